@@ -1,0 +1,136 @@
+"""The ``maglev-oc`` command.
+
+    maglev-oc report [--out DIR] [--only NAME ...]   run every analysis script -> DIR/*.pdf
+    maglev-oc model [--params JSON] [--gaps MM ...]  print the equilibrium table
+
+Errors in what the user hands in (files, values) are reported in one line on stderr with exit
+status 2; nothing is written in that case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from maglev_oc.model.parameters import (
+    DEFAULT_CONSTANTS,
+    StageParameters,
+    load_json,
+    paper_constants,
+)
+from maglev_oc.model.stage import StageModel
+
+EXIT_USAGE = 2
+
+
+class UserError(Exception):
+    """A problem with the user's input, reported without a traceback."""
+
+
+def load_model(params_path: Path | None = None, constants: str | None = None) -> StageModel:
+    """The model from a JSON file (:func:`maglev_oc.model.parameters.save_json`) or the papers'."""
+    if params_path is not None:
+        if not Path(params_path).is_file():
+            raise UserError(f"{params_path}: no such file")
+        params, consts = load_json(params_path)
+    else:
+        params, consts = StageParameters(), DEFAULT_CONSTANTS
+    if constants is not None:
+        consts = paper_constants(constants)
+    return StageModel(params, consts)
+
+
+def analysis_modules() -> dict[str, object]:
+    """Analysis scripts by name (maglev_oc.analyses.<name>), each with REPORT and build()."""
+    import maglev_oc.analyses as pkg
+
+    found = {}
+    for info in pkgutil.iter_modules(pkg.__path__):
+        module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+        if hasattr(module, "build") and hasattr(module, "REPORT"):
+            found[info.name] = module
+    return dict(sorted(found.items(), key=lambda kv: getattr(kv[1], "ORDER", 100)))
+
+
+# ----------------------------------------------------------------------------------------------
+def cmd_report(args: argparse.Namespace) -> int:
+    modules = analysis_modules()
+    names = args.only or list(modules)
+    unknown = [n for n in names if n not in modules]
+    if unknown:
+        raise UserError(f"unknown analysis {unknown}; available: {', '.join(modules)}")
+    model = load_model(args.params)
+    failed = []
+    for name in names:
+        module = modules[name]
+        out = args.out / module.REPORT
+        t0 = time.perf_counter()
+        try:
+            module.build(out, model)
+        except Exception as err:  # one failing report must not stop the others
+            failed.append(name)
+            print(f"  {name:<22s} FAILED: {type(err).__name__}: {err}", file=sys.stderr)
+            continue
+        print(f"  {name:<22s} -> {out}  ({time.perf_counter() - t0:.1f} s)")
+    if failed:
+        print(f"{len(failed)} report(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_model(args: argparse.Namespace) -> int:
+    from maglev_oc.model.summary import TABLE_GAPS, equilibrium_table_rows, summarize_model
+
+    model = load_model(args.params, args.constants)
+    gaps = TABLE_GAPS if not args.gaps else np.asarray(args.gaps, dtype=float) * 1e-3
+    if np.any(gaps <= 0):
+        raise UserError(f"--gaps must be positive millimetres, got {args.gaps}")
+    s = summarize_model(model, table_gaps=gaps)
+    print(
+        f"constants: C1={model.constants.C1:g} C2={model.constants.C2:g} "
+        f"C3={model.constants.C3:g} C4={model.constants.C4:g}  ({model.constants.source})"
+    )
+    print(f"{'gap [mm]':>9s} {'i_d [A]':>9s}  {'amplifier':<18s} {'vertical pole [1/s]':>20s}")
+    for gap_mm, current, status, pole in equilibrium_table_rows(s):
+        print(f"{gap_mm:9.2f} {current:9.3f}  {status:<18s} {pole:20.2f}")
+    if s.zero_current_gap is not None:
+        print(f"zero-current gap: {s.zero_current_gap * 1e3:.3f} mm")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="maglev-oc", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("report", help="run every analysis script and write its PDF")
+    p.add_argument("--out", type=Path, default=Path("reports"), help="output folder")
+    p.add_argument("--only", nargs="+", metavar="NAME", help="run only these analyses")
+    p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("model", help="print the equilibrium table")
+    p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.add_argument("--constants", help="a named set of the papers' constants, e.g. table3_eps0.05")
+    p.add_argument("--gaps", nargs="+", type=float, metavar="MM", help="gaps in millimetres")
+    p.set_defaults(func=cmd_model)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (UserError, ValueError, OSError) as err:
+        print(f"maglev-oc {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

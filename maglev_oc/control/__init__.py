@@ -1,0 +1,1 @@
+"""Controllers of the stage and their design."""

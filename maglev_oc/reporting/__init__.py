@@ -1,0 +1,1 @@
+"""Figures and PDF pages; takes result objects, never computes models."""
