@@ -1,0 +1,1 @@
+"""Logs of measured or simulated runs: reading, validating, writing (SPEC 2)."""
