@@ -32,22 +32,34 @@ def internal_model(omega0: float = OMEGA0) -> tuple[np.ndarray, np.ndarray, np.n
     return phi, n, gamma
 
 
-def augmented_axis(omega0: float = OMEGA0) -> tuple[np.ndarray, np.ndarray]:
-    """(A, B) of the per-axis augmented system in z = (e, e', xi1, xi2, xi3), input v."""
+def augmented_axis(
+    omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) of the per-axis augmented system in z = (e, e', xi1, xi2, xi3).
+
+    The axis is e'' = stiffness * e + input_gain * w. After the feedback transformation
+    stiffness = 0 and input_gain = 1 (w = v, the papers' design); for the linear regulator on
+    the Jacobian linearization, stiffness = d x2'/d x1 and input_gain = d x2'/d u2 (vertical) or
+    0 and -L1 (horizontal).
+    """
+    if not (np.isfinite(input_gain) and input_gain != 0):
+        raise ValueError(f"input_gain must be finite and nonzero, got {input_gain!r}")
     phi, n, _ = internal_model(omega0)
     a = np.zeros((5, 5))
     a[0, 1] = 1.0
+    a[1, 0] = stiffness
     a[2:, 2:] = phi
     a[2:, 0:1] = n
     b = np.zeros((5, 1))
-    b[1, 0] = 1.0
+    b[1, 0] = input_gain
     return a, b
 
 
-def place_axis(poles, omega0: float = OMEGA0) -> np.ndarray:
+def place_axis(poles, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0) -> np.ndarray:
     """Gains K (5,) with eig(A + B K) = ``poles`` for the augmented axis (Ackermann's formula).
 
     ``poles`` must be five values closed under complex conjugation, in the open left half plane.
+    ``stiffness`` and ``input_gain`` describe the axis as in :func:`augmented_axis`.
     """
     poles = np.asarray(poles, dtype=complex).ravel()
     if poles.size != 5:
@@ -58,7 +70,7 @@ def place_axis(poles, omega0: float = OMEGA0) -> np.ndarray:
     if np.max(np.abs(coeffs.imag)) > 1e-9 * np.max(np.abs(coeffs)):
         raise ValueError(f"poles must be closed under complex conjugation, got {poles}")
     coeffs = coeffs.real
-    a, b = augmented_axis(omega0)
+    a, b = augmented_axis(omega0, stiffness, input_gain)
     ctrb = np.hstack([np.linalg.matrix_power(a, k) @ b for k in range(5)])
     phi_a = sum(c * np.linalg.matrix_power(a, 5 - k) for k, c in enumerate(coeffs))
     last_row = np.linalg.solve(ctrb.T, np.eye(5)[:, -1])  # e_n^T ctrb^{-1}
@@ -66,9 +78,9 @@ def place_axis(poles, omega0: float = OMEGA0) -> np.ndarray:
     return -k_ackermann
 
 
-def axis_poles(gains, omega0: float = OMEGA0) -> np.ndarray:
-    """Closed-loop poles of the augmented axis under v = K z, sorted by real part, then imag."""
-    a, b = augmented_axis(omega0)
+def axis_poles(gains, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0) -> np.ndarray:
+    """Closed-loop poles of the augmented axis under w = K z, sorted by real part, then imag."""
+    a, b = augmented_axis(omega0, stiffness, input_gain)
     k = np.asarray(gains, dtype=float).reshape(1, 5)
     ev = np.linalg.eigvals(a + b @ k)
     return ev[np.lexsort((ev.imag, -ev.real))]

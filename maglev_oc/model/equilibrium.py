@@ -16,12 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.model.hardware import CONTINUOUS_CURRENT_LIMIT, PEAK_CURRENT_LIMIT
 from maglev_oc.model.stage import StageModel
-
-CONTINUOUS_CURRENT_LIMIT = 7.0
-"""LCAM continuous current [A] (002, Section 4)."""
-PEAK_CURRENT_LIMIT = 9.0
-"""LCAM peak current [A] (002, Section 4)."""
 
 
 class NoEquilibriumError(ValueError):

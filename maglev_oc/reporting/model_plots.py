@@ -6,7 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from maglev_oc.control.gains import GainCheck
-from maglev_oc.model.equilibrium import CONTINUOUS_CURRENT_LIMIT, PEAK_CURRENT_LIMIT
+from maglev_oc.model.hardware import CONTINUOUS_CURRENT_LIMIT, PEAK_CURRENT_LIMIT
 from maglev_oc.model.summary import ModelSummary
 from maglev_oc.reporting.pdf import new_figure
 

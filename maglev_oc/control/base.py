@@ -1,0 +1,61 @@
+"""What every controller offers the simulation engine.
+
+Two kinds, both sampled at ``sample_time`` with a zero-order hold on their output:
+
+* :class:`ExpressionController` — the whole update is one CasADi Function
+  ``step(c, y, r) -> (u, c_next, diag)``; the engine fuses it with the twin and runs the
+  closed loop inside CasADi (``mapaccum``), no Python per sample.
+* :class:`OnlineController` — a Python object that solves something each sample (NMPC); the
+  engine loops in Python and calls ``control(k, y, reference)``.
+
+Signals (fixed layouts, column vectors):
+
+* ``y`` (2): measured (gap [m], horizontal position [m]) — encoder readings.
+* ``r`` (6): reference (r_v, r_v', r_v'', r_h, r_h', r_h'') [m, m/s, m/s^2]; r_v is the gap
+  reference, r_h the horizontal one (001 eq. (5)).
+* ``u`` (2): current commands (i_q, i_d) [A].
+* ``diag``: controller diagnostics, named by ``diag_names``; by convention ``margin`` is the
+  feasibility margin R/(4 L4) [m/s^2] where a controller has one and ``clipped`` is 1 on
+  samples where the controller had to clip (e.g. R < 0).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import casadi as ca
+import numpy as np
+
+REFERENCE_NAMES = ("r_v", "dr_v", "ddr_v", "r_h", "dr_h", "ddr_h")
+N_REFERENCE = 6
+N_MEASURED = 2
+
+
+@runtime_checkable
+class ExpressionController(Protocol):
+    name: str
+    sample_time: float
+    n_state: int
+    diag_names: tuple[str, ...]
+    step: ca.Function  # (c, y, r) -> (u, c_next, diag)
+
+    def initial_state(self, y0: np.ndarray, r0: np.ndarray, u0: np.ndarray) -> np.ndarray:
+        """Controller state at start, given the first measurement, reference and the current
+        already flowing (for bumpless start)."""
+        ...
+
+
+@runtime_checkable
+class OnlineController(Protocol):
+    name: str
+    sample_time: float
+    diag_names: tuple[str, ...]
+
+    def reset(self, y0: np.ndarray, r0: np.ndarray, u0: np.ndarray) -> None:
+        """Prepare for a new run (observer, warm start)."""
+        ...
+
+    def control(self, k: int, y: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Current command (2,) and diagnostics (len(diag_names),) at sample k, given the
+        measurement y (2,) and the whole sampled reference (6, n) (for preview)."""
+        ...

@@ -1,0 +1,1 @@
+"""The rig twin and closed-loop simulation."""

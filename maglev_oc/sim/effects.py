@@ -1,0 +1,202 @@
+"""Physical effects of the real rig that the papers' model leaves out, each with its parameters.
+
+Every effect is a frozen dataclass with physical parameters in SI units and defaults of the size
+a stage like the Quanser 2-DOF maglev has; :class:`TwinEffects` collects the ones switched on.
+The twin (:mod:`maglev_oc.sim.twin`) turns them into CasADi expressions.
+
+Sources for the defaults: papers 000/001/002 where they give numbers (encoder 10 um, amplifier
+7 A continuous / 9 A peak, loop 5 kHz, cogging over 1 N below 15 mm, guide friction and
+misalignment limiting the tracking to about 0.1-0.2 mm); typical catalogue values for small
+preloaded linear ball guides and linear current amplifiers elsewhere (stated per field).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+
+def _positive(obj: Any, *names: str, allow_zero: bool = True) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = value >= 0 if allow_zero else value > 0
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and ok):
+            kind = "non-negative" if allow_zero else "positive"
+            raise ValueError(f"{type(obj).__name__}.{name} must be {kind} and finite, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Cogging:
+    """Cogging of the slotted stator, eq. (9) of paper 000, acting on the normal force.
+
+    F_n += xi(x1) sin(pi x3 / t1 + phase), xi(x1) = peak_at_reference * (reference_gap / x1)^exponent,
+    plus an optional longitudinal detent force F_x = horizontal_peak (reference_gap / x1)^exponent
+    sin(2 pi x3 / t1 + phase). The defaults put xi(15 mm) = 1.2 N, growing as the gap closes
+    (4 N at 10 mm) and under 0.3 N above 25 mm: "appreciable (greater than 1 N) when the air gap
+    is smaller than 15 mm, and otherwise negligible" (000 Sec. V-C).
+    """
+
+    peak_at_reference: float = 1.2  # [N]
+    reference_gap: float = 15e-3  # [m]
+    exponent: float = 3.0  # [-]
+    phase: float = 0.0  # [rad]
+    horizontal_peak: float = 0.0  # [N] longitudinal detent at reference_gap (off by default)
+
+    def __post_init__(self) -> None:
+        _positive(self, "peak_at_reference", "exponent", "horizontal_peak")
+        _positive(self, "reference_gap", allow_zero=False)
+
+
+@dataclass(frozen=True)
+class GuideFriction:
+    """Friction of one axis's linear guides: Coulomb + viscous, Coulomb smoothed by tanh(v / v_s).
+
+    F = -(coulomb tanh(v / smoothing_speed) + viscous v). The smoothing speed 0.1 mm/s is far
+    below the speeds of interest (the sinusoidal test peaks at 0.14 m/s) and keeps the explicit
+    integrator stable at 5 kHz with 4 substeps (Lipschitz constant coulomb / (M v_s) ~ 6e3 1/s).
+    Defaults: preloaded miniature ball guides, 0.5-2 N breakaway for a 2-4 kg carriage.
+    """
+
+    coulomb: float = 1.0  # [N]
+    viscous: float = 2.0  # [N s/m]
+    smoothing_speed: float = 1e-4  # [m/s]
+
+    def __post_init__(self) -> None:
+        _positive(self, "coulomb", "viscous")
+        _positive(self, "smoothing_speed", allow_zero=False)
+
+
+@dataclass(frozen=True)
+class GuideMisalignment:
+    """Imperfect alignment of the linear guides (001 Sec. VI-B, 002 Sec. 7.2).
+
+    - The horizontal guides are not parallel to the stator: the magnetic gap differs from the
+      vertical encoder's reading by tilt * x3 + waviness sin(2 pi x3 / waviness_period).
+    - The horizontal guides are not level: gravity pulls along them, G sin(level_tilt) (a
+      constant disturbance Delta_1 of 001).
+    - Binding: the guide preload, hence the Coulomb friction, grows away from the aligned
+      position, by ``binding`` [N/m] * |x3|, on both axes.
+    Defaults: 0.5 mrad tilt (25 um of gap over +-50 mm), 15 um waviness over a 40 mm period,
+    1 mrad off level, 10 N/m binding (0.5 N extra at the ends of travel).
+    """
+
+    tilt: float = 5e-4  # [rad]
+    waviness: float = 15e-6  # [m]
+    waviness_period: float = 40e-3  # [m]
+    level_tilt: float = 1e-3  # [rad]
+    binding: float = 10.0  # [N/m]
+
+    def __post_init__(self) -> None:
+        for name in ("tilt", "level_tilt"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and abs(value) < 0.05):
+                raise ValueError(f"GuideMisalignment.{name} must be a small angle [rad], got {value!r}")
+        _positive(self, "waviness", "binding")
+        _positive(self, "waviness_period", allow_zero=False)
+
+
+@dataclass(frozen=True)
+class CurrentAmplifier:
+    """The three linear current amplifiers (LCAMs), seen in d-q coordinates.
+
+    First-order current response with the given bandwidth; the current-vector magnitude
+    (= the phase-current amplitude for the amplitude-invariant transform of 002) is limited to
+    ``peak`` [A], and to ``continuous`` [A] once the thermal state, a low-pass of |i|^2 with
+    ``thermal_time_constant``, exceeds continuous^2 (I^2 t foldback). 002 Sec. 4: 7 A continuous,
+    9 A peak; "factory tuned to account for the inductance of the stator coils".
+    """
+
+    bandwidth_hz: float = 1000.0  # [Hz]
+    peak: float = 9.0  # [A]
+    continuous: float = 7.0  # [A]
+    thermal_time_constant: float = 2.0  # [s]
+
+    def __post_init__(self) -> None:
+        _positive(self, "bandwidth_hz", "peak", "continuous", "thermal_time_constant", allow_zero=False)
+        if self.continuous > self.peak:
+            raise ValueError(
+                f"CurrentAmplifier.continuous = {self.continuous} A exceeds peak = {self.peak} A"
+            )
+
+    @property
+    def time_constant(self) -> float:
+        return 1.0 / (2 * math.pi * self.bandwidth_hz)
+
+
+@dataclass(frozen=True)
+class Encoder:
+    """The two linear optical encoders: quantization to ``resolution`` plus white noise.
+
+    000 Sec. II: resolution 10 um. ``noise_std`` models vibration/electrical pick-up before the
+    quantizer (default 2 um, a fifth of a count); ``offset`` is a mounting offset of the gap
+    reading [m] (default 0).
+    """
+
+    resolution: float = 10e-6  # [m]
+    noise_std: float = 2e-6  # [m]
+    offset: tuple[float, float] = (0.0, 0.0)  # [m] (gap, horizontal)
+
+    def __post_init__(self) -> None:
+        _positive(self, "resolution", "noise_std")
+
+
+@dataclass(frozen=True)
+class Stoppers:
+    """Mechanical stoppers of the vertical and horizontal guides (002 Fig. 5).
+
+    Travel about 10 mm vertically and +-50 mm horizontally (002 Sec. 4); the stoppers sit a
+    little outside the working range. A hit stops the axis (inelastic) and is reported.
+    """
+
+    gap: tuple[float, float] = (8e-3, 30e-3)  # [m]
+    horizontal: tuple[float, float] = (-60e-3, 60e-3)  # [m]
+
+
+@dataclass(frozen=True)
+class TwinEffects:
+    """The effects switched on in a twin (None = off). See :meth:`ideal` and :meth:`rig`."""
+
+    cogging: Cogging | None = None
+    friction_horizontal: GuideFriction | None = None
+    friction_vertical: GuideFriction | None = None
+    misalignment: GuideMisalignment | None = None
+    amplifier: CurrentAmplifier | None = None
+    encoder: Encoder | None = None
+    stoppers: Stoppers | None = field(default_factory=Stoppers)
+    input_delay_samples: int = 0  # computation delay of the real-time loop [samples]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.input_delay_samples, int) and 0 <= self.input_delay_samples <= 10):
+            raise ValueError(
+                f"TwinEffects.input_delay_samples must be an integer in 0..10, got "
+                f"{self.input_delay_samples!r}"
+            )
+
+    @classmethod
+    def ideal(cls) -> TwinEffects:
+        """The papers' model exactly: exact positions, ideal amplifier, no friction (stoppers kept)."""
+        return cls()
+
+    @classmethod
+    def rig(cls, **overrides: Any) -> TwinEffects:
+        """Everything a real stage has, with the defaults above; override any by keyword."""
+        base = dict(
+            cogging=Cogging(),
+            friction_horizontal=GuideFriction(coulomb=1.0, viscous=2.0),
+            friction_vertical=GuideFriction(coulomb=1.5, viscous=3.0),
+            misalignment=GuideMisalignment(),
+            amplifier=CurrentAmplifier(),
+            encoder=Encoder(),
+            stoppers=Stoppers(),
+            input_delay_samples=1,
+        )
+        unknown = set(overrides) - set(base)
+        if unknown:
+            raise TypeError(f"unknown effect(s) {sorted(unknown)}; known: {sorted(base)}")
+        base.update(overrides)
+        return cls(**base)
+
+    def enabled(self) -> list[str]:
+        """Names of the effects that are on."""
+        return [f.name for f in fields(self) if f.name != "input_delay_samples" and getattr(self, f.name)]

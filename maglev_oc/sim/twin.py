@@ -1,0 +1,214 @@
+"""The rig twin: the stage model of SPEC 1 plus the effects of :mod:`maglev_oc.sim.effects`,
+sampled at the rig's 5 kHz with a zero-order hold on the current commands.
+
+The twin is a discrete-time system built once as CasADi Functions:
+
+    y[k]   = measure(s[k], w[k])          encoder readings (gap, horizontal) [m]
+    s[k+1] = step(s[k], u_cmd[k])         one sample of the plant under ZOH
+
+with the twin state s = (x (4), i (2) actual d-q currents [A], heat (1) [A^2], delay buffer
+(2 * input_delay_samples) [A]) and w[k] (2) standard-normal encoder noise. Inside a sample the
+continuous dynamics are integrated with fixed-step RK4 (``substeps`` per sample). Its true
+constants are those of ``model`` and may differ from the ones a controller is designed with.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+from maglev_oc.model.stage import StageModel
+from maglev_oc.sim.effects import TwinEffects
+
+
+@dataclass(frozen=True, eq=False)
+class RigTwin:
+    """A configured twin. Build once; its Functions are reused by every simulation.
+
+    Parameters
+    ----------
+    model : StageModel
+        The true plant (Table I and the true C1..C4).
+    effects : TwinEffects
+        Effects switched on (default: none, the ideal plant).
+    sample_time : float
+        Control period [s] (default 2e-4, 5 kHz).
+    substeps : int
+        RK4 steps per sample.
+
+    Attributes
+    ----------
+    n_state : int
+    measure : (s, w) -> y (2)
+    step : (s, u_cmd) -> (s_next, flags (3))  flags: :attr:`FLAG_NAMES` (current limited by
+        the amplifier, a stopper hit, thermal foldback to the continuous limit), 0/1
+    acceleration : (x, i) -> (x2', x4') of the true plant at applied current i, every effect
+        on the mechanics included (continuous time; for analyses and diagnosis tests)
+    """
+
+    model: StageModel
+    effects: TwinEffects = field(default_factory=TwinEffects.ideal)
+    sample_time: float = RIG_SAMPLE_TIME
+    substeps: int = 1
+    n_state: int = field(init=False)
+    measure: ca.Function = field(init=False, repr=False)
+    step: ca.Function = field(init=False, repr=False)
+    acceleration: ca.Function = field(init=False, repr=False)
+
+    FLAG_NAMES = ("current_limited", "stopper_hit", "thermal_foldback")
+
+    def __post_init__(self) -> None:
+        if not (self.sample_time > 0 and math.isfinite(self.sample_time)):
+            raise ValueError(f"sample_time must be positive [s], got {self.sample_time!r}")
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
+        object.__setattr__(self, "n_state", 7 + 2 * self.effects.input_delay_samples)
+        self._build()
+
+    # ------------------------------------------------------------------------------------
+    def _accelerations(self, x, i):
+        """(x2', x4') of the true plant with every effect that acts on the mechanics."""
+        p, e = self.model.params, self.effects
+        gap = x[0]
+        if e.misalignment is not None:
+            m = e.misalignment
+            gap = gap + m.tilt * x[2] + m.waviness * ca.sin(2 * math.pi * x[2] / m.waviness_period)
+        L1, L2, L3, L4 = self.model.L(gap)
+        G = p.gravity
+        acc_v = G - L2 - L3 * i[1] - L4 * (i[0] ** 2 + i[1] ** 2)
+        acc_h = -L1 * i[0]
+        if e.cogging is not None:
+            c = e.cogging
+            scale = (c.reference_gap / gap) ** c.exponent
+            angle = math.pi * x[2] / p.slot_pitch + c.phase
+            acc_v -= c.peak_at_reference * scale * ca.sin(angle) / p.mass_vertical
+            if c.horizontal_peak > 0:
+                acc_h += c.horizontal_peak * scale * ca.sin(2 * angle) / p.mass_horizontal
+        binding = 0.0
+        if e.misalignment is not None:
+            acc_h += G * math.sin(e.misalignment.level_tilt)
+            binding = e.misalignment.binding * ca.sqrt(x[2] ** 2 + 1e-8)
+        for fr, vel, mass, k in (
+            (e.friction_vertical, x[1], p.mass_vertical, 0),
+            (e.friction_horizontal, x[3], p.mass_horizontal, 1),
+        ):
+            if fr is None:
+                continue
+            force = (fr.coulomb + binding) * ca.tanh(vel / fr.smoothing_speed) + fr.viscous * vel
+            if k == 0:
+                acc_v -= force / mass
+            else:
+                acc_h -= force / mass
+        return acc_v, acc_h
+
+    def _build(self) -> None:
+        e = self.effects
+        set_ = object.__setattr__
+        x = ca.SX.sym("x", 4)
+        i = ca.SX.sym("i", 2)
+        acc_v, acc_h = self._accelerations(x, i)
+        set_(
+            self,
+            "acceleration",
+            ca.Function("twin_acc", [x, i], [ca.vertcat(acc_v, acc_h)], ["x", "i"], ["acc"]),
+        )
+
+        s = ca.SX.sym("s", self.n_state)
+        u_cmd = ca.SX.sym("u", 2)
+        xs, cur, heat = s[0:4], s[4:6], s[6]
+        d = e.input_delay_samples
+        if d > 0:
+            buf = s[7:]
+            u_in = buf[0:2]
+            buf_next = ca.vertcat(buf[2:], u_cmd)
+        else:
+            u_in = u_cmd
+            buf_next = ca.SX.zeros(0, 1)
+
+        amp = e.amplifier
+        if amp is not None:
+            limit = ca.if_else(heat > amp.continuous**2, amp.continuous, amp.peak)
+            mag = ca.sqrt(u_in[0] ** 2 + u_in[1] ** 2 + 1e-30)
+            scale = ca.fmin(1.0, limit / mag)
+            u_sat = u_in * scale
+            limited = mag > limit
+            foldback = heat > amp.continuous**2
+            tau, tau_th = amp.time_constant, amp.thermal_time_constant
+        else:
+            u_sat = u_in
+            limited = ca.SX(0)
+            foldback = ca.SX(0)
+
+        def rhs(z):
+            xz, iz, hz = z[0:4], z[4:6], z[6]
+            i_applied = iz if amp is not None else u_sat
+            av, ah = self._accelerations(xz, i_applied)
+            if amp is not None:
+                di = (u_sat - iz) / tau
+                dh = (iz[0] ** 2 + iz[1] ** 2 - hz) / tau_th
+            else:
+                di = ca.SX.zeros(2, 1)
+                dh = (u_sat[0] ** 2 + u_sat[1] ** 2 - hz) / 2.0  # bookkeeping only
+            return ca.vertcat(xz[1], av, xz[3], ah, di, dh)
+
+        z = ca.vertcat(xs, cur, heat)
+        h = self.sample_time / self.substeps
+        for _ in range(self.substeps):
+            k1 = rhs(z)
+            k2 = rhs(z + h / 2 * k1)
+            k3 = rhs(z + h / 2 * k2)
+            k4 = rhs(z + h * k3)
+            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x_next = z[0:4]
+        cur_next = z[4:6] if amp is not None else u_sat
+        hit = ca.SX(0)
+        if e.stoppers is not None:
+            (g_lo, g_hi), (h_lo, h_hi) = e.stoppers.gap, e.stoppers.horizontal
+            x1, x2, x3, x4 = x_next[0], x_next[1], x_next[2], x_next[3]
+            hit_v = ca.logic_or(x1 < g_lo, x1 > g_hi)
+            hit_h = ca.logic_or(x3 < h_lo, x3 > h_hi)
+            hit = ca.logic_or(hit_v, hit_h)
+            x_next = ca.vertcat(
+                ca.fmin(ca.fmax(x1, g_lo), g_hi),
+                ca.if_else(hit_v, 0, x2),
+                ca.fmin(ca.fmax(x3, h_lo), h_hi),
+                ca.if_else(hit_h, 0, x4),
+            )
+        s_next = ca.vertcat(x_next, cur_next, z[6], buf_next)
+        flags = ca.vertcat(limited, hit, foldback)
+        set_(
+            self,
+            "step",
+            ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"]),
+        )
+
+        w = ca.SX.sym("w", 2)
+        enc = e.encoder
+        if enc is not None:
+            raw = ca.vertcat(xs[0] + enc.offset[0], xs[2] + enc.offset[1]) + enc.noise_std * w
+            y = ca.floor(raw / enc.resolution + 0.5) * enc.resolution
+        else:
+            y = ca.vertcat(xs[0], xs[2])
+        set_(self, "measure", ca.Function("twin_measure", [s, w], [y], ["s", "w"], ["y"]))
+
+    # ------------------------------------------------------------------------------------
+    def initial_state(self, x0, u0=(0.0, 0.0)) -> np.ndarray:
+        """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing."""
+        x0 = np.asarray(x0, dtype=float).reshape(4)
+        u0 = np.asarray(u0, dtype=float).reshape(2)
+        buf = np.tile(u0, self.effects.input_delay_samples)
+        return np.concatenate([x0, u0, [u0 @ u0], buf])
+
+    @staticmethod
+    def mechanical(states: np.ndarray) -> np.ndarray:
+        """The mechanical state rows (4, n) of a twin-state trajectory (n_state, n)."""
+        return np.asarray(states)[:4]
+
+    @staticmethod
+    def currents(states: np.ndarray) -> np.ndarray:
+        """The applied d-q current rows (2, n) of a twin-state trajectory."""
+        return np.asarray(states)[4:6]
