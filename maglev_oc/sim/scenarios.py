@@ -163,7 +163,7 @@ def paper_scenarios() -> dict[str, Scenario]:
         "sinusoid": Scenario(
             "sinusoid",
             "Ellipse: r_h = 30 mm sin(w0 t), r_v = 20 + 5 cos(w0 t) mm, w0 = 1.5 pi",
-            (25 * MM, 0.0, 0.0, 0.0),
+            (20 * MM, 0.0, 0.0, 0.0),  # the amplitudes ramp in from the centre over 2 s
             Sinusoids(20 * MM, ((5 * MM, OMEGA0, math.pi / 2),), ((30 * MM, OMEGA0, 0.0),), ramp_time=2.0),
             20.0,
             evaluate_from=8.0,

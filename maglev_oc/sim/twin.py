@@ -8,7 +8,9 @@ The twin is a discrete-time system built once as CasADi Functions:
 
 with the twin state s = (x (4), i (2) actual d-q currents [A], heat (1) [A^2], delay buffer
 (2 * input_delay_samples) [A]) and w[k] (2) standard-normal encoder noise. Inside a sample the
-continuous dynamics are integrated with fixed-step RK4 (``substeps`` per sample). Its true
+mechanics are integrated with fixed-step RK4 (``substeps`` per sample; one step of 200 us is
+accurate to ~1e-12 relative, since the fastest mechanical pole is 64 1/s) and the amplifier's
+linear first-order current response to the held command is solved exactly. Its true
 constants are those of ``model`` and may differ from the ones a controller is designed with.
 """
 
@@ -143,28 +145,33 @@ class RigTwin:
             limited = ca.SX(0)
             foldback = ca.SX(0)
 
-        def rhs(z):
-            xz, iz, hz = z[0:4], z[4:6], z[6]
-            i_applied = iz if amp is not None else u_sat
-            av, ah = self._accelerations(xz, i_applied)
-            if amp is not None:
-                di = (u_sat - iz) / tau
-                dh = (iz[0] ** 2 + iz[1] ** 2 - hz) / tau_th
-            else:
-                di = ca.SX.zeros(2, 1)
-                dh = (u_sat[0] ** 2 + u_sat[1] ** 2 - hz) / 2.0  # bookkeeping only
-            return ca.vertcat(xz[1], av, xz[3], ah, di, dh)
+        def current_at(i0, theta):
+            """The amplifier's current theta [s] into the step: its first-order response to
+            the held command, exact (the lag is linear)."""
+            if amp is None:
+                return u_sat
+            return u_sat + (i0 - u_sat) * math.exp(-theta / tau)
 
-        z = ca.vertcat(xs, cur, heat)
+        def rhs(z, i_applied):
+            xz, hz = z[0:4], z[4]
+            av, ah = self._accelerations(xz, i_applied)
+            tau_heat = tau_th if amp is not None else 2.0  # bookkeeping only without amplifier
+            dh = (i_applied[0] ** 2 + i_applied[1] ** 2 - hz) / tau_heat
+            return ca.vertcat(xz[1], av, xz[3], ah, dh)
+
+        # RK4 on the mechanics and the thermal state; the current enters at each stage's time
+        z = ca.vertcat(xs, heat)
+        i0 = cur
         h = self.sample_time / self.substeps
-        for _ in range(self.substeps):
-            k1 = rhs(z)
-            k2 = rhs(z + h / 2 * k1)
-            k3 = rhs(z + h / 2 * k2)
-            k4 = rhs(z + h * k3)
+        for k in range(self.substeps):
+            t0 = k * h
+            k1 = rhs(z, current_at(i0, t0))
+            k2 = rhs(z + h / 2 * k1, current_at(i0, t0 + h / 2))
+            k3 = rhs(z + h / 2 * k2, current_at(i0, t0 + h / 2))
+            k4 = rhs(z + h * k3, current_at(i0, t0 + h))
             z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         x_next = z[0:4]
-        cur_next = z[4:6] if amp is not None else u_sat
+        cur_next = current_at(i0, self.sample_time)
         hit = ca.SX(0)
         if e.stoppers is not None:
             (g_lo, g_hi), (h_lo, h_hi) = e.stoppers.gap, e.stoppers.horizontal
@@ -178,7 +185,7 @@ class RigTwin:
                 ca.fmin(ca.fmax(x3, h_lo), h_hi),
                 ca.if_else(hit_h, 0, x4),
             )
-        s_next = ca.vertcat(x_next, cur_next, z[6], buf_next)
+        s_next = ca.vertcat(x_next, cur_next, z[4], buf_next)
         flags = ca.vertcat(limited, hit, foldback)
         set_(
             self,

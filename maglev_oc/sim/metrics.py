@@ -1,0 +1,129 @@
+"""Performance figures of a closed-loop run, in the papers' terms (002 Sec. 7).
+
+Errors are the *measured* tracking errors (encoder reading minus reference), as the papers
+report them; on the twin the true error differs from it by the encoder's quantization and noise.
+
+* settling time to a band (0.1 mm, 10 um): time from the set-point change until the error
+  enters the band for good (NaN when it never does before the next change);
+* overshoot: largest excursion past the new set-point, in % of the step (steps under 0.5 mm on
+  an axis are not scored);
+* tracking: mean and peak |error| after ``evaluate_from``;
+* current: RMS and peak of the current-vector magnitude |(i_q, i_d)| of the commands;
+* the minimum feasibility margin R / (4 L4) of controllers that have one, the number of samples
+  clipped, and the controller's per-call time (online controllers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from maglev_oc.sim.engine import SimulationResult
+from maglev_oc.sim.scenarios import Scenario, SetpointSequence
+
+BANDS = (1e-4, 1e-5)  # [m]: 0.1 mm (the papers' accuracy goal) and 10 um (encoder resolution)
+MIN_STEP = 5e-4  # [m]: smaller steps are not scored for overshoot
+AXES = ("vertical", "horizontal")
+
+
+@dataclass(frozen=True)
+class StepMetrics:
+    """One set-point change: per axis (vertical, horizontal)."""
+
+    time: float  # [s] when the set-point changed
+    size: tuple[float, float]  # [m] signed step per axis
+    settling_01mm: tuple[float, float]  # [s], NaN if not settled
+    settling_10um: tuple[float, float]  # [s]
+    overshoot_pct: tuple[float, float]  # [%], NaN for steps under MIN_STEP
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    controller: str
+    scenario: str
+    success: bool
+    message: str
+    steps: list[StepMetrics]
+    mean_error: tuple[float, float]  # [m] after evaluate_from
+    peak_error: tuple[float, float]  # [m] after evaluate_from
+    rms_current: float  # [A]
+    peak_current: float  # [A]
+    min_margin: float  # [m/s^2], NaN if the controller has no margin
+    clipped: int  # samples
+    current_limited: int  # samples
+    step_time_median: float  # [s], NaN for expression controllers
+    step_time_p99: float
+    step_time_max: float
+    wall_time: float  # [s]
+    extras: dict = field(default_factory=dict)
+
+    def worst_settling(self, axis: int, band: str = "01mm") -> float:
+        vals = [getattr(s, f"settling_{band}")[axis] for s in self.steps]
+        return float(np.max(vals)) if vals and not np.any(np.isnan(vals)) else float("nan")
+
+    def max_overshoot(self, axis: int) -> float:
+        vals = [s.overshoot_pct[axis] for s in self.steps if not np.isnan(s.overshoot_pct[axis])]
+        return float(np.max(vals)) if vals else float("nan")
+
+
+def _settling(t: np.ndarray, err: np.ndarray, band: float) -> float:
+    outside = np.nonzero(np.abs(err) > band)[0]
+    if outside.size == 0:
+        return 0.0
+    last = outside[-1]
+    if last >= t.size - 1:
+        return float("nan")
+    return float(t[last + 1] - t[0])
+
+
+def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
+    """Metrics of ``result`` (a run of ``scenario``)."""
+    t = result.t
+    err = np.vstack([result.y[0] - result.reference[0], result.y[1] - result.reference[3]])
+    steps: list[StepMetrics] = []
+    if isinstance(scenario.reference, SetpointSequence):
+        times = [*scenario.reference.times, t[-1] + result.sample_time]
+        sp = np.asarray(scenario.reference.setpoints)
+        x0 = np.asarray(scenario.x0)
+        prev = np.array([x0[0], x0[2]])
+        for k in range(len(times) - 1):
+            seg = (t >= times[k]) & (t < times[k + 1])
+            size = sp[k] - prev
+            prev = sp[k]
+            if not np.any(seg):
+                continue
+            settle01, settle10, over = [], [], []
+            for a in range(2):
+                e = err[a, seg]
+                settle01.append(_settling(t[seg], e, BANDS[0]))
+                settle10.append(_settling(t[seg], e, BANDS[1]))
+                if abs(size[a]) < MIN_STEP:
+                    over.append(float("nan"))
+                else:
+                    past = np.max(np.sign(size[a]) * e)  # positive = beyond the set-point
+                    over.append(float(max(past, 0.0) / abs(size[a]) * 100))
+            steps.append(StepMetrics(times[k], tuple(size), tuple(settle01), tuple(settle10), tuple(over)))
+    window = t >= scenario.evaluate_from
+    e_win = np.abs(err[:, window])
+    mag = np.hypot(result.u[0], result.u[1])
+    margin = result.diagnostic("margin")
+    st = result.step_times
+    return RunMetrics(
+        controller=result.controller,
+        scenario=result.scenario,
+        success=result.success,
+        message=result.message,
+        steps=steps,
+        mean_error=tuple(np.nanmean(e_win, axis=1)),
+        peak_error=tuple(np.nanmax(e_win, axis=1)),
+        rms_current=float(np.sqrt(np.nanmean(mag**2))),
+        peak_current=float(np.nanmax(mag)),
+        min_margin=float(np.nanmin(margin)) if np.any(np.isfinite(margin)) else float("nan"),
+        clipped=result.events.get("clipped", 0),
+        current_limited=result.events.get("current_limited", 0),
+        step_time_median=float(np.nanmedian(st)) if st is not None else float("nan"),
+        step_time_p99=float(np.nanpercentile(st, 99)) if st is not None else float("nan"),
+        step_time_max=float(np.nanmax(st)) if st is not None else float("nan"),
+        wall_time=result.wall_time,
+    )

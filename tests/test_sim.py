@@ -1,0 +1,175 @@
+"""The rig twin, the closed-loop engine, the controllers and the metrics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.control.gains import PAPER_GAINS, axis_poles
+from maglev_oc.control.linear_regulator import paper_linear_regulator
+from maglev_oc.control.lqr import lqr_regulator
+from maglev_oc.control.pid import paper_pid
+from maglev_oc.model.equilibrium import equilibrium
+from maglev_oc.sim.effects import Cogging, CurrentAmplifier, Encoder, GuideFriction, TwinEffects
+from maglev_oc.sim.engine import CHUNK, ClosedLoop
+from maglev_oc.sim.metrics import evaluate
+from maglev_oc.sim.scenarios import Scenario, SetpointSequence, paper_scenarios
+from maglev_oc.sim.twin import RigTwin
+
+MM = 1e-3
+
+
+@pytest.fixture(scope="module")
+def ideal_twin(model):
+    return RigTwin(model)
+
+
+@pytest.fixture(scope="module")
+def fl(model):
+    return FeedbackLinearizingRegulator(model)
+
+
+def test_ideal_twin_holds_an_equilibrium(model, ideal_twin):
+    # Open loop at the equilibrium current the twin stays put: the RK4 step of f at a fixed
+    # point is exactly the fixed point up to rounding.
+    op = equilibrium(model, 20 * MM, 0.01)
+    s = ideal_twin.initial_state(op.x, op.u)
+    for _ in range(100):
+        s, _ = ideal_twin.step(s, op.u)
+    assert_allclose(np.asarray(s).ravel()[:4], op.x, atol=1e-12)
+
+
+def test_twin_rk4_matches_fine_integration(model):
+    # One 200 us RK4 step vs 64 substeps away from equilibrium: RK4's local error
+    # ~ (h |lambda|)^5 / 120 with |lambda| <= 64 1/s is ~1e-12 relative; 1e-9 m is loose.
+    coarse = RigTwin(model, substeps=1)
+    fine = RigTwin(model, substeps=64)
+    s = coarse.initial_state([18 * MM, 0.05, 0.0, 0.1], [0.3, 2.0])
+    a, _ = coarse.step(s, [0.3, 2.0])
+    b, _ = fine.step(s, [0.3, 2.0])
+    assert_allclose(np.asarray(a)[:4], np.asarray(b)[:4], atol=1e-9)
+
+
+def test_encoder_quantizes_to_its_resolution(model):
+    twin = RigTwin(model, TwinEffects(encoder=Encoder(resolution=10e-6, noise_std=0.0)))
+    s = twin.initial_state([20.0123456 * MM, 0, 1.2345678 * MM, 0])
+    y = np.asarray(twin.measure(s, [0, 0])).ravel()
+    assert_allclose(y, [20.01 * MM, 1.23 * MM], atol=1e-12)
+    assert_allclose(np.round(y / 10e-6), y / 10e-6, atol=1e-6)
+
+
+def test_amplifier_limits_and_lag(model):
+    amp = CurrentAmplifier(bandwidth_hz=1000.0, peak=9.0, continuous=7.0)
+    twin = RigTwin(model, TwinEffects(amplifier=amp))
+    s = twin.initial_state([20 * MM, 0, 0, 0], [0, 0])
+    s1, flags = twin.step(s, [0.0, 20.0])  # command beyond the peak
+    assert float(flags[0]) == 1.0
+    i1 = float(np.asarray(s1).ravel()[5])
+    # first-order lag over one 200 us sample towards 9 A: 9 (1 - exp(-T / tau)) = 6.44 A; the
+    # twin solves the linear lag exactly.
+    tau = amp.time_constant
+    assert_allclose(i1, 9.0 * (1 - np.exp(-2e-4 / tau)), rtol=1e-12)
+
+
+def test_friction_and_cogging_act_as_documented(model):
+    fr = GuideFriction(coulomb=1.0, viscous=0.0)
+    twin = RigTwin(model, TwinEffects(friction_horizontal=fr))
+    acc = np.asarray(twin.acceleration([20 * MM, 0, 0, 0.1], [0, 0])).ravel()
+    # tanh(0.1 / 1e-4) = 1: the full Coulomb force opposes the motion, F / M_h
+    assert_allclose(acc[1], -1.0 / model.params.mass_horizontal, rtol=1e-9)
+    cog = Cogging(peak_at_reference=1.5, reference_gap=15 * MM, exponent=3.0)
+    twin = RigTwin(model, TwinEffects(cogging=cog))
+    x3 = model.params.slot_pitch / 2  # sin(pi x3 / t1) = 1
+    base = np.asarray(RigTwin(model).acceleration([15 * MM, 0, x3, 0], [0, 1.0])).ravel()
+    acc = np.asarray(twin.acceleration([15 * MM, 0, x3, 0], [0, 1.0])).ravel()
+    assert_allclose(base[0] - acc[0], 1.5 / model.params.mass_vertical, rtol=1e-12)
+
+
+def test_effects_validate():
+    with pytest.raises(ValueError, match="coulomb"):
+        GuideFriction(coulomb=-1.0)
+    with pytest.raises(ValueError, match="continuous"):
+        CurrentAmplifier(peak=5.0, continuous=7.0)
+    with pytest.raises(TypeError, match="unknown effect"):
+        TwinEffects.rig(backlash=1.0)
+
+
+def test_fl_regulator_is_exactly_linear_on_the_ideal_plant(model, ideal_twin, fl):
+    # On the ideal plant the FL loop is the linear augmented system of 002 (25); its step
+    # overshoot is that of the printed gains' poles: 42.4 % horizontal, 44.8 % vertical
+    # (exact linear response, see test_printed_gains_move_the_poles). Sampling, the observer and
+    # ZOH add < 2 percentage points.
+    res = ClosedLoop(ideal_twin, fl).run(paper_scenarios()["small_step"])
+    m = evaluate(res, paper_scenarios()["small_step"])
+    assert res.success and res.events["clipped"] == 0
+    assert_allclose(m.steps[0].overshoot_pct, [44.8, 42.4], atol=2.0)
+
+
+def test_fl_settles_papers_steps_on_ideal_plant(model, ideal_twin, fl):
+    # SPEC 4: vertical below 0.1 mm in under 1.3 s; horizontal under 1.2 s for the papers' steps
+    # (ours span up to 40 mm; linear theory gives 1.26-1.30 s for those, so 1.35 s is allowed).
+    sc = paper_scenarios()["setpoint_steps"]
+    m = evaluate(ClosedLoop(ideal_twin, fl).run(sc), sc)
+    assert m.success
+    assert m.worst_settling(0) < 1.3
+    assert m.worst_settling(1) < 1.35
+
+
+def test_chunked_run_equals_single_chunk(model, ideal_twin, fl):
+    # Runs longer than CHUNK are stitched; the state handed across a chunk boundary must make
+    # the result identical to a run of one chunk of the same scenario's first part.
+    sc = Scenario(
+        "s",
+        "s",
+        (26 * MM, 0, 0, 0),
+        SetpointSequence((0.0,), ((24 * MM, 5 * MM),)),
+        duration=1.5 * CHUNK * 2e-4,
+    )
+    cl = ClosedLoop(ideal_twin, fl)
+    long = cl.run(sc)
+    short = cl.run(Scenario("s", "s", sc.x0, sc.reference, duration=CHUNK * 2e-4))
+    assert_allclose(long.x[:, :CHUNK], short.x, rtol=0, atol=1e-15)
+
+
+def test_clipping_is_flagged_not_nan(model, ideal_twin):
+    # Gains far too aggressive for a 10 mm opening step: v2 = -10 k_e e = 166 m/s^2 exceeds the
+    # largest feasible v2 (113 m/s^2 at 15 mm), so R < 0; the controller clips and counts.
+    hot = FeedbackLinearizingRegulator(model, K_v=np.array(PAPER_GAINS["K_v"].printed) * 10.0, name="hot")
+    sc = Scenario("s", "s", (15 * MM, 0, 0, 0), SetpointSequence((0.0,), ((25 * MM, 0.0),)), 0.5)
+    res = ClosedLoop(ideal_twin, hot).run(sc)
+    assert res.events["clipped"] > 0
+    assert np.all(np.isfinite(res.u))
+
+
+def test_linear_regulator_places_the_same_poles(model):
+    lin = paper_linear_regulator(model)
+    _, kv = lin.gains_at(20 * MM)
+    sched = lin.schedule
+    k = int(np.argmin(np.abs(sched.gap - 20 * MM)))
+    target = axis_poles(PAPER_GAINS["K_v"].printed)
+    got = axis_poles(kv, stiffness=sched.stiffness_v[k], input_gain=sched.gain_v[k])
+    assert_allclose(np.sort_complex(got), np.sort_complex(target), atol=1e-6)
+
+
+@pytest.mark.parametrize("factory", [paper_linear_regulator, lqr_regulator, paper_pid])
+def test_other_controllers_settle_small_step(model, ideal_twin, factory):
+    sc = paper_scenarios()["small_step"]
+    res = ClosedLoop(ideal_twin, factory(model)).run(sc)
+    assert res.success
+    # every controller has integral action: the error at the end is at rounding level
+    assert np.max(np.abs(res.error[:, -1])) < 1e-6
+
+
+def test_rig_twin_run_is_deterministic_and_bounded(model, fl):
+    twin = RigTwin(model.with_constants(model.constants.replace(C2=781.0)), TwinEffects.rig())
+    sc = paper_scenarios()["small_step"]
+    cl = ClosedLoop(twin, fl)
+    a, b = cl.run(sc, seed=3), cl.run(sc, seed=3)
+    assert_allclose(a.x, b.x)
+    assert a.success
+    # friction + quantization: integral action keeps the set-point error within the hunting
+    # band of a few encoder counts to ~0.15 mm (see effects.GuideFriction)
+    tail = np.abs(a.error[:, a.t > 6.0])
+    assert np.max(tail) < 0.25 * MM
