@@ -46,3 +46,29 @@ def test_every_subpackage_is_packaged():
     }
     found.add("maglev_oc.analyses")
     assert found == listed
+
+
+def test_simulate_writes_a_readable_log(tmp_path, capsys):
+    from maglev_oc.data.logs import read_log
+
+    out = tmp_path / "run.csv"
+    code = main(
+        [
+            "simulate",
+            "--controller",
+            "fl",
+            "--scenario",
+            "small_step",
+            "--twin",
+            "ideal",
+            "--duration",
+            "1.0",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code == 0
+    log = read_log(out)
+    assert log.n == 1000  # 1 s at the default 1 kHz logging rate
+    assert abs(log.x[0, 0] - 0.026) < 1e-12  # starts at the scenario's 26 mm
+    assert "twin_effects" not in log.metadata  # a log does not say what is in it

@@ -12,6 +12,7 @@ preloaded linear ball guides and linear current amplifiers elsewhere (stated per
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -160,7 +161,11 @@ class Stoppers:
 
 @dataclass(frozen=True)
 class TwinEffects:
-    """The effects switched on in a twin (None = off). See :meth:`ideal` and :meth:`rig`."""
+    """The effects switched on in a twin (None = off). See :meth:`ideal` and :meth:`rig`.
+
+    ``locked_gap`` / ``locked_position`` block an axis at a value (the papers' verification
+    experiments constrain one axis by hardware, 000 Sec. V); see :meth:`locked`.
+    """
 
     cogging: Cogging | None = None
     friction_horizontal: GuideFriction | None = None
@@ -170,8 +175,16 @@ class TwinEffects:
     encoder: Encoder | None = None
     stoppers: Stoppers | None = field(default_factory=Stoppers)
     input_delay_samples: int = 0  # computation delay of the real-time loop [samples]
+    locked_gap: float | None = None  # [m] vertical motion blocked by stoppers at this gap
+    locked_position: float | None = None  # [m] horizontal motion blocked at this position
 
     def __post_init__(self) -> None:
+        if self.locked_gap is not None and not (0 < self.locked_gap < 0.1):
+            raise ValueError(f"TwinEffects.locked_gap must be a gap in metres, got {self.locked_gap!r}")
+        if self.locked_position is not None and not abs(self.locked_position) < 0.5:
+            raise ValueError(
+                f"TwinEffects.locked_position must be a position in metres, got {self.locked_position!r}"
+            )
         if not (isinstance(self.input_delay_samples, int) and 0 <= self.input_delay_samples <= 10):
             raise ValueError(
                 f"TwinEffects.input_delay_samples must be an integer in 0..10, got "
@@ -204,4 +217,17 @@ class TwinEffects:
 
     def enabled(self) -> list[str]:
         """Names of the effects that are on."""
-        return [f.name for f in fields(self) if f.name != "input_delay_samples" and getattr(self, f.name)]
+        skip = ("input_delay_samples", "locked_gap", "locked_position")
+        return [f.name for f in fields(self) if f.name not in skip and getattr(self, f.name)]
+
+    def locked(self, **locks: float | None) -> TwinEffects:
+        """The same effects with an axis blocked by the hardware stoppers, as in the papers'
+        verification procedures (000 Sec. V): ``locked(gap=0.02)`` or ``locked(position=0.0)``."""
+        unknown = set(locks) - {"gap", "position"}
+        if unknown:
+            raise TypeError(f"locked() takes gap and/or position, got {sorted(unknown)}")
+        return dataclasses.replace(
+            self,
+            locked_gap=locks.get("gap", self.locked_gap),
+            locked_position=locks.get("position", self.locked_position),
+        )

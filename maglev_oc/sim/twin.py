@@ -185,6 +185,10 @@ class RigTwin:
                 ca.fmin(ca.fmax(x3, h_lo), h_hi),
                 ca.if_else(hit_h, 0, x4),
             )
+        if e.locked_gap is not None:
+            x_next = ca.vertcat(e.locked_gap, 0, x_next[2], x_next[3])
+        if e.locked_position is not None:
+            x_next = ca.vertcat(x_next[0], x_next[1], e.locked_position, 0)
         s_next = ca.vertcat(x_next, cur_next, z[4], buf_next)
         flags = ca.vertcat(limited, hit, foldback)
         set_(
@@ -205,8 +209,12 @@ class RigTwin:
     # ------------------------------------------------------------------------------------
     def initial_state(self, x0, u0=(0.0, 0.0)) -> np.ndarray:
         """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing."""
-        x0 = np.asarray(x0, dtype=float).reshape(4)
+        x0 = np.array(x0, dtype=float).reshape(4)
         u0 = np.asarray(u0, dtype=float).reshape(2)
+        if self.effects.locked_gap is not None:
+            x0[:2] = (self.effects.locked_gap, 0.0)
+        if self.effects.locked_position is not None:
+            x0[2:] = (self.effects.locked_position, 0.0)
         buf = np.tile(u0, self.effects.input_delay_samples)
         return np.concatenate([x0, u0, [u0 @ u0], buf])
 

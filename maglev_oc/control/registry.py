@@ -1,0 +1,39 @@
+"""Controllers by name, for the command line and the reports."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.control.linear_regulator import paper_linear_regulator
+from maglev_oc.control.lqr import lqr_regulator
+from maglev_oc.control.pid import paper_pid
+from maglev_oc.model.stage import StageModel
+
+
+def _nmpc(model: StageModel):
+    from maglev_oc.control.nmpc import NonlinearMPC  # optional: imported only when asked for
+
+    return NonlinearMPC(model)
+
+
+CONTROLLERS: dict[str, tuple[str, Callable[[StageModel], object]]] = {
+    "fl": ("feedback-linearizing output regulator (001/002), printed gains", FeedbackLinearizingRegulator),
+    "linear": ("papers' linear output regulator, same poles, with feedforward", paper_linear_regulator),
+    "linear-noff": (
+        "papers' linear output regulator without equilibrium feedforward",
+        lambda m: paper_linear_regulator(m, feedforward=False),
+    ),
+    "lqr": ("LQR with internal model on the Jacobian linearization", lqr_regulator),
+    "pid": ("the papers' PID excitation regulators", paper_pid),
+    "nmpc": ("nonlinear MPC, real-time iteration", _nmpc),
+}
+
+
+def build_controller(name: str, model: StageModel):
+    """A controller by its short name (see :data:`CONTROLLERS`) for ``model``."""
+    try:
+        _, factory = CONTROLLERS[name]
+    except KeyError:
+        raise ValueError(f"unknown controller {name!r}; known: {', '.join(CONTROLLERS)}") from None
+    return factory(model)
