@@ -102,9 +102,12 @@ class ClosedLoop:
         self.compile = bool(compile)
         self._chunk: ca.Function | None = None
         if self.expression:
-            self._step = self._fused_step()
+            self.step_function = self._fused_step()
 
     def _fused_step(self) -> ca.Function:
+        """``step_function``: (z = (twin state, controller state), r (6), w (2)) ->
+        (z_next, out) with out = (y (2), u (2), diag, flags (3), twin state). Public so that
+        batch analyses (Monte Carlo) can ``map``/``mapaccum`` it themselves."""
         twin, ctrl = self.twin, self.controller
         ns, nc = twin.n_state, ctrl.n_state
         zs = ca.SX.sym("z", ns + nc)
@@ -119,7 +122,7 @@ class ClosedLoop:
 
     def _chunk_function(self) -> ca.Function:
         if self._chunk is None:
-            chunk = self._step.mapaccum("closed_loop_chunk", CHUNK)
+            chunk = self.step_function.mapaccum("closed_loop_chunk", CHUNK)
             if self.compile:
                 ins = [ca.MX.sym(chunk.name_in(k), chunk.sparsity_in(k)) for k in range(3)]
                 chunk = ca.Function(
