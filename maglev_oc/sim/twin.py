@@ -6,7 +6,8 @@ The twin is a discrete-time system built once as CasADi Functions:
     y[k]   = measure(s[k], w[k])          encoder readings (gap, horizontal) [m]
     s[k+1] = step(s[k], u_cmd[k])         one sample of the plant under ZOH
 
-with the twin state s = (x (4), i (2) actual d-q currents [A], heat (1) [A^2], delay buffer
+with the twin state s = (x (4), i (2) actual d-q currents [A], heat (1) [A^2], guide friction
+forces (2) [N] (Dahl model: vertical, horizontal), delay buffer
 (2 * input_delay_samples) [A]) and w[k] (2) standard-normal encoder noise. Inside a sample the
 mechanics are integrated with fixed-step RK4 (``substeps`` per sample; one step of 200 us is
 accurate to ~1e-12 relative, since the fastest mechanical pole is 64 1/s) and the amplifier's
@@ -48,8 +49,9 @@ class RigTwin:
     measure : (s, w) -> y (2)
     step : (s, u_cmd) -> (s_next, flags (3))  flags: :attr:`FLAG_NAMES` (current limited by
         the amplifier, a stopper hit, thermal foldback to the continuous limit), 0/1
-    acceleration : (x, i) -> (x2', x4') of the true plant at applied current i, every effect
-        on the mechanics included (continuous time; for analyses and diagnosis tests)
+    acceleration : (x, i, friction) -> (x2', x4') of the true plant at applied current i and
+        guide friction forces (vertical, horizontal) [N], every effect on the mechanics
+        included (continuous time; for analyses and diagnosis tests)
     """
 
     model: StageModel
@@ -68,12 +70,13 @@ class RigTwin:
             raise ValueError(f"sample_time must be positive [s], got {self.sample_time!r}")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
-        object.__setattr__(self, "n_state", 7 + 2 * self.effects.input_delay_samples)
+        object.__setattr__(self, "n_state", 9 + 2 * self.effects.input_delay_samples)
         self._build()
 
     # ------------------------------------------------------------------------------------
-    def _accelerations(self, x, i):
-        """(x2', x4') of the true plant with every effect that acts on the mechanics."""
+    def _accelerations(self, x, i, friction):
+        """(x2', x4') of the true plant with every effect that acts on the mechanics;
+        ``friction`` (2) is the Dahl friction force state (vertical, horizontal) [N]."""
         p, e = self.model.params, self.effects
         gap = x[0]
         if e.misalignment is not None:
@@ -90,41 +93,62 @@ class RigTwin:
             acc_v -= c.peak_at_reference * scale * ca.sin(angle) / p.mass_vertical
             if c.horizontal_peak > 0:
                 acc_h += c.horizontal_peak * scale * ca.sin(2 * angle) / p.mass_horizontal
-        binding = 0.0
         if e.misalignment is not None:
             acc_h += G * math.sin(e.misalignment.level_tilt)
-            binding = e.misalignment.binding * ca.sqrt(x[2] ** 2 + 1e-8)
-        for fr, vel, mass, k in (
-            (e.friction_vertical, x[1], p.mass_vertical, 0),
-            (e.friction_horizontal, x[3], p.mass_horizontal, 1),
-        ):
-            if fr is None:
-                continue
-            force = (fr.coulomb + binding) * ca.tanh(vel / fr.smoothing_speed) + fr.viscous * vel
-            if k == 0:
-                acc_v -= force / mass
-            else:
-                acc_h -= force / mass
+        if e.friction_vertical is not None:
+            acc_v -= (friction[0] + e.friction_vertical.viscous * x[1]) / p.mass_vertical
+        if e.friction_horizontal is not None:
+            acc_h -= (friction[1] + e.friction_horizontal.viscous * x[3]) / p.mass_horizontal
         return acc_v, acc_h
+
+    def _coulomb_levels(self, x):
+        """Coulomb levels (vertical, horizontal) [N]; binding raises them away from x3 = 0."""
+        e = self.effects
+        binding = 0.0
+        if e.misalignment is not None:
+            binding = e.misalignment.binding * ca.sqrt(x[2] ** 2 + 1e-8)
+        levels = []
+        for fr in (e.friction_vertical, e.friction_horizontal):
+            levels.append(0.0 if fr is None else fr.coulomb + binding)
+        return levels
+
+    def _friction_update(self, friction, x, h):
+        """Dahl's law over one step with the velocity held: dF/dt = sigma v - (sigma |v| / Fc) F
+        is linear in F, so F(h) = Fss + (F - Fss) exp(-sigma |v| h / Fc), Fss = Fc sign(v)."""
+        e = self.effects
+        out = []
+        levels = self._coulomb_levels(x)
+        for k, (fr, vel) in enumerate(((e.friction_vertical, x[1]), (e.friction_horizontal, x[3]))):
+            if fr is None:
+                out.append(ca.SX(0))
+                continue
+            fc = levels[k]
+            sigma = fr.coulomb / fr.presliding_distance
+            f_ss = fc * ca.sign(vel)
+            decay = ca.exp(-sigma * ca.fabs(vel) * h / fc)
+            out.append(f_ss + (friction[k] - f_ss) * decay)
+        return ca.vertcat(*out)
 
     def _build(self) -> None:
         e = self.effects
         set_ = object.__setattr__
         x = ca.SX.sym("x", 4)
         i = ca.SX.sym("i", 2)
-        acc_v, acc_h = self._accelerations(x, i)
+        fr = ca.SX.sym("friction", 2)
+        acc_v, acc_h = self._accelerations(x, i, fr)
         set_(
             self,
             "acceleration",
-            ca.Function("twin_acc", [x, i], [ca.vertcat(acc_v, acc_h)], ["x", "i"], ["acc"]),
+            ca.Function("twin_acc", [x, i, fr], [ca.vertcat(acc_v, acc_h)], ["x", "i", "friction"],
+                        ["acc"]),
         )
 
         s = ca.SX.sym("s", self.n_state)
         u_cmd = ca.SX.sym("u", 2)
-        xs, cur, heat = s[0:4], s[4:6], s[6]
+        xs, cur, heat, fric = s[0:4], s[4:6], s[6], s[7:9]
         d = e.input_delay_samples
         if d > 0:
-            buf = s[7:]
+            buf = s[9:]
             u_in = buf[0:2]
             buf_next = ca.vertcat(buf[2:], u_cmd)
         else:
@@ -154,7 +178,7 @@ class RigTwin:
 
         def rhs(z, i_applied):
             xz, hz = z[0:4], z[4]
-            av, ah = self._accelerations(xz, i_applied)
+            av, ah = self._accelerations(xz, i_applied, fric)
             tau_heat = tau_th if amp is not None else 2.0  # bookkeeping only without amplifier
             dh = (i_applied[0] ** 2 + i_applied[1] ** 2 - hz) / tau_heat
             return ca.vertcat(xz[1], av, xz[3], ah, dh)
@@ -189,7 +213,8 @@ class RigTwin:
             x_next = ca.vertcat(e.locked_gap, 0, x_next[2], x_next[3])
         if e.locked_position is not None:
             x_next = ca.vertcat(x_next[0], x_next[1], e.locked_position, 0)
-        s_next = ca.vertcat(x_next, cur_next, z[4], buf_next)
+        fric_next = self._friction_update(fric, xs, self.sample_time)
+        s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next)
         flags = ca.vertcat(limited, hit, foldback)
         set_(
             self,
@@ -216,7 +241,7 @@ class RigTwin:
         if self.effects.locked_position is not None:
             x0[2:] = (self.effects.locked_position, 0.0)
         buf = np.tile(u0, self.effects.input_delay_samples)
-        return np.concatenate([x0, u0, [u0 @ u0], buf])
+        return np.concatenate([x0, u0, [u0 @ u0], [0.0, 0.0], buf])
 
     @staticmethod
     def mechanical(states: np.ndarray) -> np.ndarray:

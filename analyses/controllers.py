@@ -1,0 +1,240 @@
+"""Controller comparison: FL regulator, the papers' linear regulator, LQR, NMPC and PID on the
+papers' scenarios, on the ideal plant and on the rig twin.
+
+    python analyses/controllers.py [--out reports/controllers.pdf] [--no-nmpc]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from maglev_oc.control.registry import build_controller
+from maglev_oc.model.stage import StageModel
+from maglev_oc.reporting import controller_plots as plots
+from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.sim.comparison import RIG_CONSTANTS, run_comparison, standard_twins, step_sweep
+from maglev_oc.sim.effects import TwinEffects
+from maglev_oc.sim.scenarios import paper_scenarios
+
+REPORT = "controllers.pdf"
+ORDER = 20
+TITLE = "maglev_oc — controller comparison"
+BASE = ("fl", "linear", "linear-noff", "lqr", "pid")
+SHORT = {"FL regulator": "FL", "linear regulator": "linear",
+         "linear regulator (no feedforward)": "linear, no ff"}
+
+
+def _mm(value: float, digits: int = 3) -> str:
+    return "—" if not math.isfinite(value) else f"{value * 1e3:.{digits}f}"
+
+
+def _s(value: float) -> str:
+    return "—" if not math.isfinite(value) else f"{value:.2f}"
+
+
+def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
+    names = list(BASE) + (["nmpc"] if nmpc else [])
+    controllers, skipped = [], []
+    for n in names:
+        try:
+            controllers.append(build_controller(n, model))
+        except ImportError as err:  # NMPC module not available in this install
+            skipped.append(f"{n}: {err}")
+    scenarios = paper_scenarios()
+    twins = standard_twins(model)
+    cmp = run_comparison(controllers, scenarios, twins)
+    sweep_ctrls = [c for c in controllers if c.name in ("FL regulator", "linear regulator",
+                                                          "linear regulator (no feedforward)")]
+    sweep = step_sweep(sweep_ctrls, twins["ideal"], np.arange(10e-3, 24.5e-3, 1e-3))
+
+    rows: dict[str, list] = {t: [] for t in cmp.twins}
+    for twin in cmp.twins:
+        for sc in scenarios:
+            for name in cmp.controllers:
+                m = cmp.metric(name, sc, twin)
+                st = m.step_time_median
+                rows[twin].append((
+                    sc.replace("_", " "), SHORT.get(name, name),
+                    "yes" if m.success else "NO",
+                    _s(m.worst_settling(0)), _s(m.worst_settling(1)),
+                    f"{m.max_overshoot(0):.0f}" if math.isfinite(m.max_overshoot(0)) else "—",
+                    f"{m.max_overshoot(1):.0f}" if math.isfinite(m.max_overshoot(1)) else "—",
+                    _mm(m.mean_error[0]), _mm(m.mean_error[1]),
+                    f"{m.rms_current:.2f}", f"{m.peak_current:.2f}",
+                    "—" if not math.isfinite(m.min_margin) else f"{m.min_margin:.1f}",
+                    str(m.clipped),
+                    "—" if not math.isfinite(st) else f"{st * 1e3:.3f}",
+                ))
+
+    fl_ideal = cmp.metric("FL regulator", "setpoint_steps", "ideal")
+    fl_rig = cmp.metric("FL regulator", "setpoint_steps", "rig")
+    sin = {(n, t): cmp.metric(n, "sinusoid", t) for n in cmp.controllers for t in cmp.twins}
+    lin_large = {t: cmp.metric("linear regulator", "large_step", t) for t in cmp.twins}
+    paper_rows = [
+        ("vertical settling to 0.1 mm [s]", "< 1.3", _s(fl_ideal.worst_settling(0)),
+         _s(fl_rig.worst_settling(0))),
+        ("horizontal settling to 0.1 mm [s]", "< 1.2 (fifth: 2.38)", _s(fl_ideal.worst_settling(1)),
+         _s(fl_rig.worst_settling(1))),
+        ("vertical overshoot [%]", "114", f"{fl_ideal.max_overshoot(0):.0f}",
+         f"{fl_rig.max_overshoot(0):.0f}"),
+        ("horizontal overshoot [%]", "43", f"{fl_ideal.max_overshoot(1):.0f}",
+         f"{fl_rig.max_overshoot(1):.0f}"),
+        ("ellipse: mean |e| horizontal [mm]", "0.11", _mm(sin[("FL regulator", "ideal")].mean_error[1]),
+         _mm(sin[("FL regulator", "rig")].mean_error[1])),
+        ("ellipse: peak |e| horizontal [mm]", "0.4", _mm(sin[("FL regulator", "ideal")].peak_error[1]),
+         _mm(sin[("FL regulator", "rig")].peak_error[1])),
+        ("ellipse: mean |e| vertical [mm]", "0.24", _mm(sin[("FL regulator", "ideal")].mean_error[0]),
+         _mm(sin[("FL regulator", "rig")].mean_error[0])),
+        ("ellipse: peak |e| vertical [mm]", "0.8", _mm(sin[("FL regulator", "ideal")].peak_error[0]),
+         _mm(sin[("FL regulator", "rig")].peak_error[0])),
+        ("PID ellipse: mean |e| horizontal [mm]", "0.19", _mm(sin[("PID", "ideal")].mean_error[1]),
+         _mm(sin[("PID", "rig")].mean_error[1])),
+        ("PID ellipse: mean |e| vertical [mm]", "≈ 0.9", _mm(sin[("PID", "ideal")].mean_error[0]),
+         _mm(sin[("PID", "rig")].mean_error[0])),
+        ("linear regulator, large step", "unstable",
+         "stable" if lin_large["ideal"].success else "unstable",
+         "stable" if lin_large["rig"].success else "unstable"),
+    ]
+
+    # where each controller wins: best mean tracking error on the ellipse, fastest settling
+    def best(key, scenario, twin):
+        vals = {n: key(cmp.metric(n, scenario, twin)) for n in cmp.controllers
+                if cmp.metric(n, scenario, twin).success}
+        vals = {n: v for n, v in vals.items() if math.isfinite(v)}
+        return min(vals, key=vals.get) if vals else "none", vals
+    lines = []
+    for twin in cmp.twins:
+        n, v = best(lambda m: max(m.mean_error), "sinusoid", twin)
+        lines.append(
+            f"Ellipse tracking, {twin} twin: best mean |error| {n} ({v[n] * 1e3:.3f} mm, worse axis)."
+        )
+        n, v = best(lambda m: max(m.worst_settling(0), m.worst_settling(1)), "setpoint_steps", twin)
+        if n != "none":
+            lines.append(f"Five set-point steps, {twin} twin: fastest worst-case settling to 0.1 mm "
+                         f"{n} ({v[n]:.2f} s).")
+        else:
+            lines.append(f"Five set-point steps, {twin} twin: no controller settles every step to "
+                         "0.1 mm within 5 s (friction hunting, see below).")
+    sweep_lines = []
+    for i, name in enumerate(sweep.controllers):
+        ok = sweep.success[i]
+        worst = sweep.target_gaps[ok].min() * 1e3 if ok.any() else float("nan")
+        sweep_lines.append(f"{name}: copes down to a {worst:.0f} mm target")
+
+    rig = TwinEffects.rig()
+    intro = [
+        "Controllers (each built once as a CasADi Function; the closed loop runs inside CasADi "
+        "with mapaccum for all but NMPC, which is stepped from Python):",
+        "\n".join(f"  • {c.name}" + _tuning(c) for c in controllers)
+        + ("\n  (skipped: " + "; ".join(skipped) + ")" if skipped else ""),
+        "Twins: 'ideal' is the controllers' own model sampled at 5 kHz with a zero-order hold, "
+        "exact positions, ideal amplifier. 'rig' has every effect of TwinEffects.rig() — cogging "
+        f"({rig.cogging.peak_at_reference} N at 15 mm, ∝ gap^-3), guide friction "
+        f"({rig.friction_vertical.coulomb} N vertical, {rig.friction_horizontal.coulomb} N "
+        "horizontal, Coulomb + viscous), guide misalignment (tilt, waviness, off-level, binding), "
+        "current amplifiers (1 kHz, 9 A peak, 7 A continuous), 10 µm encoders with 2 µm noise, "
+        f"one sample of computation delay — and true constants {RIG_CONSTANTS} while every "
+        "controller uses Table III at eps = 0.01.",
+        "Errors are encoder readings minus reference, as the papers measure them. Settling: time "
+        "after a set-point change until the error stays inside the band; overshoot in % of the step.",
+        "\n".join(lines),
+        "Linear vs nonlinear (papers: the linear regulator handles the small step and goes "
+        "unstable on the large one, 26 → 18 mm with 20 mm horizontally): "
+        + "; ".join(sweep_lines) + ". "
+        + _large_step_sentence(cmp)
+        + " Without equilibrium feedforward the linear regulator's transient is much larger. The "
+        "papers measured 114 % vertical overshoot with the FL regulator where the design gives "
+        f"{fl_ideal.max_overshoot(0):.0f} % (our twins: {fl_ideal.max_overshoot(0):.0f} % ideal, "
+        f"{fl_rig.max_overshoot(0):.0f} % rig): their loop had less damping than ours, which "
+        "moves the linear regulator's failure to smaller steps.",
+        "Why the rig twin differs from the papers' figures: guide friction with the internal "
+        "model's undamped omega0 oscillator sustains a hunting limit cycle at omega0 around a "
+        "set-point (tens of µm here; it grows with the Coulomb level), and the papers' larger "
+        "vertical tracking error (0.24 mm) is not reproduced: our vertical disturbances (cogging, "
+        "friction, model mismatch) are rejected by the stiff vertical loop.",
+        f"Total simulation wall time {cmp.wall_time:.1f} s for {len(cmp.results)} runs.",
+    ]
+    with PdfReport(out, TITLE, subtitle="reports/controllers.pdf from analyses/controllers.py") as pdf:
+        pdf.add_text("Setup and findings", intro, first_page=True)
+        pdf.add_table(
+            "FL regulator against the papers' numbers",
+            ["quantity", "papers (rig)", "ideal twin", "rig twin"], paper_rows,
+            notes=["Papers: 002 Sec. 7, 001 Sec. VI (SPEC 4). Our five set-points (not printed in "
+                   "the papers) span 15-25 mm and -40..40 mm with steps up to 10 mm / 40 mm."],
+            col_widths=[0.4, 0.2, 0.18, 0.18],
+        )
+        for twin in cmp.twins:
+            pdf.add_table(
+                f"Summary on the {twin} twin",
+                ["scenario", "controller", "ok", "T0.1 v [s]", "T0.1 h [s]", "OS v [%]",
+                 "OS h [%]", "mean|e| v [mm]", "mean|e| h [mm]", "I rms [A]", "I peak [A]",
+                 "min margin [m/s²]", "clipped", "step [ms]"],
+                rows[twin], font_size=6.5,
+                col_widths=[0.09, 0.1, 0.04, 0.065, 0.065, 0.06, 0.06, 0.08, 0.08, 0.06, 0.06,
+                            0.08, 0.055, 0.06],
+                notes=["T0.1: worst settling time to 0.1 mm over the steps (— : not settled before "
+                       "the next change); OS: worst overshoot in % of the step (steps under "
+                       "0.5 mm not scored); mean |e|: mean absolute encoder error after the "
+                       "start-up transient (ellipse: after 8 s); I: magnitude of the commanded "
+                       "current vector (the amplifier limits it to 9 A on the rig twin); min "
+                       "margin: smallest R/(4 L4) of the FL transformation; step: median "
+                       "per-call time of an online controller."],
+            )
+        for twin in cmp.twins:
+            for sc in scenarios:
+                pdf.add_figure(plots.scenario_figure(cmp, sc, twin))
+        pdf.add_figure(plots.sweep_figure(sweep))
+    return out
+
+
+def _large_step_sentence(cmp) -> str:
+    out = []
+    for twin in cmp.twins:
+        lin = cmp.metric("linear regulator", "large_step", twin)
+        small = cmp.metric("linear regulator", "small_step", twin)
+        fl = cmp.metric("FL regulator", "large_step", twin)
+        out.append(
+            f"{twin} twin: linear regulator {'settles' if small.success else 'FAILS'} on the small "
+            f"step and {'settles' if lin.success else 'FAILS'} on the large one (FL: "
+            f"{'settles' if fl.success else 'fails'})"
+        )
+    return "; ".join(out) + "."
+
+
+def _tuning(c) -> str:
+    d = getattr(c, "design", {}) or {}
+    if c.name == "FL regulator":
+        kh = ", ".join(f"{k:.0f}" for k in c.K_h)
+        kv = ", ".join(f"{k:.0f}" for k in c.K_v)
+        return f": printed gains K_h = [{kh}], K_v = [{kv}]"
+    if "poles_v" in d:
+        return ": poles of the printed gains placed on the linearization at each set-point gap"
+    if "weights" in d:
+        w = d["weights"]
+        return (f": Bryson maxima vertical (e {w['vertical'].error * 1e3:g} mm, "
+                f"e' {w['vertical'].error_rate:g} m/s, 1 A), horizontal (e "
+                f"{w['horizontal'].error * 1e3:g} mm, e' {w['horizontal'].error_rate:g} m/s, 1 A)")
+    if "poles" in d and isinstance(d["poles"], dict):
+        p = d["poles"]
+        return f": triple poles {p['vertical'][0]:g} (vertical), {p['horizontal'][0]:g} (horizontal)"
+    return getattr(c, "tuning", "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    from maglev_oc.cli import load_model
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("reports") / REPORT)
+    parser.add_argument("--params", type=Path)
+    parser.add_argument("--no-nmpc", action="store_true", help="leave NMPC out (faster)")
+    args = parser.parse_args(argv)
+    print(f"wrote {build(args.out, load_model(args.params), nmpc=not args.no_nmpc)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

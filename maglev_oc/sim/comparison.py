@@ -1,0 +1,119 @@
+"""Every controller on every scenario on each twin: the controller comparison of issue 3.
+
+The "rig" twin has every effect of :meth:`TwinEffects.rig` and true constants that differ from
+the controllers' (Table III of 000 at eps = 0.001 while the controllers use eps = 0.01: the
+papers' own spread between estimates), so no controller sees its own model.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from maglev_oc.model.parameters import PAPER_CONSTANTS
+from maglev_oc.model.stage import StageModel
+from maglev_oc.sim.effects import TwinEffects
+from maglev_oc.sim.engine import ClosedLoop, SimulationResult
+from maglev_oc.sim.metrics import RunMetrics, evaluate
+from maglev_oc.sim.scenarios import Scenario, SetpointSequence
+from maglev_oc.sim.twin import RigTwin
+
+RIG_CONSTANTS = "table3_eps0.001"
+"""The rig twin's true constants (the controllers use the model's, Table III at eps = 0.01)."""
+
+
+def standard_twins(model: StageModel) -> dict[str, RigTwin]:
+    """``ideal``: the controllers' own model, no effects. ``rig``: every effect on, and true
+    constants :data:`RIG_CONSTANTS`."""
+    return {
+        "ideal": RigTwin(model, TwinEffects.ideal()),
+        "rig": RigTwin(model.with_constants(PAPER_CONSTANTS[RIG_CONSTANTS]), TwinEffects.rig()),
+    }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Runs and metrics keyed by (controller name, scenario name, twin name)."""
+
+    controllers: tuple[str, ...]
+    scenarios: dict[str, Scenario]
+    twins: tuple[str, ...]
+    results: dict[tuple[str, str, str], SimulationResult]
+    metrics: dict[tuple[str, str, str], RunMetrics]
+    descriptions: dict[str, str] = field(default_factory=dict)
+    wall_time: float = 0.0
+
+    def metric(self, controller: str, scenario: str, twin: str) -> RunMetrics:
+        return self.metrics[(controller, scenario, twin)]
+
+
+def run_comparison(
+    controllers: Sequence[object],
+    scenarios: Mapping[str, Scenario],
+    twins: Mapping[str, RigTwin],
+    *,
+    seed: int = 0,
+) -> Comparison:
+    """Simulate each controller on each scenario on each twin (one ClosedLoop per pair)."""
+    t0 = time.perf_counter()
+    results, metrics = {}, {}
+    for twin_name, twin in twins.items():
+        for ctrl in controllers:
+            loop = ClosedLoop(twin, ctrl)
+            for sc_name, sc in scenarios.items():
+                res = loop.run(sc, seed=seed)
+                key = (ctrl.name, sc_name, twin_name)
+                results[key] = res
+                metrics[key] = evaluate(res, sc)
+    return Comparison(
+        controllers=tuple(c.name for c in controllers),
+        scenarios=dict(scenarios),
+        twins=tuple(twins),
+        results=results,
+        metrics=metrics,
+        wall_time=time.perf_counter() - t0,
+    )
+
+
+@dataclass(frozen=True)
+class StepSweep:
+    """Outcome of steps from one start to a range of target gaps, per controller."""
+
+    start: tuple[float, float, float, float]
+    target_gaps: np.ndarray  # [m]
+    target_position: float  # [m]
+    controllers: tuple[str, ...]
+    success: np.ndarray  # (n_controllers, n_targets) bool
+    min_gap: np.ndarray  # (n_controllers, n_targets) [m] smallest gap reached
+    peak_current: np.ndarray  # (n_controllers, n_targets) [A]
+
+
+def step_sweep(
+    controllers: Sequence[object],
+    twin: RigTwin,
+    target_gaps,
+    *,
+    start=(0.026, 0.0, 0.0, 0.0),
+    target_position: float = 0.020,
+    duration: float = 5.0,
+) -> StepSweep:
+    """Steps from ``start`` to (gap, 0, ``target_position``, 0) for each target gap: where
+    each controller stops coping (hits a stopper or diverges)."""
+    gaps = np.asarray(target_gaps, dtype=float)
+    ok = np.zeros((len(controllers), gaps.size), dtype=bool)
+    gmin = np.full((len(controllers), gaps.size), np.nan)
+    ipk = np.full((len(controllers), gaps.size), np.nan)
+    for i, ctrl in enumerate(controllers):
+        loop = ClosedLoop(twin, ctrl)
+        for j, g in enumerate(gaps):
+            sc = Scenario("sweep", "sweep", tuple(start),
+                          SetpointSequence((0.0,), ((float(g), target_position),)), duration)
+            res = loop.run(sc)
+            ok[i, j] = res.success
+            gmin[i, j] = np.nanmin(res.x[0])
+            ipk[i, j] = np.nanmax(np.hypot(res.u[0], res.u[1]))
+    return StepSweep(tuple(start), gaps, target_position, tuple(c.name for c in controllers),
+                     ok, gmin, ipk)
