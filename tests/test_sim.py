@@ -179,3 +179,25 @@ def test_rig_twin_run_is_deterministic_and_bounded(model, fl):
     # band of a few encoder counts to ~0.15 mm (see effects.GuideFriction)
     tail = np.abs(a.error[:, a.t > 6.0])
     assert np.max(tail) < 0.25 * MM
+
+
+def test_commutation_ripple_and_cable_effects(model):
+    from maglev_oc.sim.effects import CableForce, CommutationOffset, ForceRipple
+
+    x = [20 * MM, 0.0, 4.7625 * MM, 0.0]  # x3 = t1 / 4: sin(2 pi x3 / t1) = 1
+    base = np.asarray(RigTwin(model).acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    L1 = float(model.L(20 * MM)[0])
+    # commutation offset d: thrust from i_q cos d + i_d sin d
+    d = 0.05
+    acc = np.asarray(RigTwin(model, TwinEffects(commutation=CommutationOffset(d)))
+                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    assert_allclose(acc[1], -L1 * (np.cos(d) + 0.5 * np.sin(d)), rtol=1e-12)
+    # ripple: thrust scaled by 1 + a at the ripple's peak
+    acc = np.asarray(RigTwin(model, TwinEffects(ripple=ForceRipple(0.04, 19.05e-3)))
+                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    assert_allclose(acc[1], base[1] * 1.04, rtol=1e-12)
+    # cable: -k (x3 - neutral) / M_h
+    acc = np.asarray(RigTwin(model, TwinEffects(cable=CableForce(8.0, -20 * MM)))
+                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    assert_allclose(acc[1] - base[1], -8.0 * (x[2] + 20 * MM) / model.params.mass_horizontal,
+                    rtol=1e-12)

@@ -156,6 +156,50 @@ class Encoder:
 
 
 @dataclass(frozen=True)
+class CommutationOffset:
+    """Misaligned commutation: the amplifiers' electrical angle is off by ``angle`` [rad] from the
+    magnets' poles (the encoder zero was set a little off), so the applied d-q currents are the
+    commanded ones rotated: i_q' = i_q cos(d) + i_d sin(d), i_d' = i_d cos(d) - i_q sin(d).
+    Part of i_d then produces thrust and part of i_q normal force. Default 0.05 rad (3 deg:
+    1 mm of encoder-zero error over the 57 mm pole pitch)."""
+
+    angle: float = 0.05  # [rad]
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.angle) and abs(self.angle) < 0.5):
+            raise ValueError(f"CommutationOffset.angle must be a small angle [rad], got {self.angle!r}")
+
+
+@dataclass(frozen=True)
+class ForceRipple:
+    """Thrust ripple: the propulsion force K1 i_q is modulated along the track,
+    (1 + amplitude sin(2 pi x3 / period + phase)), from the slotting and the winding harmonics.
+    Default 4 % at the slot pitch t1 = 19.05 mm (= tau / 3, the sixth electrical harmonic)."""
+
+    amplitude: float = 0.04  # [-] fraction of the thrust
+    period: float = 19.05e-3  # [m]
+    phase: float = 0.0  # [rad]
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.amplitude < 0.5):
+            raise ValueError(f"ForceRipple.amplitude must be a fraction in [0, 0.5), got {self.amplitude!r}")
+        _positive(self, "period", allow_zero=False)
+
+
+@dataclass(frozen=True)
+class CableForce:
+    """The cable carrier of the moving platform: a position-dependent horizontal force
+    F = -stiffness (x3 - neutral) (a bent cable chain pushes back towards its neutral position).
+    Default 8 N/m, neutral at -20 mm: up to 0.56 N at the far end of travel."""
+
+    stiffness: float = 8.0  # [N/m]
+    neutral: float = -20e-3  # [m]
+
+    def __post_init__(self) -> None:
+        _positive(self, "stiffness")
+
+
+@dataclass(frozen=True)
 class Stoppers:
     """Mechanical stoppers of the vertical and horizontal guides (002 Fig. 5).
 
@@ -181,6 +225,9 @@ class TwinEffects:
     misalignment: GuideMisalignment | None = None
     amplifier: CurrentAmplifier | None = None
     encoder: Encoder | None = None
+    commutation: CommutationOffset | None = None
+    ripple: ForceRipple | None = None
+    cable: CableForce | None = None
     stoppers: Stoppers | None = field(default_factory=Stoppers)
     input_delay_samples: int = 0  # computation delay of the real-time loop [samples]
     locked_gap: float | None = None  # [m] vertical motion blocked by stoppers at this gap
@@ -206,8 +253,12 @@ class TwinEffects:
 
     @classmethod
     def rig(cls, **overrides: Any) -> TwinEffects:
-        """Everything a real stage has, with the defaults above; override any by keyword."""
+        """The effects the papers report for their rig, with the defaults above; override or add
+        any by keyword (commutation, ripple and cable are off unless given)."""
         base = dict(
+            commutation=None,
+            ripple=None,
+            cable=None,
             cogging=Cogging(),
             friction_horizontal=GuideFriction(coulomb=0.1, viscous=1.0),
             friction_vertical=GuideFriction(coulomb=0.3, viscous=2.0),

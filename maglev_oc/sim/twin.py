@@ -84,8 +84,17 @@ class RigTwin:
             gap = gap + m.tilt * x[2] + m.waviness * ca.sin(2 * math.pi * x[2] / m.waviness_period)
         L1, L2, L3, L4 = self.model.L(gap)
         G = p.gravity
+        if e.commutation is not None:
+            cd, sd = math.cos(e.commutation.angle), math.sin(e.commutation.angle)
+            i = ca.vertcat(i[0] * cd + i[1] * sd, i[1] * cd - i[0] * sd)
+        thrust = L1
+        if e.ripple is not None:
+            r = e.ripple
+            thrust = L1 * (1 + r.amplitude * ca.sin(2 * math.pi * x[2] / r.period + r.phase))
         acc_v = G - L2 - L3 * i[1] - L4 * (i[0] ** 2 + i[1] ** 2)
-        acc_h = -L1 * i[0]
+        acc_h = -thrust * i[0]
+        if e.cable is not None:
+            acc_h -= e.cable.stiffness * (x[2] - e.cable.neutral) / p.mass_horizontal
         if e.cogging is not None:
             c = e.cogging
             scale = (c.reference_gap / gap) ** c.exponent
