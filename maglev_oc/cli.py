@@ -4,6 +4,8 @@
     maglev-oc model [--params JSON] [--gaps MM ...]  print the equilibrium table
     maglev-oc simulate --controller fl --scenario sinusoid --out run.csv
                                                      closed loop on the rig twin -> log (SPEC 2)
+    maglev-oc diagnose LOG... --json OUT.json [--report OUT.pdf]
+                                                     residual -> missing effect -> error before/after
 
 Errors in what the user hands in (files, values) are reported in one line on stderr with exit
 status 2; nothing is written in that case.
@@ -149,6 +151,40 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    import json
+
+    from maglev_oc.data.logs import check_excitation, read_log
+    from maglev_oc.diagnose.diagnosis import diagnose
+    from maglev_oc.fileio import write_text_atomic
+
+    model = load_model(args.params)
+    logs = []
+    for path in args.logs:
+        if not Path(path).is_file():
+            raise UserError(f"{path}: no such file")
+        log = read_log(path, params=model.params)
+        check_excitation(log)
+        logs.append(log)
+    diag = diagnose(logs, model, holdout_fraction=args.holdout)
+    write_text_atomic(args.json, json.dumps(diag.to_json(), indent=2) + "\n")
+    print(diag.message)
+    for a in diag.error_before:
+        print(f"  held-out error {a}: {diag.error_before[a]:.4g} -> {diag.error_after[a]:.4g} m/s^2")
+    for e in diag.effects:
+        pars = ", ".join(f"{k}={v.value:.4g}±{v.stderr:.2g} {v.unit}" for k, v in e.parameters.items())
+        print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {pars}")
+    print(f"  wrote {args.json} ({diag.timings['total']:.1f} s)")
+    if args.report:
+        from maglev_oc.diagnose.feedback import compensation_study
+        from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
+
+        study = None if args.no_control else compensation_study(diag, model)
+        write_diagnosis_report(args.report, diag, study=study)
+        print(f"  wrote {args.report}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="maglev-oc", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -189,6 +225,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--describe-twin", action="store_true", help="write the twin's effects into the log")
     p.add_argument("--out", type=Path, required=True, help="log file (.csv or .mat)")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("diagnose", help="find what the model misses in logs and add it (SPEC 3)")
+    p.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="logs (.csv or .mat, SPEC 2)")
+    p.add_argument("--json", type=Path, required=True, help="result (SPEC 3 contract)")
+    p.add_argument("--report", type=Path, help="PDF report")
+    p.add_argument("--params", type=Path, help="stage/constants JSON (geometry; constants refitted)")
+    p.add_argument("--holdout", type=float, default=0.25, help="held-out fraction at each log's end")
+    p.add_argument("--no-control", action="store_true", help="skip the closed-loop study in the report")
+    p.set_defaults(func=cmd_diagnose)
     return parser
 
 

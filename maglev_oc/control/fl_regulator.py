@@ -44,6 +44,11 @@ class FeedbackLinearizingRegulator:
         Internal-model frequency [rad/s] (default 1.5 pi).
     observer_epsilon : float
         High-gain observer time constant [s].
+    compensation : casadi.Function, optional
+        An identified extra acceleration d(x) (x (4) -> (x2', x4') [m/s^2]) the model lacks,
+        e.g. from ``maglev-oc diagnose``; the transformation is then asked for v - d so that
+        the plant with the effect still sees v. Evaluated at the measured positions and the
+        observers' velocities.
     name : str
     """
 
@@ -53,6 +58,7 @@ class FeedbackLinearizingRegulator:
     sample_time: float = RIG_SAMPLE_TIME
     omega0: float = OMEGA0
     observer_epsilon: float = DEFAULT_EPSILON
+    compensation: ca.Function | None = None
     name: str = "FL regulator"
 
     n_state: ClassVar[int] = N_REGULATOR_STATE
@@ -73,7 +79,14 @@ class FeedbackLinearizingRegulator:
         v1 = ca.dot(ca.DM(self.K_h), sig.z_h)
         v2 = ca.dot(ca.DM(self.K_v), sig.z_v)
         v = ca.vertcat(v1, v2)
-        R, _, u = transformation_expressions(self.model, sig.gap, v)
+        v_ask = v
+        if self.compensation is not None:
+            if self.compensation.size1_in(0) != 4 or self.compensation.size1_out(0) != 2:
+                raise ValueError("compensation must map x (4) -> (x2', x4') (2)")
+            x_hat = ca.vertcat(y[0], c[1], y[1], c[3])
+            d = self.compensation(x_hat)
+            v_ask = ca.vertcat(v1 - d[1], v2 - d[0])
+        R, _, u = transformation_expressions(self.model, sig.gap, v_ask)
         L4 = self.model.L(sig.gap)[3]
         margin = R / (4 * L4)
         clipped = R < 0

@@ -91,13 +91,13 @@ class GuideMisalignment:
       constant disturbance Delta_1 of 001).
     - Binding: the guide preload, hence the Coulomb friction, grows away from the aligned
       position, by ``binding`` [N/m] * |x3|, on both axes.
-    Defaults: 0.5 mrad tilt (25 um of gap over +-50 mm), 15 um waviness over a 40 mm period,
+    Defaults: 0.5 mrad tilt (25 um of gap over +-50 mm), 15 um waviness over a 25 mm period,
     1 mrad off level, 3 N/m binding (0.15 N extra at the ends of travel).
     """
 
     tilt: float = 5e-4  # [rad]
     waviness: float = 15e-6  # [m]
-    waviness_period: float = 40e-3  # [m]
+    waviness_period: float = 25e-3  # [m]
     level_tilt: float = 1e-3  # [rad]
     binding: float = 3.0  # [N/m]
 
@@ -228,12 +228,18 @@ class TwinEffects:
     commutation: CommutationOffset | None = None
     ripple: ForceRipple | None = None
     cable: CableForce | None = None
+    extra: Any = None  # casadi.Function (x (4), i (2)) -> (x2', x4') [m/s^2]: e.g. an identified effect
     stoppers: Stoppers | None = field(default_factory=Stoppers)
     input_delay_samples: int = 0  # computation delay of the real-time loop [samples]
     locked_gap: float | None = None  # [m] vertical motion blocked by stoppers at this gap
     locked_position: float | None = None  # [m] horizontal motion blocked at this position
 
     def __post_init__(self) -> None:
+        if self.extra is not None:
+            f = self.extra
+            ok = hasattr(f, "n_in") and f.n_in() == 2 and f.size1_in(0) == 4 and f.size1_in(1) == 2
+            if not ok or f.size1_out(0) != 2:
+                raise ValueError("TwinEffects.extra must be a casadi.Function (x (4), i (2)) -> acc (2)")
         if self.locked_gap is not None and not (0 < self.locked_gap < 0.1):
             raise ValueError(f"TwinEffects.locked_gap must be a gap in metres, got {self.locked_gap!r}")
         if self.locked_position is not None and not abs(self.locked_position) < 0.5:

@@ -95,6 +95,10 @@ class RigTwin:
         acc_h = -thrust * i[0]
         if e.cable is not None:
             acc_h -= e.cable.stiffness * (x[2] - e.cable.neutral) / p.mass_horizontal
+        if e.extra is not None:
+            extra = e.extra(x, i)
+            acc_v += extra[0]
+            acc_h += extra[1]
         if e.cogging is not None:
             c = e.cogging
             scale = (c.reference_gap / gap) ** c.exponent

@@ -1,0 +1,153 @@
+"""What the residual depends on: the evidence that points from a residual to an effect.
+
+Analyses of an acceleration residual (per axis) against the signals that physical effects
+depend on:
+
+* the spatial spectrum over the horizontal position x3 (least-squares periodogram: the share of
+  the residual's variance a sinusoid of period lambda in x3 explains), with the motor's physical
+  periods marked — the slot pitch t1, 2 t1 (000 eq. (9)), the pole pitch tau and 2 tau;
+* the mean residual against the gap, the velocity of each axis (a step at zero velocity is
+  Coulomb friction, a slope viscous), the horizontal position (a ramp is a spring or a tilt);
+* the cross-correlation with the rate of the commanded currents at lags up to 20 ms (a current
+  lag or delay correlates with di/dt).
+
+The periodogram's peaks that match no motor period become data-driven candidates
+(guide waviness at the found period).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from maglev_oc.model.parameters import StageParameters
+
+AXIS_NAMES = ("vertical", "horizontal")
+
+
+@dataclass(frozen=True)
+class Binned:
+    """Mean residual (and its standard error) in bins of a variable."""
+
+    variable: str
+    unit: str
+    centers: np.ndarray  # (b,)
+    mean: np.ndarray  # (2, b) per axis [m/s^2]
+    stderr: np.ndarray  # (2, b)
+    count: np.ndarray  # (b,)
+
+
+@dataclass(frozen=True)
+class Trace:
+    periods: np.ndarray  # (m,) [m]
+    spectrum: np.ndarray  # (2, m) variance share explained per period
+    motor_periods: dict[str, float]  # name -> [m]
+    peaks: list[tuple[str, float, float]]  # (axis, period [m], share)
+    binned: dict[str, Binned]  # "gap", "gap_rate", "position", "position_rate"
+    lags: np.ndarray  # (l,) [s]
+    lag_correlation: np.ndarray  # (2, l) correlation of residual with di/dt (own axis)
+
+
+def motor_periods(params: StageParameters) -> dict[str, float]:
+    t1, tau = params.slot_pitch, params.pole_pitch
+    return {"slot_pitch": t1, "twice_slot_pitch": 2 * t1, "pole_pitch": tau, "twice_pole_pitch": 2 * tau}
+
+
+def spatial_periodogram(x3: np.ndarray, residual: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    """Share of each row of ``residual`` (2, n) explained by a sinusoid in ``x3`` per period."""
+    r = residual - residual.mean(axis=1, keepdims=True)
+    total = np.sum(r**2, axis=1)
+    out = np.zeros((r.shape[0], periods.size))
+    for j, lam in enumerate(periods):
+        arg = 2 * math.pi * x3 / lam
+        basis = np.vstack([np.sin(arg), np.cos(arg)])
+        basis -= basis.mean(axis=1, keepdims=True)
+        gram = basis @ basis.T
+        for a in range(r.shape[0]):
+            rhs = basis @ r[a]
+            try:
+                coef = np.linalg.solve(gram, rhs)
+            except np.linalg.LinAlgError:
+                continue
+            out[a, j] = (coef @ rhs) / max(total[a], 1e-30)
+    return out
+
+
+def _binned(variable: str, unit: str, v: np.ndarray, residual: np.ndarray, edges: np.ndarray) -> Binned:
+    idx = np.clip(np.digitize(v, edges) - 1, 0, edges.size - 2)
+    b = edges.size - 1
+    mean = np.full((2, b), np.nan)
+    se = np.full((2, b), np.nan)
+    count = np.bincount(idx, minlength=b)
+    for k in range(b):
+        sel = idx == k
+        if count[k] >= 20:
+            mean[:, k] = residual[:, sel].mean(axis=1)
+            se[:, k] = residual[:, sel].std(axis=1) / math.sqrt(count[k])
+    return Binned(variable, unit, 0.5 * (edges[:-1] + edges[1:]), mean, se, count)
+
+
+def trace(
+    x: np.ndarray,
+    du: np.ndarray,
+    residual: np.ndarray,
+    params: StageParameters,
+    sample_time: float,
+    *,
+    min_share: float = 0.02,
+) -> Trace:
+    """Analyse ``residual`` (2, n) at states ``x`` (4, n) and current rates ``du`` (2, n)."""
+    span = float(np.ptp(x[2]))
+    hi = max(min(0.75 * span, 0.15), 0.01)
+    periods = np.geomspace(4e-3, hi, 300)
+    spec = spatial_periodogram(x[2], residual, periods)
+    mp = motor_periods(params)
+    peaks = []
+    for a in range(2):
+        s = spec[a]
+        for j in np.argsort(s)[::-1][:40]:
+            if s[j] < min_share:
+                break
+            if 0 < j < s.size - 1 and s[j] >= s[j - 1] and s[j] >= s[j + 1]:
+                peaks.append((AXIS_NAMES[a], float(periods[j]), float(s[j])))
+    binned = {}
+    for name, unit, v in (("gap", "m", x[0]), ("gap_rate", "m/s", x[1]),
+                          ("position", "m", x[2]), ("position_rate", "m/s", x[3])):
+        lo, up = np.percentile(v, [1, 99])
+        if name.endswith("rate"):
+            m = max(abs(lo), abs(up))
+            edges = np.linspace(-m, m, 25)
+        else:
+            edges = np.linspace(lo, up, 21)
+        binned[name] = _binned(name, unit, v, residual, edges)
+    n_lag = round(0.02 / sample_time)
+    lags = np.arange(-n_lag, n_lag + 1)
+    corr = np.zeros((2, lags.size))
+    for a, ia in ((0, 1), (1, 0)):  # vertical with di_d/dt, horizontal with di_q/dt
+        r = residual[a] - residual[a].mean()
+        d = du[ia] - du[ia].mean()
+        denom = math.sqrt(float(r @ r) * float(d @ d)) or 1.0
+        for k, lag in enumerate(lags):
+            if lag >= 0:
+                corr[a, k] = float(r[lag:] @ d[: d.size - lag]) / denom
+            else:
+                corr[a, k] = float(r[:lag] @ d[-lag:]) / denom
+    return Trace(periods, spec, mp, peaks, binned, lags * sample_time, corr)
+
+
+def unexplained_periods(
+    tr: Trace, *, tolerance: float = 0.015, max_per_axis: int = 1
+) -> list[tuple[str, float]]:
+    """Periodogram peaks (axis, period) that match no motor period or its harmonics within
+    ``tolerance``: candidates for guide waviness."""
+    motor = list(tr.motor_periods.values())
+    out: dict[str, list[tuple[float, float]]] = {}
+    for axis, lam, share in sorted(tr.peaks, key=lambda p: -p[2]):
+        if any(abs(lam / m - 1) < tolerance for m in motor):
+            continue
+        out.setdefault(axis, [])
+        if len(out[axis]) < max_per_axis:
+            out[axis].append((lam, share))
+    return [(axis, lam) for axis, items in out.items() for lam, _ in items]
