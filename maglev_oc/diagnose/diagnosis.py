@@ -117,7 +117,7 @@ class Diagnosis:
             "constants_final": phys_full(self.constants_final),
             "candidate_ranking": [{"name": n, "holdout_gain": _num(g)} for n, g in self.ranking],
             "selection_steps": [
-                {"name": s.name, "accepted": s.accepted, "holdout_gain": _num(s.gain),
+                {"name": s.name, "accepted": bool(s.accepted), "holdout_gain": _num(s.gain),
                  "wald": _num(s.wald), "wald_threshold": _num(s.wald_threshold),
                  "contribution_rms": [_num(v) for v in s.contribution_rms],
                  "confidence": _num(s.confidence), "runner_up": s.runner_up}
