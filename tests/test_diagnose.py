@@ -166,3 +166,18 @@ def test_rig_twin_finds_the_big_three(model, twin_log):
     d = diagnose([twin_log(TwinEffects.rig(), duration=60.0)], model)
     names = {e.name for e in d.effects}
     assert {"guide_friction_horizontal", "cogging_twice_slot_pitch", "guide_friction_vertical"} <= names
+
+
+def test_locked_axis_and_fast_log(model, twin_log):
+    # The papers' vertical experiments lock the mover horizontally (000 Sec. V-B): the horizontal
+    # axis has no equation to fit. Logged at 5 kHz, the log is reduced to 1 kHz first.
+    twin = RigTwin(model.with_constants(TRUE), TwinEffects(
+        encoder=ENC, friction_vertical=GuideFriction(0.5, 2.0)).locked(position=0.0))
+    res = ClosedLoop(twin, paper_pid(model)).run(excitation_scenario(20.0, seed=2))
+    log = result_to_log(res)  # 5 kHz
+    d = diagnose([log], model)
+    assert d.data.sample_time == pytest.approx(1e-3)
+    assert d.data.moving == (True, False)
+    assert [e.name for e in d.effects][:1] == ["guide_friction_vertical"]
+    assert np.isnan(d.constants_final["C1"].value)
+    assert d.to_json()["error_before"]["horizontal"] is None

@@ -37,7 +37,8 @@ from maglev_oc.model.stage import StageModel
 
 ERROR_METRIC = (
     "RMS of the acceleration equation error (measured minus model, both through the same "
-    "zero-phase low-pass) on the held-out block at the end of each log, per axis, in m/s^2"
+    "zero-phase low-pass) on the held-out block at the end of each log, per axis, in m/s^2 "
+    "(null for an axis that does not move in the logs)"
 )
 
 
@@ -138,11 +139,22 @@ def _num(v: float) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def _constants(design, fit, ) -> dict[str, Physical]:
+def _constants(design, fit) -> dict[str, Physical]:
+    """C1..C4 with standard errors; NaN for the constants of an axis that did not move."""
     coef, cov = fit.coefficients(design, "base")
     units = ("m/(s^2 A)", "m/(s^2 T^2)", "m/(s^2 A T)", "m/(s^2 A^2)")
-    return {n: Physical(float(coef[k]), float(math.sqrt(max(cov[k, k], 0))), units[k])
-            for k, n in enumerate(BASE_NAMES)}
+    axis_of = (1, 0, 0, 0)  # C1 horizontal, C2..C4 vertical
+    out = {}
+    for k, n in enumerate(BASE_NAMES):
+        if design.moving[axis_of[k]]:
+            out[n] = Physical(float(coef[k]), float(math.sqrt(max(cov[k, k], 0))), units[k])
+        else:
+            out[n] = Physical(float("nan"), float("nan"), units[k])
+    return out
+
+
+def _per_axis(values, moving) -> dict[str, float]:
+    return {a: float(v) if m else float("nan") for a, v, m in zip(AXIS_NAMES, values, moving, strict=True)}
 
 
 def diagnose(
@@ -165,7 +177,8 @@ def diagnose(
     t1 = time.perf_counter()
     design0 = build_design(data, model, [])
     base0 = fit_subset(design0, ["base"])
-    c = base0.coef[:4]
+    # constants of a locked axis cannot be fitted: keep the model's
+    c = np.where([data.moving[1], *[data.moving[0]] * 3], base0.coef[:4], model.constants.as_array())
     fitted = model
     if np.all(c > 0) and np.all(np.isfinite(c)):
         fitted = model.with_constants(LumpedConstants(*c, source="diagnose: base fit"))
@@ -190,13 +203,18 @@ def diagnose(
         sel = select(design, [c.name for c in candidates], bootstrap=bootstrap, seed=seed)
         if not sel.selected:
             break
-        c_new = sel.final.coefficients(design, "base")[0]
+        c_new = np.where([data.moving[1], *[data.moving[0]] * 3],
+                         sel.final.coefficients(design, "base")[0], fitted.constants.as_array())
         if not (np.all(c_new > 0) and np.max(np.abs(c_new / fitted.constants.as_array() - 1)) > 0.01):
             break
         fitted = model.with_constants(LumpedConstants(*c_new, source="diagnose: refit with effects"))
         candidates = candidate_library(fitted) + [
             waviness_candidate(fitted, axis, period) for axis, period in unexplained_periods(tr)]
     timings["selection"] = time.perf_counter() - t3
+
+    def fitted_constants(fit) -> np.ndarray:
+        return np.where([data.moving[1], *[data.moving[0]] * 3],
+                        fit.coefficients(design, "base")[0], model.constants.as_array())
 
     # 6. refit and report, with the model-form spread over each effect's variants
     by_name = {c.name: c for c in candidates}
@@ -216,8 +234,8 @@ def diagnose(
         ))
     res1 = residuals(design, sel.final)
     t4 = time.perf_counter()
-    oe_before = output_error(data, fitted, sel.base.coef[:4], [])
-    oe_after = output_error(data, fitted, sel.final.coefficients(design, "base")[0],
+    oe_before = output_error(data, fitted, fitted_constants(sel.base), [])
+    oe_after = output_error(data, fitted, fitted_constants(sel.final),
                             [(e.candidate, e.coefficients) for e in effects])
     timings["output_error"] = time.perf_counter() - t4
     timings["total"] = time.perf_counter() - t0
@@ -228,8 +246,8 @@ def diagnose(
         success=True, message=message, sources=data.sources,
         constants_base=_constants(design, sel.base), constants_final=_constants(design, sel.final),
         effects=effects,
-        error_before=dict(zip(AXIS_NAMES, map(float, sel.base.holdout_rms), strict=True)),
-        error_after=dict(zip(AXIS_NAMES, map(float, sel.final.holdout_rms), strict=True)),
+        error_before=_per_axis(sel.base.holdout_rms, data.moving),
+        error_after=_per_axis(sel.final.holdout_rms, data.moving),
         output_error_before=oe_before, output_error_after=oe_after,
         ranking=sel.ranking, selection=sel, trace=tr, residual_before=residuals(design, sel.base),
         residual_after=res1, data=data, timings=timings,
@@ -311,4 +329,4 @@ def output_error(
     traj = np.asarray(batch(x0, U, DU))  # (4, h * m)
     meas = np.hstack([data.x[:, k + 1 : k + 1 + h] for k in starts])
     errs = traj[[0, 2]] - meas[[0, 2]]
-    return dict(zip(AXIS_NAMES, map(float, np.sqrt(np.mean(errs**2, axis=1))), strict=True))
+    return _per_axis(np.sqrt(np.mean(errs**2, axis=1)), data.moving)

@@ -53,6 +53,7 @@ class Design:
     hold_n: int
     train_n: int
     holdout: np.ndarray  # (n,) bool
+    moving: np.ndarray  # (2,) bool: axes in the regression (vertical, horizontal)
 
     def indices(self, names: Sequence[str]) -> np.ndarray:
         return np.concatenate([self.groups[n] for n in names])
@@ -95,7 +96,8 @@ def build_design(
     coef, *_ = np.linalg.lstsq(xb, yb, rcond=None)
     resid = target[:, tr] - np.einsum("p,pan->an", coef, cols[:4][:, :, tr])
     scale = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=1, keepdims=True)), axis=1)
-    weights = 1.0 / np.maximum(scale, 1e-9)
+    # an axis that does not move (locked by stoppers) has no equation to fit: weight zero
+    weights = np.where(np.asarray(data.moving), 1.0 / np.maximum(scale, 1e-9), 0.0)
 
     # training blocks
     block = max(1, round(block_seconds / data.sample_time))
@@ -117,7 +119,7 @@ def build_design(
     hr = np.stack([cols[:, a, ho] @ target[a, ho] for a in range(2)])
     hy = np.array([target[a, ho] @ target[a, ho] for a in range(2)])
     return Design(cols, target, groups, weights, np.array(grams), np.array(rhs), np.array(yys),
-                  hg, hr, hy, int(ho.sum()), int(tr.sum()), ho.copy())
+                  hg, hr, hy, int(ho.sum()), int(tr.sum()), ho.copy(), np.asarray(data.moving))
 
 
 @dataclass(frozen=True)
@@ -154,8 +156,12 @@ def fit_subset(
     :func:`training_sums` (default: all blocks); the covariance needs all blocks."""
     idx = design.indices(names)
     gram, rhs = training_sums(design) if sums is None else sums
-    g = gram[np.ix_(idx, idx)]
+    g = gram[np.ix_(idx, idx)].copy()
     r = rhs[idx]
+    # columns that vanish on the fitted rows (they act only on a locked axis) get a unit
+    # diagonal, so their coefficient is zero instead of the solve failing
+    dead = np.diag(g) <= 1e-12 * max(float(np.max(np.diag(g))), 1e-300)
+    g[dead, dead] = 1.0
     try:
         coef = np.linalg.solve(g, r)
     except np.linalg.LinAlgError:

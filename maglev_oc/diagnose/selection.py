@@ -77,7 +77,8 @@ def _gains(design: Design, chosen: list[str], pool: Sequence[str], current: Subs
     for name in pool:
         fit = fit_subset(design, ["base", *chosen, name], sums=sums, with_covariance=False)
         k = design.groups[name].size
-        out[name] = float(np.mean(1 - fit.holdout_rms**2 / ref)) - penalty * k
+        drop = (1 - fit.holdout_rms**2 / ref)[design.moving]
+        out[name] = float(np.mean(drop)) - penalty * k
     return out
 
 
@@ -118,7 +119,8 @@ def select(
             wald = 0.0
         threshold = float(chi2.ppf(1 - alpha, coef.size))
         contribution = contribution_rms(design, fit, best)
-        accepted = gains[best] > min_gain and wald > threshold and contribution.max() >= min_effect
+        accepted = bool(gains[best] > min_gain and wald > threshold
+                        and contribution[design.moving].max() >= min_effect)
         votes = 0
         for sums in resamples:
             current_b = fit_subset(design, ["base", *chosen], sums=sums, with_covariance=False)
