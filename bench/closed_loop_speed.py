@@ -29,15 +29,15 @@ def main() -> None:
     scenario = Scenario("ten_seconds", "10 s ellipse", (0.02, 0, 0, 0), ellipse, 10.0)
     print(f"machine: {machine()}; casadi {ca.__version__}")
     for twin_name, effects in (("ideal", TwinEffects.ideal()), ("rig", TwinEffects.rig())):
-        for compile_ in (False, True):
-            loop = ClosedLoop(RigTwin(model, effects), ctrl, compile=compile_)
+        for backend in ClosedLoop.BACKENDS:
+            loop = ClosedLoop(RigTwin(model, effects), ctrl, backend=backend)
             t0 = time.perf_counter()
             loop.run(scenario)  # builds (and compiles) once
             first = time.perf_counter() - t0
             walls = [loop.run(scenario).wall_time for _ in range(3)]
             best = min(walls)
             n = round(scenario.duration / 2e-4)
-            print(f"{twin_name:5s} twin, {'JIT -O3' if compile_ else 'CasADi VM':9s}: 10 s at 5 kHz "
+            print(f"{twin_name:5s} twin, {backend:3s}: 10 s at 5 kHz "
                   f"in {best * 1e3:.0f} ms ({n / best / 1e6:.2f} M steps/s); first run incl. build "
                   f"{first:.2f} s; instructions/step {loop.step_function.n_instructions()}")
 

@@ -201,3 +201,17 @@ def test_commutation_ripple_and_cable_effects(model):
                      .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
     assert_allclose(acc[1] - base[1], -8.0 * (x[2] + 20 * MM) / model.params.mass_horizontal,
                     rtol=1e-12)
+
+
+@pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="no C compiler")
+def test_c_backend_reproduces_the_virtual_machine(model, fl):
+    # The generated C loop evaluates the same expression graph: results agree to rounding.
+    # (No encoder: a rounding difference at a quantization boundary would flip a 10 um count.)
+    twin = RigTwin(model, TwinEffects.rig(encoder=None))
+    sc = paper_scenarios()["small_step"]
+    a = ClosedLoop(twin, fl).run(sc, seed=5)
+    b = ClosedLoop(twin, fl, backend="c").run(sc, seed=5)
+    assert_allclose(b.x, a.x, rtol=0, atol=1e-9)
+    assert_allclose(b.u, a.u, rtol=0, atol=1e-6)
+    with pytest.raises(ValueError, match="backend"):
+        ClosedLoop(twin, fl, backend="fortran")
