@@ -105,7 +105,7 @@ def test_grid_and_shift():
     assert_allclose(s @ np.ones(120), np.ones(120))
 
 
-def test_reference_preview_extrapolates_past_the_end(mpc):
+def test_reference_preview_extrapolates_past_the_end(mpc, model):
     t = np.arange(100) * TS
     ref = np.zeros((6, 100))
     ref[3], ref[4] = 0.1 * t, 0.1
@@ -113,6 +113,13 @@ def test_reference_preview_extrapolates_past_the_end(mpc):
     times = (90 + mpc.grid.node_offsets) * TS
     assert_allclose(nodes[3], 0.1 * times, atol=1e-15)  # a ramp continues
     assert_allclose(nodes[4], 0.1)
+    # without preview a coming step is not seen; with it the nodes after the step read it
+    step = np.zeros((6, 1000))
+    step[0] = np.where(np.arange(1000) < 100, 20 * MM, 22 * MM)
+    assert np.max(mpc.node_references(90, step)[0]) == 22 * MM
+    causal = NonlinearMPC(model, preview=False)
+    assert_allclose(causal.node_references(90, step)[0], 20 * MM)
+    assert_allclose(causal.node_references(90, ref)[3], 0.1 * times, atol=1e-15)
 
 
 def _estimator_function(est: _Estimator) -> ca.Function:
@@ -210,6 +217,7 @@ def test_unconstrained_shortcut_is_the_qp_solution(model):
         u2, m2, d2 = qp_only.step_rti(mem, y, ref)
         assert _diag(d1, "solver_ok") == 1 and _diag(d2, "solver_ok") == 1
         assert (_diag(d1, "qp_iterations") != 0) == constrained  # 0: no QP was needed
+        assert _diag(d1, "qp_status") == (0 if constrained else -1)
         assert (_diag(d1, "active_constraints") > 0) == constrained
         assert_allclose(u1, u2, atol=1e-6)
         assert_allclose(m1[6:], m2[6:], atol=1e-6)
@@ -312,6 +320,10 @@ def test_horizon_40_and_the_large_step(model):
     assert res.success
     assert np.all(res.diagnostic("solver_ok") == 1)
     assert np.max(res.diagnostic("active_constraints")) > 0
+    qp = res.diagnostic("qp_iterations") != 0  # samples where HPIPM ran
+    assert 0 < np.mean(qp) < 0.5
+    assert np.all(res.diagnostic("qp_iterations")[qp] > 0)  # its statistics were read
+    assert np.all(res.diagnostic("qp_status")[qp] == 0)
     assert np.max(np.abs(res.error[:, res.t >= 0.6])) < 0.1 * MM
     assert np.max(np.hypot(res.u[0], res.u[1])) <= 9.0 + 1e-9
 

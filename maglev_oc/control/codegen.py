@@ -307,17 +307,14 @@ def run_harness(
     instances_path: str | os.PathLike,
     outputs_path: str | os.PathLike | None = None,
     *,
-    repeat: int = 5,
+    repeat: int = 3,
     timeout: float = 600.0,
 ) -> HarnessTiming:
-    """Run the harness and parse its report."""
-    args = [str(executable), str(instances_path)]
-    if outputs_path is not None:
-        args += [str(outputs_path), str(int(repeat))]
-    else:
-        with tempfile.NamedTemporaryFile(suffix=".bin", delete=False) as tmp:
-            args += [tmp.name, str(int(repeat))]
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=timeout, check=False)
+    """Run the harness and parse its report (outputs go to a temporary file unless a path is given)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(outputs_path) if outputs_path is not None else Path(tmp) / "outputs.bin"
+        args = [str(executable), str(instances_path), str(out), str(int(repeat))]
+        proc = subprocess.run(args, capture_output=True, text=True, timeout=timeout, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"harness failed ({proc.returncode}): {proc.stderr.strip()}")
     report = {}

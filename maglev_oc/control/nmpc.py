@@ -16,15 +16,27 @@ Shooting grid and the 5 kHz loop
     The controller runs every sample Ts = 200 us and re-solves every sample. The first shooting
     interval is exactly one sample (h_0 = Ts): u_0 is the current held by the zero-order hold
     until the next solve, so the plan's first piece is what the rig applies. The other N - 1
-    intervals are uniform, h = 5 ms = 25 Ts by default: the open-loop unstable pole (30-64
-    rad/s over 10-30 mm) gives h lambda <= 0.32 (RK4 error ~ (h lambda)^5 / 120 < 3e-5 per
-    step) and the closed loop (dominant poles ~20-60 rad/s with the default weights, the
-    papers' regulators 9-15 rad/s) is resolved by 3-10 intervals per time constant. N = 20
-    previews Ts + 95 ms (N = 40: 195 ms), two to four dominant time constants; beyond it the
-    terminal cost is the infinite-horizon LQR value. With a short first interval the first
-    input is, near an equilibrium, u_0 = -(Ts R + B0' P B0)^-1 B0' P A0 dx: the LQR law of
-    the sampled problem (checked in tests/test_nmpc.py). The stage cost is integrated
+    intervals are uniform, h = 5 ms = 25 Ts by default. The open-loop unstable pole (30-64
+    rad/s over 10-30 mm) and the closed loop of the default weights (poles of magnitude 55-110
+    rad/s, damping 0.75-0.96, over 10-29 mm; the papers' regulators: 9-15 rad/s) give h |lambda|
+    <= 0.55, where one RK4 step is accurate to (h lambda)^5 / 120 < 5e-4 and a time constant
+    (9-18 ms) spans 2-4 intervals. N = 20 previews Ts + 95 ms (N = 40: 195 ms), five to ten
+    closed-loop time constants and one sixth of the ellipse's period; beyond it the terminal
+    cost is the infinite-horizon LQR value. Shorter intervals would cost more intervals for the
+    same preview; longer ones would leave the unstable and closed-loop modes under-resolved.
+    With a short first interval the first input is, near an equilibrium,
+    u_0 = -(Ts R + B0' P B0)^-1 B0' P A0 dx: the LQR law of the sampled problem (checked in
+    tests/test_nmpc.py), close to the continuous-time LQR of (Q, R). The stage cost is integrated
     (weighted by h_j), so the weights do not depend on the grid.
+
+Reference preview
+    The nodes read the reference array at their own times (``preview=True``, the default): the
+    plan sees a set-point step up to Ts + (N - 1) h before it happens and leaves the old
+    set-point early (by ~50 ms with the defaults), which metrics that time the settling from the
+    step instant count against it. ``preview=False`` makes the controller causal like the
+    papers' regulators: every node extrapolates the current reference sample with its velocity
+    and acceleration (on the ellipse, which is smooth, the tracking errors are the same to
+    within a few um).
 
 Warm start by shifting
     After a sample the new grid starts at the old node 1 and every later node lies a fraction
@@ -44,14 +56,16 @@ QP solver and the unconstrained shortcut
     The QP variables are ordered (u_0, x_1, u_1, ..., x_N) and the constraints per stage
     (dynamics, current polytope): the OCP structure HPIPM's Riccati-based interior point
     method exploits (u_0 plays HPIPM's "x_0" since x_0 is not a variable). ``hpipm`` is the
-    default: with the current polytope active (large steps) it needs 4-10 iterations of fixed
-    cost, where QRQP's active-set iterations each refactorize the KKT matrix (bench/nmpc_step.py:
-    similar medians, HPIPM's p99 on the constrained large step about 2/3 of QRQP's in the
-    generated C; OSQP is 3-5x slower at the accuracy the solution check needs). Most samples
-    have no active inequality: the Riccati recursion of the equality-constrained QP (its exact
-    minimizer without inequalities, ~10k flops) is computed first and, when it satisfies every
-    bound and polytope row, it IS the QP's solution and the solver is not called (a CasADi
-    Switch: only the selected branch runs, in Python and in the generated C). The QP solver
+    default because its cost on a constrained sample is bounded (4-10 interior point iterations
+    of fixed cost, iteration limit 30) where QRQP's active-set iterations each refactorize the
+    KKT matrix, so that QRQP's cost grows with the number of constraints that switch (the start
+    of a large step). Measured by bench/nmpc_step.py with the QP solved every sample (N = 20,
+    CasADi VM, per call): HPIPM 0.47 ms, QRQP 0.42 ms, OSQP 0.83 ms (OSQP needs tight
+    tolerances for the solution check and many ADMM iterations). Most samples have no active
+    inequality: the Riccati recursion of the equality-constrained QP (its exact minimizer
+    without inequalities, ~10k flops) is computed first and, when it satisfies every bound and
+    polytope row, it IS the QP's solution and the solver is not called (a CasADi Switch: only
+    the selected branch runs, in Python and in the generated C). The QP solver
     runs on the other samples. ``unconstrained_shortcut=False`` solves the QP every sample.
 
 A failed QP never raises: the solution is checked inside the Function (finite, dynamics
@@ -87,11 +101,14 @@ Weights (defaults, :class:`NMPCWeights`)
     Q = diag(1e6, 1e2, 1e6, 1e2), R = diag(1, 1) per second in SI units: 1 mm of position
     error costs as much as 1 A of current beyond the feedforward (position gains of the LQR
     ~1000-1500 A/m), 10 mm/s of velocity error as much as 0.1 mm of position. The LQR on the
-    linearization then has its poles at 30-90 rad/s across 12-29 mm (the vertical pair can not
-    be slower than the mirror of the unstable pole, 30-64 rad/s), 3-4x faster than the papers'
-    regulators, an order of magnitude below the observer (500 rad/s) and the amplifier (6300
-    rad/s); encoder quantization (10 um, 5 mm/s of velocity noise) maps to ~0.01 A + 0.1 A
-    of current noise. Large steps are shaped by the current polytope, not by the weights.
+    linearization then has its poles at magnitudes 55-110 rad/s (damping 0.75-0.96) over
+    10-29 mm (the vertical pair can not be slower than the mirror of the unstable pole, 30-64
+    rad/s): 4-7x faster than the papers' regulators, which matters against friction reversals
+    (a 1.3 N Coulomb step on the 1.6 kg horizontal mover costs 0.8 m/s^2 / 6700 s^-2 = 0.1 mm
+    of error before the disturbance estimate catches up), yet 5-10x below the observer (500
+    rad/s) and 60x below the amplifier (6300 rad/s). Encoder quantization (10 um, and about
+    5 mm/s of velocity noise through the observer) maps to ~0.01 A + 0.1 A of current noise.
+    Large steps are shaped by the current polytope, not by the weights.
 """
 
 from __future__ import annotations
@@ -114,11 +131,14 @@ NX = N_STATES
 NU = N_INPUTS
 MODES = ("rti", "converged")
 QP_SOLVERS = ("hpipm", "qrqp", "osqp")
-DIAG_NAMES = ("solver_ok", "qp_iterations", "cost", "d_v", "d_h", "active_constraints")
-"""Diagnostics per sample: 1 if the QP/NLP solution passed the checks (else the fallback was
-applied), the solver's iterations, the OCP cost of the applied plan [-], the disturbance
-estimates [m/s^2], the number of inequality constraints active in the solution (-1 when it
-failed)."""
+DIAG_NAMES = ("solver_ok", "qp_iterations", "cost", "d_v", "d_h", "active_constraints", "qp_status")
+"""Diagnostics per sample: ``solver_ok`` 1 if the solution passed the checks (else the fallback
+was applied); ``qp_iterations`` of the QP solver (0: the unconstrained Riccati step was feasible
+and no QP was solved; IPOPT's iterations in converged mode); ``cost`` of the applied plan [-];
+``d_v``, ``d_h`` the disturbance estimates [m/s^2]; ``active_constraints`` the number of
+inequalities active in the solution (-1 when it failed); ``qp_status`` -1 no QP solved, 0 the
+solver reported success, 1 it reported a failure (iteration limit, infeasibility). The generated
+C leaves qp_iterations at -1 and qp_status at NaN on QP samples (no solver statistics there)."""
 
 DEFAULT_INTERVAL = 5e-3
 """Shooting interval after the first (one-sample) interval [s]; see the module docstring."""
@@ -447,8 +467,9 @@ class _Transcription:
 
     # ------------------------------------------------------------------------------------
     def qp_data_function(self) -> ca.Function:
-        """(z_bar, x0, d, ref) -> (H, g, A, lba, uba, lbx, ubx, data_ok): the Gauss-Newton QP in
-        the step dz = z - z_bar, with bounds made finite where the data are not."""
+        """(z_bar, x0, d, ref) -> (H, g, A, lba, uba, lbx, ubx, data_ok, z_ref): the Gauss-Newton
+        QP in the step dz = z - z_bar, with bounds made finite where the data are not, and the
+        reference plan (the cost is (z - z_ref)' (H / 2) (z - z_ref))."""
         n, nz, na = self.N, self.nz, self.na
         zb = ca.SX.sym("z_bar", nz)
         x0 = ca.SX.sym("x0", NX)
@@ -503,9 +524,9 @@ class _Transcription:
         return ca.Function(
             "nmpc_qp_data",
             [zb, x0, d, ref],
-            [hess, grad, a, lba, uba, lbx, ubx, data_ok],
+            [hess, grad, a, lba, uba, lbx, ubx, data_ok, z_ref],
             ["z_bar", "x0", "d", "ref"],
-            ["H", "g", "A", "lba", "uba", "lbx", "ubx", "data_ok"],
+            ["H", "g", "A", "lba", "uba", "lbx", "ubx", "data_ok", "z_ref"],
         )
 
     def objective_function(self) -> ca.Function:
@@ -635,10 +656,19 @@ class NonlinearMPC:
         w_d [rad/s] of the disturbance estimate; 0 switches the disturbance estimate off.
     disturbance_limit : float
         |d| clip [m/s^2].
+    qp_options : dict
+        Options merged into the QP solver's (e.g. ``{"hpipm": {"mode": "speed_abs"}}``).
+    preview : bool
+        Read the future reference from the reference array (default), or extrapolate the current
+        sample (causal, like the papers' regulators: set-point steps are not anticipated).
+    unconstrained_shortcut : bool
+        Take the Riccati step when it is feasible (default) or solve the QP every sample.
     compile : bool
-        JIT-compile the two SX parts of the RTI step with the system C compiler (CasADi
-        ``jit``; 3-4x faster calls). Needs gcc/cc; the C export does not need this.
+        JIT-compile the three SX parts of the RTI step with the system C compiler (CasADi
+        ``jit``, -O1: 10-15 s once; then 2.5-3x faster calls, 0.13 ms instead of 0.35 ms at
+        N = 20). Needs gcc/cc; the C export (:mod:`maglev_oc.control.codegen`) does not use it.
     name : str
+        Default "NMPC" (the name the comparison plots know), "NMPC (converged, IPOPT)".
     """
 
     def __init__(
@@ -658,6 +688,7 @@ class NonlinearMPC:
         disturbance_bandwidth: float = DEFAULT_DISTURBANCE_BANDWIDTH,
         disturbance_limit: float = DEFAULT_DISTURBANCE_LIMIT,
         qp_options: dict | None = None,
+        preview: bool = True,
         unconstrained_shortcut: bool = True,
         compile: bool = False,
         name: str | None = None,
@@ -703,9 +734,10 @@ class NonlinearMPC:
         self.qp_solver = qp_solver
         self.qp_options = dict(qp_options or {})
         self.unconstrained_shortcut = bool(unconstrained_shortcut)
+        self.preview = bool(preview)
         self.current_limit = float(current_limit)
         self.compiled = bool(compile)
-        self.name = name or f"NMPC ({mode}, N={horizon})"
+        self.name = name or ("NMPC" if mode == "rti" else "NMPC (converged, IPOPT)")
         self.diag_names = DIAG_NAMES
         self._ocp = _Transcription(
             model, self.grid, weights, current_limit, tuple(gap_bounds), tuple(position_bounds)
@@ -718,10 +750,13 @@ class NonlinearMPC:
         self.na = self._ocp.na
         self.n_memory = 6 + self.nz
         self._build_sx_parts()
-        self.rti_step = self._build_rti_step(self._qp_data, self._riccati, self._post)
-        step = self.rti_step
+        self.rti_step, self._rti_qp = self._build_rti_step(self._qp_data, self._riccati, self._post)
+        # the controller's own copy (JIT-compiled parts if asked), with its own QP solver instance
+        # so that the solver statistics read after each call are those of that call
+        parts = (self._qp_data, self._riccati, self._post)
         if self.compiled:
-            step = self._build_rti_step(_jit(self._qp_data), _jit(self._riccati), _jit(self._post))
+            parts = tuple(_jit(f) for f in parts)
+        step, self._step_qp = self._build_rti_step(*parts)
         self._step = self._python_entry(step)
         if mode == "converged":
             self._build_nlp()
@@ -762,7 +797,8 @@ class NonlinearMPC:
         obs = ca.SX.sym("obs", 4)
         d = ca.SX.sym("d", 2)
         y = ca.SX.sym("y", 2)
-        ref = ca.SX.sym("ref", 6, n + 1)
+        hess = ca.SX.sym("H", self._qp_data.sparsity_out("H"))
+        z_ref = ca.SX.sym("z_ref", nz)
 
         adz = ca.mtimes(a, dz)
         viol = ca.vertcat(lba - adz, adz - uba, lbx - dz, dz - ubx)
@@ -770,40 +806,28 @@ class NonlinearMPC:
         size = ca.sum1(ca.fabs(dz)) + ca.sum1(ca.fabs(lam_a))
         ok = ca.logic_and(ca.logic_and(data_ok, size < 1e20), worst <= SOLUTION_TOLERANCE)
         z_qp = zb + dz
-        u_plan = zb[0:NU]
         plan_finite = ca.sum1(ca.fabs(zb)) < 1e20
-        u_ff = ocp.feedforward(ref[:, 0], d)
-        u_fallback = ocp.project_current(ca.if_else(plan_finite, u_plan, u_ff))
-        u = ca.if_else(ok, ocp.project_current(z_qp[0:NU]), u_fallback)
-        z_new = ca.if_else(ok, z_qp, ca.if_else(plan_finite, zb, ca.DM.zeros(nz)))
+        ref_finite = ca.sum1(ca.fabs(z_ref)) < 1e20
+        # fallback: the shifted previous plan, else the reference plan (its first input is the
+        # feedforward current of the reference), else no current at all
+        z_keep = ca.if_else(plan_finite, zb, ca.if_else(ref_finite, z_ref, ca.DM.zeros(nz)))
+        z_new = ca.if_else(ok, z_qp, z_keep)
+        u = ocp.project_current(z_new[0:NU])
         z_next = ca.mtimes(ca.DM(ca.sparsify(ca.DM(self.shift))), z_new)
-        cost = self._cost(z_new, d, ref)
+        e = z_new - z_ref
+        cost = 0.5 * ca.bilin(hess, e, e)
         obs_next, d_next = est.update(obs, d, y, u)
         memory_next = ca.vertcat(obs_next, d_next, z_next)
         # inequality rows of A (2 per stage) and bounds with a nonzero multiplier
         ineq = [lam_a[6 * j + NX + i] for j in range(n) for i in range(2)]
         active = ca.sum1(ca.fabs(ca.vertcat(*ineq, lam_x)) > 1e-9)
         diag = ca.vertcat(ok, 0, cost, d, ca.if_else(ok, active, -1))
+        names = ["z_bar", "dz", "lam_x", "lam_a", "A", "lba", "uba", "lbx", "ubx", "data_ok", "H", "z_ref"]
         self._post = ca.Function(
             "nmpc_post",
-            [zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, obs, d, y, ref],
+            [zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y],
             [u, memory_next, diag, z_new],
-            [
-                "z_bar",
-                "dz",
-                "lam_x",
-                "lam_a",
-                "A",
-                "lba",
-                "uba",
-                "lbx",
-                "ubx",
-                "data_ok",
-                "obs",
-                "d",
-                "y",
-                "ref",
-            ],
+            [*names, "obs", "d", "y"],
             ["u", "memory_next", "diag", "plan"],
         )
         self._riccati = self._riccati_function()
@@ -845,7 +869,7 @@ class NonlinearMPC:
             iu = _u_index(j)
             b, c = bs[j], cs[j]
             pcp = ca.mtimes(p_mat, c) + p_vec
-            quu = blk(hess, iu, iu, NU, NU) + ca.mtimes([b.T, p_mat, b])
+            quu = blk(hess, iu, iu, NU, NU) + ca.mtimes(b.T, ca.mtimes(p_mat, b))
             qu = grad[iu : iu + NU] + ca.mtimes(b.T, pcp)
             quu_inv = inv2(quu)
             if j == 0:
@@ -853,11 +877,12 @@ class NonlinearMPC:
                 break
             am = as_[j]
             ix = _x_index(j)
-            qux = ca.mtimes([b.T, p_mat, am])
+            pa = ca.mtimes(p_mat, am)  # shared by B' P A and A' P A
+            qux = ca.mtimes(b.T, pa)
             k_mat = ca.mtimes(quu_inv, qux)
             k_vec = ca.mtimes(quu_inv, qu)
             gains.append((k_mat, k_vec))
-            p_new = blk(hess, ix, ix, NX, NX) + ca.mtimes([am.T, p_mat, am]) - ca.mtimes(qux.T, k_mat)
+            p_new = blk(hess, ix, ix, NX, NX) + ca.mtimes(am.T, pa) - ca.mtimes(qux.T, k_mat)
             p_vec = grad[ix : ix + NX] + ca.mtimes(am.T, pcp) - ca.mtimes(qux.T, k_vec)
             p_mat = 0.5 * (p_new + p_new.T)
         gains = gains[::-1]
@@ -908,7 +933,10 @@ class NonlinearMPC:
                 opts[key] = value
         return ca.conic("nmpc_qp", self.qp_solver, sp, opts)
 
-    def _build_rti_step(self, qp_data: ca.Function, riccati: ca.Function, post: ca.Function) -> ca.Function:
+    def _build_rti_step(
+        self, qp_data: ca.Function, riccati: ca.Function, post: ca.Function
+    ) -> tuple[ca.Function, ca.Function]:
+        """The RTI step Function and the QP solver (conic) inside it."""
         n, nz, na = self.grid.horizon, self.nz, self.na
         mem = ca.MX.sym("memory", self.n_memory)
         y = ca.MX.sym("y", 2)
@@ -917,7 +945,7 @@ class NonlinearMPC:
         zb = mem[6 : 6 + nz]
         x0 = self._est.state_estimate(obs, y)
         data = qp_data(zb, x0, d, ref)
-        _, _, a, lba, uba, lbx, ubx, data_ok = data
+        _, _, a, lba, uba, lbx, ubx, data_ok, _ = data
         qp_in = [
             ca.MX.sym(name, sp)
             for name, sp in zip(
@@ -927,7 +955,6 @@ class NonlinearMPC:
             )
         ]
         qp = self._qp_function()
-        self._qp = qp
         # Cold start: QRQP warm-started with the previous multipliers was seen to return a wrong
         # step (equality rows dropped from its initial active set) while reporting success, and
         # an interior point method has no use for them. All of the conic's outputs are used:
@@ -955,17 +982,21 @@ class NonlinearMPC:
         else:
             feasible = ca.MX(0)
             dz, lam_x, lam_a = solve_qp(*data[:7], ca.DM.zeros(nz))
-        u, mem_next, diag, _ = post(zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, obs, d, y, ref)
+        hess, z_ref = data[0], data[8]
+        u, mem_next, diag, _ = post(
+            zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y
+        )
         # qp_iterations: 0 when the unconstrained step was taken, -1 (filled in from the solver's
         # statistics in Python) when the QP was solved
-        diag = ca.vertcat(diag[0], ca.if_else(feasible, 0, -1), diag[2:])
-        return ca.Function(
+        diag = ca.vertcat(diag[0], ca.if_else(feasible, 0, -1), diag[2:], ca.if_else(feasible, -1, np.nan))
+        step = ca.Function(
             "nmpc_rti_step",
             [mem, y, ref],
             [u, mem_next, diag],
             ["memory", "y", "ref"],
             ["u", "memory_next", "diag"],
         )
+        return step, qp
 
     def _build_nlp(self) -> None:
         ocp = self._ocp
@@ -1022,23 +1053,22 @@ class NonlinearMPC:
     def node_references(self, k: int, reference: np.ndarray) -> np.ndarray:
         """The reference (6, N + 1) at the shooting nodes from sample ``k`` on.
 
-        Nodes beyond the last sample of ``reference`` extrapolate it with its last velocity and
-        acceleration (a set-point is held; a sinusoid ending mid-motion is continued instead of
-        being seen to stop, which would make the plan brake before the run ends).
+        With ``preview`` the nodes read the reference array at their own times; nodes beyond
+        its last sample extrapolate it with its last velocity and acceleration (a set-point is
+        held; a sinusoid ending mid-motion is continued instead of being seen to stop, which
+        would make the plan brake before the run ends). Without ``preview`` every node
+        extrapolates the current sample that way (a causal controller: a step is seen when it
+        happens, a sinusoid is continued by its local Taylor expansion).
         """
         last = reference.shape[1] - 1
+        if not self.preview:
+            return _extrapolate(reference[:, min(k, last)], self.grid.node_offsets * self.sample_time)
         idx = k + self.grid.node_offsets
         if idx[-1] <= last:
             return reference[:, idx]
         out = reference[:, np.minimum(idx, last)].copy()
         beyond = idx > last
-        dt = (idx[beyond] - last) * self.sample_time
-        end = reference[:, last]
-        for row in (0, 3):
-            p, v, a = end[row], end[row + 1], end[row + 2]
-            out[row, beyond] = p + v * dt + 0.5 * a * dt**2
-            out[row + 1, beyond] = v + a * dt
-            out[row + 2, beyond] = a
+        out[:, beyond] = _extrapolate(reference[:, last], (idx[beyond] - last) * self.sample_time)
         return out
 
     def control(self, k: int, y, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1068,19 +1098,23 @@ class NonlinearMPC:
                 f"NMPC step raised ({err}); applying the previous current", RuntimeWarning, stacklevel=2
             )
             d = self.memory[4:6]
-            return self._u_last.copy(), np.array([0.0, 0.0, np.nan, *d, -1.0])
+            return self._u_last.copy(), np.array([0.0, 0.0, np.nan, *d, -1.0, np.nan])
         self._memory = mem
         out = np.array(out.nonzeros())
         u, diag = out[0:NU], out[NU:]
         if diag[1] < 0:
-            diag[1] = self._step.stats().get("iter_count", -1)
+            _fill_qp_stats(diag, self._step_qp)
         self._u_last = u
         return u, diag
 
     def step_rti(self, memory: np.ndarray, y, ref) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One evaluation of :attr:`rti_step` on explicit inputs (u, memory_next, diag)."""
+        """One evaluation of :attr:`rti_step` on explicit inputs (u, memory_next, diag), the
+        controller's own memory untouched (for analyses and tests)."""
         u, mem, diag = self.rti_step(memory, y, ref)
-        return u.full().ravel(), mem.full().ravel(), diag.full().ravel()
+        diag = diag.full().ravel()
+        if diag[1] < 0:
+            _fill_qp_stats(diag, self._rti_qp)
+        return u.full().ravel(), mem.full().ravel(), diag
 
     def _control_converged(self, y, ref) -> tuple[np.ndarray, np.ndarray]:
         y = np.asarray(y, dtype=float).ravel()
@@ -1118,7 +1152,7 @@ class NonlinearMPC:
         if ok:
             lam = np.concatenate([self._lam_x, self._lam_g.reshape(-1, 6)[:, NX:].ravel()])
             active = float(np.sum(np.abs(lam) > 1e-9))
-        return u, np.array([float(ok), iters, cost, *d, active])
+        return u, np.array([float(ok), iters, cost, *d, active, 0.0 if ok else 1.0])
 
     def _ocp_fallback(self, zb, d, ref):
         u = (
@@ -1152,6 +1186,33 @@ class NonlinearMPC:
         xs = np.array([z[_x_index(j) : _x_index(j) + NX] for j in range(1, self.grid.horizon + 1)]).T
         us = np.array([z[_u_index(j) : _u_index(j) + NU] for j in range(self.grid.horizon)]).T
         return xs, us
+
+
+def _extrapolate(r: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """The reference sample r (6,) continued with constant acceleration over times dt: (6, n)."""
+    out = np.empty((6, dt.size))
+    for row in (0, 3):
+        p, v, a = r[row], r[row + 1], r[row + 2]
+        out[row] = p + v * dt + 0.5 * a * dt**2
+        out[row + 1] = v + a * dt
+        out[row + 2] = a
+    return out
+
+
+def _fill_qp_stats(diag: np.ndarray, qp: ca.Function) -> None:
+    """Put the QP solver's iteration count and success into diag (in place).
+
+    A conic called inside an MX Function (here behind a Switch) keeps its statistics in the
+    memory the enclosing Function checked out for it, index 1 for a Function evaluated from one
+    thread; the enclosing Function's own stats() does not forward them through the Switch.
+    Diagnostics only: if they are not there, the entries stay -1 / NaN.
+    """
+    try:
+        stats = qp.stats(1)
+    except RuntimeError:
+        return
+    diag[1] = stats.get("iter_count", -1)
+    diag[6] = 0.0 if stats.get("success", False) else 1.0
 
 
 def _jit(fun: ca.Function) -> ca.Function:
