@@ -6,6 +6,8 @@
                                                      closed loop on the rig twin -> log (SPEC 2)
     maglev-oc diagnose LOG... --json OUT.json [--report OUT.pdf]
                                                      residual -> missing effect -> error before/after
+    maglev-oc identify LOG... --json OUT.json [--report OUT.pdf]
+                                                     C1..C4 by NLS (equation/output error) and NPFSI
 
 Errors in what the user hands in (files, values) are reported in one line on stderr with exit
 status 2; nothing is written in that case.
@@ -185,6 +187,37 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_identify(args: argparse.Namespace) -> int:
+    import json
+
+    from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.identify.pipeline import identify, load_logs
+
+    model = load_model(args.params)
+    for path in args.logs:
+        if not Path(path).is_file():
+            raise UserError(f"{path}: no such file")
+    logs = load_logs(args.logs, params=model.params)
+    outcome = identify(
+        logs,
+        model,
+        estimate=args.estimate,
+        methods=args.methods,
+        npfsi_eps=args.eps,
+        input_delay=args.input_delay,
+    )
+    print(outcome.report())
+    write_text_atomic(args.json, json.dumps(outcome.to_dict(), indent=2) + "\n")
+    print(f"wrote {args.json}")
+    if args.report:
+        from maglev_oc.reporting.identification_plots import write_outcome_report
+
+        write_outcome_report(args.report, outcome, logs)
+        print(f"wrote {args.report}")
+    fits = [f for f in (outcome.equation_error, outcome.output_error) if f is not None]
+    return 0 if all(f.success for f in fits) and all(r.success for r in outcome.npfsi) else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="maglev-oc", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -234,6 +267,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--holdout", type=float, default=0.25, help="held-out fraction at each log's end")
     p.add_argument("--no-control", action="store_true", help="skip the closed-loop study in the report")
     p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("identify", help="identify C1..C4 from logs: NLS (equation/output error) and NPFSI")
+    p.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="logs (.csv or .mat, SPEC 2)")
+    p.add_argument("--json", type=Path, required=True, help="estimates, standard errors, covariance, timings")
+    p.add_argument("--report", type=Path, help="PDF report")
+    p.add_argument("--params", type=Path, help="stage/constants JSON (geometry; initial and fixed constants)")
+    p.add_argument(
+        "--estimate", nargs="+", default=["C1", "C2", "C3", "C4"],
+        choices=["C1", "C2", "C3", "C4", "gap_offset"], help="parameters to estimate (default C1..C4)",
+    )
+    p.add_argument(
+        "--methods", nargs="+", default=["equation_error", "output_error", "npfsi"],
+        choices=["equation_error", "output_error", "npfsi"], help="methods to run (default all)",
+    )
+    p.add_argument("--eps", nargs="+", type=float, default=[0.001, 0.01, 0.05], help="NPFSI eps values [s]")
+    p.add_argument("--input-delay", type=float, default=0.0, help="delay of the applied currents [s]")
+    p.set_defaults(func=cmd_identify)
     return parser
 
 

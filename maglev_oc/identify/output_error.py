@@ -1,0 +1,520 @@
+"""Output-error fit by multiple shooting: simulated positions against the encoder readings.
+
+The output-error estimate minimizes sum_k |y_k - h(x(t_k))|^2 over the constants, where x(t)
+is the model's response to the logged currents. The stage is open-loop unstable (a vertical
+pole of 33-64 1/s over 25-10 mm), so a single simulation over a 60 s log diverges within a
+fraction of a second and single shooting is hopeless. Multiple shooting (Bock 1983) cuts the
+log into segments of ``segment_duration`` (default 50 ms, over which the unstable mode grows
+by at most e^3), gives each segment its own initial state S_j as an unknown, and asks for
+continuity, F(S_j, theta) = S_{j+1}, as equality constraints:
+
+    min_{theta, S}  sum_j sum_{k in segment j} |y_k - h(x_j(t_k; S_j, theta))|^2 / sigma^2
+    s.t.            x_j(t_{j+1}; S_j, theta) = S_{j+1}
+
+solved by a constrained Gauss-Newton method: each iteration solves the sparse KKT system of
+the linearized problem (scipy's SuperLU), with a line search on the l1 merit function. The
+segment simulations and their exact Jacobians come from one CasADi Function (RK4 per sample,
+the logged currents interpolated linearly between samples) mapped over the segments.
+
+Why windows: the log holds 1 kHz samples of the 5 kHz current commands, which the amplifiers
+follow with a lag; the difference acts as process noise that a simulation integrates twice.
+Continuity over the whole log makes the horizontal residual grow (twin, 10 s log: 3.4 um RMS
+with 50 ms segments and no continuity, 4.6 um with 0.2 s windows, 12 um with 1 s, 37 um with
+3 s) and biases C2..C4 (C4 by +4 % with 1 s windows, +130 % with 3 s). So continuity joins the
+segments within windows of ``window_duration`` (default 0.2 s, four segments) and the windows
+are independent. Within 0.2 s the unstable vertical mode still grows e^8-e^13, which is why
+each window needs the multiple shooting.
+
+Starting point: the constants from the equation-error fit (run first unless ``initial`` is
+given), node states from the Savitzky-Golay estimates. Standard errors: the constrained
+Gauss-Newton covariance (the theta block of the inverse KKT matrix) and its long-run
+(HAC) version from the per-sample influence, as for the equation-error fit.
+
+Output map: y = (x1 - gap_offset, x3), so the estimated ``gap_offset`` is the true gap minus
+the reading, as in the equation-error fit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from maglev_oc.data.logs import Log
+from maglev_oc.estimation.differentiate import SavitzkyGolay, differentiate_log
+from maglev_oc.identify.equation_error import as_log_list, delayed_inputs, fit_equation_error
+from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET, ParameterLayout
+from maglev_oc.identify.result import AXIS_NAMES, FitResult
+from maglev_oc.identify.terms import AccelerationTerm
+from maglev_oc.identify.uncertainty import DEFAULT_BAND, correlation_from, long_run_covariance
+from maglev_oc.model.hardware import ENCODER_RESOLUTION
+from maglev_oc.model.stage import StageModel
+
+DEFAULT_SEGMENT = 0.05
+"""[s] Shooting segment: the fastest open-loop pole (64 1/s at 10 mm) grows e^3.2-fold over it."""
+DEFAULT_WINDOW = 0.2
+"""[s] Continuity joins the segments within windows of this length; windows are independent."""
+OUTPUT_SCALE = ENCODER_RESOLUTION
+"""[m] Residuals are scaled by one encoder count (conditioning only)."""
+STATE_SCALE = np.array([1e-3, 1e-2, 1e-2, 1e-1])
+"""Typical state magnitudes [m, m/s, m, m/s] (conditioning only)."""
+
+
+@dataclass(frozen=True, eq=False)
+class _Segments:
+    """One log cut into J segments of M samples."""
+
+    source: str
+    n: int  # samples in the log
+    M: int
+    J: int
+    y: np.ndarray  # (2, J*M) readings at the residual samples (gap, horizontal)
+    u: np.ndarray  # (2, J*(M+1)) currents at each segment's M+1 points
+    nodes0: np.ndarray  # (4, J) initial node states (true gap)
+    links: np.ndarray  # indices j whose end is joined to segment j + 1 (same window)
+
+
+class MultipleShooting:
+    """An output-error problem prepared once (segments, CasADi functions); :meth:`fit` solves it.
+
+    Parameters
+    ----------
+    logs : Log or sequence of Log
+    model : StageModel
+    estimate : sequence of str
+        Among ``C1, C2, C3, C4, gap_offset``.
+    terms : sequence of AccelerationTerm
+    segment_duration : float
+        [s] Shooting segment length (default 0.05 s).
+    input_delay : float
+        [s] Delay applied to the logged currents (see :mod:`.equation_error`).
+    """
+
+    def __init__(
+        self,
+        logs: Log | Sequence[Log],
+        model: StageModel,
+        *,
+        estimate: Sequence[str] = CONSTANT_NAMES,
+        terms: Sequence[AccelerationTerm] = (),
+        segment_duration: float = DEFAULT_SEGMENT,
+        window_duration: float = DEFAULT_WINDOW,
+        input_delay: float = 0.0,
+    ) -> None:
+        t0 = time.perf_counter()
+        self.logs = as_log_list(logs)
+        self.model = model
+        self.estimate = tuple(estimate)
+        self.terms = tuple(terms)
+        self.layout = ParameterLayout(model, self.estimate, self.terms)
+        if not (math.isfinite(segment_duration) and segment_duration > 0):
+            raise ValueError(f"segment_duration must be positive [s], got {segment_duration!r}")
+        if not (math.isfinite(input_delay) and 0 <= input_delay < 0.01):
+            raise ValueError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
+        self.input_delay = float(input_delay)
+        dt = self.logs[0].sample_time
+        for log in self.logs[1:]:
+            if abs(log.sample_time - dt) > 0.01 * dt:
+                raise ValueError(f"logs at different rates: {self.logs[0].source}, {log.source}")
+        self.sample_time = dt
+        self.M = max(2, round(segment_duration / dt))
+        self.segment_duration = self.M * dt
+        if not (math.isfinite(window_duration) and window_duration >= self.segment_duration * (1 - 1e-9)):
+            raise ValueError(
+                f"window_duration must be at least the segment ({self.segment_duration:g} s), got "
+                f"{window_duration!r}"
+            )
+        self.window_duration = float(window_duration)
+        self.segments = [self._cut(log) for log in self.logs]
+        self._build()
+        self.prepare_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------------------------
+    def _cut(self, log: Log) -> _Segments:
+        M = self.M
+        J = (log.n - 1) // M
+        if J < 2:
+            raise ValueError(
+                f"{log.source}: {log.n} samples make {J} segment(s) of {M}; need at least 2 (a log of "
+                f"{2 * M * log.sample_time:g} s or more)"
+            )
+        y = np.vstack([log.x[0], log.x[2]])[:, : J * M]
+        u = delayed_inputs(log, self.input_delay)
+        idx = (np.arange(J)[:, None] * M + np.arange(M + 1)[None, :]).ravel()
+        sg = SavitzkyGolay(log.sample_time)
+        der = differentiate_log(log, sg)
+        x = np.vstack([der.position[0], der.velocity[0], der.position[1], der.velocity[1]])
+        nodes = x[:, np.arange(J) * M]
+        per_window = max(1, round(self.window_duration / (M * log.sample_time)))
+        j = np.arange(J - 1)
+        links = j[(j + 1) % per_window != 0]
+        return _Segments(log.source, log.n, M, J, y, u[:, idx], nodes, links)
+
+    def _build(self) -> None:
+        layout, M, h = self.layout, self.M, self.sample_time
+        q = layout.n
+        s0 = ca.SX.sym("s", 4)
+        U = ca.SX.sym("U", 2, M + 1)
+        theta = ca.SX.sym("theta", q)
+        acc = layout.acceleration_true
+        offset = theta[layout.names.index(GAP_OFFSET)] if GAP_OFFSET in layout.names else 0
+
+        def f(x, u):
+            a = acc(x, u, theta)
+            return ca.vertcat(x[1], a[0], x[3], a[1])
+
+        x = s0
+        ys = []
+        for k in range(M):
+            ys.append(ca.vertcat(x[0] - offset, x[2]))
+            u0, u1 = U[:, k], U[:, k + 1]
+            um = 0.5 * (u0 + u1)
+            k1 = f(x, u0)
+            k2 = f(x + h / 2 * k1, um)
+            k3 = f(x + h / 2 * k2, um)
+            k4 = f(x + h * k3, u1)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        Y = ca.vertcat(*ys)  # (2M,) time-major, (gap, horizontal) at each sample
+        z = ca.vertcat(s0, theta)
+        jy = ca.jacobian(Y, z)
+        jx = ca.jacobian(x, z)
+        seg = ca.Function(
+            "segment", [s0, U, theta], [Y, x, jy, jx], ["s", "U", "theta"], ["Y", "s_end", "dY", "ds"]
+        )
+        self._segment = seg
+        self._maps = {sg.J: seg.map(sg.J, "thread", 2) for sg in self.segments}
+
+    # ------------------------------------------------------------------------------------
+    def _evaluate(self, theta: np.ndarray, nodes: list[np.ndarray]):
+        out = []
+        for sg, S in zip(self.segments, nodes, strict=True):
+            Y, s_end, dY, ds = self._maps[sg.J](S, sg.u, theta)
+            out.append((np.asarray(Y), np.asarray(s_end), np.asarray(dY), np.asarray(ds)))
+        return out
+
+    def fit(
+        self,
+        *,
+        initial: FitResult | dict[str, float] | None = None,
+        max_iterations: int = 30,
+        tolerance: float = 1e-9,
+        hac_band: float = DEFAULT_BAND,
+    ) -> FitResult:
+        """Solve by constrained Gauss-Newton from ``initial`` (default: the equation-error fit).
+
+        Parameters
+        ----------
+        initial : FitResult or dict, optional
+            Starting values by name. Default: an equation-error fit on the same logs.
+        max_iterations : int
+        tolerance : float
+            Stop when the largest scaled step is below this and the constraints are met.
+        hac_band : float
+            [Hz] Spectral window of the long-run covariance.
+        """
+        t0 = time.perf_counter()
+        layout = self.layout
+        q = layout.n
+        init_time = 0.0
+        if initial is None:
+            ti = time.perf_counter()
+            ee = fit_equation_error(self.logs, self.model, estimate=self.estimate, terms=self.terms)
+            init_time = time.perf_counter() - ti
+            initial = ee if ee.success else None
+        if isinstance(initial, FitResult):
+            initial = {k: initial.values[k] for k in layout.names if k in initial.values}
+        theta = layout.initial_vector(initial)
+        offset0 = theta[layout.names.index(GAP_OFFSET)] if GAP_OFFSET in layout.names else 0.0
+        nodes = []
+        for sg in self.segments:
+            S = sg.nodes0.copy()
+            S[0] += offset0
+            nodes.append(S)
+
+        th_scale = np.array(layout.scale)
+        col_scale = np.concatenate([th_scale] + [np.tile(STATE_SCALE, sg.J) for sg in self.segments])
+
+        def pack(th, ns):
+            return np.concatenate([th] + [S.T.ravel() for S in ns])
+
+        def unpack(w):
+            th = w[:q]
+            ns, k = [], q
+            for sg in self.segments:
+                ns.append(w[k : k + 4 * sg.J].reshape(sg.J, 4).T.copy())
+                k += 4 * sg.J
+            return th, ns
+
+        def linearize(th, ns):
+            evals = self._evaluate(th, ns)
+            rs, cs = [], []
+            jr_rows, jr_cols, jr_vals = [], [], []
+            jc_rows, jc_cols, jc_vals = [], [], []
+            r_off = c_off = 0
+            var_off = q
+            for sg, S, (Y, s_end, dY, ds) in zip(self.segments, ns, evals, strict=True):
+                J, M = sg.J, sg.M
+                nz = 4 + q
+                y_meas = sg.y.reshape(2, J, M).transpose(1, 2, 0).reshape(J, 2 * M)  # time-major
+                r = (y_meas - Y.T) / OUTPUT_SCALE
+                rs.append(r.ravel())
+                # segment j's Jacobian block sits at columns j*nz:(j+1)*nz of the mapped output
+                dYr = dY.reshape(2 * M, J, nz).transpose(1, 0, 2)  # (J, 2M, nz)
+                col = np.empty((J, 1, nz), dtype=np.int64)
+                col[:, 0, :4] = var_off + 4 * np.arange(J)[:, None] + np.arange(4)[None, :]
+                col[:, 0, 4:] = np.arange(q)[None, :]
+                row = r_off + (np.arange(J)[:, None] * 2 * M + np.arange(2 * M)[None, :])[:, :, None]
+                jr_rows.append(np.broadcast_to(row, dYr.shape).ravel())
+                jr_cols.append(np.broadcast_to(col, dYr.shape).ravel())
+                jr_vals.append((-dYr / OUTPUT_SCALE).ravel())
+                links = sg.links  # segments j joined to j + 1 by continuity
+                nl = links.size
+                dsr = (
+                    ds.reshape(4, J, nz).transpose(1, 0, 2)[links] / STATE_SCALE[None, :, None]
+                )  # (nl, 4, nz)
+                c = (s_end[:, links] - S[:, links + 1]) / STATE_SCALE[:, None]
+                cs.append(c.T.ravel())
+                crow = c_off + (4 * np.arange(nl)[:, None] + np.arange(4)[None, :])[:, :, None]
+                jc_rows.append(np.broadcast_to(crow, dsr.shape).ravel())
+                jc_cols.append(np.broadcast_to(col[links], dsr.shape).ravel())
+                jc_vals.append(dsr.ravel())
+                jc_rows.append(crow[:, :, 0].ravel())
+                jc_cols.append((var_off + 4 * (links[:, None] + 1) + np.arange(4)[None, :]).ravel())
+                jc_vals.append(np.broadcast_to(-1.0 / STATE_SCALE, (nl, 4)).ravel())
+                r_off += J * 2 * M
+                c_off += 4 * nl
+                var_off += 4 * J
+            nvar = var_off
+            r = np.concatenate(rs)
+            c = np.concatenate(cs)
+            Jr = sp.csr_matrix(
+                (np.concatenate(jr_vals), (np.concatenate(jr_rows), np.concatenate(jr_cols))),
+                shape=(r.size, nvar),
+            )
+            Jc = sp.csr_matrix(
+                (np.concatenate(jc_vals), (np.concatenate(jc_rows), np.concatenate(jc_cols))),
+                shape=(c.size, nvar),
+            )
+            # columns in scaled variables: d/dw~ = d/dw * scale
+            D = sp.diags(col_scale)
+            return r, c, (Jr @ D).tocsc(), (Jc @ D).tocsc()
+
+        def merit(r, c, rho):
+            return 0.5 * float(r @ r) + rho * float(np.sum(np.abs(c)))
+
+        w = pack(theta, nodes)
+        lin_t = solve_t = 0.0
+        status, message = 0, "maximum iterations reached"
+        iterations = 0
+        rho = 1.0
+        tl = time.perf_counter()
+        r, c, Jr, Jc = linearize(*unpack(w))
+        lin_t += time.perf_counter() - tl
+        kkt_lu = None
+        for it in range(max_iterations):
+            iterations = it + 1
+            ts = time.perf_counter()
+            H = (Jr.T @ Jr).tocsc()
+            g = Jr.T @ r
+            nvar = H.shape[0]
+            K = sp.bmat([[H, Jc.T], [Jc, None]], format="csc")
+            try:
+                kkt_lu = splu(K)
+            except RuntimeError:
+                try:  # Levenberg-Marquardt damping if the reduced Hessian is singular
+                    damp = 1e-6 * max(float(H.diagonal().max()), 1.0) * sp.identity(nvar, format="csc")
+                    kkt_lu = splu(sp.bmat([[H + damp, Jc.T], [Jc, None]], format="csc"))
+                except RuntimeError as err:
+                    status, message = -1, f"KKT matrix singular: {err}"
+                    break
+            sol = kkt_lu.solve(np.concatenate([-g, -c]))
+            step = sol[:nvar]
+            lam = sol[nvar:]
+            solve_t += time.perf_counter() - ts
+            rho = max(rho, 2.0 * float(np.max(np.abs(lam)))) if lam.size else rho
+            m0 = merit(r, c, rho)
+            # directional derivative of the merit along the step (Nocedal & Wright eq. 18.29)
+            dm = float(g @ step) - rho * float(np.sum(np.abs(c)))
+            alpha = 1.0
+            accepted = False
+            while alpha > 1e-4:
+                w_try = w + alpha * step * col_scale
+                tl = time.perf_counter()
+                r_t, c_t, Jr_t, Jc_t = linearize(*unpack(w_try))
+                lin_t += time.perf_counter() - tl
+                if np.all(np.isfinite(r_t)) and merit(r_t, c_t, rho) <= m0 + 1e-4 * alpha * min(dm, 0.0):
+                    accepted = True
+                    break
+                alpha *= 0.5
+            if not accepted:
+                status, message = -2, "line search failed"
+                break
+            w, r, c, Jr, Jc = w_try, r_t, c_t, Jr_t, Jc_t
+            c_max = float(np.max(np.abs(c))) if c.size else 0.0
+            if alpha * np.max(np.abs(step)) < tolerance and c_max < 1e-6:
+                status, message = 1, f"converged: scaled step below {tolerance:g}, continuity met"
+                break
+            if alpha == 1.0 and np.max(np.abs(step)) < 1e3 * tolerance and c_max < 1e-6:
+                status, message = 1, f"converged: scaled step {np.max(np.abs(step)):.2g}, continuity met"
+                break
+
+        theta, nodes = unpack(w)
+        success = status > 0
+        # --- covariance from the KKT system at the solution ------------------------------
+        tc = time.perf_counter()
+        names = layout.names
+        nvar = Jr.shape[1]
+        n_res = r.size
+        n_con = Jc.shape[0]
+        dof = max(n_res - (nvar - n_con), 1)
+        chi2 = float(r @ r)
+        cov = naive = np.full((q, q), np.nan)
+        hac_m, inflation = 0, np.full(q, np.nan)
+        if success:
+            H = (Jr.T @ Jr).tocsc()
+            K = sp.bmat([[H, Jc.T], [Jc, None]], format="csc")
+            try:
+                lu = splu(K)
+                E = np.zeros((K.shape[0], q))
+                E[np.arange(q), np.arange(q)] = 1.0
+                P = lu.solve(E)[:nvar].T  # (q, nvar): theta rows of the constrained inverse
+                P_tt = P[:, :q] * np.outer(th_scale, th_scale)
+                naive = chi2 / dof * P_tt
+                G = (Jr @ P.T).T  # (q, n_res) sensitivity of theta~ to each residual
+                contrib = (G * r[None, :]) * th_scale[:, None]  # (q, n_res) in theta units
+                influence = []
+                k = 0
+                for sg in self.segments:
+                    size = sg.J * 2 * sg.M
+                    block = contrib[:, k : k + size].reshape(q, sg.J * sg.M, 2).sum(axis=2)
+                    influence.append(block)
+                    k += size
+                lr = long_run_covariance(influence, naive, self.sample_time, band=hac_band)
+                cov, hac_m, inflation = lr.covariance, lr.frequencies, lr.variance_inflation
+            except RuntimeError as err:
+                success, status, message = False, -3, f"covariance: KKT matrix singular ({err})"
+        cov_t = time.perf_counter() - tc
+
+        residuals = []
+        k = 0
+        rms_acc = np.zeros(2)
+        count = 0
+        for sg in self.segments:
+            size = sg.J * 2 * sg.M
+            rr = r[k : k + size].reshape(sg.J * sg.M, 2).T * OUTPUT_SCALE
+            full = np.full((2, sg.n), np.nan)
+            full[:, : sg.J * sg.M] = rr
+            residuals.append(full)
+            rms_acc += np.sum(rr**2, axis=1)
+            count += sg.J * sg.M
+            k += size
+        rms = {a: float(np.sqrt(rms_acc[i] / count)) for i, a in enumerate(AXIS_NAMES)}
+        total = time.perf_counter() - t0
+        return FitResult(
+            method="output_error",
+            names=names,
+            values=dict(zip(names, theta, strict=True)),
+            stderr=dict(zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)), strict=True)),
+            stderr_naive=dict(zip(names, np.sqrt(np.clip(np.diag(naive), 0, None)), strict=True)),
+            initial=dict(zip(names, layout.initial_vector(initial), strict=True)),
+            fixed=layout.fixed(),
+            covariance=cov,
+            correlation=correlation_from(cov) if success else np.full((q, q), np.nan),
+            residual_rms=rms,
+            residual_unit="m",
+            residuals=tuple(residuals),
+            n_samples=count,
+            n_residuals=n_res,
+            chi_square=chi2,
+            reduced_chi_square=chi2 / dof,
+            hac_frequencies=hac_m,
+            variance_inflation=dict(zip(names, inflation, strict=True)),
+            success=success,
+            status=status,
+            message=message,
+            iterations=iterations,
+            timings={
+                "prepare": self.prepare_time,
+                "initial_fit": init_time,
+                "simulate_and_linearize": lin_t,
+                "kkt_solves": solve_t,
+                "covariance": cov_t,
+                "total": total + self.prepare_time,
+            },
+            sources=tuple(sg.source for sg in self.segments),
+            settings={
+                "segment_duration_s": self.segment_duration,
+                "segments": [sg.J for sg in self.segments],
+                "integrator": "RK4, one step per sample, currents linear between samples",
+                "input_delay_s": self.input_delay,
+                "hac_band_hz": hac_band,
+                "residual_scale_m": OUTPUT_SCALE,
+                "chi_square_units": "encoder counts^2 (residuals divided by 10 um)",
+                "terms": [t.name for t in self.terms],
+            },
+        )
+
+
+def fit_output_error(
+    logs: Log | Sequence[Log],
+    model: StageModel,
+    *,
+    estimate: Sequence[str] = CONSTANT_NAMES,
+    terms: Sequence[AccelerationTerm] = (),
+    segment_duration: float = DEFAULT_SEGMENT,
+    input_delay: float = 0.0,
+    initial: FitResult | dict[str, float] | None = None,
+    max_iterations: int = 30,
+    hac_band: float = DEFAULT_BAND,
+) -> FitResult:
+    """Multiple-shooting output-error fit (one-off use; see :class:`MultipleShooting`)."""
+    problem = MultipleShooting(
+        logs,
+        model,
+        estimate=estimate,
+        terms=terms,
+        segment_duration=segment_duration,
+        input_delay=input_delay,
+    )
+    return problem.fit(initial=initial, max_iterations=max_iterations, hac_band=hac_band)
+
+
+def simulate_open_loop(
+    log: Log, model: StageModel, duration: float, *, x0: np.ndarray | None = None
+) -> np.ndarray:
+    """Single shooting: the model driven by the logged currents from ``x0`` (default: the
+    Savitzky-Golay state at the first sample), RK4 per sample as in the fit; returns the state
+    (4, k) over the first ``duration`` seconds (NaN once it leaves 0..0.1 m of gap).
+
+    This is what single-shooting output error would have to fit; on the unstable stage it
+    leaves the data within a fraction of a second even with the true constants.
+    """
+    k = min(log.n, round(duration / log.sample_time) + 1)
+    if x0 is None:
+        der = differentiate_log(log, SavitzkyGolay(log.sample_time))
+        x0 = np.array([der.position[0, 0], der.velocity[0, 0], der.position[1, 0], der.velocity[1, 0]])
+    f = model.f
+    h = log.sample_time
+    u = np.asarray(log.u, dtype=float)
+    out = np.full((4, k), np.nan)
+    x = np.asarray(x0, dtype=float).copy()
+    for i in range(k):
+        out[:, i] = x
+        if i == k - 1:
+            break
+        u0, u1 = u[:, i], u[:, i + 1]
+        um = 0.5 * (u0 + u1)
+        k1 = np.asarray(f(x, u0)).ravel()
+        k2 = np.asarray(f(x + h / 2 * k1, um)).ravel()
+        k3 = np.asarray(f(x + h / 2 * k2, um)).ravel()
+        k4 = np.asarray(f(x + h * k3, u1)).ravel()
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not (np.all(np.isfinite(x)) and 0 < x[0] < 0.1):
+            break
+    return out

@@ -1,0 +1,258 @@
+"""Identification of the lumped constants from log files: checks, the fits, one result.
+
+:func:`load_logs` reads and validates the files (:func:`maglev_oc.data.logs.read_log`; every
+reading problem is a :class:`~maglev_oc.data.logs.LogError`). :func:`identify` refuses logs
+that cannot identify what is asked (too short, no excitation on an axis whose constants are
+estimated) with a ``LogError`` naming the file and what is missing, then runs the
+equation-error fit, the multiple-shooting output-error fit and the NPFSI estimator, and returns
+an :class:`IdentificationOutcome` (``to_dict()`` for JSON, ``report()`` for text).
+
+This is what ``maglev-oc identify`` runs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from maglev_oc.data.logs import CURRENT_RESOLUTION, Log, LogError, read_log
+from maglev_oc.identify.equation_error import EquationError, as_log_list
+from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET
+from maglev_oc.identify.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
+from maglev_oc.identify.output_error import DEFAULT_SEGMENT, DEFAULT_WINDOW, MultipleShooting
+from maglev_oc.identify.result import FitResult, NpfsiResult
+from maglev_oc.identify.terms import AccelerationTerm
+from maglev_oc.model.hardware import ENCODER_RESOLUTION
+from maglev_oc.model.parameters import LumpedConstants, StageParameters
+from maglev_oc.model.stage import StageModel
+
+METHODS = ("equation_error", "output_error", "npfsi")
+MIN_DURATION = 5.0
+"""[s] Shortest log accepted for identification: the sum-of-sines excitation's lowest
+frequencies (0.1-0.4 Hz) need a period or more to separate C2 from C3 and C4, and the
+long-run covariance needs a few Fourier frequencies below 1 Hz."""
+VERTICAL = ("C2", "C3", "C4", GAP_OFFSET)
+HORIZONTAL = ("C1",)
+
+
+def load_logs(paths: Sequence[str | os.PathLike], *, params: StageParameters | None = None) -> list[Log]:
+    """Read and validate every file (``LogError`` names the file, line and column at fault)."""
+    if not paths:
+        raise ValueError("no log files given")
+    return [read_log(p, params=params) for p in paths]
+
+
+def _moves(values, resolution: float) -> bool:
+    """As :func:`maglev_oc.data.logs.check_excitation`: a standard deviation above the resolution."""
+    return float(np.std(values)) > resolution
+
+
+def check_identifiable(
+    logs: Sequence[Log], estimate: Sequence[str], *, min_duration: float = MIN_DURATION
+) -> None:
+    """Raise ``LogError`` if a log is too short for identification, or if the signals that the
+    estimated constants multiply do not move (on any log, for that axis).
+
+    A log that moves on neither needed axis is refused by name, even when others do.
+    """
+    need_v = any(e in VERTICAL for e in estimate)
+    need_h = any(e in HORIZONTAL for e in estimate)
+    signals = {"x1": ("position", 0), "x3": ("position", 2), "u1": ("current", 0), "u2": ("current", 1)}
+    moving: dict[str, dict[str, bool]] = {}
+    for log in logs:
+        name = log.source or "<log>"
+        if log.duration < min_duration:
+            raise LogError(
+                name,
+                f"too short for identification: {log.duration:.3g} s ({log.n} samples); need at least "
+                f"{min_duration:g} s of excitation (the sum-of-sines references of 000 Sec. IV have "
+                "periods up to 10 s)",
+            )
+        flags = {}
+        for sig, (kind, row) in signals.items():
+            values = log.x[row] if kind == "position" else log.u[row]
+            flags[sig] = _moves(values, ENCODER_RESOLUTION if kind == "position" else CURRENT_RESOLUTION)
+        moving[name] = flags
+        excited = {"vertical": flags["x1"] and flags["u2"], "horizontal": flags["x3"] and flags["u1"]}
+        needed = [a for a, need in (("vertical", need_v), ("horizontal", need_h)) if need]
+        if not any(excited[a] for a in needed):
+            flat = [s for s, ok in flags.items() if not ok]
+            what = []
+            if need_v:
+                names_v = ", ".join(e for e in estimate if e in VERTICAL)
+                what.append(f"vertical (x1 and u2 = i_d must vary for {names_v})")
+            if need_h:
+                what.append("horizontal (x3 and u1 = i_q must vary for C1)")
+            raise LogError(
+                name,
+                f"no excitation for identification: {' or '.join(what)}; constant to within the resolution "
+                f"(encoder {ENCODER_RESOLUTION:g} m, current {CURRENT_RESOLUTION:g} A): {', '.join(flat)}. "
+                "Record the run with the sum-of-sines references of 000 Sec. IV",
+                column=flat[0] if flat else None,
+            )
+    for axis, needed, sigs, names in (
+        ("vertical", need_v, ("x1", "u2"), [e for e in estimate if e in VERTICAL]),
+        ("horizontal", need_h, ("x3", "u1"), [e for e in estimate if e in HORIZONTAL]),
+    ):
+        if needed and not any(all(moving[n][s] for s in sigs) for n in moving):
+            files = ", ".join(moving)
+            raise LogError(
+                files,
+                f"no excitation for identification: no log moves {axis}ly ({' and '.join(sigs)} constant "
+                f"to within the resolution) but {', '.join(names)} need it",
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationOutcome:
+    """What :func:`identify` found: the fits that were run, in the papers' terms.
+
+    Attributes
+    ----------
+    equation_error, output_error : FitResult or None
+    npfsi : tuple of NpfsiResult (one per eps)
+    base_constants : LumpedConstants
+        The model's constants (initial guesses; the ones held fixed).
+    estimate : tuple of str
+    sources : tuple of str
+    wall_times : mapping method -> s
+    """
+
+    equation_error: FitResult | None
+    output_error: FitResult | None
+    npfsi: tuple[NpfsiResult, ...]
+    base_constants: LumpedConstants
+    estimate: tuple[str, ...]
+    sources: tuple[str, ...]
+    wall_times: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def best(self) -> FitResult | None:
+        """The output-error fit if it succeeded, else the equation-error fit."""
+        if self.output_error is not None and self.output_error.success:
+            return self.output_error
+        return self.equation_error
+
+    def constants(self) -> LumpedConstants:
+        """The identified constants (from :attr:`best`; NPFSI at eps = 0.01 if no fit ran)."""
+        if self.best is not None:
+            return self.best.constants(self.base_constants)
+        for run in self.npfsi:
+            if math.isclose(run.eps, 0.01):
+                return run.constants(self.base_constants)
+        return self.npfsi[0].constants(self.base_constants)
+
+    def report(self) -> str:
+        parts = []
+        for fit in (self.equation_error, self.output_error):
+            if fit is not None:
+                parts.append(fit.report())
+        for run in self.npfsi:
+            parts.append(run.report())
+        c = self.constants()
+        parts.append(
+            "[[Identified constants]] "
+            + ", ".join(f"{k} = {getattr(c, k):.6g}" for k in CONSTANT_NAMES)
+            + f"  ({c.source})"
+        )
+        return "\n\n".join(parts)
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.constants()
+        return {
+            "sources": list(self.sources),
+            "estimate": list(self.estimate),
+            "base_constants": self.base_constants.to_dict(),
+            "identified_constants": c.to_dict(),
+            "equation_error": None if self.equation_error is None else self.equation_error.to_dict(),
+            "output_error": None if self.output_error is None else self.output_error.to_dict(),
+            "npfsi": [run.to_dict() for run in self.npfsi],
+            "wall_times_s": dict(self.wall_times),
+        }
+
+
+def identify(
+    logs: Log | Sequence[Log],
+    model: StageModel,
+    *,
+    estimate: Sequence[str] = CONSTANT_NAMES,
+    terms: Sequence[AccelerationTerm] = (),
+    methods: Sequence[str] = METHODS,
+    npfsi_eps: Sequence[float] = PAPER_EPSILONS,
+    npfsi_gamma: float = PAPER_GAMMA,
+    segment_duration: float = DEFAULT_SEGMENT,
+    window_duration: float = DEFAULT_WINDOW,
+    input_delay: float = 0.0,
+    min_duration: float = MIN_DURATION,
+) -> IdentificationOutcome:
+    """Check the logs, then run the chosen methods.
+
+    Parameters
+    ----------
+    logs : Log or sequence of Log
+    model : StageModel
+        Initial guesses and the constants held fixed.
+    estimate : sequence of str
+        Among C1..C4 and ``gap_offset`` (NPFSI estimates the constants among them).
+    terms : sequence of AccelerationTerm
+        Extra accelerations for the two least-squares fits.
+    methods : sequence of str
+        Among ``equation_error``, ``output_error``, ``npfsi``.
+    npfsi_eps, npfsi_gamma
+        The NPFSI settings (one run per eps, one log at a time: the first log).
+    segment_duration, window_duration : float
+        [s] Multiple-shooting segment and continuity window.
+    input_delay : float
+        [s] Delay applied to the logged currents.
+    min_duration : float
+        [s] Shortest log accepted.
+
+    Raises
+    ------
+    LogError
+        A log is too short for identification or lacks excitation (message names the file).
+    """
+    logs = as_log_list(logs)
+    methods = tuple(methods)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise ValueError(f"methods: choose among {METHODS}, got {methods!r}")
+    estimate = tuple(estimate)
+    check_identifiable(logs, estimate, min_duration=min_duration)
+    times: dict[str, float] = {}
+    ee = oe = None
+    if "equation_error" in methods or "output_error" in methods:
+        t0 = time.perf_counter()
+        ee = EquationError(logs, model, estimate=estimate, terms=terms, input_delay=input_delay).fit()
+        times["equation_error"] = time.perf_counter() - t0
+    if "output_error" in methods:
+        t0 = time.perf_counter()
+        ms = MultipleShooting(
+            logs,
+            model,
+            estimate=estimate,
+            terms=terms,
+            segment_duration=segment_duration,
+            window_duration=window_duration,
+            input_delay=input_delay,
+        )
+        oe = ms.fit(initial=ee if ee is not None and ee.success else None)
+        times["output_error"] = time.perf_counter() - t0
+    if "equation_error" not in methods:
+        ee = None
+    runs: list[NpfsiResult] = []
+    constants = tuple(e for e in estimate if e in CONSTANT_NAMES)
+    if "npfsi" in methods and constants:
+        t0 = time.perf_counter()
+        for eps in npfsi_eps:
+            runs.append(npfsi(logs[0], model, estimate=constants, eps=eps, gamma=npfsi_gamma))
+        times["npfsi"] = time.perf_counter() - t0
+    return IdentificationOutcome(
+        ee, oe, tuple(runs), model.constants, estimate, tuple(log.source for log in logs), times
+    )
