@@ -56,17 +56,20 @@ QP solver and the unconstrained shortcut
     The QP variables are ordered (u_0, x_1, u_1, ..., x_N) and the constraints per stage
     (dynamics, current polytope): the OCP structure HPIPM's Riccati-based interior point
     method exploits (u_0 plays HPIPM's "x_0" since x_0 is not a variable). ``hpipm`` is the
-    default because its cost on a constrained sample is bounded (4-10 interior point iterations
-    of fixed cost, iteration limit 30) where QRQP's active-set iterations each refactorize the
-    KKT matrix, so that QRQP's cost grows with the number of constraints that switch (the start
-    of a large step). Measured by bench/nmpc_step.py with the QP solved every sample (N = 20,
-    CasADi VM, per call): HPIPM 0.47 ms, QRQP 0.42 ms, OSQP 0.83 ms (OSQP needs tight
-    tolerances for the solution check and many ADMM iterations). Most samples have no active
-    inequality: the Riccati recursion of the equality-constrained QP (its exact minimizer
-    without inequalities, ~10k flops) is computed first and, when it satisfies every bound and
-    polytope row, it IS the QP's solution and the solver is not called (a CasADi Switch: only
-    the selected branch runs, in Python and in the generated C). The QP solver
-    runs on the other samples. ``unconstrained_shortcut=False`` solves the QP every sample.
+    default (mode "speed_abs", iteration limit 30) because its cost on a constrained sample is
+    bounded (4-10 interior point iterations of fixed cost) where QRQP's active-set iterations
+    each refactorize the KKT matrix, so that QRQP's cost grows with the number of constraints
+    that switch (the start of a large step). The QP is scaled (positions in mm) so that
+    HPIPM's absolute tolerances are reachable (in SI units its Hessian spans 1e-3..1e7 and the
+    first sample of a large step ran into the iteration limit). Measured by bench/nmpc_step.py
+    with the QP solved every sample (N = 20, CasADi VM, per call): HPIPM 0.47 ms, QRQP 0.42 ms,
+    OSQP 0.83 ms (OSQP needs tight tolerances for the solution check, hence many ADMM
+    iterations). Most samples have no active inequality: the Riccati recursion of the
+    equality-constrained QP (its exact minimizer without inequalities, ~10k flops) is computed
+    first and, when it satisfies every bound and polytope row, it IS the QP's solution and the
+    solver is not called (a CasADi Switch: only the selected branch runs, in Python and in the
+    generated C). The QP solver runs on the other samples (0.1-1 % of the samples of the
+    papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every sample.
 
 A failed QP never raises: the solution is checked inside the Function (finite, dynamics
 residual and constraint violation below tolerance); when it fails the controller applies the
@@ -156,8 +159,9 @@ vertically, 1 N / 1.594 kg = 0.63 m/s^2 horizontally), half of gravity."""
 TERMINAL_GAPS = np.linspace(10e-3, 30e-3, 21)
 """Gaps [m] at which the terminal weight P is tabulated (1 mm apart; linear in between)."""
 SOLUTION_TOLERANCE = 1e-6
-"""Largest dynamics residual and constraint violation accepted in a QP solution [SI units:
-m, m/s, A]; the solvers reach 1e-8 or better on a good solve, a failed one is far off."""
+"""Largest dynamics residual and constraint violation accepted in a QP solution, in the QP's
+scaled units (mm, m/s, A); the solvers reach 1e-8 or better on a good solve, a failed one is
+far off."""
 _BIG = 1e8  # stands for an infinite bound in the QP data (HPIPM's own 'inf' default)
 
 
@@ -460,6 +464,21 @@ class _Transcription:
             lb[k + 2], ub[k + 2] = self.position_bounds
         return lb, ub
 
+    @property
+    def z_scale(self) -> np.ndarray:
+        """s (6N,): z = z_bar + s * dz_s in the QP; 1e-3 on positions (mm), 1 elsewhere."""
+        x_scale = np.array([1e-3, 1.0, 1e-3, 1.0])
+        s = np.ones(self.nz)
+        for j in range(1, self.N + 1):
+            s[_x_index(j) : _x_index(j) + NX] = x_scale
+        return s
+
+    @property
+    def row_scale(self) -> np.ndarray:
+        """t (6N,): the QP's constraint rows are t * (rows in SI); 1/s on the dynamics rows, so
+        that the -I blocks of x_{j+1} stay -I (HPIPM's structure)."""
+        return np.tile(np.r_[1e3, 1.0, 1e3, 1.0, 1.0, 1.0], self.N)
+
     def stage_states(self, z, x0):
         xs = [x0] + [z[_x_index(j) : _x_index(j) + NX] for j in range(1, self.N + 1)]
         us = [z[_u_index(j) : _u_index(j) + NU] for j in range(self.N)]
@@ -468,8 +487,9 @@ class _Transcription:
     # ------------------------------------------------------------------------------------
     def qp_data_function(self) -> ca.Function:
         """(z_bar, x0, d, ref) -> (H, g, A, lba, uba, lbx, ubx, data_ok, z_ref): the Gauss-Newton
-        QP in the step dz = z - z_bar, with bounds made finite where the data are not, and the
-        reference plan (the cost is (z - z_ref)' (H / 2) (z - z_ref))."""
+        QP in the scaled step dz_s = (z - z_bar) / s (see :attr:`z_scale`), with bounds made
+        finite where the data are not, and the reference plan z_ref (SI): the cost is
+        (z - z_ref)' W (z - z_ref) = 1/2 e_s' H e_s with e_s = (z - z_ref) / s."""
         n, nz, na = self.N, self.nz, self.na
         zb = ca.SX.sym("z_bar", nz)
         x0 = ca.SX.sym("x0", NX)
@@ -501,9 +521,18 @@ class _Transcription:
             uba.append(lim - du)
         lba = ca.vertcat(*lba)
         uba = ca.vertcat(*uba)
+        # scaling: positions in mm in the QP (rows of the position dynamics likewise), so that the
+        # Hessian's blocks are O(1e-3..10) instead of O(1e-3..1e7) in SI; HPIPM's absolute
+        # stationarity tolerance (1e-6) is then reachable on every sample
+        sz, ta = self.z_scale, self.row_scale
+        hess = ca.mtimes([ca.diag(ca.DM(sz)), hess, ca.diag(ca.DM(sz))])
+        grad = grad * ca.DM(sz)
+        a = ca.mtimes([ca.diag(ca.DM(ta)), a, ca.diag(ca.DM(sz))])
+        lba = lba * ca.DM(ta)
+        uba = uba * ca.DM(ta)
         lbz, ubz = self.bounds()
-        lbx = ca.vertcat(*[(-_BIG if not np.isfinite(v) else v) - zb[i] for i, v in enumerate(lbz)])
-        ubx = ca.vertcat(*[(_BIG if not np.isfinite(v) else v) - zb[i] for i, v in enumerate(ubz)])
+        lbx = ca.vertcat(*[-_BIG if not np.isfinite(v) else (v - zb[i]) / sz[i] for i, v in enumerate(lbz)])
+        ubx = ca.vertcat(*[_BIG if not np.isfinite(v) else (v - zb[i]) / sz[i] for i, v in enumerate(ubz)])
         # Non-finite data (a NaN measurement, a plan that left the model's domain) would make the
         # QP ill-posed, which CasADi refuses with an exception: then every bound is replaced by a
         # harmless finite one (the step dz = 0 is feasible) and the solution check downstream
@@ -657,7 +686,7 @@ class NonlinearMPC:
     disturbance_limit : float
         |d| clip [m/s^2].
     qp_options : dict
-        Options merged into the QP solver's (e.g. ``{"hpipm": {"mode": "speed_abs"}}``).
+        Options merged into the QP solver's (e.g. ``{"hpipm": {"mode": "robust"}}``).
     preview : bool
         Read the future reference from the reference array (default), or extrapolate the current
         sample (causal, like the papers' regulators: set-point steps are not anticipated).
@@ -805,7 +834,7 @@ class NonlinearMPC:
         worst = ca.mmax(viol)
         size = ca.sum1(ca.fabs(dz)) + ca.sum1(ca.fabs(lam_a))
         ok = ca.logic_and(ca.logic_and(data_ok, size < 1e20), worst <= SOLUTION_TOLERANCE)
-        z_qp = zb + dz
+        z_qp = zb + dz * ca.DM(ocp.z_scale)
         plan_finite = ca.sum1(ca.fabs(zb)) < 1e20
         ref_finite = ca.sum1(ca.fabs(z_ref)) < 1e20
         # fallback: the shifted previous plan, else the reference plan (its first input is the
@@ -814,7 +843,7 @@ class NonlinearMPC:
         z_new = ca.if_else(ok, z_qp, z_keep)
         u = ocp.project_current(z_new[0:NU])
         z_next = ca.mtimes(ca.DM(ca.sparsify(ca.DM(self.shift))), z_new)
-        e = z_new - z_ref
+        e = (z_new - z_ref) / ca.DM(ocp.z_scale)
         cost = 0.5 * ca.bilin(hess, e, e)
         obs_next, d_next = est.update(obs, d, y, u)
         memory_next = ca.vertcat(obs_next, d_next, z_next)
@@ -918,7 +947,7 @@ class NonlinearMPC:
                 nx=[NU] + [NX] * n,
                 nu=[0] + [NU] * (n - 1) + [0],
                 ng=[2] * n + [0],
-                hpipm={"mode": "speed", "iter_max": 30},
+                hpipm={"mode": "speed_abs", "iter_max": 30},
             )
         elif self.qp_solver == "qrqp":
             opts.update(print_iter=False, print_header=False, print_info=False, max_iter=200)
