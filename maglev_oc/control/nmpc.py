@@ -62,14 +62,16 @@ QP solver and the unconstrained shortcut
     that switch (the start of a large step). The QP is scaled (positions in mm) so that
     HPIPM's absolute tolerances are reachable (in SI units its Hessian spans 1e-3..1e7 and the
     first sample of a large step ran into the iteration limit). Measured by bench/nmpc_step.py
-    with the QP solved every sample (N = 20, CasADi VM, per call): HPIPM 0.47 ms, QRQP 0.42 ms,
-    OSQP 0.83 ms (OSQP needs tight tolerances for the solution check, hence many ADMM
-    iterations). Most samples have no active inequality: the Riccati recursion of the
-    equality-constrained QP (its exact minimizer without inequalities, ~10k flops) is computed
-    first and, when it satisfies every bound and polytope row, it IS the QP's solution and the
-    solver is not called (a CasADi Switch: only the selected branch runs, in Python and in the
-    generated C). The QP solver runs on the other samples (0.1-1 % of the samples of the
-    papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every sample.
+    with the QP solved every sample (N = 20, CasADi VM, per call, two runs): HPIPM 0.42-0.47
+    ms, QRQP 0.42 ms, OSQP 0.75-0.83 ms (OSQP needs tight tolerances for the solution check,
+    hence many ADMM iterations); in the generated C the p99 over a large step, set by the
+    samples that need the QP, was 0.14 ms with HPIPM and 0.24 ms with QRQP. Most samples have no
+    active inequality: the Riccati recursion of the equality-constrained QP (its exact minimizer
+    without inequalities, ~10k flops) is computed first and, when it satisfies every bound and
+    polytope row, it IS the QP's solution and the solver is not called (a CasADi Switch: only
+    the selected branch runs, in Python and in the generated C). The QP solver runs on the other
+    samples (0.1-1 % of the samples of the papers' scenarios); ``unconstrained_shortcut=False``
+    solves the QP every sample.
 
 A failed QP never raises: the solution is checked inside the Function (finite, dynamics
 residual and constraint violation below tolerance); when it fails the controller applies the
@@ -556,6 +558,7 @@ class _Transcription:
             [hess, grad, a, lba, uba, lbx, ubx, data_ok, z_ref],
             ["z_bar", "x0", "d", "ref"],
             ["H", "g", "A", "lba", "uba", "lbx", "ubx", "data_ok", "z_ref"],
+            {"cse": True},  # common subexpressions of the 20 RK4 linearizations: -10 % operations
         )
 
     def objective_function(self) -> ca.Function:
@@ -694,8 +697,9 @@ class NonlinearMPC:
         Take the Riccati step when it is feasible (default) or solve the QP every sample.
     compile : bool
         JIT-compile the three SX parts of the RTI step with the system C compiler (CasADi
-        ``jit``, -O1: 10-15 s once; then 2.5-3x faster calls, 0.13 ms instead of 0.35 ms at
-        N = 20). Needs gcc/cc; the C export (:mod:`maglev_oc.control.codegen`) does not use it.
+        ``jit``, -O1: 10-25 s once; then 2.5-3x faster calls, 0.13 ms instead of 0.31-0.36 ms
+        at N = 20 on the 2-core test machine). Needs gcc/cc; the C export
+        (:mod:`maglev_oc.control.codegen`) does not use it.
     name : str
         Default "NMPC" (the name the comparison plots know), "NMPC (converged, IPOPT)".
     """
