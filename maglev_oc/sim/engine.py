@@ -206,7 +206,8 @@ class ClosedLoop:
             u, diag = ctrl.control(k, y, ref)
             step_times[k] = time.perf_counter() - tc
             s_next, flags = step(s, u)
-            out[:, k] = np.concatenate([y, np.ravel(u), np.ravel(diag), np.ravel(flags), s])
+            row = (y, u, diag, flags, s)
+            out[:, k] = np.concatenate([np.asarray(v, dtype=float).ravel() for v in row])
             s = np.asarray(s_next).ravel()
             if not np.all(np.isfinite(s)):
                 break
