@@ -4,6 +4,8 @@
     maglev-oc model [--params JSON] [--gaps MM ...]  print the equilibrium table
     maglev-oc simulate --controller fl --scenario sinusoid --out run.csv
                                                      closed loop on the rig twin -> log (SPEC 2)
+    maglev-oc region [--gaps MM ...] [--sdp] [--samples N] [--json OUT.json]
+                                                     certified operating region (Procedure 2)
     maglev-oc diagnose LOG... --json OUT.json [--report OUT.pdf]
                                                      residual -> missing effect -> error before/after
     maglev-oc identify LOG... --json OUT.json [--report OUT.pdf]
@@ -153,6 +155,95 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def cmd_region(args: argparse.Namespace) -> int:
+    import json
+
+    from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+    from maglev_oc.region.feasibility import FeasibleSet
+    from maglev_oc.region.procedure2 import Procedure2
+
+    model = load_model(args.params)
+    gaps = [float(g) for g in args.gaps]
+    bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
+    if bad:
+        raise UserError(f"--gaps are millimetres in [5, 40], got {bad}")
+    if args.current_limit is not None and not (0 < args.current_limit < 100):
+        raise UserError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
+    if args.samples < 0:
+        raise UserError(f"--samples must be >= 0, got {args.samples}")
+    limit = None if args.no_current_limit else (args.current_limit or 9.0)
+    feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
+    loop = RegulatorLoop()
+    proc = Procedure2(feasible, loop)
+    refs = [Reference.setpoint(g * 1e-3, args.position * 1e-3) for g in gaps]
+    if args.sinusoid:
+        refs.append(Reference.paper_sinusoid())
+    sim = None
+    if args.samples:
+        from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+        from maglev_oc.region.montecarlo import BatchSimulator
+        from maglev_oc.sim.twin import RigTwin
+
+        sim = BatchSimulator(RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0)
+    print(f"feasible set: {feasible.label}; gains: printed K_h, K_v (001/002)")
+    print(
+        f"{'reference':>10s} {'P':>9s} {'level':>10s} {'c/upper':>8s} {'binding':>13s} "
+        f"{'e1 [mm]':>8s} {'e1dot [mm/s]':>12s} {'e2 [mm]':>8s} {'e2dot [mm/s]':>12s} {'runs/viol.':>11s}"
+    )
+    records = []
+    n_bad = 0
+    for ref in refs:
+        certs = [("Lyapunov", proc.run(ref))]
+        if args.sdp:
+            from maglev_oc.region.sdp import enlarge
+
+            sdp = enlarge(proc, ref)
+            if sdp.certified is not None:
+                certs.append(("SDP", sdp.certified))
+        for label, cert in certs:
+            s = cert.initial_conditions.semi_axes
+            runs = viol = 0
+            if sim is not None and cert.success:
+                import numpy as np
+
+                from maglev_oc.region.montecarlo import check_error_states, uniform_in_ellipsoid
+
+                z = uniform_in_ellipsoid(cert.P, cert.level, args.samples, np.random.default_rng(0))
+                chk = check_error_states(sim, loop, ref, cert.P, cert.level, z, current_limit=limit)
+                runs, viol = chk.n, chk.violations
+                n_bad += viol
+            name = f"{ref.gap * 1e3:g} mm" if ref.is_setpoint else "sinusoid"
+            print(
+                f"{name:>10s} {label:>9s} {cert.level:10.4g} {cert.tightness:8.3f} {cert.binding:>13s} "
+                f"{s['e1'] * 1e3:8.2f} {s['e1_rate'] * 1e3:12.0f} {s['e2'] * 1e3:8.2f} "
+                f"{s['e2_rate'] * 1e3:12.0f} {f'{runs}/{viol}' if runs else '-':>11s}"
+            )
+            records.append(
+                {
+                    "reference": ref.label,
+                    "P": label,
+                    "certified": bool(cert.success),
+                    "level": cert.level,
+                    "level_upper": cert.level_upper,
+                    "binding": cert.binding,
+                    "semi_axes_SI": cert.initial_conditions.semi_axes,
+                    "rectangle_m": list(cert.initial_conditions.rectangle),
+                    "P_matrix": cert.P.tolist(),
+                    "monte_carlo": {"runs": runs, "violations": viol},
+                }
+            )
+    if args.json:
+        doc = {
+            "feasible_set": feasible.label,
+            "semi_axes": "largest deviation of e1 [m], e1_rate [m/s], e2 [m], e2_rate [m/s] alone, at rest",
+            "certificates": records,
+        }
+        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0 if n_bad == 0 and all(r["certified"] for r in records) else 1
+
+
 def cmd_diagnose(args: argparse.Namespace) -> int:
     import json
 
@@ -258,6 +349,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--describe-twin", action="store_true", help="write the twin's effects into the log")
     p.add_argument("--out", type=Path, required=True, help="log file (.csv or .mat)")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("region", help="certified operating region of the FL regulator (adapted Procedure 2)")
+    p.add_argument("--gaps", nargs="+", type=float, default=[15, 17.5, 20, 22.5, 25], metavar="MM",
+                   help="set-point gaps in millimetres (default 15 17.5 20 22.5 25)")
+    p.add_argument("--position", type=float, default=0.0, metavar="MM", help="horizontal set-point [mm]")
+    p.add_argument("--sinusoid", action="store_true", help="also the papers' ellipse reference")
+    p.add_argument("--sdp", action="store_true", help="also enlarge the certified set by SDP")
+    p.add_argument("--current-limit", type=float, metavar="A", help="limit on |u| [A] (default 9)")
+    p.add_argument("--no-current-limit", action="store_true", help="only R >= 0 (the papers' set A)")
+    p.add_argument("--no-stoppers", action="store_true", help="ignore the gap stoppers")
+    p.add_argument("--samples", type=int, default=0, help="Monte Carlo runs inside each certified set")
+    p.add_argument("--json", type=Path, help="write the certificates (P, levels, sizes) here")
+    p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.set_defaults(func=cmd_region)
 
     p = sub.add_parser("diagnose", help="find what the model misses in logs and add it (SPEC 3)")
     p.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="logs (.csv or .mat, SPEC 2)")

@@ -1,0 +1,41 @@
+"""Operating region of the controllers: where the FL regulator's feedback transformation stays defined.
+
+* :mod:`~maglev_oc.region.closed_loop` — the FL loop in error coordinates with its exosystem
+  (:class:`Reference`, :class:`RegulatorLoop`).
+* :mod:`~maglev_oc.region.feasibility` — the feasible set F (R >= 0, |u| <= 9 A, stoppers) and its
+  maps with exact boundaries (:class:`FeasibleSet`, :func:`feasibility_map`).
+* :mod:`~maglev_oc.region.interval` — interval arithmetic over CasADi graphs (:class:`IntervalFunction`).
+* :mod:`~maglev_oc.region.procedure2` — Procedure 2 of Maggiore & Becerril adapted and certified
+  (:class:`Procedure2`).
+* :mod:`~maglev_oc.region.sdp` — P chosen by SDP over a proved inner polytope (:func:`enlarge`).
+* :mod:`~maglev_oc.region.roa` — regions of attraction of the linear regulators (:func:`certify_roa`).
+* :mod:`~maglev_oc.region.montecarlo` — vectorised runs of the sampled twin (:class:`BatchSimulator`).
+* :mod:`~maglev_oc.region.study` — everything the report shows (:func:`operating_region_study`).
+"""
+
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibilityMap, FeasibleSet, feasibility_map
+from maglev_oc.region.interval import IntervalFunction
+from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
+from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
+from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa
+from maglev_oc.region.sdp import SdpResult, enlarge
+
+__all__ = [
+    "BatchSimulator",
+    "FeasibilityMap",
+    "FeasibleSet",
+    "IntervalFunction",
+    "LinearizedLoop",
+    "Procedure2",
+    "Procedure2Result",
+    "Reference",
+    "RegulatorLoop",
+    "RoaResult",
+    "SdpResult",
+    "certify_roa",
+    "check_error_states",
+    "enlarge",
+    "feasibility_map",
+    "uniform_in_ellipsoid",
+]

@@ -1,0 +1,318 @@
+"""The feasible set of the FL regulator: where the feedback transformation exists and the currents fit.
+
+The transformation (002 (13)-(16), physical root of SPEC 1 reading 5) is defined on
+A = {R(x1, v1, v2) >= 0} (L1, L4 > 0 on every gap considered). With the amplifiers' limit on the
+current-vector magnitude |u| = sqrt(i_q^2 + i_d^2) <= I (9 A peak, 002 Sec. 4) and the stoppers,
+the feasible set is
+
+    F = { margin(x1, v) = R / (4 L4) = L3^2/(4 L4) + G - L2 - L4 (v1/L1)^2 - v2 >= 0     [m/s^2]
+          headroom(x1, v) = I^2 - u1^2 - u2^2 >= 0                                      [A^2]
+          g_lo <= x1 <= g_hi,  p_lo <= x3 <= p_hi }                                     [m]
+
+with u1 = -v1/L1 and the physical root written without cancellation,
+
+    u2 = (-L3 - sqrt R) / (2 L4) = 2 (L4 u1^2 + L2 - G + v2) / (sqrt R - L3)      (L3 < 0),
+
+which is the same number (multiply by (sqrt R - L3)/(sqrt R - L3)) but evaluates to tight
+intervals. In the closed loop, v = K z, so F is a set of states (x, xi) and reference phases;
+:func:`feasibility_map` draws it on two-dimensional slices and locates its boundary by Newton's
+method (CasADi ``rootfinder``) on every grid line where a constraint changes sign.
+
+Over 8-30 mm the root at R = 0 needs i_d = -L3/(2 L4) >= 18 A, twice the peak limit, so with the
+9 A limit the current constraint always binds before R = 0: A is larger than F.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
+from maglev_oc.model.stage import StageModel
+from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.interval import IntervalFunction
+
+GAP_TRAVEL = (8e-3, 30e-3)
+"""Gap between the stoppers [m] (the rig twin's ``sim.effects.Stoppers().gap``; 002 Fig. 5)."""
+POSITION_TRAVEL = (-60e-3, 60e-3)
+"""Horizontal position between the stoppers [m] (``sim.effects.Stoppers().horizontal``)."""
+
+CONSTRAINT_NAMES = ("margin", "headroom", "gap_low", "gap_high", "position_low", "position_high")
+CONSTRAINT_LABELS = (
+    "R >= 0 (transformation exists)",
+    "|u| <= current limit",
+    "gap >= lower stopper",
+    "gap <= upper stopper",
+    "position >= left stopper",
+    "position <= right stopper",
+)
+CONSTRAINT_UNITS = ("m/s^2", "A^2", "m", "m", "m", "m")
+
+
+def transformation_constraints(model: StageModel, x1, v, current_limit: float | None):
+    """Symbolic (margin [m/s^2], headroom [A^2]) at gap x1 and accelerations v (CasADi).
+
+    ``headroom`` uses sqrt(max(R, 0)); it is meaningful where margin >= 0. With
+    ``current_limit=None`` headroom is returned as the constant 1 (no current constraint).
+    """
+    L1, L2, L3, L4 = model.L(x1)
+    G = model.params.gravity
+    u1 = -v[0] / L1
+    margin = L3**2 / (4 * L4) + G - L2 - L4 * u1**2 - v[1]
+    if current_limit is None:
+        return margin, ca.SX(1.0) if isinstance(x1, ca.SX) else 1.0
+    sqrt_r = 2 * ca.sqrt(L4 * ca.fmax(margin, 0))
+    u2 = 2 * (L4 * u1**2 + L2 - G + v[1]) / (sqrt_r - L3)
+    headroom = current_limit**2 - u1**2 - u2**2
+    return margin, headroom
+
+
+def constraints_from_coefficients(coefficients, v1, v2, gravity: float, current_limit: float | None):
+    """numpy twin of :func:`transformation_constraints` given L1..L4 (4, ...) at the gaps:
+    (margin [m/s^2], headroom [A^2]), broadcast over the trailing shape."""
+    L1, L2, L3, L4 = coefficients
+    u1 = -v1 / L1
+    margin = L3**2 / (4 * L4) + gravity - L2 - L4 * u1**2 - v2
+    if current_limit is None:
+        return margin, np.ones_like(margin)
+    sqrt_r = 2 * np.sqrt(L4 * np.maximum(margin, 0))
+    u2 = 2 * (L4 * u1**2 + L2 - gravity + v2) / (sqrt_r - L3)
+    return margin, current_limit**2 - u1**2 - u2**2
+
+
+@dataclass(frozen=True, eq=False)
+class FeasibleSet:
+    """The feasible set F (module docstring) for one model and one set of limits.
+
+    Parameters
+    ----------
+    model : StageModel
+        The controller's model (assumed equal to the plant).
+    current_limit : float or None
+        Limit on |u| [A] (default 9 A, the amplifiers' peak); None drops the current
+        constraint and leaves A = {R >= 0} with the stoppers.
+    gap_range, position_range : (float, float) or None
+        Stoppers [m]; None drops the constraint.
+
+    Attributes (CasADi Functions)
+    ----------
+    pointwise : (x1, v (2)) -> (margin, headroom)
+    pointwise_interval : IntervalFunction of ``pointwise``
+    """
+
+    model: StageModel
+    current_limit: float | None = PEAK_CURRENT_LIMIT
+    gap_range: tuple[float, float] | None = GAP_TRAVEL
+    position_range: tuple[float, float] | None = POSITION_TRAVEL
+    pointwise: ca.Function = field(init=False, repr=False)
+    pointwise_interval: IntervalFunction = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.model, StageModel):
+            raise TypeError(f"model must be a StageModel, got {type(self.model).__name__}")
+        if self.current_limit is not None and not (0 < self.current_limit < 100):
+            raise ValueError(f"current_limit must be in (0, 100) A or None, got {self.current_limit!r}")
+        for name in ("gap_range", "position_range"):
+            rng = getattr(self, name)
+            if rng is None:
+                continue
+            lo, hi = (float(v) for v in rng)
+            if not (lo < hi) or max(abs(lo), abs(hi)) > 0.5:
+                raise ValueError(f"{name} must be (low, high) in metres, got {rng!r}")
+            object.__setattr__(self, name, (lo, hi))
+        if self.gap_range is not None and self.gap_range[0] <= 0:
+            raise ValueError(f"gap_range must be positive [m], got {self.gap_range!r}")
+        x1 = ca.SX.sym("x1")
+        v = ca.SX.sym("v", 2)
+        margin, headroom = transformation_constraints(self.model, x1, v, self.current_limit)
+        fn = ca.Function("feasible", [x1, v], [ca.vertcat(margin, headroom)], ["x1", "v"], ["h"])
+        object.__setattr__(self, "pointwise", fn)
+        object.__setattr__(self, "pointwise_interval", IntervalFunction(fn))
+
+    @property
+    def label(self) -> str:
+        cur = "no current limit" if self.current_limit is None else f"|u| <= {self.current_limit:g} A"
+        gap = (
+            "no gap stoppers"
+            if self.gap_range is None
+            else f"gap in [{self.gap_range[0] * 1e3:g}, {self.gap_range[1] * 1e3:g}] mm"
+        )
+        return f"R >= 0, {cur}, {gap}"
+
+    def evaluate(self, x1, v1, v2) -> np.ndarray:
+        """(margin [m/s^2], headroom [A^2]) for arrays broadcast together; shape (2, ...)."""
+        x1, v1, v2 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x1, v1, v2)))
+        n = x1.size
+        out = np.asarray(self.pointwise.map(n)(x1.reshape(1, n), np.vstack([v1.ravel(), v2.ravel()])))
+        return out.reshape((2, *x1.shape))
+
+    # ------------------------------------------------------------------------------------
+    def loop_expressions(self, loop: RegulatorLoop, ztilde, phase, offsets) -> list:
+        """Symbolic constraint values (CONSTRAINT_NAMES order) of the closed loop at z~ and phase
+        phi, with ``offsets`` the (4, 3) matrix of :meth:`RegulatorLoop.offset_coefficients`
+        (a CasADi matrix or numbers)."""
+        basis = ca.vertcat(1, ca.sin(phase), ca.cos(phase))
+        off = ca.mtimes(offsets, basis)
+        x1 = off[0] + ztilde[0]
+        x3 = off[1] + ztilde[5]
+        v1 = off[2] + ca.dot(ca.DM(loop.K_h), ztilde[5:10])
+        v2 = off[3] + ca.dot(ca.DM(loop.K_v), ztilde[0:5])
+        margin, headroom = transformation_constraints(self.model, x1, ca.vertcat(v1, v2), self.current_limit)
+        g_lo, g_hi = self.gap_range if self.gap_range is not None else (-np.inf, np.inf)
+        p_lo, p_hi = self.position_range if self.position_range is not None else (-np.inf, np.inf)
+        big = 1.0  # a constant "satisfied" value for constraints that are switched off
+        return [
+            margin,
+            headroom,
+            x1 - g_lo if np.isfinite(g_lo) else ca.SX(big),
+            g_hi - x1 if np.isfinite(g_hi) else ca.SX(big),
+            x3 - p_lo if np.isfinite(p_lo) else ca.SX(big),
+            p_hi - x3 if np.isfinite(p_hi) else ca.SX(big),
+        ]
+
+    def loop_function(self, loop: RegulatorLoop, reference: Reference) -> ca.Function:
+        """(z~ (10), phi) -> h (6): every constraint of F on the closed loop of ``reference``."""
+        z = ca.SX.sym("z", N_ERROR)
+        phi = ca.SX.sym("phi")
+        h = self.loop_expressions(loop, z, phi, ca.DM(loop.offset_coefficients(reference)))
+        return ca.Function("loop_constraints", [z, phi], [ca.vertcat(*h)], ["z", "phi"], ["h"])
+
+
+# ----------------------------------------------------------------------------------------------
+SLICE_VARIABLES = {
+    "e1": 0,
+    "e1_rate": 1,
+    "xi_v1": 2,
+    "xi_v2": 3,
+    "xi_v3": 4,
+    "e2": 5,
+    "e2_rate": 6,
+    "xi_h1": 7,
+    "xi_h2": 8,
+    "xi_h3": 9,
+    "phase": 10,
+}
+"""Slice coordinates: deviations z~ from the reference's steady state (m, m/s, ...), or phase [rad]."""
+
+
+@dataclass(frozen=True)
+class FeasibilityMap:
+    """The constraints of F on a 2-D slice through the steady state of a reference.
+
+    ``values`` has shape (6, ny, nx) (CONSTRAINT_NAMES order) on the grid ``x`` (nx) x ``y`` (ny)
+    of slice coordinates (SLICE_VARIABLES; SI units). ``boundary[name]`` is a (2, k) array of
+    points (x, y) where that constraint is exactly zero, found by Newton's method on the grid
+    lines (columns: y varies; rows: x varies) that bracket a sign change, and kept only where
+    every other constraint holds; ``newton_failures`` counts brackets where Newton left the
+    bracket and bisection was used instead.
+    """
+
+    reference: Reference
+    axes: tuple[str, str]
+    x: np.ndarray
+    y: np.ndarray
+    values: np.ndarray
+    feasible: np.ndarray  # (ny, nx) bool
+    boundary: dict[str, np.ndarray]
+    newton_failures: int
+    base: np.ndarray  # (11,) z~ and phase of the slice's origin
+    wall_time: float
+
+
+def feasibility_map(
+    feasible: FeasibleSet,
+    loop: RegulatorLoop,
+    reference: Reference,
+    axes: tuple[str, str],
+    x_range: tuple[float, float],
+    y_range: tuple[float, float],
+    *,
+    n: int = 121,
+    phase: float = 0.0,
+) -> FeasibilityMap:
+    """Constraints of F on the slice spanned by ``axes`` through z~ = 0 at ``phase``.
+
+    ``x_range``/``y_range`` are in the slice coordinates' SI units (e.g. (-0.01, 0.01) m for e1).
+    """
+    t0 = time.perf_counter()
+    for a in axes:
+        if a not in SLICE_VARIABLES:
+            raise ValueError(f"unknown slice variable {a!r}; known: {', '.join(SLICE_VARIABLES)}")
+    if axes[0] == axes[1]:
+        raise ValueError(f"the two slice axes must differ, got {axes!r}")
+    if n < 3:
+        raise ValueError(f"n must be >= 3, got {n!r}")
+    fn = feasible.loop_function(loop, reference)
+    base = np.zeros(N_ERROR + 1)
+    base[N_ERROR] = phase
+    ix, iy = SLICE_VARIABLES[axes[0]], SLICE_VARIABLES[axes[1]]
+    xs = np.linspace(*x_range, n)
+    ys = np.linspace(*y_range, n)
+    X, Y = np.meshgrid(xs, ys)
+    pts = np.repeat(base[:, None], X.size, axis=1)
+    pts[ix] += X.ravel()
+    pts[iy] += Y.ravel()
+    vals = np.asarray(fn.map(X.size)(pts[:N_ERROR], pts[N_ERROR:]))
+    values = vals.reshape(len(CONSTRAINT_NAMES), *X.shape)
+    ok = np.all(values >= 0, axis=0)
+
+    # exact boundary: Newton on the lines that bracket a sign change
+    s = ca.SX.sym("s")
+    p0 = ca.SX.sym("p0", N_ERROR + 1)
+    d = ca.SX.sym("d", N_ERROR + 1)
+    point = p0 + s * d
+    hs = fn(point[:N_ERROR], point[N_ERROR])
+    boundary: dict[str, list] = {name: [] for name in CONSTRAINT_NAMES}
+    failures = 0
+    for j, name in enumerate(CONSTRAINT_NAMES):
+        g = ca.Function("g", [s, ca.vertcat(p0, d)], [hs[j]])
+        solver = ca.rootfinder("root", "newton", g, {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False})
+        vj = values[j]
+        for direction in (0, 1):  # 0: along y (columns), 1: along x (rows)
+            lines = vj.T if direction == 0 else vj
+            grid = ys if direction == 0 else xs
+            other = xs if direction == 0 else ys
+            sign = np.signbit(lines)
+            idx_line, idx_k = np.nonzero(sign[:, :-1] != sign[:, 1:])
+            for li, k in zip(idx_line, idx_k, strict=True):
+                a_val, b_val = lines[li, k], lines[li, k + 1]
+                lo, hi = grid[k], grid[k + 1]
+                start = lo + (hi - lo) * a_val / (a_val - b_val)
+                p = base.copy()
+                dvec = np.zeros(N_ERROR + 1)
+                if direction == 0:
+                    p[ix] += other[li]
+                    dvec[iy] = 1.0
+                else:
+                    p[iy] += other[li]
+                    dvec[ix] = 1.0
+                par = np.concatenate([p, dvec])
+                root = float(solver(start, par))
+                if not (lo - 1e-12 <= root <= hi + 1e-12) or not np.isfinite(root):
+                    failures += 1
+                    root = _bisect(g, lo, hi, par)
+                pt = p + root * dvec
+                h_all = np.asarray(fn(pt[:N_ERROR], pt[N_ERROR])).ravel()
+                others = np.delete(h_all, j)
+                if np.all(others >= -1e-9 * np.maximum(1, np.abs(others))):
+                    xy = (pt[ix] - base[ix], pt[iy] - base[iy])
+                    boundary[name].append(xy)
+    bnd = {k: (np.array(v).T if v else np.zeros((2, 0))) for k, v in boundary.items()}
+    return FeasibilityMap(
+        reference, tuple(axes), xs, ys, values, ok, bnd, failures, base, time.perf_counter() - t0
+    )
+
+
+def _bisect(g: ca.Function, lo: float, hi: float, par: np.ndarray, iters: int = 60) -> float:
+    f_lo = float(g(lo, par))
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        f_mid = float(g(mid, par))
+        if np.signbit(f_mid) == np.signbit(f_lo):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)

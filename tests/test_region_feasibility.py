@@ -1,0 +1,89 @@
+"""The feasible set F (maglev_oc.region.feasibility)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import (
+    GAP_TRAVEL,
+    POSITION_TRAVEL,
+    FeasibleSet,
+    feasibility_map,
+)
+from maglev_oc.sim.effects import Stoppers
+
+
+@pytest.fixture(scope="module")
+def feasible(model):
+    return FeasibleSet(model)
+
+
+def _samples(n=2000, seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(8e-3, 30e-3, n), rng.uniform(-50, 50, n), rng.uniform(-60, 30, n)
+
+
+def test_matches_the_feedback_transformation(feasible, transformation):
+    """margin = R/(4 L4) and headroom = 81 - |u|^2 with the physical root (SPEC 1 reading 5)."""
+    x1, v1, v2 = _samples()
+    h = feasible.evaluate(x1, v1, v2)
+    np.testing.assert_allclose(h[0], transformation.feasibility_margin(x1, v1, v2), rtol=1e-12, atol=1e-12)
+    ok = h[0] >= 0
+    u = np.asarray(transformation.currents.map(x1.size)(x1[None, :], np.vstack([v1, v2])))
+    # the rationalised root equals (-L3 - sqrt R)/(2 L4) up to rounding (a few 1e-13 A^2)
+    np.testing.assert_allclose(h[1][ok], 81 - u[0][ok] ** 2 - u[1][ok] ** 2, atol=1e-10)
+
+
+def test_current_constraint_is_an_ellipse(feasible, model):
+    """|u| <= I  <=>  (v1/L1)^2 + ((v2 - G + L2 + L4 I^2)/L3)^2 <= I^2 when -L3/(2 L4) >= I."""
+    x1, v1, v2 = _samples(seed=1)
+    L1, L2, L3, L4 = model.coefficients(x1)
+    c0 = model.params.gravity - L2 - L4 * 81
+    ell = (v1 / L1) ** 2 + ((v2 - c0) / L3) ** 2 - 81
+    h = feasible.evaluate(x1, v1, v2)
+    clear = np.abs(ell) > 1e-6
+    np.testing.assert_array_equal((h[1] >= 0)[clear], (ell <= 0)[clear])
+
+
+def test_root_at_R0_needs_twice_the_peak_current(model):
+    """Over the stoppers' range -L3/(2 L4) >= 18 A > 9 A: the current limit binds before R = 0."""
+    g = np.linspace(*GAP_TRAVEL, 500)
+    _, _, L3, L4 = model.coefficients(g)
+    assert np.min(-L3 / (2 * L4)) > 18.0
+
+
+def test_defaults_are_the_twin_stoppers():
+    assert GAP_TRAVEL == Stoppers().gap
+    assert POSITION_TRAVEL == Stoppers().horizontal
+
+
+def test_map_boundary_is_exact(feasible):
+    """Newton roots on the grid lines are zeros of the constraint to solver tolerance."""
+    loop = RegulatorLoop()
+    fm = feasibility_map(
+        feasible, loop, Reference.setpoint(0.02), ("e1", "e1_rate"), (-0.011, 0.009), (-0.6, 0.6), n=41
+    )
+    assert fm.newton_failures == 0
+    pts = fm.boundary["headroom"]
+    assert pts.shape[1] > 20
+    fn = feasible.loop_function(loop, Reference.setpoint(0.02))
+    z = np.zeros((10, pts.shape[1]))
+    z[0], z[1] = pts
+    h = np.asarray(fn.map(pts.shape[1])(z, np.zeros((1, pts.shape[1]))))
+    np.testing.assert_allclose(h[1], 0, atol=1e-9)  # rootfinder abstol 1e-12 [A^2]
+    assert fm.feasible[fm.y.size // 2, fm.x.size // 2]  # the set-point itself is feasible
+
+
+def test_validation(model):
+    with pytest.raises(ValueError, match="current_limit"):
+        FeasibleSet(model, current_limit=-1)
+    with pytest.raises(ValueError, match="metres"):
+        FeasibleSet(model, gap_range=(8, 30))
+    with pytest.raises(TypeError):
+        FeasibleSet(model, limit=9)
+    with pytest.raises(ValueError, match="unknown slice variable"):
+        feasibility_map(
+            FeasibleSet(model), RegulatorLoop(), Reference.setpoint(0.02), ("gap", "e1"), (0, 1), (0, 1)
+        )

@@ -1,0 +1,104 @@
+"""The adapted, certified Procedure 2 (maglev_oc.region.procedure2)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibleSet
+from maglev_oc.region.procedure2 import Procedure2, ellipsoid_image, max_rectangle
+
+
+@pytest.fixture(scope="module")
+def proc(model):
+    return Procedure2(FeasibleSet(model), RegulatorLoop())
+
+
+@pytest.fixture(scope="module")
+def at20(proc):
+    return proc.run(Reference.setpoint(0.02))
+
+
+def test_certified_below_the_upper_bound_and_tight(at20):
+    assert at20.success
+    assert at20.level <= at20.level_upper
+    # the ladder's first rung is 0.995 of the upper bound: the certificate is within 0.5 % here
+    assert at20.tightness >= 0.99
+    assert at20.binding == "headroom"  # the 9 A limit binds at 20 mm, not the stoppers
+
+
+def test_papers_gains_certified_sizes_at_20mm(at20):
+    """Sizes at 20 mm with the Lyapunov equation's P (this implementation's reference values;
+    rtol 1 %: c is certified within 0.5 % of the IPOPT bound and the sizes go as sqrt(c))."""
+    s = at20.initial_conditions.semi_axes
+    np.testing.assert_allclose(
+        [s["e1"], s["e1_rate"], s["e2"], s["e2_rate"]], [6.06e-3, 0.372, 8.02e-3, 0.414], rtol=0.01
+    )
+
+
+def test_witness_is_on_the_boundary_and_least_V(proc, at20):
+    """IPOPT's point: V = upper bound, the constraint is zero, and it is the least-V preimage of its
+    (e1, v1, v2) (the 10-D minimum equals the 3-D reduction)."""
+    z = at20.witness
+    np.testing.assert_allclose(z @ at20.P @ z, at20.level_upper, rtol=1e-9)
+    fn = proc.feasible.loop_function(proc.loop, at20.reference)
+    h = np.asarray(fn(z, at20.witness_phase)).ravel()
+    assert abs(h[1]) < 1e-6  # [A^2], IPOPT tol 1e-10 on a scaled problem
+    img = ellipsoid_image(proc.loop, at20.P)
+    M = proc.loop.output[[0, 2, 3]]
+    np.testing.assert_allclose(img.Pinv_Mt @ np.linalg.solve(img.S, M @ z), z, rtol=1e-6, atol=1e-12)
+    # just inside the certified set the constraints hold, just outside the witness they fail
+    inside = z * math.sqrt(at20.level / at20.level_upper) * 0.999
+    assert np.all(np.asarray(fn(inside, at20.witness_phase)) >= 0)
+    assert np.asarray(fn(z * 1.001, at20.witness_phase)).ravel()[1] < 0
+
+
+def test_dense_sampling_finds_no_infeasible_point_inside(proc, at20):
+    """Independent check of the branch and bound: 20000 points of the certified ellipsoid, most near
+    its boundary, are all feasible."""
+    rng = np.random.default_rng(1)
+    g = rng.standard_normal((10, 20000))
+    g /= np.linalg.norm(g, axis=0)
+    g *= rng.uniform(0.9, 1.0, 20000) ** 0.1
+    L = np.linalg.cholesky(at20.P)
+    z = math.sqrt(at20.level) * np.linalg.solve(L.T, g)
+    fn = proc.feasible.loop_function(proc.loop, at20.reference)
+    h = np.asarray(fn.map(z.shape[1])(z, np.zeros((1, z.shape[1]))))
+    assert np.all(h >= 0)
+
+
+def test_stoppers_give_the_exact_level(proc):
+    """At 25 mm the upper stopper (30 mm) binds: level = (5 mm)^2 / (m' P^-1 m) exactly."""
+    res = proc.run(Reference.setpoint(0.025))
+    Pinv = np.linalg.inv(res.P)
+    np.testing.assert_allclose(res.level, 0.005**2 / Pinv[0, 0], rtol=1e-12)
+    assert res.binding == "gap_high"
+    np.testing.assert_allclose(res.witness[0], 0.005, rtol=1e-9)
+
+
+def test_sinusoid_covers_every_phase(proc):
+    """The ellipse reference: r_v reaches 25 mm, so the upper stopper binds at (5 mm)^2/spread^2."""
+    res = proc.run(Reference.paper_sinusoid())
+    assert res.success and res.binding == "gap_high"
+    np.testing.assert_allclose(res.level, 0.005**2 / np.linalg.inv(res.P)[0, 0], rtol=1e-9)
+
+
+def test_refutes_a_level_that_is_too_large(proc, at20):
+    out = proc.certifier.certify(at20.reference, at20.P, 1.5 * at20.level_upper)
+    assert out.status == "refuted"
+    assert out.witness_level <= 1.5 * at20.level_upper
+    assert out.binding == "headroom"
+
+
+def test_rejects_a_non_lyapunov_matrix(proc):
+    with pytest.raises(ValueError, match="Lyapunov"):
+        proc.run(Reference.setpoint(0.02), np.eye(10))
+
+
+def test_max_rectangle_closed_form():
+    """For a diagonal P2 the largest-area box has half-sides sqrt(c / (2 p_ii))."""
+    a, b = max_rectangle(np.diag([4.0, 1.0]), 2.0)
+    np.testing.assert_allclose([a, b], [0.5, 1.0], rtol=1e-12)

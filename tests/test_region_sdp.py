@@ -1,0 +1,66 @@
+"""The SDP enlargement with a proved inner polytope (maglev_oc.region.sdp)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibleSet
+from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.region.sdp import PolygonBuilder, enlarge
+
+
+@pytest.fixture(scope="module")
+def proc(model):
+    return Procedure2(FeasibleSet(model), RegulatorLoop())
+
+
+@pytest.fixture(scope="module")
+def builder(proc):
+    return PolygonBuilder(proc.feasible, proc.loop)
+
+
+def test_polygon_vertices_are_feasible_on_the_whole_gap_range(proc, builder):
+    """Independent pointwise check of the interval proof on a dense gap grid."""
+    ref = Reference.setpoint(0.02)
+    poly = builder.build(ref, 5e-3)
+    assert poly.success
+    gaps = np.linspace(0.015, 0.025, 801)
+    for v in poly.vertices.T:
+        h = proc.feasible.evaluate(gaps, v[0], v[1])
+        assert np.all(h >= 0)
+    # the origin (the set-point's own acceleration) is strictly inside every face
+    assert np.all(poly.offsets > 0)
+
+
+def test_sdp_enlarges_the_certified_rectangle(proc, builder):
+    """At 20 mm the SDP's certified rectangle is several times the Lyapunov equation's
+    (reference run: x8.2 in area; asserted >= 4 to leave room for solver differences)."""
+    ref = Reference.setpoint(0.02)
+    base = proc.run(ref)
+    res = enlarge(proc, ref, fractions=(0.75,), builder=builder)
+    assert res.success
+    best = res.best
+    assert proc.loop.is_lyapunov(best.P, 0.05)
+    assert best.construction_level >= 1 - 1e-6  # the polytope holds the SDP's level set
+    assert best.certified.level >= best.construction_level * (1 - 1e-6)  # exact F allows at least as much
+    a0, b0 = base.initial_conditions.rectangle
+    a1, b1 = best.rectangle
+    assert a1 * b1 >= 4 * a0 * b0
+
+
+def test_sdp_aimed_at_the_papers_large_step_certifies_it(proc, builder):
+    """The large step (26, 0, 0, 0) -> (18 mm, 20 mm) is inside a certified set of the FL regulator
+    (reference run: 1.15 times its initial error)."""
+    ref = Reference.setpoint(0.018, 0.020)
+    z0 = proc.loop.error_state([0.026, 0, 0, 0], np.zeros(6), ref)[:, 0]
+    res = enlarge(proc, ref, fractions=(0.75,), builder=builder, direction=z0)
+    assert res.success
+    assert res.best.reach >= 1.0
+    assert z0 @ res.best.P @ z0 <= res.best.certified.level
+
+
+def test_validation(proc):
+    with pytest.raises(ValueError, match="decay"):
+        enlarge(proc, Reference.setpoint(0.02), decay=-1)
