@@ -421,7 +421,7 @@ def _large_step_pages(pdf: PdfReport, st: OperatingRegionStudy, model: StageMode
     fl_share = ls.maps.get("FL regulator", {}).get("success")
     rows.append(
         (
-            "FL regulator (Procedure 2, aimed SDP)",
+            "FL regulator (aimed SDP)",
             "—",
             "—",
             "—",
