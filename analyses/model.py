@@ -14,6 +14,7 @@ from maglev_oc.reporting import model_plots as plots
 from maglev_oc.reporting.pdf import PdfReport
 
 REPORT = "model.pdf"
+ORDER = 10
 TITLE = "maglev_oc — stage model"
 
 

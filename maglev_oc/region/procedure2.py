@@ -278,6 +278,10 @@ class BoundaryMinimizer:
                 "ipopt.tol": 1e-10,
                 "ipopt.max_iter": 200,
                 "ipopt.sb": "yes",
+                # multistart points may leave the model's domain (NaN): that start fails and
+                # is reported in the result; no warning on stderr for each
+                "show_eval_warnings": False,
+                "calc_lam_p": False,
             }
             self._solvers[name] = (ca.nlpsol(f"min_V_{name}", "ipopt", nlp, opts), len(g))
 
