@@ -170,9 +170,9 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         for twin in cmp.twins:
             pdf.add_table(
                 f"Summary on the {twin} twin",
-                ["scenario", "controller", "ok", "T0.1 v [s]", "T0.1 h [s]", "OS v [%]",
-                 "OS h [%]", "mean|e| v [mm]", "mean|e| h [mm]", "I rms [A]", "I peak [A]",
-                 "min margin [m/s²]", "clipped", "step [ms]"],
+                ["scenario", "controller", "ok", "T0.1 v\n[s]", "T0.1 h\n[s]", "OS v\n[%]",
+                 "OS h\n[%]", "mean|e| v\n[mm]", "mean|e| h\n[mm]", "I rms\n[A]", "I peak\n[A]",
+                 "min margin\n[m/s²]", "clipped\n[samples]", "step\n[ms]"],
                 rows[twin], font_size=6.5,
                 col_widths=[0.09, 0.1, 0.04, 0.065, 0.065, 0.06, 0.06, 0.08, 0.08, 0.06, 0.06,
                             0.08, 0.055, 0.06],

@@ -109,10 +109,12 @@ class PdfReport:
             table.auto_set_font_size(False)
             table.set_fontsize(font_size)
             table.scale(1.0, 1.25)
+            header_lines = max(str(c).count("\n") + 1 for c in columns)
             for (r, _), cell in table.get_celld().items():
                 if r == 0:
                     cell.set_text_props(weight="bold")
                     cell.set_facecolor("0.9")
+                    cell.set_height(cell.get_height() * header_lines)
             if k == len(chunks) - 1 and notes:
                 text = "\n".join(line for n in notes for line in (textwrap.wrap(n, 100) or [""]))
                 fig.text(0.06, 0.88 - height, text, fontsize=8.5, va="top")
