@@ -17,7 +17,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from maglev_oc.control.gains import OMEGA0, PAPER_GAINS
+from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, checked_gains
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.feedback import transformation_expressions
@@ -66,10 +66,7 @@ class FeedbackLinearizingRegulator:
 
     def __post_init__(self) -> None:
         for label in ("K_h", "K_v"):
-            k = np.asarray(getattr(self, label), dtype=float).ravel()
-            if k.shape != (5,) or not np.all(np.isfinite(k)):
-                raise ValueError(f"{label} must be 5 finite gains, got {getattr(self, label)!r}")
-            object.__setattr__(self, label, k)
+            object.__setattr__(self, label, checked_gains(getattr(self, label), label))
         core = RegulatorCore(self.sample_time, self.omega0, self.observer_epsilon)
         object.__setattr__(self, "core", core)
         c = ca.SX.sym("c", self.n_state)

@@ -32,6 +32,14 @@ def internal_model(omega0: float = OMEGA0) -> tuple[np.ndarray, np.ndarray, np.n
     return phi, n, gamma
 
 
+def checked_gains(value, label: str) -> np.ndarray:
+    """``value`` as five finite gains (5,), or ``ValueError`` naming ``label``."""
+    k = np.asarray(value, dtype=float).ravel()
+    if k.shape != (5,) or not np.all(np.isfinite(k)):
+        raise ValueError(f"{label} must be 5 finite gains, got {value!r}")
+    return k
+
+
 def augmented_axis(
     omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import block_diag, solve_continuous_lyapunov, solve_sylvester
 
-from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, augmented_axis
+from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, augmented_axis, checked_gains
 
 N_ERROR = 10
 """Dimension of z~ (two axes of (e, e', xi1, xi2, xi3))."""
@@ -165,10 +165,7 @@ class RegulatorLoop:
 
     def __post_init__(self) -> None:
         for label in ("K_h", "K_v"):
-            k = np.asarray(getattr(self, label), dtype=float).ravel()
-            if k.shape != (5,) or not np.all(np.isfinite(k)):
-                raise ValueError(f"{label} must be 5 finite gains, got {getattr(self, label)!r}")
-            object.__setattr__(self, label, k)
+            object.__setattr__(self, label, checked_gains(getattr(self, label), label))
         a, b = augmented_axis(self.omega0)
         a_v = a + b @ self.K_v[None, :]
         a_h = a + b @ self.K_h[None, :]
