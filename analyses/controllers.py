@@ -135,7 +135,8 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         "exact positions, ideal amplifier. 'rig' has every effect of TwinEffects.rig() — cogging "
         f"({rig.cogging.peak_at_reference} N at 15 mm, ∝ gap^-3), guide friction "
         f"({rig.friction_vertical.coulomb} N vertical, {rig.friction_horizontal.coulomb} N "
-        "horizontal, Coulomb + viscous), guide misalignment (tilt, waviness, off-level, binding), "
+        "horizontal, Dahl model with 5 µm pre-sliding, plus viscous), guide misalignment (tilt, "
+        "waviness, off-level, binding), "
         "current amplifiers (1 kHz, 9 A peak, 7 A continuous), 10 µm encoders with 2 µm noise, "
         f"one sample of computation delay — and true constants {RIG_CONSTANTS} while every "
         "controller uses Table III at eps = 0.01.",
@@ -221,7 +222,16 @@ def _tuning(c) -> str:
     if "poles" in d and isinstance(d["poles"], dict):
         p = d["poles"]
         return f": triple poles {p['vertical'][0]:g} (vertical), {p['horizontal'][0]:g} (horizontal)"
-    return getattr(c, "tuning", "")
+    grid = getattr(c, "grid", None)
+    if grid is not None:  # NMPC
+        w = c.weights
+        return (f": real-time iteration, N = {grid.horizon} (first interval one sample, then "
+                f"{grid.interval_samples * grid.sample_time * 1e3:g} ms), Q = diag({w.gap:g}, "
+                f"{w.gap_rate:g}, {w.position:g}, {w.position_rate:g}), R = diag({w.i_q:g}, "
+                f"{w.i_d:g}) per second (1 mm of error costs as much as 1 A), current polytope "
+                f"inside {c.current_limit:g} A, {c.qp_solver} QP, disturbance observer for offset-"
+                f"free tracking, no reference preview{', JIT-compiled' if c.compiled else ''}")
+    return ""
 
 
 def main(argv: list[str] | None = None) -> int:
