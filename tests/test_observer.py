@@ -35,3 +35,12 @@ def test_observer_rejects_bad_settings():
         HighGainObserver(2e-4, epsilon=0.0)
     with pytest.raises(ValueError, match="sample_time"):
         HighGainObserver(-1.0)
+
+
+def test_step_keeps_the_shape_of_its_input():
+    # a 1-D estimate must not broadcast against the (2, 1) input column into a (2, 2) array
+    obs = HighGainObserver(2e-4)
+    x1 = obs.step(np.array([0.02, 0.0]), 0.0201)
+    x2 = obs.step(np.array([[0.02], [0.0]]), 0.0201)
+    assert x1.shape == (2,) and x2.shape == (2, 1)
+    assert_allclose(x1, x2.ravel(), rtol=0, atol=0)

@@ -72,7 +72,12 @@ class HighGainObserver:
         object.__setattr__(self, "Ba", e[:2, 3:4])
 
     def step(self, xhat, y, a=0.0):
-        """One update; works on numpy arrays and CasADi expressions alike."""
+        """One update; works on numpy arrays ((2,) or (2, 1), same shape back) and CasADi
+        column expressions alike."""
+        if isinstance(xhat, np.ndarray) and xhat.ndim == 1:
+            if xhat.shape != (2,):
+                raise ValueError(f"xhat must have 2 entries, got shape {xhat.shape}")
+            return self.Ad @ xhat + self.By[:, 0] * y + self.Ba[:, 0] * a
         return self.Ad @ xhat + self.By * y + self.Ba * a
 
     def filter(self, y: np.ndarray, a: np.ndarray | None = None, x0=None) -> np.ndarray:
