@@ -6,7 +6,6 @@ the diagnosis is not told about.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from maglev_oc.control.pid import paper_pid
@@ -61,11 +60,9 @@ def build(out: Path, model: StageModel) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import load_model
+    from maglev_oc.cli import analysis_parser, load_model
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("reports") / REPORT)
-    parser.add_argument("--params", type=Path)
+    parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)
     print(f"wrote {build(args.out, load_model(args.params))}")
     return 0

@@ -6,7 +6,6 @@ papers' scenarios, on the ideal plant and on the rig twin.
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -235,11 +234,9 @@ def _tuning(c) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import load_model
+    from maglev_oc.cli import analysis_parser, load_model
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("reports") / REPORT)
-    parser.add_argument("--params", type=Path)
+    parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--no-nmpc", action="store_true", help="leave NMPC out (faster)")
     args = parser.parse_args(argv)
     print(f"wrote {build(args.out, load_model(args.params), nmpc=not args.no_nmpc)}")

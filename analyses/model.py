@@ -5,7 +5,6 @@ python analyses/model.py [--out reports/model.pdf] [--params stage.json]
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from maglev_oc.model.stage import StageModel
@@ -110,14 +109,11 @@ def build(out: Path, model: StageModel) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import load_model
+    from maglev_oc.cli import analysis_parser, load_model
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("reports") / REPORT)
-    parser.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)
-    path = build(args.out, load_model(args.params))
-    print(f"wrote {path}")
+    print(f"wrote {build(args.out, load_model(args.params))}")
     return 0
 
 

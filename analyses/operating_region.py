@@ -6,7 +6,6 @@ python analyses/operating_region.py [--out reports/operating_region.pdf] [--para
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -542,15 +541,12 @@ def _large_step_text(st: OperatingRegionStudy, model: StageModel) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import load_model
+    from maglev_oc.cli import analysis_parser, load_model
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("reports") / REPORT)
-    parser.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--quick", action="store_true", help="small sample counts (smoke test)")
     args = parser.parse_args(argv)
-    path = build(args.out, load_model(args.params), QUICK if args.quick else None)
-    print(f"wrote {path}")
+    print(f"wrote {build(args.out, load_model(args.params), QUICK if args.quick else None)}")
     return 0
 
 

@@ -55,6 +55,14 @@ def load_model(params_path: Path | None = None, constants: str | None = None) ->
     return StageModel(params, consts)
 
 
+def analysis_parser(doc: str, report: str) -> argparse.ArgumentParser:
+    """The command line every analysis script shares: ``--out`` and ``--params``."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("reports") / report, help="PDF to write")
+    parser.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    return parser
+
+
 def analysis_modules() -> dict[str, object]:
     """Analysis scripts by name (maglev_oc.analyses.<name>), each with REPORT and build()."""
     import maglev_oc.analyses as pkg
