@@ -26,10 +26,6 @@ from typing import Protocol, runtime_checkable
 import casadi as ca
 import numpy as np
 
-REFERENCE_NAMES = ("r_v", "dr_v", "ddr_v", "r_h", "dr_h", "ddr_h")
-N_REFERENCE = 6
-N_MEASURED = 2
-
 
 @runtime_checkable
 class ExpressionController(Protocol):

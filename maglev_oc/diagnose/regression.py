@@ -51,7 +51,6 @@ class Design:
     hold_rhs: np.ndarray  # (2, P)
     hold_yy: np.ndarray  # (2,)
     hold_n: int
-    train_n: int
     holdout: np.ndarray  # (n,) bool
     moving: np.ndarray  # (2,) bool: axes in the regression (vertical, horizontal)
 
@@ -119,7 +118,7 @@ def build_design(
     hr = np.stack([cols[:, a, ho] @ target[a, ho] for a in range(2)])
     hy = np.array([target[a, ho] @ target[a, ho] for a in range(2)])
     return Design(cols, target, groups, weights, np.array(grams), np.array(rhs), np.array(yys),
-                  hg, hr, hy, int(ho.sum()), int(tr.sum()), ho.copy(), np.asarray(data.moving))
+                  hg, hr, hy, int(ho.sum()), ho.copy(), np.asarray(data.moving))
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,3 @@ CONTINUOUS_CURRENT_LIMIT = 7.0
 """LCAM continuous current [A]."""
 PEAK_CURRENT_LIMIT = 9.0
 """LCAM peak current [A]."""
-HORIZONTAL_TRAVEL = (-50e-3, 50e-3)
-"""Horizontal working range [m] (about +-50 mm)."""
-GAP_WORKING_RANGE = (15e-3, 25e-3)
-"""Air-gap range over which the model was verified and the set-point tests run [m] (000, 001)."""

@@ -34,10 +34,6 @@ from maglev_oc.model.parameters import DEFAULT_CONSTANTS, LumpedConstants, Stage
 
 N_STATES = 4
 N_INPUTS = 2
-STATE_NAMES = ("x1", "x2", "x3", "x4")
-STATE_LABELS = ("air gap [m]", "gap rate [m/s]", "horizontal position [m]", "horizontal rate [m/s]")
-INPUT_NAMES = ("u1", "u2")
-INPUT_LABELS = ("i_q [A]", "i_d [A]")
 FIELD_MODELS = ("closed_form", "polynomial")
 
 

@@ -44,6 +44,9 @@ def write_diagnosis_report(
     ]
     for e in diag.effects:
         pars = "; ".join(f"{k} = {_fmt(v.value, v.stderr)} {v.unit}" for k, v in e.parameters.items())
+        if e.candidate.variant_note:
+            pars += (f" (standard errors include the spread over {e.candidate.variant_note} and 1 % "
+                     "differentiator calibration)")
         summary.append(
             f"• {e.name} ({e.axis}; confidence {e.confidence:.2f}, held-out gain "
             f"{e.gain * 100:.1f} %, runner-up {e.runner_up}): {e.explanation}\n   {pars}"

@@ -58,7 +58,9 @@ class PdfReport:
         self.n_pages += 1
 
     def add_text(self, heading: str, paragraphs: Sequence[str], *, first_page: bool = False) -> None:
-        """A page of wrapped text; ``first_page`` adds the report title and date above it."""
+        """Pages of wrapped text (as many as it takes); ``first_page`` adds the report title and
+        date above the first."""
+        line_height, gap, bottom = 0.0165, 0.014, 0.04
         fig = Figure(figsize=PAGE_SIZE)
         y = 0.95
         if first_page:
@@ -74,8 +76,17 @@ class PdfReport:
             lines = []
             for raw in para.split("\n"):
                 lines.extend(textwrap.wrap(raw, 95) or [""])
-            fig.text(0.08, y, "\n".join(lines), fontsize=9.5, va="top", family="DejaVu Sans")
-            y -= 0.0165 * len(lines) + 0.014
+            while lines:
+                fit = int((y - bottom) / line_height)
+                chunk, lines = lines[:fit], lines[fit:]
+                if chunk:
+                    fig.text(0.08, y, "\n".join(chunk), fontsize=9.5, va="top", family="DejaVu Sans")
+                    y -= line_height * len(chunk) + gap
+                if lines:  # continue on a new page
+                    self.add_figure(fig)
+                    fig = Figure(figsize=PAGE_SIZE)
+                    fig.text(0.08, 0.95, f"{heading} (continued)", fontsize=13, weight="bold", va="top")
+                    y = 0.95 - 0.035
         self.add_figure(fig)
 
     def add_table(

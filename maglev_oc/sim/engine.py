@@ -14,7 +14,7 @@ Per sample k (controller and twin share the sample time):
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -53,7 +53,6 @@ class SimulationResult:
     step_times: np.ndarray | None = None  # (n,) [s] per-call time of an online controller
     sample_time: float = 0.0
     evaluate_from: float = 0.0
-    extras: dict = field(default_factory=dict)
 
     def diagnostic(self, name: str) -> np.ndarray:
         """A diagnostic row by name, e.g. ``'margin'``; NaNs if the controller has none."""

@@ -15,7 +15,7 @@ report them; on the twin the true error differs from it by the encoder's quantiz
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -56,7 +56,6 @@ class RunMetrics:
     step_time_p99: float
     step_time_max: float
     wall_time: float  # [s]
-    extras: dict = field(default_factory=dict)
 
     def worst_settling(self, axis: int, band: str = "01mm") -> float:
         vals = [getattr(s, f"settling_{band}")[axis] for s in self.steps]
