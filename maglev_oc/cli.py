@@ -374,8 +374,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("region", help="certified operating region of the FL regulator (adapted Procedure 2)")
-    p.add_argument("--gaps", nargs="+", type=float, default=[15, 17.5, 20, 22.5, 25], metavar="MM",
-                   help="set-point gaps in millimetres (default 15 17.5 20 22.5 25)")
+    p.add_argument(
+        "--gaps",
+        nargs="+",
+        type=float,
+        default=[15, 17.5, 20, 22.5, 25],
+        metavar="MM",
+        help="set-point gaps in millimetres (default 15 17.5 20 22.5 25)",
+    )
     p.add_argument("--position", type=float, default=0.0, metavar="MM", help="horizontal set-point [mm]")
     p.add_argument("--sinusoid", action="store_true", help="also the papers' ellipse reference")
     p.add_argument("--sdp", action="store_true", help="also enlarge the certified set by SDP")
@@ -402,12 +408,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", type=Path, help="PDF report")
     p.add_argument("--params", type=Path, help="stage/constants JSON (geometry; initial and fixed constants)")
     p.add_argument(
-        "--estimate", nargs="+", default=["C1", "C2", "C3", "C4"],
-        choices=["C1", "C2", "C3", "C4", "gap_offset"], help="parameters to estimate (default C1..C4)",
+        "--estimate",
+        nargs="+",
+        default=["C1", "C2", "C3", "C4"],
+        choices=["C1", "C2", "C3", "C4", "gap_offset"],
+        help="parameters to estimate (default C1..C4)",
     )
     p.add_argument(
-        "--methods", nargs="+", default=["equation_error", "output_error", "npfsi"],
-        choices=["equation_error", "output_error", "npfsi"], help="methods to run (default all)",
+        "--methods",
+        nargs="+",
+        default=["equation_error", "output_error", "npfsi"],
+        choices=["equation_error", "output_error", "npfsi"],
+        help="methods to run (default all)",
     )
     p.add_argument("--eps", nargs="+", type=float, default=[0.001, 0.01, 0.05], help="NPFSI eps values [s]")
     p.add_argument("--input-delay", type=float, default=0.0, help="delay of the applied currents [s]")

@@ -82,16 +82,27 @@ def compensation_study(
         plant_name = "twin of the identified plant (refitted constants + the found effects)"
     else:
         plant_name = "the rig twin that recorded the log"
-    base = FeedbackLinearizingRegulator(model.with_constants(_constants(diagnosis.constants_base)),
-                                        name="FL, base model fitted")
+    base = FeedbackLinearizingRegulator(
+        model.with_constants(_constants(diagnosis.constants_base)), name="FL, base model fitted"
+    )
     comp = effects_acceleration(fx, with_inputs=False) if fx else None
-    after = FeedbackLinearizingRegulator(model.with_constants(_constants(diagnosis.constants_final)),
-                                         compensation=comp, name="FL, effects compensated")
+    after = FeedbackLinearizingRegulator(
+        model.with_constants(_constants(diagnosis.constants_final)),
+        compensation=comp,
+        name="FL, effects compensated",
+    )
     rb = ClosedLoop(twin, base).run(scenario)
     ra = ClosedLoop(twin, after).run(scenario)
-    return CompensationStudy(scenario.name, plant_name, tuple(e.name for e in fx),
-                             tuple(e.name for e in fu), evaluate(rb, scenario), evaluate(ra, scenario),
-                             rb, ra)
+    return CompensationStudy(
+        scenario.name,
+        plant_name,
+        tuple(e.name for e in fx),
+        tuple(e.name for e in fu),
+        evaluate(rb, scenario),
+        evaluate(ra, scenario),
+        rb,
+        ra,
+    )
 
 
 def improvement(study: CompensationStudy) -> np.ndarray:

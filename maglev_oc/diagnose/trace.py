@@ -113,8 +113,12 @@ def trace(
             if 0 < j < s.size - 1 and s[j] >= s[j - 1] and s[j] >= s[j + 1]:
                 peaks.append((AXIS_NAMES[a], float(periods[j]), float(s[j])))
     binned = {}
-    for name, unit, v in (("gap", "m", x[0]), ("gap_rate", "m/s", x[1]),
-                          ("position", "m", x[2]), ("position_rate", "m/s", x[3])):
+    for name, unit, v in (
+        ("gap", "m", x[0]),
+        ("gap_rate", "m/s", x[1]),
+        ("position", "m", x[2]),
+        ("position_rate", "m/s", x[3]),
+    ):
         lo, up = np.percentile(v, [1, 99])
         if name.endswith("rate"):
             m = max(abs(lo), abs(up))

@@ -62,8 +62,9 @@ def scenario_figure(cmp: Comparison, scenario: str, twin: str) -> Figure:
     if first is not None:
         k = _stride(first.t.size)
         for col, row_r in enumerate((0, 3)):
-            axes[0, col].plot(first.t[::k], first.reference[row_r, ::k] * MM, "k--", lw=0.8,
-                              label="reference")
+            axes[0, col].plot(
+                first.t[::k], first.reference[row_r, ::k] * MM, "k--", lw=0.8, label="reference"
+            )
     for col in range(2):
         for band in BANDS:
             axes[1, col].axhline(band * MM, color="0.5", ls=":", lw=0.8)
@@ -81,8 +82,9 @@ def scenario_figure(cmp: Comparison, scenario: str, twin: str) -> Figure:
     axes[2, 1].set_ylabel("i_q = u1 [A]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     axes[0, 0].legend(handles[::-1], labels[::-1], fontsize=7, loc="best")
-    axes[1, 0].text(0.01, 0.02, "dotted: 0.1 mm and 10 µm", transform=axes[1, 0].transAxes,
-                    fontsize=7, color="0.4")
+    axes[1, 0].text(
+        0.01, 0.02, "dotted: 0.1 mm and 10 µm", transform=axes[1, 0].transAxes, fontsize=7, color="0.4"
+    )
     fig.suptitle(f"{sc.title} — {twin} twin")
     return fig
 

@@ -30,8 +30,17 @@ def spectrum_figure(diag: Diagnosis) -> Figure:
         for name, lam in tr.motor_periods.items():
             ax.axvline(lam * MM, color="tab:red", ls=":", lw=1)
             if a == 0:
-                ax.text(lam * MM, 0.97, f"{name.replace('_', ' ')} ", rotation=90, va="top",
-                        ha="right", fontsize=7, color="tab:red", transform=ax.get_xaxis_transform())
+                ax.text(
+                    lam * MM,
+                    0.97,
+                    f"{name.replace('_', ' ')} ",
+                    rotation=90,
+                    va="top",
+                    ha="right",
+                    fontsize=7,
+                    color="tab:red",
+                    transform=ax.get_xaxis_transform(),
+                )
         ax.set_ylabel(f"{AXIS_NAMES[a]}: variance\nexplained [%]")
         ax.grid(alpha=0.3, which="both")
     axes[-1].set_xlabel("period in the horizontal position x3 [mm]")
@@ -43,13 +52,24 @@ def dependence_figure(diag: Diagnosis) -> Figure:
     tr = diag.trace
     fig = new_figure((8.27, 8.5))
     axes = fig.subplots(3, 2)
-    panels = (("gap", "gap [mm]", MM), ("position", "x3 [mm]", MM),
-              ("gap_rate", "gap rate [mm/s]", MM), ("position_rate", "x3 rate [mm/s]", MM))
+    panels = (
+        ("gap", "gap [mm]", MM),
+        ("position", "x3 [mm]", MM),
+        ("gap_rate", "gap rate [mm/s]", MM),
+        ("position_rate", "x3 rate [mm/s]", MM),
+    )
     for ax, (key, label, scale) in zip(axes.ravel()[:4], panels, strict=True):
         b = tr.binned[key]
         for a, color in ((0, "tab:blue"), (1, "tab:orange")):
-            ax.errorbar(b.centers * scale, b.mean[a], yerr=2 * b.stderr[a], color=color, lw=1,
-                        marker=".", label=AXIS_NAMES[a])
+            ax.errorbar(
+                b.centers * scale,
+                b.mean[a],
+                yerr=2 * b.stderr[a],
+                color=color,
+                lw=1,
+                marker=".",
+                label=AXIS_NAMES[a],
+            )
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_xlabel(label)
         ax.set_ylabel("mean residual [m/s²]")
@@ -93,8 +113,10 @@ def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
         edges = np.linspace(*np.percentile(vv, [1, 99]), 41)
         idx = np.clip(np.digitize(vv, edges) - 1, 0, 39)
         centers = 0.5 * (edges[1:] + edges[:-1])
-        for series, color, name in ((before[hold], "tab:red", "before (without this effect)"),
-                                    (after[hold], "tab:green", "after (effect added)")):
+        for series, color, name in (
+            (before[hold], "tab:red", "before (without this effect)"),
+            (after[hold], "tab:green", "after (effect added)"),
+        ):
             m = np.array([series[idx == k].mean() if np.any(idx == k) else np.nan for k in range(40)])
             ax.plot(vv[::20], series[::20], ".", color=color, ms=1.5, alpha=0.25)
             ax.plot(centers, m, "-", color=color, lw=2, label=name)
@@ -120,8 +142,9 @@ def timeseries_figure(diag: Diagnosis, seconds: float = 4.0) -> Figure:
         meas = d.acc[a, sl]
         ax.plot(t, meas, "k", lw=1.2, label="measured (filtered)")
         ax.plot(t, meas - diag.residual_before[a, sl], "tab:red", lw=0.9, label="base model")
-        ax.plot(t, meas - diag.residual_after[a, sl], "tab:green", lw=0.9, ls="--",
-                label="base + found effects")
+        ax.plot(
+            t, meas - diag.residual_after[a, sl], "tab:green", lw=0.9, ls="--", label="base + found effects"
+        )
         ax.set_ylabel(f"{AXIS_NAMES[a]} acceleration\n(x{2 if a == 0 else 4}') [m/s²]")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
@@ -133,8 +156,10 @@ def timeseries_figure(diag: Diagnosis, seconds: float = 4.0) -> Figure:
 def compensation_figure(study: CompensationStudy) -> Figure:
     fig = new_figure((8.27, 5.5))
     axes = fig.subplots(2, 1, sharex=True)
-    for res, color, name in ((study.result_before, "tab:red", study.result_before.controller),
-                             (study.result_after, "tab:green", study.result_after.controller)):
+    for res, color, name in (
+        (study.result_before, "tab:red", study.result_before.controller),
+        (study.result_after, "tab:green", study.result_after.controller),
+    ):
         err = np.vstack([res.y[0] - res.reference[0], res.y[1] - res.reference[3]])
         k = max(1, res.t.size // 3000)
         for a, ax in enumerate(axes):

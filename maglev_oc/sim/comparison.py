@@ -109,11 +109,15 @@ def step_sweep(
     for i, ctrl in enumerate(controllers):
         loop = ClosedLoop(twin, ctrl)
         for j, g in enumerate(gaps):
-            sc = Scenario("sweep", "sweep", tuple(start),
-                          SetpointSequence((0.0,), ((float(g), target_position),)), duration)
+            sc = Scenario(
+                "sweep",
+                "sweep",
+                tuple(start),
+                SetpointSequence((0.0,), ((float(g), target_position),)),
+                duration,
+            )
             res = loop.run(sc)
             ok[i, j] = res.success
             gmin[i, j] = np.nanmin(res.x[0])
             ipk[i, j] = np.nanmax(np.hypot(res.u[0], res.u[1]))
-    return StepSweep(tuple(start), gaps, target_position, tuple(c.name for c in controllers),
-                     ok, gmin, ipk)
+    return StepSweep(tuple(start), gaps, target_position, tuple(c.name for c in controllers), ok, gmin, ipk)

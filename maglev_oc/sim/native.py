@@ -75,11 +75,16 @@ class NativeLoop:
         cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         cg.add(fn)
         cg.generate(str(Path(self._dir.name)) + "/")
-        src.write_text(src.read_text() + _DRIVER.format(name=name, nz=self.nz, nr=self.nr,
-                                                        nw=self.nw, nout=self.nout))
+        src.write_text(
+            src.read_text() + _DRIVER.format(name=name, nz=self.nz, nr=self.nr, nw=self.nw, nout=self.nout)
+        )
         lib = Path(self._dir.name) / f"{name}.so"
-        done = subprocess.run([cc, *flags, "-shared", "-fPIC", str(src), "-o", str(lib), "-lm"],
-                              capture_output=True, text=True, check=False)
+        done = subprocess.run(
+            [cc, *flags, "-shared", "-fPIC", str(src), "-o", str(lib), "-lm"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
         if done.returncode != 0:
             raise RuntimeError(f"compiling the closed loop failed: {done.stderr[-2000:]}")
         self._lib = ctypes.CDLL(str(lib))

@@ -152,8 +152,7 @@ class RigTwin:
         set_(
             self,
             "acceleration",
-            ca.Function("twin_acc", [x, i, fr], [ca.vertcat(acc_v, acc_h)], ["x", "i", "friction"],
-                        ["acc"]),
+            ca.Function("twin_acc", [x, i, fr], [ca.vertcat(acc_v, acc_h)], ["x", "i", "friction"], ["acc"]),
         )
 
         s = ca.SX.sym("s", self.n_state)
