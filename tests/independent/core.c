@@ -1,0 +1,346 @@
+/*
+ * Simulation core of the independent maglev log generator (tests/independent).
+ *
+ * One closed-loop run of the 2-DOF PMLSM stage: the papers' feedback-linearizing output
+ * regulator sampled at the control rate on quantized encoder readings, zero-order-held
+ * currents, and the plant (papers' force model with its true constants plus optional
+ * unmodelled effects) integrated with classical RK4 at n_sub steps per control period.
+ * All quantities SI. The Params struct body is generated from the field list in core.py so
+ * that Python and C cannot disagree on its layout.
+ *
+ * Plant state s = (x1, x2, x3, x4, z_h, z_v): encoder-frame gap [m] and its rate [m/s],
+ * horizontal position [m] and its rate [m/s], LuGre bristle deflections of the horizontal
+ * and vertical guides [m].
+ *
+ * Compiled with -O2 -ffp-contract=off (no fused multiply-add, no fast-math) so that a seed
+ * gives bit-identical results on re-run.
+ */
+#include <math.h>
+#include <string.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+typedef struct {
+/*@FIELDS@*/
+} Params;
+
+int params_size(void) { return (int)sizeof(Params); }
+
+#define NSTATE 6
+#define NREC 17
+#define NAUX 6
+
+/* L1..L4 of the model at gap y for lumped constants C[0..3] (physics.model_functions). */
+static void model_L(const Params *p, const double *C, double y, double *L)
+{
+    const double a = M_PI / p->tau;
+    const double e = exp(a * (p->hm + y));
+    const double s = 0.5 * (e - 1.0 / e);
+    const double c = 0.5 * (e + 1.0 / e);
+    const double coth = c / s;
+    const double r = p->b0 / (2.0 * y);
+    const double gamma1 = 4.0 / M_PI * (r * atan(r) - 0.5 * log1p(r * r));
+    const double kc = p->t1 / (p->t1 - y * gamma1);
+    const double lam = 1.0 - p->b0 * p->b0 / (4.0 * p->t1 * (y + 0.5 * p->b0 + p->hm / p->mu_rec));
+    const double b = p->Bpre / s;
+    L[0] = C[0] * lam / (kc * s);
+    L[1] = C[1] * lam * b * b;
+    L[2] = -C[2] * lam * b * coth / kc;
+    L[3] = C[3] * lam * coth * coth / (kc * kc);
+}
+
+/* LuGre friction force [N] and bristle rate dz [m/s] at velocity v [m/s], deflection z [m]. */
+static double lugre(double Fc, double Fs, double vs, double s0, double s1, double s2, double v, double z,
+                    double *dz)
+{
+    const double w = exp(-(v / vs) * (v / vs));
+    const double gss = Fc + (Fs - Fc) * w;
+    *dz = v - s0 * fabs(v) * z / gss;
+    return s0 * z + s1 * w * (*dz) + s2 * v;
+}
+
+/*
+ * Right-hand side of the plant. (iq_c, id_c) are the amplifier's output currents in the
+ * commanded dq frame; the commutation error rotates them into the motor's true frame.
+ * aux (may be NULL): true gap, actual i_q, actual i_d, horizontal and vertical friction
+ * forces [N], magnetic normal force [N].
+ */
+static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double *ds, double *aux)
+{
+    const double x1 = s[0], x2 = s[1], x3 = s[2], x4 = s[3];
+    const double iq = iq_c * p->com_cos + id_c * p->com_sin;
+    const double id = id_c * p->com_cos - iq_c * p->com_sin;
+    const double Ctrue[4] = {p->C1, p->C2, p->C3, p->C4};
+    double L[4];
+    double delta = 0.0, slope = 0.0;
+    double fB = 1.0, fBt = 1.0, etaT = 1.0, etaA = 1.0, rho = 1.0;
+    double Fx, Fn, Ffh = 0.0, Ffv = 0.0;
+    int k;
+
+    /* guide misalignment: magnetic gap differs from the encoder's reading */
+    if (p->mis_on) {
+        delta = p->mis_slope * x3;
+        slope = p->mis_slope;
+        if (p->mis_amp != 0.0) {
+            const double kw = 2.0 * M_PI / p->mis_len;
+            delta += p->mis_amp * (sin(kw * x3 + p->mis_phase) - sin(p->mis_phase));
+            slope += p->mis_amp * kw * cos(kw * x3 + p->mis_phase);
+        }
+    }
+    const double g = x1 + delta;
+    model_L(p, Ctrue, g, L);
+
+    /* magnets' field differing smoothly from the closed form */
+    if (p->fs_on) {
+        const double d = g - p->fs_gref;
+        fB = exp(-p->fs_k1 * d - p->fs_k2 * d * d);
+        fBt = p->fs_thrust ? fB : 1.0;
+    }
+    /* end effects: smooth loss of thrust and attraction near the stator ends */
+    if (p->ee_on) {
+        double loss = exp((x3 - p->ee_xp) / p->ee_w) + exp((p->ee_xm - x3) / p->ee_w);
+        if (loss > 2.0) loss = 2.0;
+        etaT = 1.0 - p->ee_fT * loss;
+        etaA = 1.0 - p->ee_fA * loss;
+    }
+    /* thrust ripple */
+    if (p->tr_on) {
+        for (k = 0; k < 2; k++)
+            if (p->tr_amp[k] != 0.0)
+                rho += p->tr_amp[k] * cos(2.0 * M_PI * x3 / p->tr_period[k] + p->tr_phase[k]);
+    }
+
+    Fx = -p->Mh * L[0] * fBt * etaT * rho * iq;
+    Fn = p->Mv * (L[1] * fB * fB * etaA + L[2] * fBt * etaT * id + L[3] * etaT * (id * id + iq * iq));
+
+    /* normal cogging (adds to the attraction) and longitudinal cogging (detent) */
+    if (p->cn_on) {
+        for (k = 0; k < 3; k++)
+            if (p->cn_amp[k] != 0.0)
+                Fn += p->cn_amp[k] * exp(-(g - p->cn_gref) / p->cn_decay[k]) *
+                      sin(2.0 * M_PI * x3 / p->cn_period[k] + p->cn_phase[k]);
+    }
+    if (p->cl_on) {
+        for (k = 0; k < 3; k++)
+            if (p->cl_amp[k] != 0.0)
+                Fx += p->cl_amp[k] * exp(-(g - p->cl_gref) / p->cl_decay[k]) *
+                      sin(2.0 * M_PI * x3 / p->cl_period[k] + p->cl_phase[k]);
+    }
+    /* cable carrier, base not level, tilted guide */
+    if (p->cab_on) Fx += -p->cab_k * (x3 - p->cab_x0) + p->cab_F0;
+    Fx += p->tilt_F;
+    if (p->mis_on) Fx += slope * (p->Mh * p->G - Fn);
+
+    /* guide friction (LuGre) */
+    ds[4] = 0.0;
+    ds[5] = 0.0;
+    if (p->fh_on) Ffh = lugre(p->fh_Fc, p->fh_Fs, p->fh_vs, p->fh_s0, p->fh_s1, p->fh_s2, x4, s[4], &ds[4]);
+    if (p->fv_on) Ffv = lugre(p->fv_Fc, p->fv_Fs, p->fv_vs, p->fv_s0, p->fv_s1, p->fv_s2, x2, s[5], &ds[5]);
+
+    ds[0] = x2;
+    ds[1] = p->G - (Fn + Ffv) / p->Mv;
+    ds[2] = x4;
+    ds[3] = (Fx - Ffh) / p->Mh;
+    if (aux) {
+        aux[0] = g;
+        aux[1] = iq;
+        aux[2] = id;
+        aux[3] = Ffh;
+        aux[4] = Ffv;
+        aux[5] = Fn;
+    }
+}
+
+/* Feedback transformation with the controller's constants: physical root (SPEC 1 item 5). */
+static int control_law(const Params *p, double y1, double v1, double v2, double *u1, double *u2)
+{
+    const double Cn[4] = {p->Cn1, p->Cn2, p->Cn3, p->Cn4};
+    double L[4], R;
+    int clipped = 0;
+    model_L(p, Cn, y1, L);
+    *u1 = -v1 / L[0];
+    R = L[2] * L[2] - 4.0 * L[3] * (L[3] * (*u1) * (*u1) + L[1] - p->G + v2);
+    if (R < 0.0) {
+        R = 0.0;
+        clipped = 1;
+    }
+    *u2 = (-L[2] - sqrt(R)) / (2.0 * L[3]);
+    return clipped;
+}
+
+static double quantize(double x, double q) { return q * floor(x / q + 0.5); }
+
+static double clip(double u, double lim) { return u > lim ? lim : (u < -lim ? -lim : u); }
+
+/* --- exported helpers for the tests ------------------------------------------------------- */
+
+void eval_rhs(const Params *p, const double *s, double iq_c, double id_c, double *ds, double *aux)
+{
+    plant_rhs(p, s, iq_c, id_c, ds, aux);
+}
+
+int eval_control(const Params *p, double y1, double v1, double v2, double *u)
+{
+    return control_law(p, y1, v1, v2, &u[0], &u[1]);
+}
+
+/*
+ * One closed-loop run.
+ *
+ * ref    (n_ctrl x 4): r_v, dr_v/dt, r_h, dr_h/dt at the control instants.
+ * noise  (n_ctrl x 2): encoder noise [m] added to x1, x3 before quantization.
+ * s0     (6): initial plant state.
+ * rec    (n_rec x NREC) with n_rec = ceil(n_ctrl / record_every): rows at every record_every-th
+ *        control instant: x1 x2 x3 x4 (true), y1 y3 (encoder), u1 u2 (commanded),
+ *        iq id (actual), gap (true), F_fric_h F_fric_v [N], v1 v2, xhat2 xhat4.
+ * info   (5): status (0 ok, 1 left the stage's range, 2 not finite), control index of failure,
+ *        samples with R clipped at 0, samples with a command clipped at i_max, substeps with the
+ *        amplifier at its peak.
+ * ucmd   (n_ctrl x 2) work space: the commanded (u1, u2) of every control sample.
+ */
+int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise, const double *s0,
+             double *rec, int *info, double *ucmd)
+{
+    const int ns = p->n_sub;
+    const double h = p->Tc / ns;
+    const double Eh = p->amp_tau > 0.0 ? exp(-0.5 * h / p->amp_tau) : 0.0;
+    const double Ef = p->amp_tau > 0.0 ? exp(-h / p->amp_tau) : 0.0;
+    double s[NSTATE], st[NSTATE], k1[NSTATE], k2[NSTATE], k3[NSTATE], k4[NSTATE];
+    double ov[2] = {0, 0}, oh[2] = {0, 0}; /* observer states (position, velocity) */
+    double xiv[3] = {0, 0, 0}, xih[3] = {0, 0, 0};
+    double vprev1 = 0.0, vprev2 = 0.0, yprev1 = 0.0, yprev3 = 0.0;
+    double ia_q = 0.0, ia_d = 0.0; /* amplifier output (dq, commanded frame) */
+    double aux[NAUX];
+    int k, j, i, nrec = 0;
+
+    memcpy(s, s0, sizeof(s));
+    for (i = 0; i < 5; i++) info[i] = 0;
+
+    for (k = 0; k < n_ctrl; k++) {
+        const double rv = ref[4 * k], drv = ref[4 * k + 1], rh = ref[4 * k + 2], drh = ref[4 * k + 3];
+        /* encoders */
+        const double y1 = quantize(s[0] + noise[2 * k], p->q);
+        const double y3 = quantize(s[2] + noise[2 * k + 1], p->q);
+        double e1, de1, e2, de2, v1, v2, u1, u2, nv[2], nh[2], nxi[3];
+
+        /* high-gain observers: x_k = Ao x_{k-1} + Bo (y_{k-1}, v_{k-1}) */
+        if (k == 0) {
+            ov[0] = y1;
+            ov[1] = 0.0;
+            oh[0] = y3;
+            oh[1] = 0.0;
+        } else {
+            nv[0] = p->Ao[0] * ov[0] + p->Ao[1] * ov[1] + p->Bo[0] * yprev1 + p->Bo[1] * vprev2;
+            nv[1] = p->Ao[2] * ov[0] + p->Ao[3] * ov[1] + p->Bo[2] * yprev1 + p->Bo[3] * vprev2;
+            nh[0] = p->Ao[0] * oh[0] + p->Ao[1] * oh[1] + p->Bo[0] * yprev3 + p->Bo[1] * vprev1;
+            nh[1] = p->Ao[2] * oh[0] + p->Ao[3] * oh[1] + p->Bo[2] * yprev3 + p->Bo[3] * vprev1;
+            ov[0] = nv[0];
+            ov[1] = nv[1];
+            oh[0] = nh[0];
+            oh[1] = nh[1];
+        }
+        e1 = y1 - rv;
+        de1 = ov[1] - drv;
+        e2 = y3 - rh;
+        de2 = oh[1] - drh;
+        v2 = p->Kv[0] * e1 + p->Kv[1] * de1 + p->Kv[2] * xiv[0] + p->Kv[3] * xiv[1] + p->Kv[4] * xiv[2];
+        v1 = p->Kh[0] * e2 + p->Kh[1] * de2 + p->Kh[2] * xih[0] + p->Kh[3] * xih[1] + p->Kh[4] * xih[2];
+        info[2] += control_law(p, y1, v1, v2, &u1, &u2);
+        if (fabs(u1) > p->i_max || fabs(u2) > p->i_max) info[3]++;
+        u1 = clip(u1, p->i_max);
+        u2 = clip(u2, p->i_max);
+        ucmd[2 * k] = u1;
+        ucmd[2 * k + 1] = u2;
+
+        /* internal models: xi_{k+1} = Ai xi_k + Bi e_k */
+        for (i = 0; i < 3; i++)
+            nxi[i] = p->Ai[3 * i] * xiv[0] + p->Ai[3 * i + 1] * xiv[1] + p->Ai[3 * i + 2] * xiv[2] + p->Bi[i] * e1;
+        memcpy(xiv, nxi, sizeof(nxi));
+        for (i = 0; i < 3; i++)
+            nxi[i] = p->Ai[3 * i] * xih[0] + p->Ai[3 * i + 1] * xih[1] + p->Ai[3 * i + 2] * xih[2] + p->Bi[i] * e2;
+        memcpy(xih, nxi, sizeof(nxi));
+        vprev1 = v1;
+        vprev2 = v2;
+        yprev1 = y1;
+        yprev3 = y3;
+
+        if (k == 0) {
+            /* the amplifier was already delivering the first command before t = 0 */
+            ia_q = u1;
+            ia_d = u2;
+        }
+
+        /* plant over [t_k, t_k + Tc) */
+        for (j = 0; j < ns; j++) {
+            const int jg = k * ns + j - p->amp_delay_sub;
+            int kc = jg < 0 ? 0 : jg / ns;
+            double cq, cd, mag, iq0, id0, iqh, idh, iq1, id1;
+            cq = ucmd[2 * kc];
+            cd = ucmd[2 * kc + 1];
+            mag = sqrt(cq * cq + cd * cd);
+            if (p->amp_peak > 0.0 && mag > p->amp_peak) {
+                cq *= p->amp_peak / mag;
+                cd *= p->amp_peak / mag;
+                info[4]++;
+            }
+            if (p->amp_tau > 0.0) {
+                iq0 = ia_q;
+                id0 = ia_d;
+                iqh = cq + (ia_q - cq) * Eh;
+                idh = cd + (ia_d - cd) * Eh;
+                iq1 = cq + (ia_q - cq) * Ef;
+                id1 = cd + (ia_d - cd) * Ef;
+            } else {
+                iq0 = iqh = iq1 = cq;
+                id0 = idh = id1 = cd;
+            }
+            if (j == 0 && k % p->record_every == 0) {
+                double *r = rec + (size_t)NREC * nrec++;
+                plant_rhs(p, s, iq0, id0, k1, aux);
+                r[0] = s[0];
+                r[1] = s[1];
+                r[2] = s[2];
+                r[3] = s[3];
+                r[4] = y1;
+                r[5] = y3;
+                r[6] = u1;
+                r[7] = u2;
+                r[8] = aux[1];
+                r[9] = aux[2];
+                r[10] = aux[0];
+                r[11] = aux[3];
+                r[12] = aux[4];
+                r[13] = v1;
+                r[14] = v2;
+                r[15] = ov[1];
+                r[16] = oh[1];
+            } else {
+                plant_rhs(p, s, iq0, id0, k1, NULL);
+            }
+            for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k1[i];
+            plant_rhs(p, st, iqh, idh, k2, NULL);
+            for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k2[i];
+            plant_rhs(p, st, iqh, idh, k3, NULL);
+            for (i = 0; i < NSTATE; i++) st[i] = s[i] + h * k3[i];
+            plant_rhs(p, st, iq1, id1, k4, NULL);
+            for (i = 0; i < NSTATE; i++) s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            ia_q = iq1;
+            ia_d = id1;
+        }
+        for (i = 0; i < NSTATE; i++) {
+            if (!isfinite(s[i])) {
+                info[0] = 2;
+                info[1] = k;
+                return 2;
+            }
+        }
+        if (s[0] < p->gap_min || s[0] > p->gap_max || fabs(s[2]) > p->x3_max) {
+            info[0] = 1;
+            info[1] = k;
+            return 1;
+        }
+    }
+    return 0;
+}

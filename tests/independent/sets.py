@@ -1,0 +1,158 @@
+"""Named sets of scenarios: ``clean``, ``eleven``, ``single`` and ``pairs``.
+
+Each set is a list of ``(stem, Scenario)``: the stem is the neutral file name the log is written
+under (``<set>_<nn>``, saying nothing about what is in it), the scenario's ``name`` says what it
+is (only in the truth file). Seeds are fixed per set, so a set is the same on every machine.
+
+clean
+    20 logs without any effect, seeds 101-120 (true constants 1-4 % off the papers', different
+    per seed).
+eleven
+    One clean log and ten with one or two effects (seeds 201-211), in a fixed shuffled order.
+single
+    Each effect alone at its ``small()`` and ``large()`` size (seeds 301-324).
+pairs
+    Six logs with two effects together (seeds 401-406).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .effects import (
+    AmplifierDynamics,
+    CableCarrier,
+    CommutationOffset,
+    DetentForce,
+    Effect,
+    EndEffect,
+    FieldShape,
+    GuideFriction,
+    GuideMisalignment,
+    NormalCogging,
+    ThrustRipple,
+    TiltedBase,
+)
+from .simulate import Scenario
+
+SINGLE_EFFECTS: dict[str, Callable[[str], Effect]] = {
+    "guide_friction_horizontal": lambda size: getattr(GuideFriction, size)("horizontal"),
+    "guide_friction_vertical": lambda size: getattr(GuideFriction, size)("vertical"),
+    "normal_cogging": lambda size: getattr(NormalCogging, size)(),
+    "detent_force": lambda size: getattr(DetentForce, size)(),
+    "end_effect": lambda size: getattr(EndEffect, size)(),
+    "guide_misalignment": lambda size: getattr(GuideMisalignment, size)(),
+    "cable_carrier": lambda size: getattr(CableCarrier, size)(),
+    "thrust_ripple": lambda size: getattr(ThrustRipple, size)(),
+    "commutation_offset": lambda size: getattr(CommutationOffset, size)(),
+    "amplifier_dynamics": lambda size: getattr(AmplifierDynamics, size)(),
+    "field_shape": lambda size: getattr(FieldShape, size)(),
+    "tilted_base": lambda size: getattr(TiltedBase, size)(),
+}
+"""Every effect that ``single`` runs alone, by name; called with 'small' or 'large'."""
+
+
+def _eleven() -> list[tuple[str, tuple[Effect, ...]]]:
+    return [
+        ("clean", ()),
+        ("guide_friction_both_axes", (GuideFriction.small("horizontal"), GuideFriction.small("vertical"))),
+        ("cogging_normal_and_detent", (NormalCogging.large(), DetentForce.small())),
+        ("end_effect", (EndEffect.large(),)),
+        ("guide_misalignment", (GuideMisalignment.large(),)),
+        ("cable_carrier", (CableCarrier.large(),)),
+        ("commutation_offset", (CommutationOffset.small(),)),
+        ("amplifier_dynamics", (AmplifierDynamics.large(),)),
+        ("field_shape", (FieldShape.large(),)),
+        (
+            "papers_hardware_friction_and_misalignment",
+            (GuideFriction.large("horizontal"), GuideMisalignment.small()),
+        ),
+        ("normal_cogging_and_field_shape", (NormalCogging.small(), FieldShape.small())),
+    ]
+
+
+ELEVEN_ORDER = (3, 9, 6, 0, 10, 1, 7, 4, 2, 8, 5)
+"""File k of ``eleven`` (eleven_01 ... eleven_11) holds entry ELEVEN_ORDER[k-1] of the list above."""
+
+
+def _pairs() -> list[tuple[str, tuple[Effect, ...]]]:
+    return [
+        ("friction_h_and_cable", (GuideFriction.small("horizontal"), CableCarrier.small())),
+        ("normal_cogging_and_field_shape", (NormalCogging.large(), FieldShape.large())),
+        ("misalignment_and_end_effect", (GuideMisalignment.large(), EndEffect.small())),
+        ("commutation_and_tilted_base", (CommutationOffset.small(), TiltedBase.large())),
+        ("amplifier_and_friction_v", (AmplifierDynamics.large(), GuideFriction.small("vertical"))),
+        ("detent_and_thrust_ripple", (DetentForce.large(), ThrustRipple.large())),
+    ]
+
+
+SET_NAMES = ("clean", "eleven", "single", "pairs")
+"""The named sets."""
+
+
+def named_set(name: str, duration: float = 60.0) -> list[tuple[str, Scenario]]:
+    """The scenarios of set ``name`` as ``(file stem, Scenario)``; ``duration`` [s] per log."""
+    out: list[tuple[str, Scenario]] = []
+    if name == "clean":
+        for i in range(20):
+            out.append(
+                (
+                    f"clean_{i + 1:02d}",
+                    Scenario(
+                        name=f"clean_seed{101 + i}",
+                        seed=101 + i,
+                        duration=duration,
+                        description="no effect beyond the papers' model",
+                    ),
+                )
+            )
+    elif name == "eleven":
+        entries = _eleven()
+        for k, j in enumerate(ELEVEN_ORDER):
+            label, effects = entries[j]
+            out.append(
+                (
+                    f"eleven_{k + 1:02d}",
+                    Scenario(
+                        name=label,
+                        seed=201 + j,
+                        duration=duration,
+                        effects=effects,
+                        description=f"set eleven: {label}",
+                    ),
+                )
+            )
+    elif name == "single":
+        n = 0
+        for label, make in SINGLE_EFFECTS.items():
+            for size in ("small", "large"):
+                n += 1
+                out.append(
+                    (
+                        f"single_{n:02d}",
+                        Scenario(
+                            name=f"{label}_{size}",
+                            seed=300 + n,
+                            duration=duration,
+                            effects=(make(size),),
+                            description=f"set single: {label} alone, {size} size",
+                        ),
+                    )
+                )
+    elif name == "pairs":
+        for i, (label, effects) in enumerate(_pairs()):
+            out.append(
+                (
+                    f"pairs_{i + 1:02d}",
+                    Scenario(
+                        name=label,
+                        seed=401 + i,
+                        duration=duration,
+                        effects=effects,
+                        description=f"set pairs: {label}",
+                    ),
+                )
+            )
+    else:
+        raise ValueError(f"unknown set {name!r}; the sets are {', '.join(SET_NAMES)}")
+    return out
