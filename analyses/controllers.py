@@ -23,8 +23,11 @@ REPORT = "controllers.pdf"
 ORDER = 20
 TITLE = "maglev_oc — controller comparison"
 BASE = ("fl", "linear", "linear-noff", "lqr", "pid")
-SHORT = {"FL regulator": "FL", "linear regulator": "linear",
-         "linear regulator (no feedforward)": "linear, no ff"}
+SHORT = {
+    "FL regulator": "FL",
+    "linear regulator": "linear",
+    "linear regulator (no feedforward)": "linear, no ff",
+}
 
 
 def _mm(value: float, digits: int = 3) -> str:
@@ -46,8 +49,11 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
     scenarios = paper_scenarios()
     twins = standard_twins(model)
     cmp = run_comparison(controllers, scenarios, twins)
-    sweep_ctrls = [c for c in controllers if c.name in ("FL regulator", "linear regulator",
-                                                          "linear regulator (no feedforward)")]
+    sweep_ctrls = [
+        c
+        for c in controllers
+        if c.name in ("FL regulator", "linear regulator", "linear regulator (no feedforward)")
+    ]
     sweep = step_sweep(sweep_ctrls, twins["ideal"], np.arange(10e-3, 24.5e-3, 1e-3))
 
     rows: dict[str, list] = {t: [] for t in cmp.twins}
@@ -56,55 +62,108 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
             for name in cmp.controllers:
                 m = cmp.metric(name, sc, twin)
                 st = m.step_time_median
-                rows[twin].append((
-                    sc.replace("_", " "), SHORT.get(name, name),
-                    "yes" if m.success else "NO",
-                    _s(m.worst_settling(0)), _s(m.worst_settling(1)),
-                    f"{m.max_overshoot(0):.0f}" if math.isfinite(m.max_overshoot(0)) else "—",
-                    f"{m.max_overshoot(1):.0f}" if math.isfinite(m.max_overshoot(1)) else "—",
-                    _mm(m.mean_error[0]), _mm(m.mean_error[1]),
-                    f"{m.rms_current:.2f}", f"{m.peak_current:.2f}",
-                    "—" if not math.isfinite(m.min_margin) else f"{m.min_margin:.1f}",
-                    str(m.clipped),
-                    "—" if not math.isfinite(st) else f"{st * 1e3:.3f}",
-                ))
+                rows[twin].append(
+                    (
+                        sc.replace("_", " "),
+                        SHORT.get(name, name),
+                        "yes" if m.success else "NO",
+                        _s(m.worst_settling(0)),
+                        _s(m.worst_settling(1)),
+                        f"{m.max_overshoot(0):.0f}" if math.isfinite(m.max_overshoot(0)) else "—",
+                        f"{m.max_overshoot(1):.0f}" if math.isfinite(m.max_overshoot(1)) else "—",
+                        _mm(m.mean_error[0]),
+                        _mm(m.mean_error[1]),
+                        f"{m.rms_current:.2f}",
+                        f"{m.peak_current:.2f}",
+                        "—" if not math.isfinite(m.min_margin) else f"{m.min_margin:.1f}",
+                        str(m.clipped),
+                        "—" if not math.isfinite(st) else f"{st * 1e3:.3f}",
+                    )
+                )
 
     fl_ideal = cmp.metric("FL regulator", "setpoint_steps", "ideal")
     fl_rig = cmp.metric("FL regulator", "setpoint_steps", "rig")
     sin = {(n, t): cmp.metric(n, "sinusoid", t) for n in cmp.controllers for t in cmp.twins}
     lin_large = {t: cmp.metric("linear regulator", "large_step", t) for t in cmp.twins}
     paper_rows = [
-        ("vertical settling to 0.1 mm [s]", "< 1.3", _s(fl_ideal.worst_settling(0)),
-         _s(fl_rig.worst_settling(0))),
-        ("horizontal settling to 0.1 mm [s]", "< 1.2 (fifth: 2.38)", _s(fl_ideal.worst_settling(1)),
-         _s(fl_rig.worst_settling(1))),
-        ("vertical overshoot [%]", "114", f"{fl_ideal.max_overshoot(0):.0f}",
-         f"{fl_rig.max_overshoot(0):.0f}"),
-        ("horizontal overshoot [%]", "43", f"{fl_ideal.max_overshoot(1):.0f}",
-         f"{fl_rig.max_overshoot(1):.0f}"),
-        ("ellipse: mean |e| horizontal [mm]", "0.11", _mm(sin[("FL regulator", "ideal")].mean_error[1]),
-         _mm(sin[("FL regulator", "rig")].mean_error[1])),
-        ("ellipse: peak |e| horizontal [mm]", "0.4", _mm(sin[("FL regulator", "ideal")].peak_error[1]),
-         _mm(sin[("FL regulator", "rig")].peak_error[1])),
-        ("ellipse: mean |e| vertical [mm]", "0.24", _mm(sin[("FL regulator", "ideal")].mean_error[0]),
-         _mm(sin[("FL regulator", "rig")].mean_error[0])),
-        ("ellipse: peak |e| vertical [mm]", "0.8", _mm(sin[("FL regulator", "ideal")].peak_error[0]),
-         _mm(sin[("FL regulator", "rig")].peak_error[0])),
-        ("PID ellipse: mean |e| horizontal [mm]", "0.19", _mm(sin[("PID", "ideal")].mean_error[1]),
-         _mm(sin[("PID", "rig")].mean_error[1])),
-        ("PID ellipse: mean |e| vertical [mm]", "≈ 0.9", _mm(sin[("PID", "ideal")].mean_error[0]),
-         _mm(sin[("PID", "rig")].mean_error[0])),
-        ("linear regulator, large step", "unstable",
-         "stable" if lin_large["ideal"].success else "unstable",
-         "stable" if lin_large["rig"].success else "unstable"),
+        (
+            "vertical settling to 0.1 mm [s]",
+            "< 1.3",
+            _s(fl_ideal.worst_settling(0)),
+            _s(fl_rig.worst_settling(0)),
+        ),
+        (
+            "horizontal settling to 0.1 mm [s]",
+            "< 1.2 (fifth: 2.38)",
+            _s(fl_ideal.worst_settling(1)),
+            _s(fl_rig.worst_settling(1)),
+        ),
+        (
+            "vertical overshoot [%]",
+            "114",
+            f"{fl_ideal.max_overshoot(0):.0f}",
+            f"{fl_rig.max_overshoot(0):.0f}",
+        ),
+        (
+            "horizontal overshoot [%]",
+            "43",
+            f"{fl_ideal.max_overshoot(1):.0f}",
+            f"{fl_rig.max_overshoot(1):.0f}",
+        ),
+        (
+            "ellipse: mean |e| horizontal [mm]",
+            "0.11",
+            _mm(sin[("FL regulator", "ideal")].mean_error[1]),
+            _mm(sin[("FL regulator", "rig")].mean_error[1]),
+        ),
+        (
+            "ellipse: peak |e| horizontal [mm]",
+            "0.4",
+            _mm(sin[("FL regulator", "ideal")].peak_error[1]),
+            _mm(sin[("FL regulator", "rig")].peak_error[1]),
+        ),
+        (
+            "ellipse: mean |e| vertical [mm]",
+            "0.24",
+            _mm(sin[("FL regulator", "ideal")].mean_error[0]),
+            _mm(sin[("FL regulator", "rig")].mean_error[0]),
+        ),
+        (
+            "ellipse: peak |e| vertical [mm]",
+            "0.8",
+            _mm(sin[("FL regulator", "ideal")].peak_error[0]),
+            _mm(sin[("FL regulator", "rig")].peak_error[0]),
+        ),
+        (
+            "PID ellipse: mean |e| horizontal [mm]",
+            "0.19",
+            _mm(sin[("PID", "ideal")].mean_error[1]),
+            _mm(sin[("PID", "rig")].mean_error[1]),
+        ),
+        (
+            "PID ellipse: mean |e| vertical [mm]",
+            "≈ 0.9",
+            _mm(sin[("PID", "ideal")].mean_error[0]),
+            _mm(sin[("PID", "rig")].mean_error[0]),
+        ),
+        (
+            "linear regulator, large step",
+            "unstable",
+            "stable" if lin_large["ideal"].success else "unstable",
+            "stable" if lin_large["rig"].success else "unstable",
+        ),
     ]
 
     # where each controller wins: best mean tracking error on the ellipse, fastest settling
     def best(key, scenario, twin):
-        vals = {n: key(cmp.metric(n, scenario, twin)) for n in cmp.controllers
-                if cmp.metric(n, scenario, twin).success}
+        vals = {
+            n: key(cmp.metric(n, scenario, twin))
+            for n in cmp.controllers
+            if cmp.metric(n, scenario, twin).success
+        }
         vals = {n: v for n, v in vals.items() if math.isfinite(v)}
         return min(vals, key=vals.get) if vals else "none", vals
+
     lines = []
     for twin in cmp.twins:
         n, v = best(lambda m: max(m.mean_error), "sinusoid", twin)
@@ -113,11 +172,15 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         )
         n, v = best(lambda m: max(m.worst_settling(0), m.worst_settling(1)), "setpoint_steps", twin)
         if n != "none":
-            lines.append(f"Five set-point steps, {twin} twin: fastest worst-case settling to 0.1 mm "
-                         f"{n} ({v[n]:.2f} s).")
+            lines.append(
+                f"Five set-point steps, {twin} twin: fastest worst-case settling to 0.1 mm "
+                f"{n} ({v[n]:.2f} s)."
+            )
         else:
-            lines.append(f"Five set-point steps, {twin} twin: no controller settles every step to "
-                         "0.1 mm within 5 s (friction hunting, see below).")
+            lines.append(
+                f"Five set-point steps, {twin} twin: no controller settles every step to "
+                "0.1 mm within 5 s (friction hunting, see below)."
+            )
     sweep_lines = []
     for i, name in enumerate(sweep.controllers):
         ok = sweep.success[i]
@@ -144,7 +207,8 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         "\n".join(lines),
         "Linear vs nonlinear (papers: the linear regulator handles the small step and goes "
         "unstable on the large one, 26 → 18 mm with 20 mm horizontally): "
-        + "; ".join(sweep_lines) + ". "
+        + "; ".join(sweep_lines)
+        + ". "
         + _large_step_sentence(cmp)
         + " Without equilibrium feedforward the linear regulator's transient is much larger. The "
         "papers measured 114 % vertical overshoot with the FL regulator where the design gives "
@@ -162,27 +226,60 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         pdf.add_text("Setup and findings", intro, first_page=True)
         pdf.add_table(
             "FL regulator against the papers' numbers",
-            ["quantity", "papers (rig)", "ideal twin", "rig twin"], paper_rows,
-            notes=["Papers: 002 Sec. 7, 001 Sec. VI (SPEC 4). Our five set-points (not printed in "
-                   "the papers) span 15-25 mm and -40..40 mm with steps up to 10 mm / 40 mm."],
+            ["quantity", "papers (rig)", "ideal twin", "rig twin"],
+            paper_rows,
+            notes=[
+                "Papers: 002 Sec. 7, 001 Sec. VI (SPEC 4). Our five set-points (not printed in "
+                "the papers) span 15-25 mm and -40..40 mm with steps up to 10 mm / 40 mm."
+            ],
             col_widths=[0.4, 0.2, 0.18, 0.18],
         )
         for twin in cmp.twins:
             pdf.add_table(
                 f"Summary on the {twin} twin",
-                ["scenario", "controller", "ok", "T0.1 v\n[s]", "T0.1 h\n[s]", "OS v\n[%]",
-                 "OS h\n[%]", "mean|e| v\n[mm]", "mean|e| h\n[mm]", "I rms\n[A]", "I peak\n[A]",
-                 "min margin\n[m/s²]", "clipped\n[samples]", "step\n[ms]"],
-                rows[twin], font_size=6.5,
-                col_widths=[0.09, 0.1, 0.04, 0.065, 0.065, 0.06, 0.06, 0.08, 0.08, 0.06, 0.06,
-                            0.08, 0.055, 0.06],
-                notes=["T0.1: worst settling time to 0.1 mm over the steps (— : not settled before "
-                       "the next change); OS: worst overshoot in % of the step (steps under "
-                       "0.5 mm not scored); mean |e|: mean absolute encoder error after the "
-                       "start-up transient (ellipse: after 8 s); I: magnitude of the commanded "
-                       "current vector (the amplifier limits it to 9 A on the rig twin); min "
-                       "margin: smallest R/(4 L4) of the FL transformation; step: median "
-                       "per-call time of an online controller."],
+                [
+                    "scenario",
+                    "controller",
+                    "ok",
+                    "T0.1 v\n[s]",
+                    "T0.1 h\n[s]",
+                    "OS v\n[%]",
+                    "OS h\n[%]",
+                    "mean|e| v\n[mm]",
+                    "mean|e| h\n[mm]",
+                    "I rms\n[A]",
+                    "I peak\n[A]",
+                    "min margin\n[m/s²]",
+                    "clipped\n[samples]",
+                    "step\n[ms]",
+                ],
+                rows[twin],
+                font_size=6.5,
+                col_widths=[
+                    0.09,
+                    0.1,
+                    0.04,
+                    0.065,
+                    0.065,
+                    0.06,
+                    0.06,
+                    0.08,
+                    0.08,
+                    0.06,
+                    0.06,
+                    0.08,
+                    0.055,
+                    0.06,
+                ],
+                notes=[
+                    "T0.1: worst settling time to 0.1 mm over the steps (— : not settled before "
+                    "the next change); OS: worst overshoot in % of the step (steps under "
+                    "0.5 mm not scored); mean |e|: mean absolute encoder error after the "
+                    "start-up transient (ellipse: after 8 s); I: magnitude of the commanded "
+                    "current vector (the amplifier limits it to 9 A on the rig twin); min "
+                    "margin: smallest R/(4 L4) of the FL transformation; step: median "
+                    "per-call time of an online controller."
+                ],
             )
         for twin in cmp.twins:
             for sc in scenarios:
@@ -215,21 +312,25 @@ def _tuning(c) -> str:
         return ": poles of the printed gains placed on the linearization at each set-point gap"
     if "weights" in d:
         w = d["weights"]
-        return (f": Bryson maxima vertical (e {w['vertical'].error * 1e3:g} mm, "
-                f"e' {w['vertical'].error_rate:g} m/s, 1 A), horizontal (e "
-                f"{w['horizontal'].error * 1e3:g} mm, e' {w['horizontal'].error_rate:g} m/s, 1 A)")
+        return (
+            f": Bryson maxima vertical (e {w['vertical'].error * 1e3:g} mm, "
+            f"e' {w['vertical'].error_rate:g} m/s, 1 A), horizontal (e "
+            f"{w['horizontal'].error * 1e3:g} mm, e' {w['horizontal'].error_rate:g} m/s, 1 A)"
+        )
     if "poles" in d and isinstance(d["poles"], dict):
         p = d["poles"]
         return f": triple poles {p['vertical'][0]:g} (vertical), {p['horizontal'][0]:g} (horizontal)"
     grid = getattr(c, "grid", None)
     if grid is not None:  # NMPC
         w = c.weights
-        return (f": real-time iteration, N = {grid.horizon} (first interval one sample, then "
-                f"{grid.interval_samples * grid.sample_time * 1e3:g} ms), Q = diag({w.gap:g}, "
-                f"{w.gap_rate:g}, {w.position:g}, {w.position_rate:g}), R = diag({w.i_q:g}, "
-                f"{w.i_d:g}) per second (1 mm of error costs as much as 1 A), current polytope "
-                f"inside {c.current_limit:g} A, {c.qp_solver} QP, disturbance observer for offset-"
-                f"free tracking, no reference preview{', JIT-compiled' if c.compiled else ''}")
+        return (
+            f": real-time iteration, N = {grid.horizon} (first interval one sample, then "
+            f"{grid.interval_samples * grid.sample_time * 1e3:g} ms), Q = diag({w.gap:g}, "
+            f"{w.gap_rate:g}, {w.position:g}, {w.position_rate:g}), R = diag({w.i_q:g}, "
+            f"{w.i_d:g}) per second (1 mm of error costs as much as 1 A), current polytope "
+            f"inside {c.current_limit:g} A, {c.qp_solver} QP, disturbance observer for offset-"
+            f"free tracking, no reference preview{', JIT-compiled' if c.compiled else ''}"
+        )
     return ""
 
 

@@ -37,9 +37,11 @@ def main() -> None:
             walls = [loop.run(scenario).wall_time for _ in range(3)]
             best = min(walls)
             n = round(scenario.duration / 2e-4)
-            print(f"{twin_name:5s} twin, {backend:3s}: 10 s at 5 kHz "
-                  f"in {best * 1e3:.0f} ms ({n / best / 1e6:.2f} M steps/s); first run incl. build "
-                  f"{first:.2f} s; instructions/step {loop.step_function.n_instructions()}")
+            print(
+                f"{twin_name:5s} twin, {backend:3s}: 10 s at 5 kHz "
+                f"in {best * 1e3:.0f} ms ({n / best / 1e6:.2f} M steps/s); first run incl. build "
+                f"{first:.2f} s; instructions/step {loop.step_function.n_instructions()}"
+            )
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark: diagnose a 60 s log at 1 kHz (the issue asks for under 30 s on this machine).
 
-    python bench/diagnose_speed.py
+python bench/diagnose_speed.py
 """
 
 from __future__ import annotations
@@ -29,8 +29,10 @@ def main() -> None:
         d = diagnose([log], model)
         runs.append(time.perf_counter() - t0)
     print(f"machine: {machine()}")
-    print(f"diagnose, 60 s at 1 kHz (rig twin, {len(d.effects)} effects found): "
-          f"best {min(runs):.2f} s, worst {max(runs):.2f} s")
+    print(
+        f"diagnose, 60 s at 1 kHz (rig twin, {len(d.effects)} effects found): "
+        f"best {min(runs):.2f} s, worst {max(runs):.2f} s"
+    )
     print("  stages (last run): " + ", ".join(f"{k} {v:.2f} s" for k, v in d.timings.items()))
 
 

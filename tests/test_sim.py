@@ -189,18 +189,20 @@ def test_commutation_ripple_and_cable_effects(model):
     L1 = float(model.L(20 * MM)[0])
     # commutation offset d: thrust from i_q cos d + i_d sin d
     d = 0.05
-    acc = np.asarray(RigTwin(model, TwinEffects(commutation=CommutationOffset(d)))
-                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    acc = np.asarray(
+        RigTwin(model, TwinEffects(commutation=CommutationOffset(d))).acceleration(x, [1.0, 0.5], [0, 0])
+    ).ravel()
     assert_allclose(acc[1], -L1 * (np.cos(d) + 0.5 * np.sin(d)), rtol=1e-12)
     # ripple: thrust scaled by 1 + a at the ripple's peak
-    acc = np.asarray(RigTwin(model, TwinEffects(ripple=ForceRipple(0.04, 19.05e-3)))
-                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
+    acc = np.asarray(
+        RigTwin(model, TwinEffects(ripple=ForceRipple(0.04, 19.05e-3))).acceleration(x, [1.0, 0.5], [0, 0])
+    ).ravel()
     assert_allclose(acc[1], base[1] * 1.04, rtol=1e-12)
     # cable: -k (x3 - neutral) / M_h
-    acc = np.asarray(RigTwin(model, TwinEffects(cable=CableForce(8.0, -20 * MM)))
-                     .acceleration(x, [1.0, 0.5], [0, 0])).ravel()
-    assert_allclose(acc[1] - base[1], -8.0 * (x[2] + 20 * MM) / model.params.mass_horizontal,
-                    rtol=1e-12)
+    acc = np.asarray(
+        RigTwin(model, TwinEffects(cable=CableForce(8.0, -20 * MM))).acceleration(x, [1.0, 0.5], [0, 0])
+    ).ravel()
+    assert_allclose(acc[1] - base[1], -8.0 * (x[2] + 20 * MM) / model.params.mass_horizontal, rtol=1e-12)
 
 
 @pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="no C compiler")
