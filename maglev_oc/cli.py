@@ -288,8 +288,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for a in diag.error_before:
         print(f"  held-out error {a}: {diag.error_before[a]:.4g} -> {diag.error_after[a]:.4g} m/s^2")
     for e in diag.effects:
-        pars = ", ".join(f"{k}={v.value:.4g}±{v.stderr:.2g} {v.unit}" for k, v in e.parameters.items())
-        print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {pars}")
+        print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {e.finding}")
+    for n in diag.not_separable:
+        print(f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}")
+    for u in diag.unexplained:
+        print(f"  unexplained: {u.description}")
     print(f"  wrote {args.json} ({diag.timings['total']:.1f} s)")
     if args.report:
         from maglev_oc.diagnose.feedback import compensation_study

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from maglev_oc.identify.uncertainty import (
+from maglev_oc.regression.covariance import (
     bartlett_long_run,
     correlation_from,
     frequencies_for,

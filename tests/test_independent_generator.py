@@ -9,31 +9,25 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # `pytest` puts tests/ on the path, not the repository root
-    sys.path.insert(0, str(ROOT))
-
-from tests.independent import core  # noqa: E402
-from tests.independent import effects as E  # noqa: E402
-from tests.independent.controller import K_H, K_V, OMEGA0, closed_loop_poles  # noqa: E402
-from tests.independent.generate import main as generate_main  # noqa: E402
-from tests.independent.logio import csv_text, write_log  # noqa: E402
-from tests.independent.physics import (  # noqa: E402
+from tests.independent import core
+from tests.independent import effects as E
+from tests.independent.controller import K_H, K_V, OMEGA0, closed_loop_poles
+from tests.independent.generate import main as generate_main
+from tests.independent.logio import csv_text, write_log
+from tests.independent.physics import (
     GEOMETRY,
     PAPERS_CONSTANTS,
     G,
     equilibrium_current,
     model_functions,
 )
-from tests.independent.sets import SET_NAMES, named_set  # noqa: E402
-from tests.independent.simulate import Rig, Scenario, build_params, simulate  # noqa: E402
+from tests.independent.sets import SET_NAMES, named_set
+from tests.independent.simulate import Rig, Scenario, build_params, simulate
 
 Q = 10e-6  # [m] encoder resolution (SPEC 4)
 SIGMA = 2e-6  # [m] encoder noise of the default rig

@@ -25,21 +25,34 @@ from maglev_oc.sim.scenarios import Scenario, paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
 
+def _compensable_coefficients(effect: Effect) -> np.ndarray:
+    """The effect's coefficients with its nuisance ones (a friction's share held while sticking)
+    set to zero: what a controller can feed forward."""
+    term = effect.candidate.term
+    return np.array(
+        [
+            0.0 if q in effect.candidate.nuisance else c
+            for q, c in zip(term.parameter_names, effect.coefficients, strict=True)
+        ]
+    )
+
+
 def state_only(effect: Effect) -> bool:
-    """Whether an effect depends on the state alone (not on the currents or their rates)."""
-    f = effect.candidate.features
+    """Whether an effect's compensable part depends on the state alone (not on the currents or
+    their rates)."""
     x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
-    out = f(x, u, du)
+    out = effect.candidate.term.acceleration(_compensable_coefficients(effect))(x, u, du)
     return not (ca.depends_on(out, u) or ca.depends_on(out, du))
 
 
 def effects_acceleration(effects: list[Effect], *, with_inputs: bool) -> ca.Function:
-    """Sum of the effects' accelerations: (x) -> acc, or (x, i) -> acc with ``with_inputs``
-    (current rates taken as zero)."""
+    """Sum of the effects' accelerations: (x) -> acc (their compensable parts), or (x, i) -> acc
+    with ``with_inputs`` (the whole effects, current rates taken as zero: a twin of the plant)."""
     x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
     acc = ca.SX.zeros(2, 1)
     for e in effects:
-        acc += e.candidate.acceleration(e.coefficients)(x, u, ca.SX.zeros(2, 1))
+        coef = e.coefficients if with_inputs else _compensable_coefficients(e)
+        acc += e.candidate.term.acceleration(coef)(x, u, ca.SX.zeros(2, 1))
     if with_inputs:
         return ca.Function("effects", [x, u], [acc], ["x", "i"], ["acc"])
     return ca.Function("effects", [x], [acc], ["x"], ["acc"])

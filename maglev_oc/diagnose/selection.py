@@ -1,138 +1,464 @@
-"""Forward stepwise selection of effects by held-out error, with a complexity penalty, a
-significance test and a block-bootstrap confidence.
+"""Forward selection of effects: each candidate judged in a joint fit with the base constants.
 
-Gain of adding a candidate c to the current set S: the relative drop of the held-out
-mean-square residual per axis, averaged over the two axes (each axis counts alike whatever its
-noise level), less ``penalty`` per coefficient:
+At each step every remaining candidate c is fitted jointly with the base constants and the
+effects already chosen (bias-compensated least squares on the training blocks,
+:mod:`maglev_oc.regression.solve`) and judged in this order:
 
-    gain(c) = 1/2 sum_axis [1 - MSE_holdout(base + S + c, axis) / MSE_holdout(base + S, axis)]
-              - penalty * k_c
+1. **Held-out improvement.** The relative drop of the held-out mean-square residual on the axes
+   c acts on (``gain``), and its significance (:func:`holdout_significance`): the mean log-ratio
+   of the residual's sum of squares before and after, over 0.5 s blocks, against its long-run
+   standard error (averaged periodogram at zero frequency — the residuals of filtered,
+   differentiated data are strongly coloured, so a count of samples would overstate the
+   evidence by orders of magnitude). Needed: gain >= ``min_gain`` and z >= ``min_z``.
+2. **Significance on the training data.** A Wald test of c's coefficients with the long-run
+   covariance at level ``alpha``.
+3. **Physical size.** Adding c changes the model's prediction on the held-out block by at least
+   ``min_effect`` RMS on one of its axes (the net change, not c's own columns, which collinearity
+   with the constants can make large while the prediction hardly moves). 2.25e-3 m/s^2 is the
+   disturbance the regulated stage
+   (closed-loop bandwidth about 15 rad/s) turns into the encoder's 10 um: a / omega_c^2 = 10 um.
+4. **Separability.** c must be separable from the base constants and the chosen effects on this
+   log: the variance inflation of its coefficients (VIF, from the normal matrix) at most
+   ``max_vif``, and no correlation of its estimate with another parameter's above
+   ``max_correlation``. A confounded candidate goes to ``not_separable`` with what it is
+   confounded with; it is never claimed (a constant vertical force, for example, is nearly
+   collinear with a common scale of the vertical magnetic force, which near equilibrium always
+   carries the weight).
+5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnose.library`).
+6. **Specificity.** c must explain the held-out data about as well as or better than a generic
+   smooth function of one state variable with as many coefficients, on its axes
+   (:func:`~maglev_oc.diagnose.library.smooth_probes`: a constant and Legendre polynomials of the
+   gap, the position or a velocity): a rival that explains more by more than ``rival_margin``
+   means the data show a dependence on that variable, not this effect's shape, and the residual
+   goes to ``unexplained`` instead of to the nearest candidate.
 
-At each step the candidate with the largest gain is added if
-
-* the gain exceeds ``min_gain`` (default 0.01: one percent of what is left of the held-out
-  error on average, two percent on a single axis), and
-* its coefficients are jointly significant on the training data: a Wald test with the block
-  (batch-means) covariance at ``alpha`` (default 1e-4), and
-* it matters physically: its predicted acceleration has an RMS of at least ``min_effect``
-  on the held-out block on some axis. The default 2.25e-3 m/s^2 is the disturbance that the
-  regulated stage (closed-loop bandwidth about 15 rad/s) turns into the encoder's 10 um:
-  a / omega_c^2 = 10 um. Smaller effects exist in every log (the zero-order hold alone delays
-  the currents by half a sample) but nothing a user could see or compensate.
-
-It stops when no candidate passes or after ``max_effects``. The confidence of each choice is the
-share of block-bootstrap resamples of the training data in which the same candidate wins that
-step (given the earlier choices).
+Among the candidates that pass all six the one with the largest gain is added; the selection
+stops when none passes or after ``max_effects``. The confidence of each choice is the share of
+block-bootstrap resamples of the training blocks in which the same candidate has the largest
+held-out gain at that step (given the earlier choices).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2
 
-from maglev_oc.diagnose.regression import (
-    Design,
-    SubsetFit,
-    contribution_rms,
-    fit_subset,
-    training_sums,
+from maglev_oc.diagnose.library import Candidate
+from maglev_oc.regression.base import AXIS_INDEX, CONSTANT_NAMES
+from maglev_oc.regression.covariance import DEFAULT_BAND, frequencies_for, periodogram_long_run
+from maglev_oc.regression.design import Design
+from maglev_oc.regression.solve import SubsetFit, fit_subset
+from maglev_oc.regression.terms import Estimate
+
+__all__ = ["Judgement", "Selection", "SelectionSettings", "fitted_constants", "judge", "select"]
+
+VERDICTS = (
+    "accepted",
+    "passes",
+    "not significant",
+    "too small",
+    "not separable",
+    "implausible",
+    "not specific",
 )
 
 
 @dataclass(frozen=True)
-class Step:
-    """One accepted (or the first rejected) step of the selection."""
+class SelectionSettings:
+    """Thresholds of the selection (see the module doc for each one's reason)."""
+
+    min_gain: float = 0.005
+    min_z: float = 3.0
+    min_z_strong: float = 2.0
+    strong_wald: float = 10.0
+    alpha: float = 1e-4
+    min_effect: float = 2.25e-3
+    max_vif: float = 100.0
+    max_correlation: float = 0.99
+    parameter_penalty: float = 0.002
+    rival_margin: float = 0.05
+    max_effects: int = 4
+    bootstrap: int = 30
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One candidate judged at one step of the selection."""
 
     name: str
-    gain: float  # relative drop of the held-out error (see module doc)
-    wald: float  # chi^2 statistic of the coefficients
+    verdict: str
+    reason: str
+    gain: float  # relative drop of the held-out MSE on its axes
+    gain_axes: np.ndarray  # (2,) per axis (NaN where it does not act or the axis is locked)
+    z: float  # significance of the held-out drop (long-run standard error)
+    wald: float
     wald_threshold: float
-    holdout_rms: np.ndarray  # (2,) after adding it [m/s^2]
-    contribution_rms: np.ndarray  # (2,) RMS of its predicted acceleration, held out [m/s^2]
-    confidence: float  # bootstrap share choosing it
-    runner_up: str
-    runner_up_gain: float
-    accepted: bool
+    vif: float
+    confounded_with: tuple[str, ...]
+    contribution_rms: np.ndarray  # (2,) held-out RMS of its acceleration [m/s^2]
+    physical: dict[str, Estimate] = field(repr=False)
+    fit: SubsetFit = field(repr=False)
+
+    @property
+    def significant(self) -> bool:
+        return self.verdict not in ("not significant", "too small")
+
+
+@dataclass(frozen=True)
+class Step:
+    chosen: str
+    confidence: float
+    judgements: dict[str, Judgement]
 
 
 @dataclass(frozen=True)
 class Selection:
     steps: list[Step]
-    ranking: list[tuple[str, float]]  # first-step gains of every candidate, best first
     base: SubsetFit
     final: SubsetFit
+    last: dict[str, Judgement]  # every candidate's judgement at the last step it was judged
 
     @property
     def selected(self) -> list[str]:
-        return [s.name for s in self.steps if s.accepted]
+        return [s.chosen for s in self.steps]
+
+    @property
+    def ranking(self) -> list[tuple[str, float]]:
+        """First-step gains of every candidate, best first."""
+        if not self.steps and not self.last:
+            return []
+        first = self.steps[0].judgements if self.steps else self.last
+        return sorted(((n, j.gain) for n, j in first.items()), key=lambda t: -t[1])
 
 
-def _gains(design: Design, chosen: list[str], pool: Sequence[str], current: SubsetFit,
-           penalty: float, sums=None) -> dict[str, float]:
-    ref = np.maximum(current.holdout_rms**2, 1e-30)
-    out = {}
-    for name in pool:
-        fit = fit_subset(design, ["base", *chosen, name], sums=sums, with_covariance=False)
-        k = design.groups[name].size
-        drop = (1 - fit.holdout_rms**2 / ref)[design.moving]
-        out[name] = float(np.mean(drop)) - penalty * k
+def _axes(candidate: Candidate, moving: np.ndarray) -> np.ndarray:
+    axes = [0, 1] if candidate.axis == "both" else [AXIS_INDEX[candidate.axis]]
+    return np.array([a for a in axes if moving[a]], dtype=int)
+
+
+def _holdout_residual(design: Design, fit: SubsetFit) -> np.ndarray:
+    ho = design.holdout
+    return design.target[:, ho] - np.einsum("p,pan->an", fit.coef, design.columns[fit.index][:, :, ho])
+
+
+def holdout_significance(
+    design: Design, r0: np.ndarray, r1: np.ndarray, axes: np.ndarray
+) -> tuple[float, float]:
+    """(gain, z) of replacing held-out residuals r0 by r1 (2, n_hold) on ``axes``.
+
+    gain: relative drop of the held-out mean-square residual, averaged over the axes.
+    z: the mean over 0.5 s blocks of the log-ratio log(SS0_b / SS1_b) (sums of squares on the axes,
+    each axis scaled by its overall MSE0) divided by its long-run standard error (the block series'
+    averaged periodogram at zero frequency, per log). Log-ratios per block make the test
+    indifferent to where in the log the error is large: an effect that matters only at small gaps
+    improves few samples by much, and a plain mean of squared-error differences would be ruled
+    by those few blocks.
+    """
+    if axes.size == 0:
+        return 0.0, 0.0
+    mse0 = np.maximum(np.mean(r0[axes] ** 2, axis=1), 1e-300)
+    gain = float(np.mean(1.0 - np.mean(r1[axes] ** 2, axis=1) / mse0))
+    e0 = np.sum(r0[axes] ** 2 / mse0[:, None], axis=0)
+    e1 = np.sum(r1[axes] ** 2 / mse0[:, None], axis=0)
+    seg = design.prepared.segment[design.holdout]
+    size = max(1, round(design.block_seconds / design.prepared.sample_time))
+    ratios, logs = [], []
+    for s in np.unique(seg):
+        idx = np.flatnonzero(seg == s)
+        nb = idx.size // size
+        for b in range(nb):
+            sel = idx[b * size : (b + 1) * size]
+            ratios.append(np.log(max(e0[sel].sum(), 1e-300) / max(e1[sel].sum(), 1e-300)))
+            logs.append(s)
+    ratios, logs = np.array(ratios), np.array(logs)
+    if ratios.size < 2:
+        return gain, 0.0
+    mean = float(ratios.mean())
+    total = 0.0
+    for s in np.unique(logs):
+        x = ratios[logs == s] - mean
+        if x.size < 4:
+            total += float(np.sum(x) ** 2)
+            continue
+        m = frequencies_for(x.size, design.block_seconds, DEFAULT_BAND)
+        total += float(periodogram_long_run(x[None, :], m)[0, 0])
+    se = float(np.sqrt(max(total, 0.0))) / ratios.size
+    return gain, (mean / se if se > 0 else 0.0)
+
+
+def judge(
+    design: Design,
+    cand: Candidate,
+    current: list[str],
+    cur_fit: SubsetFit,
+    r0: np.ndarray,
+    mse0: np.ndarray,
+    settings: SelectionSettings,
+    rivals: dict[tuple[str, int], tuple[float, str]] | None = None,
+) -> Judgement:
+    axes = _axes(cand, design.moving)
+    fit = fit_subset(design, [*current, cand.name])
+    r1 = _holdout_residual(design, fit)
+    mse1 = np.mean(r1**2, axis=1)
+    gain_axes = np.full(2, np.nan)
+    gain_axes[axes] = 1.0 - mse1[axes] / mse0[axes]
+    _, z = holdout_significance(design, r0, r1, axes)
+    # the gain counts every moving axis alike, so an effect on both axes is not diluted
+    moving = np.flatnonzero(design.moving)
+    gain = float(np.mean(1.0 - mse1[moving] / mse0[moving]))
+    coef, cov = fit.group(design, cand.name)
+    try:
+        wald = float(coef @ np.linalg.solve(cov, coef))
+    except np.linalg.LinAlgError:
+        wald = 0.0
+    threshold = float(chi2.isf(settings.alpha, coef.size))
+    # its size: how much adding it changes the model's prediction on the held-out block (not
+    # the RMS of its own columns, which collinearity with the constants can make large)
+    contrib = np.sqrt(np.mean((r0 - r1) ** 2, axis=1))
+    # separability from the normal matrix of the joint fit
+    vif, partners = _separability(design, cand, fit, settings)
+    constants = fitted_constants(fit)
+    physical = cand.term.physical_parameters(coef, cov, constants)
+    verdict, reason = "passes", ""
+    if fit.compensation < cur_fit.compensation:
+        verdict = "not significant"
+        reason = (
+            "its columns are dominated by the errors of the logged currents (not identifiable from this log)"
+        )
+    elif not (
+        gain >= settings.min_gain
+        and (z >= settings.min_z or (z >= settings.min_z_strong and wald >= settings.strong_wald * threshold))
+    ):
+        verdict = "not significant"
+        reason = (
+            f"held-out error falls by {gain:.1%} (z = {z:.1f}; needs {settings.min_gain:.1%} and "
+            f"z >= {settings.min_z:g})"
+        )
+    elif wald < threshold:
+        verdict, reason = (
+            "not significant",
+            f"Wald {wald:.3g} below {threshold:.3g} (alpha {settings.alpha:g})",
+        )
+    elif axes.size == 0 or np.max(contrib[axes]) < settings.min_effect:
+        verdict = "too small"
+        reason = (
+            f"its acceleration is {np.max(contrib):.2g} m/s^2 RMS, below the {settings.min_effect:g} m/s^2 "
+            "that the regulated stage would turn into one encoder count"
+        )
+    elif vif > settings.max_vif or partners:
+        verdict = "not separable"
+        what = ", ".join(partners) if partners else "the base constants"
+        reason = f"confounded with {what} on this log (variance inflation {vif:.3g})"
+    else:
+        why = cand.plausible(physical)
+        if why:
+            verdict, reason = "implausible", why
+        elif rivals and (cand.axis, _reported(cand)) in rivals:
+            best_gain, best_var = rivals[(cand.axis, _reported(cand))]
+            if best_gain > gain + settings.rival_margin:
+                verdict = "not specific"
+                reason = (
+                    f"a smooth function of the {best_var.replace('_', ' ')} explains more of the "
+                    "held-out error "
+                    f"({best_gain:.1%} against {gain:.1%}): the data show a dependence on that variable, not "
+                    "this effect's shape"
+                )
+    return Judgement(
+        cand.name,
+        verdict,
+        reason,
+        gain,
+        gain_axes,
+        z,
+        wald,
+        threshold,
+        vif,
+        partners or (("C1..C4",) if verdict == "not separable" else ()),
+        contrib,
+        physical,
+        fit,
+    )
+
+
+def _separability(
+    design: Design, cand: Candidate, fit: SubsetFit, settings: SelectionSettings
+) -> tuple[float, tuple[str, ...]]:
+    """(group variance inflation, confounded partners) of a candidate in a joint fit.
+
+    The variance inflation is 1 / (1 - rho^2), rho the largest canonical correlation between the
+    span of the candidate's reported columns and the span of everything else in the fit (the
+    base parameters and the other effects; the candidate's own nuisance columns are left out of
+    both). Partners: parameters whose estimate correlates with one of the candidate's by more
+    than ``max_correlation``.
+    """
+    idx = fit.index
+    g = design.gram[:, idx][:, :, idx].sum(axis=0) - fit.compensation * design.noise[:, idx][:, :, idx].sum(
+        axis=0
+    )
+    reported = [q for q in cand.term.parameter_names if q not in cand.nuisance]
+    own_cols = design.groups[cand.name][[cand.term.parameter_names.index(q) for q in reported]]
+    own = np.isin(idx, own_cols)
+    others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0)
+    try:
+        g_cc, g_oo, g_co = g[np.ix_(own, own)], g[np.ix_(others, others)], g[np.ix_(own, others)]
+        m = np.linalg.solve(g_cc, g_co @ np.linalg.solve(g_oo, g_co.T))
+        rho2 = float(np.clip(np.max(np.real(np.linalg.eigvals(m))), 0.0, 1.0)) if others.any() else 0.0
+        vif = 1.0 / max(1.0 - rho2, 1e-300)
+        live = np.diag(g) > 0
+        full = np.full(g.shape, np.nan)
+        full[np.ix_(live, live)] = np.linalg.inv(g[np.ix_(live, live)])
+        sd = np.sqrt(np.abs(np.diag(full)))
+        corr = full / np.outer(sd, sd)
+    except np.linalg.LinAlgError:
+        return np.inf, ("the base constants",)
+    partners = [
+        _owner(design, idx[j])
+        for j in np.flatnonzero(others)
+        if np.nanmax(np.abs(corr[own, j]), initial=0.0) > settings.max_correlation
+    ]
+    return vif, tuple(dict.fromkeys(partners))
+
+
+def _owner(design: Design, column: int) -> str:
+    """The parameter name of a base column, or the effect a term column belongs to."""
+    for name, cols in design.groups.items():
+        if column in cols:
+            return design.names[column] if name == "base" else name
+    return design.names[column]
+
+
+def _rival_columns(design: Design, probes: dict[tuple[str, str], str], axis: str, var: str) -> list[int]:
+    """The columns of a probe in the order a rival takes them: a constant first (horizontal), then
+    Legendre orders 1, 2, ..."""
+    name = probes.get((axis, var))
+    if name is None or name not in design.groups:
+        return []
+    cols = list(design.groups[name])
+    return cols[-1:] + cols[:-1] if axis == "horizontal" else cols
+
+
+def _rival_gains(
+    design: Design, current: list[str], mse0: np.ndarray, probes: dict[tuple[str, str], str], sizes: set
+) -> dict[tuple[str, int], tuple[float, str]]:
+    """The best generic rival of each size: (axes of a candidate, number of coefficients k) ->
+    (held-out gain, variable). A rival has as many coefficients as the candidate it rivals (an
+    equal-complexity comparison): the first k columns of one variable's probe on the candidate's
+    axis, or for an effect on both axes any split of k between the two axes' probes."""
+    moving = np.flatnonzero(design.moving)
+    variables = sorted({var for _, var in probes})
+    out: dict[tuple[str, int], tuple[float, str]] = {}
+    for axes_key, k in sizes:
+        best = (-np.inf, "")
+        for var in variables:
+            if axes_key == "both":
+                splits = [(kv, k - kv) for kv in range(k + 1)]
+            else:
+                splits = [(k, 0)] if axes_key == "vertical" else [(0, k)]
+            for kv, kh in splits:
+                cv = _rival_columns(design, probes, "vertical", var)[:kv]
+                ch = _rival_columns(design, probes, "horizontal", var)[:kh]
+                if len(cv) < kv or len(ch) < kh:
+                    continue
+                f = fit_subset(design, current, covariance=False, extra=[*cv, *ch])
+                r = _holdout_residual(design, f)
+                gain = float(np.mean(1.0 - np.mean(r[moving] ** 2, axis=1) / mse0[moving]))
+                if gain > best[0]:
+                    best = (gain, var)
+        out[(axes_key, k)] = best
     return out
 
 
 def select(
     design: Design,
-    candidates: Sequence[str],
-    *,
-    min_gain: float = 0.01,
-    penalty: float = 0.002,
-    alpha: float = 1e-4,
-    max_effects: int = 4,
-    min_effect: float = 2.25e-3,
-    bootstrap: int = 40,
-    seed: int = 0,
+    candidates: Sequence[Candidate],
+    settings: SelectionSettings | None = None,
+    probes: dict[tuple[str, str], str] | None = None,
 ) -> Selection:
-    """Forward stepwise selection over the candidate names (groups of ``design``)."""
-    rng = np.random.default_rng(seed)
-    n_blocks = design.train_gram.shape[0]
-    base = fit_subset(design, ["base"])
-    chosen: list[str] = []
-    pool = list(candidates)
-    current = base
+    """Forward selection over ``candidates`` (groups of ``design``); ``probes``: (axis, variable) ->
+    group name of the generic smooth rivals in the design (see :func:`_rival_gains`)."""
+    settings = settings or SelectionSettings()
+    rng = np.random.default_rng(settings.seed)
+    n_blocks = design.gram.shape[0]
+    resamples = [rng.integers(0, n_blocks, n_blocks) for _ in range(settings.bootstrap)]
+    by_name = {c.name: c for c in candidates}
+    pool = [c.name for c in candidates if _axes(c, design.moving).size]
+    current = ["base"]
+    base = fit_subset(design, current)
+    cur_fit = base
     steps: list[Step] = []
-    ranking: list[tuple[str, float]] = []
-    resamples = [training_sums(design, rng.integers(0, n_blocks, n_blocks)) for _ in range(bootstrap)]
-    while pool and len(chosen) < max_effects:
-        gains = _gains(design, chosen, pool, current, penalty)
-        order = sorted(gains, key=gains.get, reverse=True)
-        if not chosen:
-            ranking = [(n, gains[n]) for n in order]
-        best = order[0]
-        runner = order[1] if len(order) > 1 else ""
-        fit = fit_subset(design, ["base", *chosen, best])
-        coef, cov = fit.coefficients(design, best)
-        try:
-            wald = float(coef @ np.linalg.solve(cov, coef))
-        except np.linalg.LinAlgError:
-            wald = 0.0
-        threshold = float(chi2.ppf(1 - alpha, coef.size))
-        contribution = contribution_rms(design, fit, best)
-        accepted = bool(gains[best] > min_gain and wald > threshold
-                        and contribution[design.moving].max() >= min_effect)
-        votes = 0
-        for sums in resamples:
-            current_b = fit_subset(design, ["base", *chosen], sums=sums, with_covariance=False)
-            g = _gains(design, chosen, pool, current_b, penalty, sums)
-            votes += max(g, key=g.get) == best
-        steps.append(Step(best, gains[best], wald, threshold, fit.holdout_rms, contribution,
-                          votes / max(len(resamples), 1), runner,
-                          gains.get(runner, float("nan")), accepted))
-        if not accepted:
+    last: dict[str, Judgement] = {}
+    while pool and len(current) - 1 < settings.max_effects:
+        r0 = _holdout_residual(design, cur_fit)
+        mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+        sizes = {(by_name[n].axis, _reported(by_name[n])) for n in pool}
+        rivals = _rival_gains(design, current, mse0, probes, sizes) if probes else None
+        judged = {n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals) for n in pool}
+        last.update(judged)
+        passing = [j for j in judged.values() if j.verdict == "passes"]
+        if not passing:
             break
-        chosen.append(best)
-        pool.remove(best)
-        current = fit
-    final = fit_subset(design, ["base", *chosen])
-    return Selection(steps, ranking, base, final)
+        # parsimony: a candidate that only adds coefficients to a nested, simpler one (a spring
+        # with zero stiffness is a constant force) must beat it by more than the penalty
+        best = max(passing, key=lambda j: j.gain - settings.parameter_penalty * _reported(by_name[j.name]))
+        # confidence: among the candidates that pass at this step, the share of block-bootstrap
+        # resamples of the training data in which the same one ranks first
+        contenders = [j.name for j in passing]
+        moving = np.flatnonzero(design.moving)
+        votes = 0
+        for blocks in resamples if len(contenders) > 1 else []:
+            fb = fit_subset(design, current, blocks=blocks, covariance=False)
+            rb = _holdout_residual(design, fb)
+            mb = np.maximum(np.mean(rb**2, axis=1), 1e-30)
+            score = {}
+            for n in contenders:
+                f = fit_subset(design, [*current, n], blocks=blocks, covariance=False)
+                r1 = _holdout_residual(design, f)
+                gain = float(np.mean(1 - np.mean(r1[moving] ** 2, axis=1) / mb[moving]))
+                score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
+            votes += max(score, key=score.get) == best.name
+        if len(contenders) == 1:
+            votes = len(resamples)
+        judged[best.name] = _accepted(best)
+        last[best.name] = judged[best.name]
+        steps.append(Step(best.name, votes / max(len(resamples), 1), judged))
+        current.append(best.name)
+        pool.remove(best.name)
+        cur_fit = best.fit
+    # backward: an effect chosen early may be explained by later ones (a constant force by a
+    # commutation offset that also makes one); drop any that no longer passes given the others
+    dropped = True
+    while dropped and len(current) > 2:
+        dropped = False
+        for name in current[1:]:
+            others = [c for c in current if c != name]
+            fit_o = fit_subset(design, others, covariance=False)
+            r0 = _holdout_residual(design, fit_o)
+            mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+            sizes = {(by_name[name].axis, _reported(by_name[name]))}
+            rivals = _rival_gains(design, others, mse0, probes, sizes) if probes else None
+            j = judge(design, by_name[name], others, fit_o, r0, mse0, settings, rivals)
+            if j.verdict != "passes":
+                current = others
+                steps = [st for st in steps if st.chosen != name]
+                last[name] = dataclasses.replace(j, reason=f"dropped after the later choices: {j.reason}")
+                dropped = True
+                break
+    return Selection(steps, base, fit_subset(design, current), last)
+
+
+def fitted_constants(fit: SubsetFit) -> dict[str, float]:
+    """The fit's constants C1..C4 that were estimated (positive: a locked axis's is not)."""
+    return {n: fit.value(n) for n in CONSTANT_NAMES if n in fit.names and fit.value(n) > 0}
+
+
+def _reported(cand: Candidate) -> int:
+    return sum(q not in cand.nuisance for q in cand.term.parameter_names)
+
+
+def _accepted(j: Judgement) -> Judgement:
+    return dataclasses.replace(j, verdict="accepted")

@@ -100,7 +100,7 @@ def trace(
 ) -> Trace:
     """Analyse ``residual`` (2, n) at states ``x`` (4, n) and current rates ``du`` (2, n)."""
     span = float(np.ptp(x[2]))
-    hi = max(min(0.75 * span, 0.15), 0.01)
+    hi = max(min(1.5 * span, 0.15), 0.01)
     periods = np.geomspace(4e-3, hi, 300)
     spec = spatial_periodogram(x[2], residual, periods)
     mp = motor_periods(params)

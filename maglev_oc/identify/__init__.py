@@ -3,12 +3,12 @@ verification procedures (000 Sec. V, 002 Sec. 5).
 
 Modules
 -------
-terms            AccelerationTerm: extra accelerations fitted jointly with the constants
+(terms: AccelerationTerm lives in maglev_oc.regression, the layer identify and diagnose share)
 layout           which parameters a fit estimates; the model's accelerations as a function of them
 equation_error   filtered equation-error NLS (linear in C; exact Jacobians otherwise)
 output_error     multiple-shooting output-error NLS (constrained Gauss-Newton)
 npfsi            the reduced-order NPFSI estimator (000 eq. (3), 002 sidebar)
-uncertainty      long-run (HAC) covariance of estimates from autocorrelated residuals
+(covariance: maglev_oc.regression.covariance)
 result           FitResult, NpfsiResult
 verification     parabolas vs NPFSI, equilibrium currents, the cogging procedure
 experiments      twin runs that produce the logs of the papers' experiments
@@ -21,7 +21,7 @@ from maglev_oc.identify.npfsi import NpfsiEstimator, npfsi
 from maglev_oc.identify.output_error import MultipleShooting, fit_output_error
 from maglev_oc.identify.pipeline import IdentificationOutcome, identify, load_logs
 from maglev_oc.identify.result import FitResult, NpfsiResult
-from maglev_oc.identify.terms import AccelerationTerm
+from maglev_oc.regression.terms import AccelerationTerm
 
 __all__ = [
     "AccelerationTerm",

@@ -1,36 +1,30 @@
 """Equation-error fit: the measured accelerations against the model's, linear in C1..C4.
 
 For every sample of a log, eq. (2) of paper 000 says (x2', x4') = Phi(x, u) C + b (+ terms).
-The gap and position are measured; their second derivatives are estimated with the zero-phase
-Savitzky-Golay differentiator of :mod:`maglev_oc.estimation.differentiate` (the observers lag,
-and a lag between the acceleration and the regressors taken at the same instant biases the
-constants; see that module). The SG acceleration is a linear filter of the true acceleration,
-a_SG = F[x''] with F = g * [1, 10, 1]/12, where g is the SG second-derivative kernel divided
-by the second difference (exact: the SG kernel annihilates constants and ramps) and [1, 10, 1]/12
-is the second difference's own smoothing of x'' (exact for quadratics between samples). So the
-model side is filtered with the same F:
+The gap and position are measured; their second derivatives come from the zero-phase
+Savitzky-Golay differentiator, and every model column passes through the filter F that the
+differentiator applies to the true acceleration, so the filtered equation stays exact:
 
     F[a_measured]  =  F[Phi(x, u)] C + F[b] + F[terms]      (filtered equation error)
 
-which keeps the equation exact: the currents' and the gap's high-frequency content does not
-leak into the comparison unfiltered. Positions and velocities inside Phi are the SG estimates
-(the 10 um quantization steps averaged out).
+All of it — data preparation, the filter, the logged currents' errors (errors in variables,
+removed from the normal equations), the block Gram matrices, the solver and the covariance — is
+the project's one regression layer, :mod:`maglev_oc.regression`, which the diagnosis uses too.
+This module is the identification's front end to it: which parameters, which samples, and a
+:class:`~maglev_oc.identify.result.FitResult`.
 
-When the accelerations are affine in the estimated parameters (constants and linear terms,
-no gap offset) the fit is one linear least-squares solve (exact). Otherwise a Levenberg-
-Marquardt iteration runs with the exact Jacobian from CasADi, started from the constants'
-linear solution (5-10 iterations on the twin). The two axes are weighted by the inverse RMS
-of their residuals after a first, unweighted pass. Standard errors come from the long-run
-covariance of the estimate's influence (:mod:`maglev_oc.identify.uncertainty`): filtered
-residuals are correlated, so the plain s^2 (J'J)^-1, which assumes independent samples, is no
-guide (it is reported beside).
+When the accelerations are affine in the estimated parameters (constants and linear terms, no
+gap offset) the fit is one linear solve (exact). Otherwise Gauss-Newton iterates on the exact
+Jacobian (:func:`~maglev_oc.regression.solve.fit_nonlinear`), started from the model's constants.
+The two axes are weighted by the inverse RMS of their residuals after a first, unweighted pass.
 
-Commanded vs. applied currents: logs carry the commands (SPEC 2). The amplifiers follow them
-with a first-order lag (1 kHz bandwidth, 0.16 ms) and the 5 kHz loop holds each command for
-0.2 ms, together about a 0.26 ms delay. ``input_delay`` shifts the logged currents by a given
-delay (linear interpolation) before they enter Phi; the default 0 leaves them as logged. On the
-twin (60 s logs) a 0.26 ms delay changes C4 by 0.05-0.07 % and C1..C3 by less than 0.005 %,
-below their standard errors (0.2-0.3 % and 0.003-0.015 %), so the commands are used as logged.
+Band: 8 Hz (:data:`DEFAULT_BANDWIDTH`). Both sides are filtered by the same F, so the band only
+selects which part of the spectrum the fit uses: the sum-of-sines excitation (up to 3 Hz) and the
+regulators' poles (up to 9 Hz) pass; the band where the differentiated quantization noise (rising
+as f^4) and its echo in the closed-loop currents dominate is left out.
+
+Commanded vs. applied currents: logs carry the commands (SPEC 2). ``input_delay`` shifts the
+logged currents by a given delay (linear interpolation) before they enter Phi; default 0.
 """
 
 from __future__ import annotations
@@ -38,54 +32,32 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
-from scipy.ndimage import convolve1d
-from scipy.signal import savgol_coeffs
 
 from maglev_oc.data.logs import Log
-from maglev_oc.estimation.differentiate import SavitzkyGolay, differentiate_log
-from maglev_oc.identify.layout import CONSTANT_NAMES, ParameterLayout
-from maglev_oc.identify.result import AXIS_NAMES, FitResult
-from maglev_oc.identify.terms import AccelerationTerm
-from maglev_oc.identify.uncertainty import DEFAULT_BAND, correlation_from, long_run_covariance
+from maglev_oc.estimation.differentiate import SavitzkyGolay
+from maglev_oc.identify.result import FitResult
 from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.base import (
+    AXIS_NAMES,
+    CONSTANT_NAMES,
+    GAP_OFFSET,
+    GAP_OFFSET_BOUND,
+    GAP_OFFSET_SCALE,
+)
+from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from
+from maglev_oc.regression.data import as_log_list, delayed_inputs, prepare
+from maglev_oc.regression.design import Design, build_design
+from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
+from maglev_oc.regression.terms import AccelerationTerm
+
+__all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error", "sample_masks"]
 
 DEFAULT_BANDWIDTH = 8.0
-"""[Hz] Band of the Savitzky-Golay differentiator for identification. Both sides of the
-equation are filtered by the same F, so the band only selects which part of the spectrum the
-fit uses, not an approximation: 8 Hz keeps the sum-of-sines excitation (up to 3 Hz) and the PID
-loops' poles (up to 5 Hz) and drops the band where the differentiated quantization noise
-(rising as f^4) and its echo in the closed-loop currents dominate. On the twin (20 s logs, six
-seeds) the closed-loop correlation between that noise and u1 biases C1 by +0.047 % at 20 Hz
-and +0.002 % at 8 Hz, and the scatter of C2..C4 is 30-40 % smaller."""
+"""[Hz] Band of the Savitzky-Golay differentiator for identification (see the module doc)."""
 
 SampleSpec = slice | tuple[int, int] | np.ndarray | None
-
-
-def matching_kernel(differentiator: SavitzkyGolay) -> np.ndarray:
-    """The filter F with SG acceleration = F[true acceleration] (symmetric, unit DC gain)."""
-    sg = differentiator
-    h2 = savgol_coeffs(sg.acceleration_window, sg.polyorder, deriv=2, delta=sg.sample_time, use="conv")
-    g, remainder = np.polydiv(h2, np.array([1.0, -2.0, 1.0]) / sg.sample_time**2)
-    if np.max(np.abs(remainder)) > 1e-6 * np.max(np.abs(h2)):
-        raise RuntimeError("the SG second-derivative kernel is not divisible by the second difference")
-    kernel = np.convolve(g, [1 / 12, 10 / 12, 1 / 12])
-    return kernel / kernel.sum()
-
-
-def as_log_list(logs: Log | Sequence[Log]) -> list[Log]:
-    if isinstance(logs, Log):
-        return [logs]
-    out = list(logs)
-    if not out:
-        raise ValueError("no logs given")
-    for log in out:
-        if not isinstance(log, Log):
-            raise TypeError(f"expected Log objects, got {type(log).__name__}")
-    return out
 
 
 def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]) -> list[np.ndarray]:
@@ -135,31 +107,13 @@ def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]
     return masks
 
 
-def delayed_inputs(log: Log, delay: float) -> np.ndarray:
-    """The logged currents shifted later by ``delay`` [s] (linear interpolation, held at the start)."""
-    if delay == 0:
-        return np.asarray(log.u, dtype=float)
-    return np.vstack([np.interp(log.t - delay, log.t, row) for row in log.u])
-
-
-@dataclass(frozen=True, eq=False)
-class _Prepared:
-    """One log, differentiated and ready: SG states, currents, filtered measured accelerations."""
-
-    x: np.ndarray  # (4, n) SG position / velocity estimates
-    u: np.ndarray  # (2, n)
-    acc: np.ndarray  # (2, n) SG accelerations (= F[true])
-    valid: np.ndarray  # (n,) bool, away from the filters' edges
-    source: str
-
-
 class EquationError:
     """An equation-error problem prepared once, fitted on any subset of samples.
 
     Parameters
     ----------
     logs : Log or sequence of Log
-        Logs at one sampling rate (x2, x4 need not be logged).
+        Logs at one sampling rate (x2, x4 need not be logged; logs above 1 kHz are reduced).
     model : StageModel
         Geometry, and the values of constants that are not estimated (and initial guesses).
     estimate : sequence of str
@@ -169,7 +123,10 @@ class EquationError:
     differentiator : SavitzkyGolay, optional
         Default ``SavitzkyGolay(sample_time, bandwidth=8.0)`` (``DEFAULT_BANDWIDTH``, polyorder 5).
     input_delay : float
-        [s] Delay applied to the logged currents (default 0; see the module docstring).
+        [s] Delay applied to the logged currents (default 0).
+    logging_error : bool
+        Remove the logged currents' errors from the normal equations (default True; see
+        :mod:`maglev_oc.regression.data`).
 
     Use :meth:`fit` (any subset of samples, e.g. with a block held out) and :meth:`residuals`
     (on every valid sample, for held-out errors).
@@ -184,13 +141,21 @@ class EquationError:
         terms: Sequence[AccelerationTerm] = (),
         differentiator: SavitzkyGolay | None = None,
         input_delay: float = 0.0,
+        logging_error: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         self.logs = as_log_list(logs)
-        self.layout = ParameterLayout(model, tuple(estimate), tuple(terms))
+        self.model = model
         if not (math.isfinite(input_delay) and 0 <= input_delay < 0.01):
             raise ValueError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
         self.input_delay = float(input_delay)
+        self.estimate = (estimate,) if isinstance(estimate, str) else tuple(estimate)
+        self.terms = tuple(terms)
+        for term in self.terms:
+            if not isinstance(term, AccelerationTerm):
+                raise TypeError(f"terms must be AccelerationTerm, got {type(term).__name__}")
+        if not self.estimate and not self.terms:
+            raise ValueError("nothing to estimate: give constants in estimate or at least one term")
         dt = self.logs[0].sample_time
         for log in self.logs[1:]:
             if abs(log.sample_time - dt) > 0.01 * dt:
@@ -198,101 +163,76 @@ class EquationError:
                     f"logs at different rates: {self.logs[0].source} at {1 / dt:g} Hz, {log.source} at "
                     f"{1 / log.sample_time:g} Hz"
                 )
-        self.differentiator = (
-            SavitzkyGolay(dt, bandwidth=DEFAULT_BANDWIDTH) if differentiator is None else differentiator
+        shifted = [
+            log if self.input_delay == 0 else _with_inputs(log, delayed_inputs(log, self.input_delay))
+            for log in self.logs
+        ]
+        kw = (
+            {"bandwidth": DEFAULT_BANDWIDTH} if differentiator is None else {"differentiator": differentiator}
         )
-        if not isinstance(self.differentiator, SavitzkyGolay):
-            raise TypeError(
-                "differentiator must be a SavitzkyGolay (zero phase; a lagging estimate biases an "
-                f"equation-error fit), got {type(self.differentiator).__name__}"
-            )
-        self.kernel = matching_kernel(self.differentiator)
-        sg = self.differentiator
-        self.edge = max(sg.velocity_window, sg.acceleration_window) // 2 + self.kernel.size // 2
-        self.min_samples = 2 * self.kernel.size
-        self.sample_time = dt
-        self.prepared = [self._prepare(log) for log in self.logs]
-        fn = self.layout.acceleration_reading
-        theta = ca.SX.sym("theta", self.layout.n)
-        x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
-        acc = fn(x, u, theta)
-        self._acc_jac = ca.Function("acc_jac", [x, u, theta], [acc, ca.jacobian(acc, theta)])
-        self._maps: dict[int, ca.Function] = {}
-        self._affine: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._last: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.prepared = prepare(shifted, logging_error=logging_error, **kw)
+        self.differentiator = self.prepared.differentiator
+        self.sample_time = self.prepared.sample_time
+        self.kernel = self.prepared.kernel
+        # the first design validates the names and gives the layout (names, initial values)
+        self._probe = build_design(self.prepared, model, estimate=self.estimate, terms=self.terms)
+        self.names = self._probe.names
+        self.linear = not (GAP_OFFSET in self.estimate or any(not t.linear for t in self.terms))
         self.prepare_time = time.perf_counter() - t0
 
-    def _prepare(self, log: Log) -> _Prepared:
-        n_needed = 2 * self.edge + 10
-        if log.n < n_needed:
-            raise ValueError(
-                f"{log.source}: {log.n} samples; the differentiator's windows need at least {n_needed}"
-            )
-        der = differentiate_log(log, self.differentiator)
-        x = np.vstack([der.position[0], der.velocity[0], der.position[1], der.velocity[1]])
-        valid = np.zeros(log.n, dtype=bool)
-        valid[self.edge : log.n - self.edge] = True
-        return _Prepared(
-            x, delayed_inputs(log, self.input_delay), np.asarray(der.acceleration), valid, log.source
-        )
-
     # ------------------------------------------------------------------------------------
-    def _evaluate(self, prep: _Prepared, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Filtered model accelerations (2, n) and their Jacobian (2, n, p) at ``theta``.
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Initial values, lower and upper bounds and scales of every parameter, design order."""
+        init, lo, hi, sc = [], [], [], []
+        for name in self.names:
+            if name in CONSTANT_NAMES:
+                v = getattr(self.model.constants, name)
+                init.append(v)
+                lo.append(0.0)
+                hi.append(math.inf)
+                sc.append(abs(v) or 1.0)
+            elif name == GAP_OFFSET:
+                init.append(0.0)
+                lo.append(-GAP_OFFSET_BOUND)
+                hi.append(GAP_OFFSET_BOUND)
+                sc.append(GAP_OFFSET_SCALE)
+        for term in self.terms:
+            init.extend(term.initial)
+            lo.extend(term.lower)
+            hi.extend(term.upper)
+            sc.extend(term.scale)
+        return np.array(init), np.array(lo), np.array(hi), np.array(sc)
 
-        Affine models are evaluated once (at theta = 0) and then composed; otherwise the last
-        evaluation per log is remembered (the solver asks for residuals and Jacobians apart)."""
-        theta = np.asarray(theta, dtype=float)
-        key = id(prep)
-        if self.layout.linear:
-            if key not in self._affine:
-                self._affine[key] = self._evaluate_raw(prep, np.zeros(self.layout.n))
-            acc0, jac = self._affine[key]
-            return acc0 + np.einsum("anp,p->an", jac, theta), jac
-        cached = self._last.get(key)
-        if cached is not None and np.array_equal(cached[0], theta):
-            return cached[1], cached[2]
-        acc_f, jac_f = self._evaluate_raw(prep, theta)
-        self._last[key] = (theta.copy(), acc_f, jac_f)
-        return acc_f, jac_f
+    def _values(self, values: FitResult | dict[str, float] | np.ndarray) -> np.ndarray:
+        if isinstance(values, FitResult):
+            return values.vector()
+        if isinstance(values, dict):
+            missing = [k for k in self.names if k not in values]
+            if missing:
+                raise ValueError(f"values: missing {missing}")
+            return np.array([values[k] for k in self.names], dtype=float)
+        theta = np.asarray(values, dtype=float).ravel()
+        if theta.size != len(self.names):
+            raise ValueError(f"values: expected {len(self.names)} numbers {self.names}, got {theta.size}")
+        return theta
 
-    def _evaluate_raw(self, prep: _Prepared, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = prep.x.shape[1]
-        if n not in self._maps:
-            self._maps[n] = self._acc_jac.map(n)
-        acc, jac = self._maps[n](prep.x, prep.u, theta)
-        acc = np.asarray(acc)
-        jac = np.asarray(jac).reshape(2, n, self.layout.n)
-        acc_f = convolve1d(acc, self.kernel, axis=1, mode="constant")
-        jac_f = convolve1d(jac, self.kernel, axis=1, mode="constant")
-        return acc_f, jac_f
+    def _per_log(self, rows: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
+        """Split a (2, n) array of the prepared samples into one array per log, NaN off ``mask``."""
+        out = []
+        r = np.where(mask[None, :], rows, np.nan)
+        for s in range(self.prepared.n_logs):
+            out.append(r[:, self.prepared.segment == s])
+        return out
 
     def residuals(self, values: FitResult | dict[str, float] | np.ndarray) -> list[np.ndarray]:
         """Measured minus model accelerations (2, n) [m/s^2] per log, at every valid sample
         (NaN within the filters' edges), for the given parameter values."""
-        theta = self._theta(values)
-        out = []
-        for prep in self.prepared:
-            acc_f, _ = self._evaluate(prep, theta)
-            r = prep.acc - acc_f
-            r[:, ~prep.valid] = np.nan
-            out.append(r)
-        return out
-
-    def _theta(self, values: FitResult | dict[str, float] | np.ndarray) -> np.ndarray:
-        if isinstance(values, FitResult):
-            return values.vector()
-        if isinstance(values, dict):
-            missing = [k for k in self.layout.names if k not in values]
-            if missing:
-                raise ValueError(f"values: missing {missing}")
-            return np.array([values[k] for k in self.layout.names], dtype=float)
-        theta = np.asarray(values, dtype=float).ravel()
-        if theta.size != self.layout.n:
-            raise ValueError(
-                f"values: expected {self.layout.n} numbers {self.layout.names}, got {theta.size}"
-            )
-        return theta
+        theta = self._values(values)
+        design = build_design(
+            self.prepared, self.model, estimate=self.estimate, terms=self.terms, at=theta, weights=np.ones(2)
+        )
+        r = design.target - np.einsum("p,pan->an", theta, design.columns)
+        return self._per_log(r, self.prepared.valid)
 
     # ------------------------------------------------------------------------------------
     def fit(
@@ -316,126 +256,89 @@ class EquationError:
             [Hz] Spectral window of the long-run covariance (default 0.25 Hz).
         """
         t0 = time.perf_counter()
-        layout = self.layout
+        prep = self.prepared
+        masks = sample_masks(samples, self.logs)
         masks = [
-            m & prep.valid for m, prep in zip(sample_masks(samples, self.logs), self.prepared, strict=True)
+            _reduced_mask(m, round(self.sample_time / log.sample_time))
+            for m, log in zip(masks, self.logs, strict=True)
         ]
-        n_used = int(sum(m.sum() for m in masks))
-        if n_used < 10 * layout.n + self.min_samples:
+        fit_mask, _ = prep.masks(0.0, masks)
+        n_used = int(fit_mask.sum())
+        p = len(self.names)
+        min_samples = 2 * self.kernel.size
+        if n_used < 10 * p + min_samples:
             raise ValueError(
-                f"only {n_used} usable samples (after leaving out {self.edge} at each edge of each log); "
-                f"need at least {10 * layout.n + self.min_samples} for {layout.n} parameters"
+                f"only {n_used} usable samples (after leaving out {prep.edge} at each edge of each log); "
+                f"need at least {10 * p + min_samples} for {p} parameters"
             )
-        theta0 = layout.initial_vector(initial)
-        scale = np.array(layout.scale)
-
-        def stacked(theta: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            rs, js = [], []
-            for prep, m in zip(self.prepared, masks, strict=True):
-                acc_f, jac_f = self._evaluate(prep, theta)
-                r = (prep.acc - acc_f)[:, m] * weights[:, None]
-                j = jac_f[:, m, :] * weights[:, None, None]
-                rs.append(r.ravel())
-                js.append(j.reshape(-1, layout.n))
-            return np.concatenate(rs), np.concatenate(js)
-
-        status, message, iterations = 0, "", 0
-        weights = np.ones(2)
-        theta = theta0.copy()
+        init, lower, upper, scale = self._bounds()
+        if initial:
+            for key, value in initial.items():
+                if key not in self.names:
+                    raise ValueError(f"initial: {key!r} is not estimated; estimated: {self.names}")
+                init[self.names.index(key)] = float(value)
         solve_t0 = time.perf_counter()
-        for stage in range(2):  # unweighted, then each axis weighted by 1 / its residual RMS
-            if layout.linear:
-                r0, jac = stacked(np.zeros(layout.n), weights)
-                js = jac * scale
-                sol, _, rank, sv = np.linalg.lstsq(js, r0, rcond=None)
-                theta = sol * scale
-                iterations += 1
-                if rank < layout.n:
-                    status, message = (
-                        -1,
-                        (
-                            f"not identifiable from these samples: the scaled regressor has rank {rank} < "
-                            f"{layout.n} (singular values {np.array2string(sv, precision=3)})"
-                        ),
-                    )
-                    break
-                status, message = 1, "linear least squares (exact: the accelerations are affine in theta)"
-            else:
-                lower = np.array(layout.lower)
-                upper = np.array(layout.upper)
-                start = np.clip(theta, np.nextafter(lower, upper), np.nextafter(upper, lower))
-
-                if stage == 0 and any(c in layout.names for c in CONSTANT_NAMES):
-                    start = self._linear_start(start, masks)
-                theta, status, message, nit = _levenberg_marquardt(
-                    lambda th, w=weights: stacked(th, w), start, scale, lower, upper
-                )
-                iterations += nit
-                if status <= 0:
-                    break
-            if stage == 0:
-                r, _ = stacked(theta, np.ones(2))
-                r2 = r.reshape(-1)
-                rms = self._axis_rms(r2, masks)
-                weights = np.array([1 / rms[a] if rms[a] > 0 else 1.0 for a in AXIS_NAMES])
-        solve_time = time.perf_counter() - solve_t0
-
-        cov_t0 = time.perf_counter()
-        success = status > 0
-        r, jac = stacked(theta, weights)
-        chi2 = float(r @ r)
-        n_res = r.size
-        dof = max(n_res - layout.n, 1)
-        hess = jac.T @ jac
-        try:
-            h_inv = np.linalg.inv(hess) if success else np.full((layout.n, layout.n), np.nan)
-        except np.linalg.LinAlgError:
-            h_inv = np.full((layout.n, layout.n), np.nan)
-            success, status, message = False, -1, "singular normal matrix"
-        if success:
-            influence = []
-            for prep, m in zip(self.prepared, masks, strict=True):
-                acc_f, jac_f = self._evaluate(prep, theta)
-                res = (prep.acc - acc_f) * weights[:, None]
-                res[:, ~m] = 0.0
-                jw = jac_f * weights[:, None, None]
-                scores = np.einsum("anp,an->pn", jw, res)
-                influence.append(h_inv @ scores)
-            lr = long_run_covariance(influence, chi2 / dof * h_inv, self.sample_time, band=hac_band)
-            cov, naive, hac_m, inflation = lr.covariance, lr.naive, lr.frequencies, lr.variance_inflation
+        first = build_design(
+            prep, self.model, estimate=self.estimate, terms=self.terms, fit=fit_mask, at=init
+        )
+        weights = first.weights
+        if self.linear:
+            design = first
+            sub = fit_subset(design, list(design.groups), band=hac_band)
+            status, message, iterations = (
+                1,
+                "linear least squares (exact: the accelerations are affine in theta)",
+                1,
+            )
         else:
-            cov = naive = np.full((layout.n, layout.n), np.nan)
-            hac_m, inflation = 0, np.full(layout.n, np.nan)
-        cov_time = time.perf_counter() - cov_t0
 
-        residuals = []
-        for prep, m in zip(self.prepared, masks, strict=True):
-            acc_f, _ = self._evaluate(prep, theta)
-            res = prep.acc - acc_f
-            res[:, ~m] = np.nan
-            residuals.append(res)
-        all_res = np.concatenate(residuals, axis=1)
-        rms = {a: float(np.sqrt(np.nanmean(all_res[k] ** 2))) for k, a in enumerate(AXIS_NAMES)}
-        names = layout.names
-        total = time.perf_counter() - t0
+            def build(at: np.ndarray) -> Design:
+                return build_design(
+                    prep,
+                    self.model,
+                    estimate=self.estimate,
+                    terms=self.terms,
+                    fit=fit_mask,
+                    at=at,
+                    weights=weights,
+                )
+
+            design, sub, status, message, iterations = fit_nonlinear(build, init, lower, upper, scale)
+            design = build(sub.coef) if status > 0 else design
+            sub = fit_subset(design, list(design.groups), band=hac_band)
+        if sub.message:
+            message = f"{message}; {sub.message}"
+        solve_time = time.perf_counter() - solve_t0
+        cov = sub.covariance
+        success = status > 0 and bool(np.all(np.isfinite(cov)))
+        if status > 0 and not success:
+            status, message = -1, "singular normal matrix"
+        theta = sub.coef
+        res = residuals(design, sub)
+        res_list = self._per_log(res, fit_mask)
+        rms = {a: float(np.sqrt(np.mean(res[k, fit_mask] ** 2))) for k, a in enumerate(AXIS_NAMES)}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inflation = np.where(np.diag(sub.naive) > 0, np.diag(cov) / np.diag(sub.naive), np.nan)
+        names = self.names
+        fixed = {k: getattr(self.model.constants, k) for k in CONSTANT_NAMES if k not in names}
         return FitResult(
             method="equation_error",
             names=names,
             values=dict(zip(names, theta, strict=True)),
-            stderr=dict(zip(names, np.sqrt(np.diag(cov)), strict=True)),
-            stderr_naive=dict(zip(names, np.sqrt(np.diag(naive)), strict=True)),
-            initial=dict(zip(names, theta0, strict=True)),
-            fixed=layout.fixed(),
+            stderr=dict(zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)), strict=True)),
+            stderr_naive=dict(zip(names, np.sqrt(np.clip(np.diag(sub.naive), 0, None)), strict=True)),
+            initial=dict(zip(names, init, strict=True)),
+            fixed=fixed,
             covariance=cov,
             correlation=correlation_from(cov) if success else np.full_like(cov, np.nan),
             residual_rms=rms,
             residual_unit="m/s^2",
-            residuals=tuple(residuals),
+            residuals=tuple(res_list),
             n_samples=n_used,
-            n_residuals=n_res,
-            chi_square=chi2,
-            reduced_chi_square=chi2 / dof,
-            hac_frequencies=hac_m,
+            n_residuals=n_used * int(np.sum(design.weights > 0)),
+            chi_square=sub.chi_square,
+            reduced_chi_square=sub.chi_square / sub.dof,
+            hac_frequencies=sub.frequencies,
             variance_inflation=dict(zip(names, inflation, strict=True)),
             success=success,
             status=status,
@@ -444,10 +347,10 @@ class EquationError:
             timings={
                 "prepare": self.prepare_time,
                 "solve": solve_time,
-                "covariance": cov_time,
-                "total": total + self.prepare_time,
+                "covariance": 0.0,
+                "total": time.perf_counter() - t0 + self.prepare_time,
             },
-            sources=tuple(p.source for p in self.prepared),
+            sources=tuple(log.source for log in self.logs),
             settings={
                 "differentiator": "savitzky_golay",
                 "bandwidth_hz": self.differentiator.bandwidth,
@@ -455,86 +358,28 @@ class EquationError:
                 "polyorder": self.differentiator.polyorder,
                 "velocity_window": self.differentiator.velocity_window,
                 "acceleration_window": self.differentiator.acceleration_window,
-                "edge_samples": self.edge,
+                "edge_samples": prep.edge,
                 "input_delay_s": self.input_delay,
                 "axis_weights": dict(zip(AXIS_NAMES, weights.tolist(), strict=True)),
-                "linear": layout.linear,
-                "terms": [t.name for t in layout.terms],
+                "linear": self.linear,
+                "terms": [t.name for t in self.terms],
+                "logging_error_variance_A2": prep.current_noise.tolist(),
+                "errors_in_variables_compensated": sub.compensated,
             },
         )
 
-    def _axis_rms(self, r: np.ndarray, masks: list[np.ndarray]) -> dict[str, float]:
-        """RMS per axis of a stacked residual (per log: vertical block then horizontal block)."""
-        sums = np.zeros(2)
-        count = 0
-        k = 0
-        for m in masks:
-            n = int(m.sum())
-            block = r[k : k + 2 * n].reshape(2, n)
-            sums += np.sum(block**2, axis=1)
-            count += n
-            k += 2 * n
-        return {a: float(np.sqrt(sums[i] / max(count, 1))) for i, a in enumerate(AXIS_NAMES)}
 
-    def _linear_start(self, theta: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
-        """The constants' linear LS solution with the nonlinear parameters at ``theta``."""
-        names = self.layout.names
-        idx = [k for k, nm in enumerate(names) if nm in CONSTANT_NAMES]
-        rs, js = [], []
-        for prep, m in zip(self.prepared, masks, strict=True):
-            acc_f, jac_f = self._evaluate(prep, theta)
-            rs.append((prep.acc - acc_f)[:, m].ravel())
-            js.append(jac_f[:, m, :][:, :, idx].reshape(-1, len(idx)))
-        r, j = np.concatenate(rs), np.concatenate(js)
-        step, *_ = np.linalg.lstsq(j, r, rcond=None)
-        out = theta.copy()
-        out[idx] += step
-        return out
+def _reduced_mask(mask: np.ndarray, q: int) -> np.ndarray:
+    """A sample mask of a log reduced by q-sample means: a mean is used if all its samples are."""
+    if q <= 1:
+        return mask
+    return mask[: (mask.size // q) * q].reshape(-1, q).all(axis=1)
 
 
-def _levenberg_marquardt(
-    stacked,
-    theta: np.ndarray,
-    scale: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    *,
-    max_iterations: int = 100,
-    tolerance: float = 1e-10,
-) -> tuple[np.ndarray, int, str, int]:
-    """Levenberg-Marquardt on ``stacked(theta) -> (r, J)`` (r = data - model, J = d model / d theta,
-    exact), in the variables theta / scale, steps clipped to the bounds. Returns
-    (theta, status > 0 on success, message, iterations)."""
-    r, jac = stacked(theta)
-    cost = float(r @ r)
-    mu = 1e-9  # nearly Gauss-Newton: the collinear directions (gap offset vs C1..C3) need it
-    for it in range(1, max_iterations + 1):
-        js = jac * scale
-        a = js.T @ js
-        g = js.T @ r
-        diag = np.diag(a).copy()
-        diag[diag <= 0] = 1.0
-        while True:
-            try:
-                step = np.linalg.solve(a + mu * np.diag(diag), g)
-            except np.linalg.LinAlgError:
-                step = np.full_like(g, np.inf)
-            trial = np.clip(theta + step * scale, lower, upper)
-            if np.all(np.isfinite(trial)):
-                r_t, jac_t = stacked(trial)
-                cost_t = float(r_t @ r_t)
-                if np.isfinite(cost_t) and cost_t <= cost:
-                    break
-            mu *= 10.0
-            if mu > 1e12:
-                return theta, -1, "Levenberg-Marquardt: no decrease along any damped step", it
-        moved = float(np.max(np.abs(trial - theta) / scale))
-        decrease = cost - cost_t
-        theta, r, jac, cost = trial, r_t, jac_t, cost_t
-        mu = max(mu / 10.0, 1e-15)
-        if moved < tolerance or decrease <= 1e-14 * cost:
-            return theta, 1, f"Levenberg-Marquardt (exact Jacobian) converged in {it} iterations", it
-    return theta, 0, f"Levenberg-Marquardt: {max_iterations} iterations without convergence", max_iterations
+def _with_inputs(log: Log, u: np.ndarray) -> Log:
+    import dataclasses
+
+    return dataclasses.replace(log, u=u, notes=(*log.notes, "currents shifted by input_delay"))
 
 
 def fit_equation_error(

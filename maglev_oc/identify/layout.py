@@ -11,21 +11,21 @@ the offset, and the physics (L1..L4 and every term) sees the true gap.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from maglev_oc.identify.terms import AccelerationTerm
 from maglev_oc.model.stage import StageModel
-
-CONSTANT_NAMES = ("C1", "C2", "C3", "C4")
-GAP_OFFSET = "gap_offset"
-ESTIMABLE = (*CONSTANT_NAMES, GAP_OFFSET)
-GAP_OFFSET_SCALE = 1e-4  # [m] typical encoder mounting offset (0.1 mm), for conditioning
-GAP_OFFSET_BOUND = 5e-3  # [m] an offset beyond 5 mm is a wrong setup, not a parameter
-UNITS = {"C1": "m/(s^2 A)", "C2": "m/(s^2 T^2)", "C3": "m/(s^2 A T)", "C4": "m/(s^2 A^2)", GAP_OFFSET: "m"}
+from maglev_oc.regression.base import (
+    CONSTANT_NAMES,
+    ESTIMABLE,
+    GAP_OFFSET,
+    GAP_OFFSET_BOUND,
+    GAP_OFFSET_SCALE,
+    UNITS,
+)
+from maglev_oc.regression.terms import AccelerationTerm
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,7 +130,8 @@ class ParameterLayout:
             acc = ca.mtimes(phi, c_vec) + b
             k = len(self.names) - sum(t.n_parameters for t in self.terms)
             for term in self.terms:
-                acc = acc + term.function(x_true, u, theta[k : k + term.n_parameters])
+                # the simulation has no current rates: terms see du = 0
+                acc = acc + term.function(x_true, u, ca.DM.zeros(2), theta[k : k + term.n_parameters])
                 k += term.n_parameters
             return acc
 
@@ -171,9 +172,3 @@ class ParameterLayout:
 
     def unit(self, name: str) -> str:
         return UNITS.get(name, "")
-
-
-def as_term_tuple(terms: Sequence[AccelerationTerm]) -> tuple[AccelerationTerm, ...]:
-    if isinstance(terms, AccelerationTerm):
-        return (terms,)
-    return tuple(terms)

@@ -48,13 +48,14 @@ from scipy.sparse.linalg import splu
 
 from maglev_oc.data.logs import Log
 from maglev_oc.estimation.differentiate import SavitzkyGolay, differentiate_log
-from maglev_oc.identify.equation_error import as_log_list, delayed_inputs, fit_equation_error
+from maglev_oc.identify.equation_error import fit_equation_error
 from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET, ParameterLayout
 from maglev_oc.identify.result import AXIS_NAMES, FitResult
-from maglev_oc.identify.terms import AccelerationTerm
-from maglev_oc.identify.uncertainty import DEFAULT_BAND, correlation_from, long_run_covariance
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from, long_run_covariance
+from maglev_oc.regression.data import as_log_list, delayed_inputs
+from maglev_oc.regression.terms import AccelerationTerm
 
 DEFAULT_SEGMENT = 0.05
 """[s] Shooting segment: the fastest open-loop pole (64 1/s at 10 mm) grows e^3.2-fold over it."""

@@ -22,15 +22,16 @@ from typing import Any
 import numpy as np
 
 from maglev_oc.data.logs import CURRENT_RESOLUTION, Log, LogError, read_log
-from maglev_oc.identify.equation_error import EquationError, as_log_list
+from maglev_oc.identify.equation_error import EquationError
 from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET
 from maglev_oc.identify.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
 from maglev_oc.identify.output_error import DEFAULT_SEGMENT, DEFAULT_WINDOW, MultipleShooting
 from maglev_oc.identify.result import FitResult, NpfsiResult
-from maglev_oc.identify.terms import AccelerationTerm
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import as_log_list
+from maglev_oc.regression.terms import AccelerationTerm
 
 METHODS = ("equation_error", "output_error", "npfsi")
 MIN_DURATION = 5.0

@@ -67,7 +67,7 @@ class FitResult:
     chi_square, reduced_chi_square : float
         Of the weighted residuals.
     hac_frequencies : int
-        Fourier frequencies the long-run covariance averages (:mod:`~maglev_oc.identify.uncertainty`);
+        Fourier frequencies the long-run covariance averages (:mod:`~maglev_oc.regression.covariance`);
         ``variance_inflation`` = HAC / plain variance per parameter.
     success, status, message : bool, int, str
     iterations : int

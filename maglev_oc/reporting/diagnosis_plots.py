@@ -7,7 +7,7 @@ from matplotlib.figure import Figure
 
 from maglev_oc.diagnose.diagnosis import Diagnosis, Effect
 from maglev_oc.diagnose.feedback import CompensationStudy
-from maglev_oc.diagnose.trace import AXIS_NAMES
+from maglev_oc.regression.base import AXIS_NAMES
 from maglev_oc.reporting.pdf import new_figure
 
 MM = 1e3
@@ -19,6 +19,15 @@ _VARIABLE = {
     "current_rate": ("d i_q / dt (horizontal), d i_d / dt (vertical) [A/s]", None),
     "current": ("i_d (horizontal), i_q (vertical) [A]", None),
 }
+
+
+def plain(name: str) -> str:
+    """An identifier in words: ``guide_friction_horizontal`` -> ``guide friction, horizontal``."""
+    words = name.replace("_", " ")
+    for axis in ("vertical", "horizontal"):
+        if words.endswith(" " + axis):
+            return words[: -len(axis) - 1] + f", {axis}"
+    return words
 
 
 def spectrum_figure(diag: Diagnosis) -> Figure:
@@ -102,9 +111,9 @@ def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
     axes_used = [0, 1] if effect.axis == "both" else [AXIS_NAMES.index(effect.axis)]
     fig = new_figure((8.27, 4.3 * len(axes_used)))
     axs = np.atleast_1d(fig.subplots(len(axes_used), 1))
-    contrib = np.asarray(effect.candidate.acceleration(effect.coefficients).map(d.n)(d.x, d.u, d.du))
-    contrib = d.lowpass(contrib)
-    hold = d.holdout
+    contrib = np.asarray(effect.candidate.term.acceleration(effect.coefficients).map(d.n)(d.x, d.u, d.du))
+    contrib = d.filter(contrib)
+    hold = diag.holdout
     for ax, a in zip(axs, axes_used, strict=True):
         label, v = _variable(diag, effect, a)
         before = diag.residual_after[a] + contrib[a]
@@ -125,13 +134,13 @@ def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
         ax.set_ylabel(f"{AXIS_NAMES[a]} residual [m/s²]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(f"{effect.name}: residual before and after, held-out data (lines: bin means)")
+    fig.suptitle(f"{plain(effect.name)}: residual before and after, held-out data (lines: bin means)")
     return fig
 
 
 def timeseries_figure(diag: Diagnosis, seconds: float = 4.0) -> Figure:
     d = diag.data
-    hold = np.nonzero(d.holdout)[0]
+    hold = np.nonzero(diag.holdout)[0]
     k0 = hold[0]
     k1 = min(hold[-1], k0 + int(seconds / d.sample_time))
     sl = slice(k0, k1)

@@ -100,16 +100,26 @@ class PdfReport:
         font_size: float = 8.5,
     ) -> None:
         """A page with a table; long tables continue on further pages."""
-        per_page = 38
-        chunks = [rows[i : i + per_page] for i in range(0, max(len(rows), 1), per_page)] or [[]]
+        per_page = 38  # lines of text per page
+        rows = [[_fmt(v) for v in r] for r in rows]
+        heights = [max(str(v).count("\n") + 1 for v in r) if r else 1 for r in rows]
+        chunks, chunk, used = [], [], 0
+        for r, h in zip(rows, heights, strict=True):
+            if chunk and used + h > per_page:
+                chunks.append(chunk)
+                chunk, used = [], 0
+            chunk.append(r)
+            used += h
+        chunks.append(chunk)
         for k, chunk in enumerate(chunks):
             fig = Figure(figsize=PAGE_SIZE)
             title = heading if k == 0 else f"{heading} (continued)"
             fig.text(0.06, 0.95, title, fontsize=13, weight="bold", va="top")
-            height = min(0.022 * (len(chunk) + 1), 0.82)
+            lines = [max(str(v).count("\n") + 1 for v in r) for r in chunk]
+            height = min(0.022 * (sum(lines) + 1), 0.82)
             ax = fig.add_axes((0.04, 0.92 - height, 0.92, height))
             ax.axis("off")
-            cells = [[_fmt(v) for v in r] for r in chunk] or [["—"] * len(columns)]
+            cells = chunk or [["—"] * len(columns)]
             table = ax.table(
                 cellText=cells,
                 colLabels=list(columns),
@@ -126,6 +136,8 @@ class PdfReport:
                     cell.set_text_props(weight="bold")
                     cell.set_facecolor("0.9")
                     cell.set_height(cell.get_height() * header_lines)
+                elif r - 1 < len(lines) and lines[r - 1] > 1:
+                    cell.set_height(cell.get_height() * lines[r - 1])
             if k == len(chunks) - 1 and notes:
                 text = "\n".join(line for n in notes for line in (textwrap.wrap(n, 100) or [""]))
                 fig.text(0.06, 0.88 - height, text, fontsize=8.5, va="top")

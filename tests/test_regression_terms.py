@@ -1,4 +1,4 @@
-"""The AccelerationTerm contract (used by the diagnosis layer) and the provided terms."""
+"""The one term type (identify and diagnose): its contract, linearity, features and the provided physics."""
 
 from __future__ import annotations
 
@@ -7,13 +7,17 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 from maglev_oc.identify.layout import ParameterLayout
-from maglev_oc.identify.terms import (
+from maglev_oc.regression.terms import (
     AccelerationTerm,
     cogging_term,
     constant_acceleration,
+    constant_force,
+    guide_friction,
     is_linear_in_parameters,
+    periodic_force,
     viscous_friction,
 )
 
@@ -35,7 +39,8 @@ def test_contract_fields():
         upper=(math.inf,),
         function=_fn(),
     )
-    assert [f for f in term.__dataclass_fields__] == [
+    # the positional order the identify API has always had, then the physics for reports
+    assert list(term.__dataclass_fields__)[:9] == [
         "name",
         "explanation",
         "axis",
@@ -48,6 +53,10 @@ def test_contract_fields():
     ]
     assert term.qualified_names == ("drag.c",)
     assert term.is_linear()
+    # a 3-input function (x, u, p) is taken as not depending on the current rates
+    assert term.function.n_in() == 4 and not term.depends_on_inputs()
+    feats = np.asarray(term.features([0.02, 0.3, 0, 0], [0, 0], [0, 0]))
+    assert_allclose(feats, [[0.3], [0.0]])
     with pytest.raises(AttributeError):
         term.name = "other"  # frozen
 
@@ -60,6 +69,7 @@ def test_contract_fields():
         ({"scale": (0.0,)}, "scale positive"),
         ({"lower": (1.0,)}, "lower <= initial"),
         ({"function": _fn(2)}, r"\(x \(4\), u \(2\), p \(1\)\)"),
+        ({"function": None}, "casadi.Function"),
         ({"parameter_names": ()}, "at least one parameter"),
         ({"name": ""}, "non-empty"),
     ],
@@ -93,7 +103,8 @@ def test_provided_terms(model):
     cog = cogging_term(model.params)
     assert cog.axis == "vertical" and cog.is_linear()
     # at x3 = t1/2 the sine part is at its peak: x2' += -a_s (ref/x1)^3 / M_v
-    acc = np.asarray(cog.function([15e-3, 0, model.params.slot_pitch / 2, 0], [0, 0], [1.5, 0.0])).ravel()
+    x = [15e-3, 0, model.params.slot_pitch / 2, 0]
+    acc = np.asarray(cog.function(x, [0, 0], [0, 0], [1.5, 0.0])).ravel()
     assert acc[0] == pytest.approx(-1.5 / model.params.mass_vertical)
     assert acc[1] == 0.0
     for term in (constant_acceleration("horizontal"), viscous_friction("vertical")):
@@ -109,3 +120,34 @@ def test_provided_terms(model):
     with pytest.raises(ValueError, match="nothing to estimate"):
         ParameterLayout(model, (), ())
     assert not ParameterLayout(model, ("C1", "gap_offset")).linear
+
+
+def test_defaults_and_physical_units(model):
+    x, u, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("p", 2)
+    fn = ca.Function("f", [x, u, p], [ca.vertcat(p[0], p[1])])
+    term = AccelerationTerm("t", "e.", "both", ("a", "b"), function=fn)
+    assert term.initial == (0.0, 0.0) and term.scale == (1.0, 1.0)
+    assert term.lower == (-math.inf, -math.inf) and term.upper == (math.inf, math.inf)
+    # no conversion given: the parameters themselves with their standard errors
+    est = term.physical_parameters(np.array([1.0, 2.0]), np.diag([0.04, 0.09]))
+    assert est["a"].value == 1.0 and est["b"].stderr == pytest.approx(0.3)
+
+
+def test_friction_force_and_periodic_terms_in_newtons(model):
+    params = model.params
+    fr = guide_friction(params, "horizontal")
+    assert fr.linear and not fr.depends_on_inputs() and len(fr.variants) == 2
+    # far above the reversal speed tanh = 1: acc = -(F_c + c v) / M_h
+    acc = np.asarray(fr.function([0.02, 0, 0, 0.1], [0, 0], [0, 0], [1.0, 2.0])).ravel()
+    assert acc[1] == pytest.approx(-(1.0 + 2.0 * 0.1) / params.mass_horizontal, rel=1e-9)
+    est = fr.physical_parameters(np.array([1.0, 2.0]), np.diag([0.01, 0.04]))
+    assert (est["coulomb"].unit, est["viscous"].unit) == ("N", "N s/m")
+    # a vertical force towards the stator closes the gap: x2' decreases by F / M_v
+    cf = constant_force(params, "vertical")
+    acc = np.asarray(cf.function([0.02, 0, 0, 0], [0, 0], [0, 0], [2.0])).ravel()
+    assert acc[0] == pytest.approx(-2.0 / params.mass_vertical)
+    # periodic: amplitude and phase from (sin, cos) by the delta method
+    pf = periodic_force(params, "horizontal", 0.019)
+    est = pf.physical_parameters(np.array([3.0, 4.0]), np.diag([0.01, 0.01]))
+    assert est["amplitude"].value == pytest.approx(5.0) and est["amplitude"].stderr == pytest.approx(0.1)
+    assert est["period"].value == 0.019

@@ -1,0 +1,169 @@
+"""What is left when no named effect explains it: the residual's signature, not a guess.
+
+After the selection, the residual of the final fit may still hold structure that no candidate
+of the library explains (or explains only by being confounded with the constants). Rather than
+naming the nearest candidate, the diagnosis probes the residual with generic, smooth additive
+terms on each axis — Legendre polynomials (orders 1-4) of one variable at a time (gap, position,
+gap rate, horizontal rate), and sinusoids of the position at the periods the residual's
+spatial spectrum points to that match no motor period — each judged like a candidate (held-out
+gain with its long-run significance, physical size), on top of the base model, the chosen
+effects and the candidates that were significant but not separable (so that nothing is reported
+twice). Polynomials of the currents are not probed: the logged currents' errors are as large
+as their slow part on such logs, and a polynomial of a noisy variable is biased in ways the
+errors-in-variables compensation (first order) does not remove. What passes is reported in
+``unexplained`` with the variable it depends on, its size
+and its spectrum.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.diagnose.library import PROBE_VARIABLES, Candidate, smooth_probes
+from maglev_oc.diagnose.selection import SelectionSettings, _holdout_residual, holdout_significance
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.base import AXIS_NAMES
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.solve import fit_subset
+from maglev_oc.regression.terms import AccelerationTerm, term_function
+
+__all__ = ["Unexplained", "find_unexplained"]
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """A significant residual that no candidate explains."""
+
+    axis: str
+    depends_on: str  # variable name (gap, position, ..., or "position (period 12.3 mm)")
+    size: float  # RMS of the probe's acceleration on the held-out block [m/s^2]
+    force_rms: float  # the same as a force [N] (times the axis's mass)
+    gain: float  # relative drop of the held-out error it gives
+    z: float
+    description: str
+    period: float | None = None  # [m] for a periodic signature
+    term: AccelerationTerm | None = field(default=None, repr=False, compare=False)  # the probe
+
+    def to_dict(self) -> dict:
+        out = {
+            "axis": self.axis,
+            "depends_on": self.depends_on,
+            "size": self.size,
+            "size_unit": "m/s^2 RMS (held out)",
+            "force_rms_N": self.force_rms,
+            "holdout_gain": self.gain,
+            "z": self.z,
+            "description": self.description,
+        }
+        if self.period is not None:
+            out["period_m"] = self.period
+        return out
+
+
+def _probe(name: str, axis: int, build, k: int) -> AccelerationTerm:
+    def fn(x, u, du, q):
+        val = build(x, u, du, q)
+        return ca.vertcat(val, 0) if axis == 0 else ca.vertcat(0, val)
+
+    return AccelerationTerm(
+        name, "probe", AXIS_NAMES[axis], tuple(f"q{i}" for i in range(k)), function=term_function(name, fn, k)
+    )
+
+
+def _sine_probe(name: str, axis: int, period: float):
+    def build(x, u, du, q):
+        arg = 2 * math.pi * x[2] / period
+        return q[0] * ca.sin(arg) + q[1] * ca.cos(arg)
+
+    return _probe(name, axis, build, 2)
+
+
+def find_unexplained(
+    data: PreparedLogs,
+    model: StageModel,
+    explained: Sequence[Candidate],
+    fit_mask: np.ndarray,
+    holdout: np.ndarray,
+    weights: np.ndarray,
+    periods: Sequence[tuple[str, float]],
+    settings: SelectionSettings,
+    *,
+    max_per_axis: int = 2,
+) -> list[Unexplained]:
+    """Probe the residual of (base + ``explained``) for structure nothing named explains."""
+    p = model.params
+    probes: list[tuple[AccelerationTerm, str, str, float | None]] = []
+    for (axis, var), term in smooth_probes(data).items():
+        if data.moving[AXIS_NAMES.index(axis)]:
+            probes.append((term, var, PROBE_VARIABLES[var][1], None))
+    for axis, period in periods:
+        a = AXIS_NAMES.index(axis)
+        if data.moving[a]:
+            probes.append(
+                (
+                    _sine_probe(f"probe_{axis}_period_{period * 1e6:.0f}um", a, period),
+                    f"position (period {period * 1e3:.1f} mm)",
+                    f"the horizontal position, periodically over {period * 1e3:.1f} mm",
+                    period,
+                )
+            )
+    if not probes:
+        return []
+    terms = [c.term for c in explained] + [t for t, *_ in probes]
+    design = build_design(data, model, terms=terms, fit=fit_mask, holdout=holdout, weights=weights)
+    current = ["base", *[c.name for c in explained]]
+    out: list[Unexplained] = []
+    found = {axis: 0 for axis in AXIS_NAMES}
+    remaining = list(probes)
+    while remaining:
+        cur_fit = fit_subset(design, current, covariance=False)
+        r0 = _holdout_residual(design, cur_fit)
+        mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+        best = None
+        for entry in remaining:
+            term, key, words, period = entry
+            a = AXIS_NAMES.index(term.axis)
+            if found[term.axis] >= max_per_axis:
+                continue
+            fit = fit_subset(design, [*current, term.name], covariance=False)
+            r1 = _holdout_residual(design, fit)
+            gain = 1.0 - float(np.mean(r1[a] ** 2)) / mse0[a]
+            if best is None or gain > best[0]:
+                best = (gain, entry, fit, r1)
+        if best is None:
+            break
+        gain, entry, fit, r1 = best
+        term, key, words, period = entry
+        a = AXIS_NAMES.index(term.axis)
+        gain, z = holdout_significance(design, r0, r1, np.array([a]))
+        size = float(np.sqrt(np.mean((r0[a] - r1[a]) ** 2)))  # net change of the prediction
+        if gain < settings.min_gain or z < settings.min_z or size < settings.min_effect:
+            break
+        mass = p.mass_vertical if a == 0 else p.mass_horizontal
+        out.append(
+            Unexplained(
+                axis=term.axis,
+                depends_on=key,
+                size=size,
+                force_rms=size * mass,
+                gain=gain,
+                z=z,
+                description=(
+                    f"A {term.axis} residual of {size:.3g} m/s² RMS ({size * mass:.3g} N) that varies with "
+                    f"{words}; no effect of the library explains it (it lowers the held-out error by "
+                    f"{gain:.1%}, z = {z:.1f})."
+                ),
+                period=period,
+                term=term,
+            )
+        )
+        found[term.axis] += 1
+        current.append(term.name)
+        remaining.remove(entry)
+    return out

@@ -1,0 +1,365 @@
+"""Logs prepared for the filtered equation-error regression shared by identify and diagnose.
+
+One data preparation and one filter policy for every equation-error fit in the project:
+
+1. **Rate.** Logs faster than ``max_rate`` are reduced by block means (an anti-aliasing filter:
+   the mean of q samples is flat to 1 % up to 0.055 / T at the reduced rate). Block means of
+   the currents are also what drove the plant over the block, so reduction removes, rather than
+   adds, the logging error of item 4.
+2. **Derivatives.** Positions, velocities and accelerations of the encoder readings from the
+   zero-phase Savitzky-Golay differentiator (:class:`~maglev_oc.estimation.differentiate.SavitzkyGolay`)
+   with a chosen ``bandwidth``; the currents' rates from its velocity filter.
+3. **One filter, both sides.** The SG acceleration is a linear filter of the true one,
+   a_SG = F[x''] (:func:`matching_kernel`), so every model column is filtered by the same F
+   (:meth:`PreparedLogs.filter`): the equation error compares like with like and stays exact for
+   any model that is linear in its parameters. The bandwidth only selects which part of the
+   spectrum the fit uses.
+4. **Logged currents are not the applied ones.** A 5 kHz loop logged at 1 kHz by taking every
+   fifth command logs one sample of a current that changed four more times before the next log
+   line; the plant felt the mean. The difference is an error in the regressors (errors in
+   variables) that biases every coefficient multiplying a current towards zero: on such logs C1
+   comes out 2-3 % low at a 10 Hz band. Its size is measured from the log itself: the logged
+   currents' spectrum above the closed-loop band is flat (aliased high-frequency noise of the
+   fast loop), and that floor, times the share of it that did not reach the plant
+   (:func:`logging_error_share`), is the variance per sample of the current error
+   (``current_noise``). :mod:`~maglev_oc.regression.design` removes its expected contribution
+   from the normal equations (bias-compensated least squares, Söderström 2018, Ch. 7).
+5. **Masks.** Samples within the filters' memory of a log's ends are invalid; an optional
+   held-out block at the end of each log is separated from the fitted samples by guard bands as
+   long as the filters' memory, so that no sample of one leaks into the other.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs, welch
+
+from maglev_oc.data.logs import Log, LogError
+from maglev_oc.estimation.differentiate import SavitzkyGolay
+from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+
+__all__ = [
+    "DEFAULT_MAX_RATE",
+    "PreparedLogs",
+    "as_log_list",
+    "delayed_inputs",
+    "logging_error_share",
+    "matching_kernel",
+    "prepare",
+    "reduce_rate",
+]
+
+DEFAULT_MAX_RATE = 1000.0
+"""[Hz] Logs faster than this are reduced to it by block means: every effect the fits look for
+lives below 30 Hz, and the regression's memory grows with the number of samples."""
+MOTION = 50e-6
+"""[m] An axis whose position varies by less than this (standard deviation, 5 encoder counts)
+is taken as locked by the stoppers and left out of the regression."""
+NOISE_BAND = (0.3, 0.45)
+"""Band of the current-noise floor, as fractions of the sample rate: above the closed-loop band
+of any regulator of this stage (<= 60 rad/s) by a factor of 30 at 1 kHz, below Nyquist."""
+
+
+def as_log_list(logs: Log | Sequence[Log]) -> list[Log]:
+    """``logs`` as a non-empty list of Log (TypeError for anything else)."""
+    if isinstance(logs, Log):
+        return [logs]
+    out = list(logs)
+    if not out:
+        raise ValueError("no logs given")
+    for log in out:
+        if not isinstance(log, Log):
+            raise TypeError(f"expected Log objects, got {type(log).__name__}")
+    return out
+
+
+def delayed_inputs(log: Log, delay: float) -> np.ndarray:
+    """The logged currents shifted later by ``delay`` [s] (linear interpolation, held at the start)."""
+    if delay == 0:
+        return np.asarray(log.u, dtype=float)
+    return np.vstack([np.interp(log.t - delay, log.t, row) for row in log.u])
+
+
+def matching_kernel(differentiator: SavitzkyGolay) -> np.ndarray:
+    """The filter F with SG acceleration = F[true acceleration] (symmetric, unit DC gain).
+
+    The SG second-derivative kernel g2 annihilates constants and ramps, so it factors exactly as
+    g2 = g * D2 with D2 the second difference / T^2; D2 of a signal smooth between samples is
+    [1, 10, 1]/12 of its second derivative (exact for quadratics). Hence F = g * [1, 10, 1]/12.
+    """
+    sg = differentiator
+    h2 = savgol_coeffs(sg.acceleration_window, sg.polyorder, deriv=2, delta=sg.sample_time, use="conv")
+    g, remainder = np.polydiv(h2, np.array([1.0, -2.0, 1.0]) / sg.sample_time**2)
+    if np.max(np.abs(remainder)) > 1e-6 * np.max(np.abs(h2)):
+        raise RuntimeError("the SG second-derivative kernel is not divisible by the second difference")
+    kernel = np.convolve(g, [1 / 12, 10 / 12, 1 / 12])
+    return kernel / kernel.sum()
+
+
+def logging_error_share(log: Log, control_rate: float | None = None) -> float:
+    """The share of the logged currents' white noise floor that did not reach the plant.
+
+    * currents measured by sensors (``log.currents_measured``): 1 — sensor noise is all error;
+    * commands logged at the control rate or faster: 0 — each logged value was applied over its
+      interval;
+    * commands of a loop at ``control_rate`` logged by taking one of every q = rate ratio: the
+      logged sample differs from the interval's mean by the q - 1 commands it did not see; for
+      commands that vary independently from one control step to the next the error variance is
+      (1 - 1/q) of the logged floor. (Slower-varying commands would make it smaller, faster
+      ones cannot make it larger than 1.)
+
+    ``control_rate`` [Hz]: the log's ``control_rate_hz`` metadata if present, else the rig's
+    5 kHz (:data:`~maglev_oc.model.hardware.RIG_SAMPLE_TIME`).
+    """
+    if log.currents_measured:
+        return 1.0
+    if control_rate is None:
+        raw = log.metadata.get("control_rate_hz")
+        try:
+            control_rate = float(raw) if raw is not None else 1.0 / RIG_SAMPLE_TIME
+        except ValueError as err:
+            raise LogError(
+                log.source, f"metadata control_rate_hz: expected a number [Hz], got {raw!r}"
+            ) from err
+    if not (math.isfinite(control_rate) and control_rate > 0):
+        raise LogError(log.source, f"metadata control_rate_hz must be positive, got {control_rate!r}")
+    q = control_rate * log.sample_time
+    return max(0.0, 1.0 - 1.0 / q) if q > 1.0 + 1e-9 else 0.0
+
+
+def reduce_rate(log: Log, max_rate: float = DEFAULT_MAX_RATE) -> tuple[Log, int]:
+    """``log`` at no more than ``max_rate`` [Hz] by means over blocks of q samples; returns (log, q)."""
+    q = math.ceil(1.0 / (log.sample_time * max_rate) - 1e-9)
+    if q <= 1:
+        return log, 1
+    n = (log.n // q) * q
+
+    def blocks(a: np.ndarray) -> np.ndarray:
+        return a[..., :n].reshape(*a.shape[:-1], n // q, q).mean(axis=-1)
+
+    reduced = Log(
+        blocks(np.asarray(log.t)),
+        blocks(np.asarray(log.x)),
+        blocks(np.asarray(log.u)),
+        metadata=dict(log.metadata),
+        source=log.source,
+        notes=(*log.notes, f"reduced to {1 / (log.sample_time * q):g} Hz by {q}-sample means"),
+        currents_measured=log.currents_measured,
+    )
+    return reduced, q
+
+
+def _white_floor(u: np.ndarray, sample_time: float) -> np.ndarray:
+    """Variance per sample [A^2] of a white noise with the PSD level of ``u``'s noise band."""
+    n = u.shape[1]
+    nper = int(min(4096, max(256, n // 8)))
+    f, p = welch(u - u.mean(axis=1, keepdims=True), fs=1.0 / sample_time, nperseg=nper, axis=1)
+    fs = 1.0 / sample_time
+    band = (f >= NOISE_BAND[0] * fs) & (f <= NOISE_BAND[1] * fs)
+    level = np.median(p[:, band], axis=1)  # one-sided PSD [A^2/Hz]
+    return level * fs / 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedLogs:
+    """Logs differentiated and concatenated for a filtered equation-error fit.
+
+    Arrays are (rows, n) over the samples of all logs, one after another.
+
+    Attributes
+    ----------
+    t : (n,) time within its log [s]
+    segment : (n,) index of the log each sample comes from
+    x : (4, n) gap [m], gap rate [m/s], position [m], its rate [m/s] (SG estimates)
+    u : (2, n) currents (i_q, i_d) as logged [A]
+    du : (2, n) their rates [A/s] (SG)
+    acc : (2, n) measured accelerations (x2', x4') [m/s^2], = F[true] (see module doc)
+    valid : (n,) bool — outside the filters' memory of each log's ends
+    sample_time : float [s]
+    differentiator : SavitzkyGolay
+    kernel : (k,) the matching filter F
+    current_noise : (2,) variance per sample of the logged currents' error [A^2]
+    moving : (2,) bool — (vertical, horizontal) axis moves in the logs
+    sources : tuple of str
+    notes : tuple of str
+    """
+
+    t: np.ndarray
+    segment: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    du: np.ndarray
+    acc: np.ndarray
+    valid: np.ndarray
+    sample_time: float
+    differentiator: SavitzkyGolay
+    kernel: np.ndarray
+    current_noise: np.ndarray
+    moving: np.ndarray
+    sources: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def n_logs(self) -> int:
+        return len(self.sources)
+
+    @property
+    def edge(self) -> int:
+        """Samples left out at each end of a log (the SG window plus F, half each)."""
+        sg = self.differentiator
+        return max(sg.velocity_window, sg.acceleration_window) // 2 + self.kernel.size // 2
+
+    def filter(self, columns: np.ndarray) -> np.ndarray:
+        """F applied along the last axis of ``columns`` (..., n), log by log (zero outside)."""
+        columns = np.asarray(columns, dtype=float)
+        out = np.empty_like(columns)
+        for s in range(self.n_logs):
+            idx = self.segment == s
+            out[..., idx] = convolve1d(columns[..., idx], self.kernel, axis=-1, mode="constant")
+        return out
+
+    def masks(self, holdout_fraction: float = 0.0, samples: Sequence[np.ndarray] | None = None):
+        """(fit, held-out) boolean masks (n,).
+
+        ``holdout_fraction``: a contiguous block at the end of each log is held out, separated
+        from the fitted part by guard bands of one filter memory. ``samples``: per log, a boolean
+        mask of the samples a fit may use (default all); held-out samples are never fitted.
+        """
+        if not 0.0 <= holdout_fraction <= 0.5:
+            raise ValueError(f"holdout_fraction must be in [0, 0.5], got {holdout_fraction!r}")
+        fit = np.zeros(self.n, dtype=bool)
+        hold = np.zeros(self.n, dtype=bool)
+        guard = self.edge
+        for s in range(self.n_logs):
+            idx = np.flatnonzero(self.segment == s)
+            n = idx.size
+            use = np.ones(n, dtype=bool) if samples is None else np.asarray(samples[s], dtype=bool)
+            if use.shape != (n,):
+                raise ValueError(f"samples[{s}]: expected a boolean mask of shape ({n},), got {use.shape}")
+            valid = self.valid[idx]
+            if holdout_fraction > 0:
+                split = round(n * (1 - holdout_fraction))
+                f = np.zeros(n, dtype=bool)
+                h = np.zeros(n, dtype=bool)
+                f[: max(split - guard, 0)] = True
+                h[split + guard :] = True
+                fit[idx] = f & valid & use
+                hold[idx] = h & valid
+            else:
+                fit[idx] = valid & use
+        return fit, hold
+
+
+def prepare(
+    logs: Log | Sequence[Log],
+    *,
+    bandwidth: float | None = None,
+    differentiator: SavitzkyGolay | None = None,
+    max_rate: float = DEFAULT_MAX_RATE,
+    control_rate: float | None = None,
+    logging_error: bool = True,
+) -> PreparedLogs:
+    """Reduce, differentiate and concatenate ``logs`` (all at one sample rate).
+
+    Parameters
+    ----------
+    logs : sequence of Log
+    bandwidth : float
+        [Hz] Band of the SG differentiator (and so of the fit).
+    differentiator : SavitzkyGolay, optional
+        Instead of ``bandwidth``: a differentiator for the (reduced) sample rate.
+    max_rate : float
+        [Hz] Faster logs are reduced by block means.
+    control_rate : float, optional
+        [Hz] Rate of the loop that produced the logged currents (see :func:`logging_error_share`).
+    logging_error : bool
+        Estimate the logged currents' error (item 4 of the module doc); False sets it to zero.
+    """
+    logs = as_log_list(logs)
+    if (bandwidth is None) == (differentiator is None):
+        raise ValueError("give exactly one of bandwidth and differentiator")
+    if differentiator is not None and not isinstance(differentiator, SavitzkyGolay):
+        raise TypeError(
+            "differentiator must be a SavitzkyGolay (zero phase; a lagging estimate biases an "
+            f"equation-error fit), got {type(differentiator).__name__}"
+        )
+    shares, reduced = [], []
+    for log in logs:
+        share = logging_error_share(log, control_rate) if logging_error else 0.0
+        r, q = reduce_rate(log, max_rate)
+        shares.append(share / q)  # a mean of q samples carries 1/q of the sample's error
+        reduced.append(r)
+    ts = reduced[0].sample_time
+    for log in reduced[1:]:
+        if abs(log.sample_time - ts) > 0.01 * ts:
+            raise LogError(
+                log.source,
+                f"sample time {log.sample_time:g} s differs from {reduced[0].source}'s {ts:g} s; "
+                "fit logs of one rate together",
+            )
+    if differentiator is None:
+        sg = SavitzkyGolay(ts, bandwidth=bandwidth)
+    else:
+        sg = differentiator
+        if abs(sg.sample_time - ts) > 0.01 * ts:
+            raise ValueError(
+                f"differentiator sample_time {sg.sample_time!r} s does not match the logs' {ts!r} s"
+            )
+    bandwidth = sg.bandwidth
+    kernel = matching_kernel(sg)
+    edge = max(sg.velocity_window, sg.acceleration_window) // 2 + kernel.size // 2
+    parts = []
+    noise = np.zeros(2)
+    weight = 0
+    for k, (log, share) in enumerate(zip(reduced, shares, strict=True)):
+        if log.n < 2 * edge + 10:
+            raise LogError(
+                log.source,
+                f"{log.n} samples at {1 / ts:g} Hz; the {bandwidth:g} Hz differentiator needs at least "
+                f"{2 * edge + 10} ({(2 * edge + 10) * ts:.2f} s)",
+            )
+        d = sg(np.vstack([log.x[0], log.x[2]]))
+        u = np.asarray(log.u, dtype=float)
+        du = sg(u).velocity
+        x = np.vstack([d.position[0], d.velocity[0], d.position[1], d.velocity[1]])
+        valid = np.zeros(log.n, dtype=bool)
+        valid[edge : log.n - edge] = True
+        noise += share * _white_floor(u, ts) * log.n
+        weight += log.n
+        parts.append((log.t - log.t[0], np.full(log.n, k), x, u, du, np.asarray(d.acceleration), valid))
+    cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
+    moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
+    notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
+    return PreparedLogs(
+        t=cat[0],
+        segment=cat[1],
+        x=cat[2],
+        u=cat[3],
+        du=cat[4],
+        acc=cat[5],
+        valid=cat[6],
+        sample_time=ts,
+        differentiator=sg,
+        kernel=kernel,
+        current_noise=noise / max(weight, 1),
+        moving=moving,
+        sources=tuple(log.source for log in logs),
+        notes=notes,
+        settings={
+            "bandwidth_hz": bandwidth,
+            "sg_windows": (sg.velocity_window, sg.acceleration_window),
+            "edge_samples": edge,
+            "logging_error_share": [float(s) for s in shares],
+            "max_rate_hz": max_rate,
+        },
+    )

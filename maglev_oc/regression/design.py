@@ -1,0 +1,333 @@
+"""The filtered regression design: columns, target and their Gram matrices per block of samples.
+
+Rows are samples of both axes; columns are the estimated base parameters (among C1..C4 and the
+gap offset) followed by every term's parameters. The target is the measured acceleration minus
+everything known (gravity, the constants held fixed, and for parameters entered nonlinearly the
+part of their linearization that does not multiply them). Columns and target pass through the
+same filter F (:mod:`~maglev_oc.regression.data`).
+
+Everything a fit needs is accumulated once per block of ``block_seconds`` of fitted samples
+(weighted by the per-axis weights):
+
+* ``gram`` X_b' X_b, ``rhs`` X_b' y_b, ``yy`` y_b' y_b — any subset's fit is a small solve;
+* ``noise`` N_b, the expected contribution of the logged currents' errors to X_b' X_b
+  (errors-in-variables, see :mod:`~maglev_oc.regression.data`): a column c(x, u, du) with
+  u = u_applied + e carries F[dc/du e] + F[dc/d(du) D e] (D the SG velocity filter), whose
+  expected cross-products, for white e of variance s_i^2 per channel and slowly varying
+  sensitivities, are s_i^2 (|F|^2 sum dc_j/du_i dc_k/du_i + |F*D|^2 sum dc_j/ddu_i dc_k/ddu_i);
+* the held-out block's per-axis (unweighted) Gram matrices, so any subset's held-out error is a
+  quadratic form.
+
+Blocks never span two logs or the gap around a held-out block; the fits' covariance treats the
+block scores as a time series (:mod:`~maglev_oc.regression.solve`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.terms import AccelerationTerm
+
+__all__ = ["DEFAULT_BLOCK", "Design", "build_design"]
+
+DEFAULT_BLOCK = 0.5
+"""[s] Block length: the covariance's spectral window (0.25 Hz) is well inside the block
+series' band (1 Hz), and a 45 s fitting part gives 90 blocks for the bootstrap."""
+
+
+@dataclass(frozen=True, eq=False)
+class Design:
+    """Filtered columns and their block sums.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Parameters in column order: estimated base parameters, then ``"<term>.<parameter>"``.
+    groups : dict
+        "base" (the estimated base parameters) and each term's name -> column indices.
+    terms : tuple of AccelerationTerm
+    columns : (P, 2, n) filtered columns; target : (2, n) filtered target
+    weights : (2,) per-axis weights (1 / residual scale; 0 for an axis that does not move)
+    fit, holdout : (n,) bool masks
+    gram, noise : (B, P, P); rhs : (B, P); yy : (B,) per fitted block, weighted
+    block_log : (B,) the log each block belongs to; block_seconds : float
+    hold_gram : (2, P, P); hold_rhs : (2, P); hold_yy : (2,); hold_n : int (unweighted, per axis)
+    at : (P,) the parameter values the nonlinear parameters were linearized at
+    prepared : PreparedLogs
+    """
+
+    names: tuple[str, ...]
+    groups: dict[str, np.ndarray]
+    terms: tuple[AccelerationTerm, ...]
+    columns: np.ndarray
+    target: np.ndarray
+    weights: np.ndarray
+    fit: np.ndarray
+    holdout: np.ndarray
+    gram: np.ndarray
+    noise: np.ndarray
+    rhs: np.ndarray
+    yy: np.ndarray
+    block_log: np.ndarray
+    block_seconds: float
+    hold_gram: np.ndarray
+    hold_rhs: np.ndarray
+    hold_yy: np.ndarray
+    hold_n: int
+    at: np.ndarray
+    prepared: PreparedLogs
+
+    @property
+    def n_parameters(self) -> int:
+        return len(self.names)
+
+    @property
+    def moving(self) -> np.ndarray:
+        return self.prepared.moving
+
+    def indices(self, groups: Sequence[str]) -> np.ndarray:
+        return np.concatenate([self.groups[g] for g in groups]) if groups else np.zeros(0, dtype=int)
+
+    def term(self, name: str) -> AccelerationTerm:
+        for t in self.terms:
+            if t.name == name:
+                return t
+        raise KeyError(name)
+
+
+def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[AccelerationTerm], at: np.ndarray):
+    """CasADi Function (x, u, du) -> (columns (2, P), known (2,), sensitivities (m,)) and, for each of
+    the m sensitivities, (column, axis, input, kind): d column / d u_input (kind 0) or
+    d column / d du_input (kind 1), the structural nonzeros only."""
+    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    consts = np.asarray(model.constants.as_array(), dtype=float)
+    names = [c for c in CONSTANT_NAMES if c in estimate]
+    k = len(names) + (GAP_OFFSET in estimate)
+    for c in names:
+        consts[CONSTANT_NAMES.index(c)] = at[names.index(c)]
+    delta0 = float(at[len(names)]) if GAP_OFFSET in estimate else 0.0
+    delta = ca.SX.sym("delta")
+    xs = ca.vertcat(x[0] + delta, x[1], x[2], x[3])
+    phi, b = model.regressor(xs, u)
+    cols, known = [], b
+    for j, c in enumerate(CONSTANT_NAMES):
+        if c in names:
+            cols.append(phi[:, j])
+        else:
+            known = known + phi[:, j] * consts[j]
+    total = phi @ ca.DM(consts) + b  # the model at the linearization point, for the offset's column
+    term_acc = []
+    for term in terms:
+        p0 = ca.DM(at[k : k + term.n_parameters])
+        acc = term.function(xs, u, du, p0)
+        p = ca.SX.sym("p", term.n_parameters)
+        acc_p = term.function(xs, u, du, p)
+        jac = ca.substitute(ca.jacobian(acc_p, p), p, p0)
+        cols.extend(jac[:, i] for i in range(term.n_parameters))
+        known = known + acc - jac @ p0
+        term_acc.append(acc)
+        k += term.n_parameters
+    if GAP_OFFSET in estimate:
+        full = total + sum(term_acc, ca.SX.zeros(2, 1))
+        dcol = ca.jacobian(full, delta)
+        cols.insert(len(names), dcol)
+        known = known - dcol * delta0
+    cols_m = ca.horzcat(*cols) if cols else ca.SX.zeros(2, 0)
+    cols_m = ca.substitute(cols_m, delta, delta0)
+    known = ca.substitute(known, delta, delta0)
+    flat = ca.reshape(cols_m, -1, 1)  # column-major: (axis, column) -> axis + 2 column
+    # sensitivities to the currents and their rates: only their structural nonzeros, as vectors,
+    # with (column, axis, input) of each; kind 0 = d/du, 1 = d/d(du)
+    outs, where = [], []
+    for kind, var in enumerate((u, du)):
+        jac = ca.jacobian(flat, var)
+        rows, cols_ = jac.sparsity().get_triplet()
+        outs.append(jac.nz[:] if rows else ca.SX.zeros(0, 1))
+        where.extend((r // 2, r % 2, c, kind) for r, c in zip(rows, cols_, strict=True))
+    fn = ca.Function(
+        "design",
+        [x, u, du],
+        [cols_m, known, ca.vertcat(*outs)],
+        ["x", "u", "du"],
+        ["cols", "known", "sensitivities"],
+    )
+    return fn, np.array(where, dtype=int).reshape(-1, 4)
+
+
+def _blocks(fit: np.ndarray, segment: np.ndarray, size: int) -> list[np.ndarray]:
+    """Index arrays of the fitted samples cut into blocks of ``size`` (a last piece shorter than
+    half a block joins its predecessor); blocks never cross a log or a gap in the mask."""
+    idx = np.flatnonzero(fit)
+    if idx.size == 0:
+        return []
+    breaks = np.flatnonzero((np.diff(idx) > 1) | (np.diff(segment[idx]) != 0)) + 1
+    out = []
+    for run in np.split(idx, breaks):
+        pieces = [run[k : k + size] for k in range(0, run.size, size)]
+        if len(pieces) > 1 and pieces[-1].size < size // 2:
+            pieces[-2] = np.concatenate([pieces[-2], pieces.pop()])
+        out.extend(pieces)
+    return out
+
+
+def build_design(
+    prepared: PreparedLogs,
+    model: StageModel,
+    *,
+    estimate: Sequence[str] = CONSTANT_NAMES,
+    terms: Sequence[AccelerationTerm] = (),
+    fit: np.ndarray | None = None,
+    holdout: np.ndarray | None = None,
+    at: Mapping[str, float] | np.ndarray | None = None,
+    weights: np.ndarray | None = None,
+    block_seconds: float = DEFAULT_BLOCK,
+) -> Design:
+    """Evaluate, filter and accumulate the design.
+
+    Parameters
+    ----------
+    prepared : PreparedLogs
+    model : StageModel
+        Geometry, and the values of the constants not estimated.
+    estimate : sequence of str
+        Base parameters among C1..C4 and ``gap_offset``.
+    terms : sequence of AccelerationTerm
+    fit, holdout : (n,) bool, optional
+        Samples fitted (default every valid one) and held out (default none).
+    at : mapping or array, optional
+        Values at which parameters that enter nonlinearly (the gap offset, nonlinear terms' ones)
+        are linearized; default the model's constants, zero offset, the terms' initial values.
+    weights : (2,), optional
+        Per-axis weights; default 1 / RMS residual of an unweighted fit of this design.
+    block_seconds : float
+        [s] Length of the blocks of fitted samples.
+    """
+    estimate = tuple(estimate)
+    unknown = [e for e in estimate if e not in ESTIMABLE]
+    if unknown:
+        raise ValueError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
+    if len(set(estimate)) != len(estimate):
+        raise ValueError(f"estimate: duplicate names in {estimate!r}")
+    terms = tuple(terms)
+    tnames = [t.name for t in terms]
+    if len(set(tnames)) != len(tnames):
+        raise ValueError(f"terms: duplicate names {tnames}")
+    base = [c for c in CONSTANT_NAMES if c in estimate] + ([GAP_OFFSET] if GAP_OFFSET in estimate else [])
+    names = tuple(base) + tuple(q for t in terms for q in t.qualified_names)
+    defaults = [getattr(model.constants, c) for c in base if c != GAP_OFFSET]
+    defaults += [0.0] * (GAP_OFFSET in estimate) + [v for t in terms for v in t.initial]
+    if at is None:
+        at_vec = np.array(defaults, dtype=float)
+    elif isinstance(at, Mapping):
+        at_vec = np.array([float(at.get(nm, d)) for nm, d in zip(names, defaults, strict=True)])
+    else:
+        at_vec = np.asarray(at, dtype=float).ravel()
+        if at_vec.size != len(names):
+            raise ValueError(f"at: expected {len(names)} values {names}, got {at_vec.size}")
+    groups = {"base": np.arange(len(base))}
+    k = len(base)
+    for t in terms:
+        groups[t.name] = np.arange(k, k + t.n_parameters)
+        k += t.n_parameters
+
+    prep = prepared
+    n, P = prep.n, len(names)
+    fn, where = _symbolic(model, estimate, terms, at_vec)
+    cols, known, sens = (np.asarray(v) for v in fn.map(n)(prep.x, prep.u, prep.du))
+    # mapped outputs are concatenated sample by sample: cols (2, n P) -> (P, 2, n)
+    cols = cols.reshape(2, n, P).transpose(2, 0, 1) if P else np.zeros((0, 2, n))
+    columns = prep.filter(cols)
+    target = prep.acc - prep.filter(known)
+
+    fit = prep.valid.copy() if fit is None else np.asarray(fit, dtype=bool) & prep.valid
+    holdout = np.zeros(n, dtype=bool) if holdout is None else np.asarray(holdout, dtype=bool)
+    if weights is None:
+        weights = _axis_weights(columns, target, fit, prep.moving)
+    weights = np.where(prep.moving, np.asarray(weights, dtype=float), 0.0)
+
+    size = max(1, round(block_seconds / prep.sample_time))
+    blocks = _blocks(fit, prep.segment, size)
+    # errors in variables: sensitivity e of column p on axis a to input I carries, after the
+    # filter, variance s2_I |K|^2 per unit; scale each by sqrt(w_a^2 s2_I |K|^2) so that the block
+    # Gram of the scaled sensitivities, summed over pairs on the same (axis, input, kind),
+    # scattered to their columns, is N_b
+    kf = float(np.sum(prep.kernel**2))
+    kfd = float(np.sum(np.convolve(prep.kernel, _velocity_kernel(prep)) ** 2))
+    if sens.size and np.any(prep.current_noise > 0):
+        sens = sens.reshape(-1, n)  # (m, n): one column per sample
+        gain = np.array(
+            [weights[a] ** 2 * prep.current_noise[i] * (kf if k == 0 else kfd) for _, a, i, k in where]
+        )
+        sens = sens * np.sqrt(gain)[:, None]
+        group = where[:, 1] * 4 + where[:, 2] * 2 + where[:, 3]
+        same = group[:, None] == group[None, :]
+        scatter = np.zeros((P, len(where)))
+        scatter[where[:, 0], np.arange(len(where))] = 1.0
+    else:
+        sens = None
+    grams, noises, rhss, yys, logs = [], [], [], [], []
+    for sel in blocks:
+        xw = (columns[:, :, sel] * weights[None, :, None]).reshape(P, -1)
+        yw = (target[:, sel] * weights[:, None]).reshape(-1)
+        grams.append(xw @ xw.T)
+        rhss.append(xw @ yw)
+        yys.append(float(yw @ yw))
+        logs.append(int(prep.segment[sel[0]]))
+        if sens is not None:
+            e = sens[:, sel]
+            noises.append(scatter @ ((e @ e.T) * same) @ scatter.T)
+        else:
+            noises.append(np.zeros((P, P)))
+    ho = holdout
+    hg = np.stack([columns[:, a, ho] @ columns[:, a, ho].T for a in range(2)])
+    hr = np.stack([columns[:, a, ho] @ target[a, ho] for a in range(2)])
+    hy = np.array([float(target[a, ho] @ target[a, ho]) for a in range(2)])
+    empty = np.zeros((0, P, P))
+    return Design(
+        names=names,
+        groups=groups,
+        terms=terms,
+        columns=columns,
+        target=target,
+        weights=weights,
+        fit=fit,
+        holdout=holdout,
+        gram=np.array(grams) if grams else empty,
+        noise=np.array(noises) if noises else empty,
+        rhs=np.array(rhss) if rhss else np.zeros((0, P)),
+        yy=np.array(yys),
+        block_log=np.array(logs, dtype=int),
+        block_seconds=size * prep.sample_time,
+        hold_gram=hg,
+        hold_rhs=hr,
+        hold_yy=hy,
+        hold_n=int(ho.sum()),
+        at=at_vec,
+        prepared=prep,
+    )
+
+
+def _velocity_kernel(prep: PreparedLogs) -> np.ndarray:
+    from scipy.signal import savgol_coeffs
+
+    sg = prep.differentiator
+    return savgol_coeffs(sg.velocity_window, sg.polyorder, deriv=1, delta=sg.sample_time, use="conv")
+
+
+def _axis_weights(columns: np.ndarray, target: np.ndarray, fit: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """1 / RMS residual per axis of an unweighted fit on the fitted samples (1 if no columns)."""
+    P = columns.shape[0]
+    y = target[:, fit]
+    if P:
+        xb = columns[:, :, fit].reshape(P, -1).T
+        coef, *_ = np.linalg.lstsq(xb, y.reshape(-1), rcond=None)
+        y = y - np.einsum("p,pan->an", coef, columns[:, :, fit])
+    rms = np.sqrt(np.mean(y**2, axis=1)) if y.shape[1] else np.ones(2)
+    return np.where(moving & (rms > 0), 1.0 / np.maximum(rms, 1e-12), 0.0)

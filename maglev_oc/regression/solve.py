@@ -1,0 +1,258 @@
+"""Least squares on a :class:`~maglev_oc.regression.design.Design`: one solver, one covariance.
+
+A fit of any subset of column groups is the solve of its block-summed normal equations,
+
+    (sum_b X_b'X_b - sum_b N_b) theta = sum_b X_b'y_b,
+
+with the errors-in-variables part N_b of the logged currents removed (bias-compensated least
+squares; ``compensate=False`` gives ordinary least squares). Its held-out error per axis is a
+quadratic form in the held-out Gram matrices; a block bootstrap resamples the blocks' sums.
+
+Covariance (the one choice of the project's equation-error fits): the sandwich
+H^-1 S H^-1 with S the long-run covariance of the block scores s_b = X_b'y_b - (X_b'X_b - N_b)
+theta, a time series per log, estimated by the averaged periodogram over its lowest Fourier
+frequencies (:func:`~maglev_oc.regression.covariance.periodogram_long_run`, band 0.25 Hz; see that
+module for why not Newey-West). Summing the samples into 0.5 s blocks does not change the series'
+spectrum below 1 Hz, so this is the per-sample estimate at a fraction of the memory. The plain
+s^2 H^-1 is reported beside it.
+
+Parameters that enter nonlinearly are fitted by Gauss-Newton (:func:`fit_nonlinear`): the design
+is rebuilt at each iterate, its columns being the exact Jacobian there, so each solve gives the
+next iterate directly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from maglev_oc.regression.covariance import DEFAULT_BAND, frequencies_for, periodogram_long_run
+from maglev_oc.regression.design import Design
+
+__all__ = ["SubsetFit", "fit_nonlinear", "fit_subset", "predicted", "residuals"]
+
+
+@dataclass(frozen=True, eq=False)
+class SubsetFit:
+    """A fit of some column groups of a design.
+
+    Attributes
+    ----------
+    groups : tuple of str
+    index : (p,) column indices in the design; names : tuple of str
+    coef : (p,)
+    covariance : (p, p) long-run (sandwich) covariance; naive : (p, p) s^2 H^-1
+    holdout_rms : (2,) per axis, unweighted [units of the target]; NaN without a held-out block
+    chi_square : float  weighted residual sum of squares of the fitted blocks
+    dof : int
+    frequencies : int  Fourier frequencies the long-run covariance averaged (all logs)
+    compensation : float  share of the estimated errors-in-variables part removed (1 = all, 0 = OLS)
+    message : str
+    """
+
+    groups: tuple[str, ...]
+    index: np.ndarray
+    names: tuple[str, ...]
+    coef: np.ndarray
+    covariance: np.ndarray
+    naive: np.ndarray
+    holdout_rms: np.ndarray
+    chi_square: float
+    dof: int
+    frequencies: int
+    compensation: float
+    message: str = ""
+
+    @property
+    def compensated(self) -> bool:
+        """Whether the whole errors-in-variables part was removed."""
+        return self.compensation == 1.0
+
+    def group(self, design: Design, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(coefficients, covariance) of one group."""
+        pos = (
+            np.searchsorted(self.index, design.groups[name])
+            if _sorted(self.index)
+            else np.array([int(np.flatnonzero(self.index == j)[0]) for j in design.groups[name]])
+        )
+        return self.coef[pos], self.covariance[np.ix_(pos, pos)]
+
+    def value(self, name: str) -> float:
+        return float(self.coef[self.names.index(name)])
+
+    def stderr(self, name: str) -> float:
+        k = self.names.index(name)
+        return float(np.sqrt(max(self.covariance[k, k], 0.0)))
+
+
+def _sorted(a: np.ndarray) -> bool:
+    return bool(np.all(np.diff(a) > 0))
+
+
+def _solve_spd(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Solution and inverse of a symmetric system; False when it is not positive definite."""
+    try:
+        c = np.linalg.cholesky(g)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(g, r, rcond=None)[0], np.linalg.pinv(g), False
+    inv = np.linalg.inv(c)
+    ginv = inv.T @ inv
+    return ginv @ r, ginv, True
+
+
+def fit_subset(
+    design: Design,
+    groups: Sequence[str],
+    *,
+    blocks: np.ndarray | None = None,
+    compensate: bool = True,
+    covariance: bool = True,
+    band: float = DEFAULT_BAND,
+    extra: Sequence[int] = (),
+) -> SubsetFit:
+    """Least squares on the chosen groups (and any ``extra`` single columns) over the fitted blocks.
+
+    ``blocks``: indices of blocks to sum (with repetition, for a bootstrap); the covariance needs
+    all blocks in order. With ``compensate`` the logged currents' errors are removed from the
+    normal equations; if that leaves them indefinite (an error estimate larger than the signal),
+    the fit falls back to ordinary least squares and says so in ``message``.
+    """
+    idx = np.concatenate([design.indices(groups), np.asarray(extra, dtype=int)])
+    sel = slice(None) if blocks is None else np.asarray(blocks)
+    gram_raw = design.gram[sel][:, idx][:, :, idx].sum(axis=0)
+    noise = design.noise[sel][:, idx][:, :, idx].sum(axis=0)
+    rhs = design.rhs[sel][:, idx].sum(axis=0)
+    message = ""
+    # columns that vanish on the fitted rows (they act only on a locked axis): coefficient 0
+    dead = np.diag(gram_raw) <= 1e-12 * max(float(np.max(np.diag(gram_raw), initial=0.0)), 1e-300)
+    rhs = np.where(dead, 0.0, rhs)
+
+    def system(share: float) -> np.ndarray:
+        g = gram_raw - share * noise
+        g[dead, :] = 0.0
+        g[:, dead] = 0.0
+        g[dead, dead] = 1.0
+        return g
+
+    share = 1.0 if compensate else 0.0
+    coef, ginv, ok = _solve_spd(system(share), rhs)
+    if not ok and share > 0:
+        # the logged currents' errors, as estimated, are larger than some columns' signal: remove
+        # the largest share of them that keeps the normal equations positive definite
+        lo, hi = 0.0, 1.0
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _solve_spd(system(mid), rhs)[2] else (lo, mid)
+        share = lo
+        coef, ginv, _ = _solve_spd(system(share), rhs)
+        message = (
+            f"only {share:.0%} of the estimated errors in the logged currents could be removed: some "
+            "columns are dominated by them"
+        )
+    coef = np.where(dead, 0.0, coef)
+    yy = float(design.yy[sel].sum())
+    chi2 = max(yy - 2 * coef @ rhs + coef @ gram_raw @ coef, 0.0)
+    rows = int(np.sum(design.fit)) * int(np.sum(design.weights > 0))
+    dof = max(rows - idx.size, 1)
+    naive = chi2 / dof * ginv
+    ho = np.full(2, np.nan)
+    if design.hold_n:
+        for a in range(2):
+            hg = design.hold_gram[a][np.ix_(idx, idx)]
+            sse = design.hold_yy[a] - 2 * coef @ design.hold_rhs[a][idx] + coef @ hg @ coef
+            ho[a] = np.sqrt(max(sse, 0.0) / design.hold_n)
+    cov = np.full((idx.size, idx.size), np.nan)
+    total_m = 0
+    if covariance and blocks is None and design.gram.shape[0]:
+        comp = share * design.noise[:, idx][:, :, idx]
+        scores = design.rhs[:, idx] - np.einsum("bpq,q->bp", design.gram[:, idx][:, :, idx] - comp, coef)
+        scores[:, dead] = 0.0
+        meat = np.zeros((idx.size, idx.size))
+        for log in np.unique(design.block_log):
+            s = scores[design.block_log == log].T  # (p, B_log)
+            if s.shape[1] < 4:
+                meat += s @ s.T
+                total_m += 1
+                continue
+            m = frequencies_for(s.shape[1], design.block_seconds, band)
+            meat += periodogram_long_run(s, m)
+            total_m += m
+        meat = 0.5 * (meat + meat.T)
+        cov = ginv @ meat @ ginv
+        cov[dead, :] = 0.0
+        cov[:, dead] = 0.0
+    return SubsetFit(
+        groups=tuple(groups),
+        index=idx,
+        names=tuple(design.names[j] for j in idx),
+        coef=coef,
+        covariance=cov,
+        naive=naive,
+        holdout_rms=ho,
+        chi_square=float(chi2),
+        dof=dof,
+        frequencies=total_m,
+        compensation=share,
+        message=message,
+    )
+
+
+def predicted(design: Design, fit: SubsetFit, group: str | None = None) -> np.ndarray:
+    """Filtered prediction (2, n) of a fit (or of one of its groups) at every sample."""
+    if group is None:
+        return np.einsum("p,pan->an", fit.coef, design.columns[fit.index])
+    coef, _ = fit.group(design, group)
+    return np.einsum("p,pan->an", coef, design.columns[design.groups[group]])
+
+
+def residuals(design: Design, fit: SubsetFit) -> np.ndarray:
+    """Filtered residual (2, n), unweighted, at every sample (meaningful where ``valid``)."""
+    return design.target - predicted(design, fit)
+
+
+def _cost_at(design: Design, at: np.ndarray) -> float:
+    """Weighted residual sum of squares of the model at ``at`` itself (the design being
+    linearized there, its columns times ``at`` reproduce the model)."""
+    r = design.target - np.einsum("p,pan->an", at, design.columns)
+    return float(np.sum((r[:, design.fit] * design.weights[:, None]) ** 2))
+
+
+def fit_nonlinear(
+    build: Callable[[np.ndarray], Design],
+    at: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    scale: np.ndarray,
+    *,
+    compensate: bool = True,
+    max_iterations: int = 30,
+    tolerance: float = 1e-8,
+) -> tuple[Design, SubsetFit, int, str, int]:
+    """Gauss-Newton with step halving: ``build(at)`` gives the design linearized at ``at`` (all
+    parameters, in the design's order). Returns (design, fit, status, message, iterations);
+    status 1 converged, 0 iteration limit, -1 no decrease."""
+    at = np.clip(np.asarray(at, dtype=float), lower, upper)
+    design = build(at)
+    groups = list(design.groups)
+    fit = fit_subset(design, groups, compensate=compensate, covariance=False)
+    cost = _cost_at(design, at)
+    for it in range(1, max_iterations + 1):
+        step = fit.coef - at
+        t = 1.0
+        while True:
+            trial = np.clip(at + t * step, lower, upper)
+            d_t = build(trial)
+            f_t = fit_subset(d_t, groups, compensate=compensate, covariance=False)
+            c_t = _cost_at(d_t, trial)
+            if c_t <= cost * (1 + 1e-12) or t < 1e-6:
+                break
+            t *= 0.5
+        if t < 1e-6 and c_t > cost:
+            return design, fit, -1, "Gauss-Newton: no decrease along the step", it
+        moved = float(np.max(np.abs(trial - at) / scale))
+        at, design, fit, cost = trial, d_t, f_t, c_t
+        if moved < tolerance:
+            return design, fit, 1, f"Gauss-Newton (exact Jacobian) converged in {it} iterations", it
+    return design, fit, 0, f"Gauss-Newton: {max_iterations} iterations without convergence", max_iterations

@@ -1,0 +1,169 @@
+"""Scoring a diagnosis against a log's truth: the three counts of the diagnosis issue.
+
+This module reads two plain JSON documents — the generator's ``<log>.truth.json`` and the
+``effects`` list of a diagnosis (the SPEC 3 contract that ``maglev-oc diagnose --json`` writes,
+or any tool's answer put in that form) — and imports nothing from ``maglev_oc``. It is the one
+place that knows how the generator's physical kinds correspond to the names a diagnosis uses and
+how their sizes compare:
+
+* **true effect first**: on a clean log nothing is claimed; otherwise the first claimed effect
+  is one of the log's true effects;
+* **no false claim**: every claimed effect is one of the log's true effects (each true effect
+  matched at most once);
+* **size right**: every true effect is claimed, with its size within 30 % of the truth (a clean
+  log with no claim counts as sized right).
+
+Sizes compared (truth -> claimed parameter):
+
+=================== ====================================== =========================================
+truth kind          claimed name                           size
+=================== ====================================== =========================================
+guide_friction      ``guide_friction_<axis>``              Coulomb force [N]
+normal_cogging      ``cogging_vertical_19mm``              peak of the slot-pitch fundamental [N] at
+                                                           the claim's ``at_gap`` (truth's decay law)
+detent_force        ``cogging_horizontal_19mm``            the same, longitudinal
+end_effect          ``end_effects``                        thrust lost at the logged ends relative
+                                                           to the centre [1]
+guide_misalignment  ``guide_misalignment``                 slope [rad]
+cable_carrier       ``cable_carrier_force``                stiffness [N/m]
+thrust_ripple       ``thrust_ripple``                      ripple amplitude at the slot pitch [1]
+commutation_offset  ``commutation_offset``                 angle [rad]
+amplifier_dynamics  ``current_amplifier_lag``              first-order time constant + delay [s]
+field_shape         ``attraction_gap_dependence``          attraction change at the smallest gap [1]
+tilted_base         ``horizontal_guides_not_level``        force along the track [N]
+=================== ====================================== =========================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+SIZE_TOLERANCE = 0.30
+"""Relative size error allowed (the diagnosis issue: 'size within 30 % of the truth')."""
+
+
+def _name_for(effect: dict) -> tuple[str, ...]:
+    """Names a diagnosis may give a true effect."""
+    kind, axis = effect["kind"], effect.get("axis")
+    return {
+        "guide_friction": (f"guide_friction_{axis}",),
+        "normal_cogging": ("cogging_vertical_19mm",),
+        "detent_force": ("cogging_horizontal_19mm",),
+        "end_effect": ("end_effects",),
+        "guide_misalignment": ("guide_misalignment", "guide_waviness"),
+        "cable_carrier": ("cable_carrier_force",),
+        "thrust_ripple": ("thrust_ripple",),
+        "commutation_offset": ("commutation_offset",),
+        "amplifier_dynamics": ("current_amplifier_lag",),
+        "field_shape": ("attraction_gap_dependence",),
+        "tilted_base": ("horizontal_guides_not_level",),
+    }.get(kind, (kind,))
+
+
+def _profile(x: float, p: dict) -> float:
+    w = p["width"]
+    return math.exp((x - p["end_position_plus"]) / w) + math.exp((p["end_position_minus"] - x) / w)
+
+
+def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
+    """(true size, claimed size) in the units of the table above, or None if not comparable."""
+    kind = true_effect["kind"]
+    t = true_effect["parameters"]
+    c = claimed.get("parameters", {})
+    try:
+        if kind == "guide_friction":
+            return t["coulomb_force"], c["coulomb"]
+        if kind in ("normal_cogging", "detent_force"):
+            decay = true_effect.get("derived", {}).get(
+                "decay_length_fundamental_m", t["period"] / (2 * math.pi)
+            )
+            truth = t["peak_force"] * math.exp(-(c["at_gap"] - t["reference_gap"]) / decay)
+            return truth, c["amplitude"]
+        if kind == "end_effect":
+            ends = (c["low_end_position"], c["high_end_position"])
+            drop = sum(_profile(x, t) for x in ends) / 2 - _profile(0.5 * sum(ends), t)
+            return t["thrust_loss"] * drop, c["thrust_loss_at_ends"]
+        if kind == "guide_misalignment":
+            return t["slope"], c["slope"]
+        if kind == "cable_carrier":
+            return t["stiffness"], c["stiffness"]
+        if kind == "thrust_ripple":
+            return t["ratio"], c["amplitude"]
+        if kind == "commutation_offset":
+            return t["angle"], c["angle"]
+        if kind == "amplifier_dynamics":
+            d = true_effect.get("derived", {})
+            tau = d.get("time_constant_s", 1 / (2 * math.pi * t["bandwidth"]))
+            return tau + d.get("delay_used_s", t["delay"]), c["time_constant"]
+        if kind == "field_shape":
+            g = c["smallest_gap"]
+            d = g - t["reference_gap"]
+            f2 = math.exp(-2 * (t["k1"] * d + t["k2"] * d * d))
+            return f2 - 1, c["attraction_change_at_smallest_gap"]
+        if kind == "tilted_base":
+            return true_effect.get("derived", {}).get("horizontal_force_N"), c["force"]
+    except (KeyError, TypeError):
+        return None
+    return None
+
+
+@dataclass
+class Score:
+    """The three counts for one log."""
+
+    log: str
+    truth: list[str]
+    claimed: list[str]
+    true_first: bool
+    no_false_claim: bool
+    size_right: bool
+    sizes: dict[str, tuple[float, float]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def score(log: str, truth: dict, effects: list[dict]) -> Score:
+    """Score one diagnosis (``effects``: the ranked list of claimed effects) against ``truth``."""
+    true_effects = truth.get("effects", [])
+    claimed = [e["name"] for e in effects]
+    matched: dict[int, int] = {}  # claimed index -> true index
+    for ci, name in enumerate(claimed):
+        for ti, te in enumerate(true_effects):
+            if ti not in matched.values() and any(
+                name == n or name.startswith(n + "_") for n in _name_for(te)
+            ):
+                matched[ci] = ti
+                break
+    no_false = len(matched) == len(claimed)
+    if true_effects:
+        true_first = bool(claimed) and 0 in matched
+    else:
+        true_first = not claimed
+    size_right = True
+    found_sizes: dict[str, tuple[float, float]] = {}
+    notes: list[str] = []
+    for ti, te in enumerate(true_effects):
+        ci = next((c for c, t in matched.items() if t == ti), None)
+        if ci is None:
+            size_right = False
+            notes.append(f"{te['kind']} not claimed")
+            continue
+        pair = sizes(te, effects[ci])
+        if pair is None or pair[0] is None or pair[1] is None:
+            size_right = False
+            notes.append(f"{te['kind']}: size not comparable")
+            continue
+        found_sizes[te["kind"]] = pair
+        if not abs(pair[1] - pair[0]) <= SIZE_TOLERANCE * abs(pair[0]):
+            size_right = False
+            notes.append(f"{te['kind']}: size {pair[1]:.4g} vs truth {pair[0]:.4g}")
+    return Score(
+        log,
+        [te["kind"] for te in true_effects],
+        claimed,
+        true_first,
+        no_false,
+        size_right,
+        found_sizes,
+        notes,
+    )
