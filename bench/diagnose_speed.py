@@ -1,39 +1,53 @@
-"""Benchmark: diagnose a 60 s log at 1 kHz (the issue asks for under 30 s on this machine).
+"""Benchmark: diagnose 60 s logs at 1 kHz (the issue asks for under 30 s on this machine).
 
-python bench/diagnose_speed.py
+The logs come from the independent generator (tests/independent), not from the project's twin:
+the clean log, one with friction on both axes, one with two cogging forces, one with the papers'
+hardware (friction and misalignment). Run from the repository root:
+
+    python bench/diagnose_speed.py
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 from common import machine
 
-from maglev_oc.control.pid import paper_pid
+from maglev_oc.data.logs import read_log
 from maglev_oc.diagnose.diagnosis import diagnose
-from maglev_oc.model.stage import StageModel
-from maglev_oc.sim.effects import TwinEffects
-from maglev_oc.sim.engine import ClosedLoop
-from maglev_oc.sim.recording import result_to_log
-from maglev_oc.sim.scenarios import excitation_scenario
-from maglev_oc.sim.twin import RigTwin
+
+LOGS = {
+    "eleven_04": "clean",
+    "eleven_06": "guide friction, both axes",
+    "eleven_09": "normal cogging and detent",
+    "eleven_02": "friction and misalignment",
+}
 
 
 def main() -> None:
-    model = StageModel()
-    res = ClosedLoop(RigTwin(model, TwinEffects.rig()), paper_pid(model)).run(excitation_scenario(60.0))
-    log = result_to_log(res, rate_hz=1000)
-    runs = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        d = diagnose([log], model)
-        runs.append(time.perf_counter() - t0)
-    print(f"machine: {machine()}")
-    print(
-        f"diagnose, 60 s at 1 kHz (rig twin, {len(d.effects)} effects found): "
-        f"best {min(runs):.2f} s, worst {max(runs):.2f} s"
-    )
-    print("  stages (last run): " + ", ".join(f"{k} {v:.2f} s" for k, v in d.timings.items()))
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        subprocess.run(
+            [sys.executable, "-m", "tests.independent.generate", "--set", "eleven", "--out", tmp],
+            cwd=root,
+            check=True,
+            capture_output=True,
+        )
+        print(f"machine: {machine()}")
+        for stem, what in LOGS.items():
+            log = read_log(Path(tmp) / f"{stem}.csv")
+            runs = []
+            for _ in range(2):
+                t0 = time.perf_counter()
+                d = diagnose([log])
+                runs.append(time.perf_counter() - t0)
+            found = ", ".join(e.name for e in d.effects) or "nothing"
+            print(f"{stem} ({what}; found {found}): best {min(runs):.2f} s, worst {max(runs):.2f} s")
+            print("  stages (last run): " + ", ".join(f"{k} {v:.2f} s" for k, v in d.timings.items()))
 
 
 if __name__ == "__main__":

@@ -34,8 +34,6 @@ from tests.independent.sets import named_set
 from tests.independent.simulate import simulate
 
 SHARED_CLEAN = Path(__file__).resolve().parents[2] / "shared" / "logs" / "independent_clean.csv"
-NOT_IDENTIFIABLE = {"field_shape"}
-"""Effects a closed-loop log of this kind cannot show (see test_field_shape_is_absorbed)."""
 
 
 @pytest.fixture(scope="session")
@@ -111,40 +109,57 @@ def _single_stems() -> list[tuple[str, str]]:
 
 
 QUICK = {"guide_friction_horizontal_small", "normal_cogging_large", "cable_carrier_small"}
+FIELD_SHAPE = pytest.mark.xfail(
+    strict=True,
+    reason="not identifiable from a closed-loop log: the constants absorb it (see test_field_shape_...)",
+)
+
+
+def _marks(name: str) -> list:
+    marks = [] if name in QUICK else [pytest.mark.slow]
+    return marks + ([FIELD_SHAPE] if name.startswith("field_shape") else [])
 
 
 @pytest.mark.parametrize(
     ("stem", "name"),
-    [
-        pytest.param(stem, name, marks=() if name in QUICK else pytest.mark.slow, id=name)
-        for stem, name in _single_stems()
-    ],
+    [pytest.param(stem, name, marks=_marks(name), id=name) for stem, name in _single_stems()],
 )
 def test_each_effect_alone_is_found_first_and_sized(generated, stem, name):
     path, truth = generated("single", stem)
     d = _diagnose(path)
-    kind = truth["effects"][0]["kind"]
     s = score(stem, truth, d.to_json()["effects"])
     assert s.no_false_claim, s.claimed
-    if kind in NOT_IDENTIFIABLE:
-        return  # test_field_shape_is_absorbed says what happens instead
     assert s.true_first, (s.claimed, s.notes)
     assert s.size_right, s.notes  # within 30 % of the truth (the issue's bound)
 
 
+KNOWN_PAIR_FAILURES = {
+    "pairs_02": FIELD_SHAPE,
+    "pairs_03": pytest.mark.xfail(
+        strict=True,
+        reason="a 1.5 % end effect beside a 4 mrad misalignment with 8 um waviness at 60 mm: the waviness's "
+        "along-guide force is named a detent force at the pole pitch (57 mm) and the end effect is not found",
+    ),
+    "pairs_05": pytest.mark.xfail(
+        strict=True,
+        reason="the amplifier lag next to vertical friction: the lag fits the training part (1.6 ms against "
+        "1.3 ms) but worsens the held-out error, confounded with the sticking guides",
+    ),
+}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("stem", [stem for stem, _ in named_set("pairs")])
+@pytest.mark.parametrize(
+    "stem",
+    [pytest.param(stem, marks=KNOWN_PAIR_FAILURES.get(stem, ()), id=stem) for stem, _ in named_set("pairs")],
+)
 def test_two_effects_together_are_both_found(generated, stem):
     path, truth = generated("pairs", stem)
     d = _diagnose(path)
     s = score(stem, truth, d.to_json()["effects"])
-    kinds = {e["kind"] for e in truth["effects"]}
     assert s.true_first, s.claimed
-    found = sum(1 for k in kinds if k in s.sizes)
-    # both found, except an effect closed-loop logs cannot show (and pairs_03's small end effect
-    # beside a four times larger misalignment: measured, see the closing note)
-    expected = len(kinds - NOT_IDENTIFIABLE) - (stem == "pairs_03")
-    assert found >= expected, (s.claimed, s.notes)
+    assert s.no_false_claim, s.claimed
+    assert s.size_right, (s.claimed, s.notes)  # both found, each within 30 %
 
 
 @pytest.mark.slow

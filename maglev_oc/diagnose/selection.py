@@ -202,7 +202,7 @@ def judge(
     rivals: dict[tuple[str, int], tuple[float, str]] | None = None,
 ) -> Judgement:
     axes = _axes(cand, design.moving)
-    fit = fit_subset(design, [*current, cand.name])
+    fit = fit_subset(design, [*current, cand.name], covariance=False)
     r1 = _holdout_residual(design, fit)
     mse1 = np.mean(r1**2, axis=1)
     gain_axes = np.full(2, np.nan)
@@ -211,9 +211,11 @@ def judge(
     # the gain counts every moving axis alike, so an effect on both axes is not diluted
     moving = np.flatnonzero(design.moving)
     gain = float(np.mean(1.0 - mse1[moving] / mse0[moving]))
+    if gain >= settings.min_gain and z >= min(settings.min_z, settings.min_z_strong):
+        fit = fit_subset(design, [*current, cand.name])  # the long-run covariance, for the Wald test
     coef, cov = fit.group(design, cand.name)
     try:
-        wald = float(coef @ np.linalg.solve(cov, coef))
+        wald = float(coef @ np.linalg.solve(cov, coef)) if np.all(np.isfinite(cov)) else 0.0
     except np.linalg.LinAlgError:
         wald = 0.0
     threshold = float(chi2.isf(settings.alpha, coef.size))

@@ -36,8 +36,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import convolve1d
-from scipy.signal import savgol_coeffs, welch
+from scipy.signal import fftconvolve, savgol_coeffs, welch
 
 from maglev_oc.data.logs import Log, LogError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
@@ -221,11 +220,13 @@ class PreparedLogs:
 
     def filter(self, columns: np.ndarray) -> np.ndarray:
         """F applied along the last axis of ``columns`` (..., n), log by log (zero outside)."""
-        columns = np.asarray(columns, dtype=float)
+        columns = np.ascontiguousarray(columns, dtype=float)
         out = np.empty_like(columns)
+        shape = (1,) * (columns.ndim - 1) + (self.kernel.size,)
         for s in range(self.n_logs):
             idx = self.segment == s
-            out[..., idx] = convolve1d(columns[..., idx], self.kernel, axis=-1, mode="constant")
+            # zero-padded 'same' convolution by FFT (the kernel is symmetric: no flip needed)
+            out[..., idx] = fftconvolve(columns[..., idx], self.kernel.reshape(shape), mode="same", axes=-1)
         return out
 
     def masks(self, holdout_fraction: float = 0.0, samples: Sequence[np.ndarray] | None = None):

@@ -57,7 +57,8 @@ class Design:
     weights : (2,) per-axis weights (1 / residual scale; 0 for an axis that does not move)
     fit, holdout : (n,) bool masks
     gram, noise : (B, P, P); rhs : (B, P); yy : (B,) per fitted block, weighted
-    block_log : (B,) the log each block belongs to; block_seconds : float
+    block_log : (B,) the log each block belongs to; block_of : (n,) each sample's block (-1: not
+    fitted); block_seconds : float
     hold_gram : (2, P, P); hold_rhs : (2, P); hold_yy : (2,); hold_n : int (unweighted, per axis)
     at : (P,) the parameter values the nonlinear parameters were linearized at
     prepared : PreparedLogs
@@ -76,6 +77,7 @@ class Design:
     rhs: np.ndarray
     yy: np.ndarray
     block_log: np.ndarray
+    block_of: np.ndarray
     block_seconds: float
     hold_gram: np.ndarray
     hold_rhs: np.ndarray
@@ -242,7 +244,7 @@ def build_design(
     fn, where = _symbolic(model, estimate, terms, at_vec)
     cols, known, sens = (np.asarray(v) for v in fn.map(n)(prep.x, prep.u, prep.du))
     # mapped outputs are concatenated sample by sample: cols (2, n P) -> (P, 2, n)
-    cols = cols.reshape(2, n, P).transpose(2, 0, 1) if P else np.zeros((0, 2, n))
+    cols = np.ascontiguousarray(cols.reshape(2, n, P).transpose(2, 0, 1)) if P else np.zeros((0, 2, n))
     columns = prep.filter(cols)
     target = prep.acc - prep.filter(known)
 
@@ -273,21 +275,27 @@ def build_design(
     else:
         sens = None
     grams, noises, rhss, yys, logs = [], [], [], [], []
-    for sel in blocks:
-        xw = (columns[:, :, sel] * weights[None, :, None]).reshape(P, -1)
-        yw = (target[:, sel] * weights[:, None]).reshape(-1)
+    block_of = np.full(n, -1)
+    xw_all = columns * weights[None, :, None]
+    yw_all = target * weights[:, None]
+    for b, sel in enumerate(blocks):
+        block_of[sel] = b
+        part = slice(sel[0], sel[-1] + 1)  # blocks are runs of consecutive samples
+        xw = xw_all[:, :, part].reshape(P, -1)
+        yw = yw_all[:, part].reshape(-1)
         grams.append(xw @ xw.T)
         rhss.append(xw @ yw)
         yys.append(float(yw @ yw))
         logs.append(int(prep.segment[sel[0]]))
         if sens is not None:
-            e = sens[:, sel]
+            e = sens[:, part]
             noises.append(scatter @ ((e @ e.T) * same) @ scatter.T)
         else:
             noises.append(np.zeros((P, P)))
     ho = holdout
-    hg = np.stack([columns[:, a, ho] @ columns[:, a, ho].T for a in range(2)])
-    hr = np.stack([columns[:, a, ho] @ target[a, ho] for a in range(2)])
+    held = [np.ascontiguousarray(columns[:, a, ho]) for a in range(2)]
+    hg = np.stack([h @ h.T for h in held])
+    hr = np.stack([h @ target[a, ho] for a, h in enumerate(held)])
     hy = np.array([float(target[a, ho] @ target[a, ho]) for a in range(2)])
     empty = np.zeros((0, P, P))
     return Design(
@@ -304,6 +312,7 @@ def build_design(
         rhs=np.array(rhss) if rhss else np.zeros((0, P)),
         yy=np.array(yys),
         block_log=np.array(logs, dtype=int),
+        block_of=block_of,
         block_seconds=size * prep.sample_time,
         hold_gram=hg,
         hold_rhs=hr,

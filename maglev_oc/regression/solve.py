@@ -166,20 +166,9 @@ def fit_subset(
     cov = np.full((idx.size, idx.size), np.nan)
     total_m = 0
     if covariance and blocks is None and design.gram.shape[0]:
-        comp = share * design.noise[:, idx][:, :, idx]
-        scores = design.rhs[:, idx] - np.einsum("bpq,q->bp", design.gram[:, idx][:, :, idx] - comp, coef)
-        scores[:, dead] = 0.0
-        meat = np.zeros((idx.size, idx.size))
-        for log in np.unique(design.block_log):
-            s = scores[design.block_log == log].T  # (p, B_log)
-            if s.shape[1] < 4:
-                meat += s @ s.T
-                total_m += 1
-                continue
-            m = frequencies_for(s.shape[1], design.block_seconds, band)
-            meat += periodogram_long_run(s, m)
-            total_m += m
-        meat = 0.5 * (meat + meat.T)
+        meat, total_m = _long_run_meat(design, idx, coef, share, band)
+        meat[dead, :] = 0.0
+        meat[:, dead] = 0.0
         cov = ginv @ meat @ ginv
         cov[dead, :] = 0.0
         cov[:, dead] = 0.0
@@ -197,6 +186,39 @@ def fit_subset(
         compensation=share,
         message=message,
     )
+
+
+def _long_run_meat(
+    design: Design, idx: np.ndarray, coef: np.ndarray, share: float, band: float
+) -> tuple[np.ndarray, int]:
+    """Long-run covariance of the per-sample scores s_t = sum over axes w^2 x_t (y_t - x_t' theta)
+    + (N_b / m_b) theta (the errors-in-variables correction spread evenly over its block's m_b
+    samples): the averaged periodogram over the lowest Fourier frequencies, per log, summed.
+
+    Per sample rather than per block: the scores of a filtered equation error have most of their
+    power near twice the band, and summing them into 0.5 s blocks (a 2 Hz sampling of a boxcar
+    average) folds part of it onto zero frequency, overstating the variance (2.3x on a synthetic
+    log whose answer is known, tests/test_regression.py)."""
+    fit = design.fit
+    w = design.weights
+    x = design.columns[idx][:, :, fit]  # (p, 2, n_fit)
+    r = design.target[:, fit] - np.einsum("p,pan->an", coef, x)
+    scores = np.einsum("pan,an->pn", x, r * (w**2)[:, None])
+    blocks = design.block_of[fit]
+    sizes = np.bincount(blocks[blocks >= 0], minlength=design.gram.shape[0])
+    corr = (
+        share * np.einsum("bpq,q->bp", design.noise[:, idx][:, :, idx], coef) / np.maximum(sizes, 1)[:, None]
+    )
+    scores += corr[blocks].T
+    segment = design.prepared.segment[fit]
+    meat = np.zeros((idx.size, idx.size))
+    total = 0
+    for log in np.unique(segment):
+        s = scores[:, segment == log]
+        m = frequencies_for(s.shape[1], design.prepared.sample_time, band)
+        meat += periodogram_long_run(s, m)
+        total += m
+    return 0.5 * (meat + meat.T), total
 
 
 def predicted(design: Design, fit: SubsetFit, group: str | None = None) -> np.ndarray:
