@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.parameters import (
     DEFAULT_CONSTANTS,
     StageParameters,
@@ -180,7 +181,7 @@ def cmd_region(args: argparse.Namespace) -> int:
         raise UserError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
     if args.samples < 0:
         raise UserError(f"--samples must be >= 0, got {args.samples}")
-    limit = None if args.no_current_limit else (args.current_limit or 9.0)
+    limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
     loop = RegulatorLoop()
     proc = Procedure2(feasible, loop)

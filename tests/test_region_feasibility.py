@@ -8,11 +8,9 @@ import pytest
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import (
     GAP_TRAVEL,
-    POSITION_TRAVEL,
     FeasibleSet,
     feasibility_map,
 )
-from maglev_oc.sim.effects import Stoppers
 
 
 @pytest.fixture(scope="module")
@@ -52,11 +50,6 @@ def test_root_at_R0_needs_twice_the_peak_current(model):
     g = np.linspace(*GAP_TRAVEL, 500)
     _, _, L3, L4 = model.coefficients(g)
     assert np.min(-L3 / (2 * L4)) > 18.0
-
-
-def test_defaults_are_the_twin_stoppers():
-    assert GAP_TRAVEL == Stoppers().gap
-    assert POSITION_TRAVEL == Stoppers().horizontal
 
 
 def test_map_boundary_is_exact(feasible):

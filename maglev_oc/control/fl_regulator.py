@@ -17,15 +17,12 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, checked_gains
+from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, checked_gains
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.feedback import transformation_expressions
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
-
-PAPER_K_H = np.array(PAPER_GAINS["K_h"].printed, dtype=float)
-PAPER_K_V = np.array(PAPER_GAINS["K_v"].printed, dtype=float)
 
 
 @dataclass(frozen=True, eq=False)

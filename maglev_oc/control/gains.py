@@ -124,6 +124,10 @@ PAPER_GAINS: dict[str, PaperGains] = {
         "002 Sec. 7.1: vertical axis retuned for less overshoot (poles printed to 0.1)",
     ),
 }
+PAPER_K_H = np.array(PAPER_GAINS["K_h"].printed, dtype=float)
+"""The printed horizontal gains K_h (002 Sec. 7.1), the regulators' default."""
+PAPER_K_V = np.array(PAPER_GAINS["K_v"].printed, dtype=float)
+"""The printed vertical gains K_v (002 Sec. 7.1), the regulators' default."""
 
 
 @dataclass(frozen=True)

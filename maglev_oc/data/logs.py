@@ -52,6 +52,7 @@ from typing import Literal
 import numpy as np
 import scipy.io
 
+from maglev_oc.errors import LogError
 from maglev_oc.fileio import atomic_path
 from maglev_oc.model.hardware import ENCODER_RESOLUTION, PEAK_CURRENT_LIMIT
 from maglev_oc.model.parameters import StageParameters
@@ -91,38 +92,6 @@ _NUMBER = re.compile(
     re.IGNORECASE,
 )
 _MATLAB_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}")
-
-
-class LogError(ValueError):
-    """A log that cannot be used, with where (file, line or element, column) and what is wrong.
-
-    Attributes
-    ----------
-    source : str
-        The file.
-    line : int or None
-        1-based line of a CSV file, counting metadata lines (None for .mat and whole-file problems).
-    column : str or None
-        The column (or MATLAB variable) name, when one is at fault.
-    problem : str
-        What is wrong, without the location.
-    """
-
-    def __init__(
-        self,
-        source: str,
-        problem: str,
-        *,
-        where: str | None = None,
-        line: int | None = None,
-        column: str | None = None,
-    ) -> None:
-        self.source = str(source)
-        self.line = line
-        self.column = column
-        self.problem = problem
-        prefix = f"{self.source}: {where}" if where else self.source
-        super().__init__(f"{prefix}: {problem}")
 
 
 # --- the Log ------------------------------------------------------------------------------------

@@ -36,8 +36,8 @@ from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence, Sinusoids, excitation_scenario
 from maglev_oc.sim.twin import RigTwin
+from maglev_oc.units import MM_TO_M
 
-MM = 1e-3
 LOG_RATE_HZ = 1000.0
 """Logging rate of the twin experiments [Hz] (the loop runs at 5 kHz)."""
 
@@ -51,9 +51,9 @@ TWIN_TRUTH = LumpedConstants(
 """The twin's true constants in the identification experiments: the papers' values perturbed,
 so that a fit that stays at its initial guess (the papers' values) is visibly wrong."""
 
-FIXED_GAPS = tuple(round(g, 4) * MM for g in np.arange(10.0, 27.51, 2.5))
+FIXED_GAPS = tuple(round(g, 4) * MM_TO_M for g in np.arange(10.0, 27.51, 2.5))
 """Gaps of the parabola experiments: 10-27.5 mm in 2.5 mm steps (000 Sec. V-A)."""
-EQUILIBRIUM_GAPS = tuple(float(g) * MM for g in range(10, 26))
+EQUILIBRIUM_GAPS = tuple(float(g) * MM_TO_M for g in range(10, 26))
 """Gaps of the equilibrium-current experiments: 10-25 mm in 1 mm steps (000 Sec. V-B)."""
 
 
@@ -82,7 +82,7 @@ def excitation_log(
     seed: int = 0,
     effects: TwinEffects | None = None,
     controller_model: StageModel | None = None,
-    gap_offset: float = 20 * MM,
+    gap_offset: float = 20 * MM_TO_M,
     locked_position: float | None = None,
     design_gap: float | None = None,
 ) -> Log:
@@ -158,8 +158,8 @@ def fixed_gap_logs(
     gaps: Sequence[float] = FIXED_GAPS,
     *,
     current: float = -0.5,
-    start: float = -50 * MM,
-    stop: float = 50 * MM,
+    start: float = -50 * MM_TO_M,
+    stop: float = 50 * MM_TO_M,
     effects: TwinEffects | None = None,
     seed: int = 0,
 ) -> list[Log]:

@@ -8,3 +8,8 @@ CONTINUOUS_CURRENT_LIMIT = 7.0
 """LCAM continuous current [A]."""
 PEAK_CURRENT_LIMIT = 9.0
 """LCAM peak current [A]."""
+STOPPER_GAP = (8e-3, 30e-3)
+"""Gap between the vertical stoppers [m] (002 Fig. 5: about 10 mm of travel, the stoppers a little
+outside the working range)."""
+STOPPER_POSITION = (-60e-3, 60e-3)
+"""Horizontal position between the stoppers [m] (about +-50 mm of travel, 002 Sec. 4)."""

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import block_diag, solve_continuous_lyapunov, solve_sylvester
 
-from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, augmented_axis, checked_gains
+from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, augmented_axis, checked_gains
 
 N_ERROR = 10
 """Dimension of z~ (two axes of (e, e', xi1, xi2, xi3))."""
@@ -42,9 +42,6 @@ E1, DE1, E2, DE2 = 0, 1, 5, 6
 """Indices of the vertical error, its rate, the horizontal error and its rate in z~."""
 ERROR_STATE_NAMES = ("e1", "e1'", "xi_v1", "xi_v2", "xi_v3", "e2", "e2'", "xi_h1", "xi_h2", "xi_h3")
 ERROR_STATE_UNITS = ("m", "m/s", "m s^2", "m s", "m", "m", "m/s", "m s^2", "m s", "m")
-
-PAPER_K_H = np.array(PAPER_GAINS["K_h"].printed, dtype=float)
-PAPER_K_V = np.array(PAPER_GAINS["K_v"].printed, dtype=float)
 
 
 @dataclass(frozen=True)

@@ -30,15 +30,15 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.interval import IntervalFunction
 
-GAP_TRAVEL = (8e-3, 30e-3)
-"""Gap between the stoppers [m] (the rig twin's ``sim.effects.Stoppers().gap``; 002 Fig. 5)."""
-POSITION_TRAVEL = (-60e-3, 60e-3)
-"""Horizontal position between the stoppers [m] (``sim.effects.Stoppers().horizontal``)."""
+GAP_TRAVEL = STOPPER_GAP
+"""Gap between the stoppers [m] (:data:`maglev_oc.model.hardware.STOPPER_GAP`; 002 Fig. 5)."""
+POSITION_TRAVEL = STOPPER_POSITION
+"""Horizontal position between the stoppers [m] (:data:`maglev_oc.model.hardware.STOPPER_POSITION`)."""
 
 CONSTRAINT_NAMES = ("margin", "headroom", "gap_low", "gap_high", "position_low", "position_high")
 CONSTRAINT_LABELS = (

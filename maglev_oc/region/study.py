@@ -42,10 +42,10 @@ from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa, frozen_
 from maglev_oc.region.sdp import PolygonBuilder, SdpResult, enlarge
 from maglev_oc.sim.effects import Encoder, TwinEffects
 from maglev_oc.sim.twin import RigTwin
+from maglev_oc.units import MM_TO_M
 
-MM = 1e-3
-LARGE_STEP_START = (26 * MM, 0.0, 0.0, 0.0)
-LARGE_STEP_TARGET = (18 * MM, 20 * MM)
+LARGE_STEP_START = (26 * MM_TO_M, 0.0, 0.0, 0.0)
+LARGE_STEP_TARGET = (18 * MM_TO_M, 20 * MM_TO_M)
 """The papers' large step, 001 Sec. VI-A / 002 Sec. 7.1: (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0)."""
 
 
@@ -253,7 +253,7 @@ def operating_region_study(
     builder = PolygonBuilder(feasible, loop)
     timings["build solvers"] = time.perf_counter() - t0
 
-    refs = [Reference.setpoint(g * MM, config.position) for g in config.setpoints_mm]
+    refs = [Reference.setpoint(g * MM_TO_M, config.position) for g in config.setpoints_mm]
     if config.sinusoid:
         refs.append(Reference.paper_sinusoid())
 
@@ -277,11 +277,11 @@ def operating_region_study(
     # 2. feasibility maps through the middle set-point and the sinusoid
     t0 = time.perf_counter()
     maps = []
-    mid = Reference.setpoint(20 * MM, config.position)
+    mid = Reference.setpoint(20 * MM_TO_M, config.position)
     if config.map_points:
         n = config.map_points
-        g_lo, g_hi = feasible.gap_range or (5 * MM, 35 * MM)
-        e_rng = (g_lo - 2 * MM - mid.gap, g_hi + 2 * MM - mid.gap)
+        g_lo, g_hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
+        e_rng = (g_lo - 2 * MM_TO_M - mid.gap, g_hi + 2 * MM_TO_M - mid.gap)
         maps.append(feasibility_map(feasible, loop, mid, ("e1", "e1_rate"), e_rng, (-0.6, 0.6), n=n))
         maps.append(feasibility_map(feasible, loop, mid, ("e1", "e2"), e_rng, (-0.065, 0.065), n=n))
         maps.append(
@@ -329,14 +329,14 @@ def operating_region_study(
     t0 = time.perf_counter()
     slices: dict[str, list[SliceCheck]] = {"Lyapunov P": [], "SDP P": []}
     if config.slice_points:
-        by_gap = {round(r.reference.gap / MM, 6): r for r in ref_studies if r.reference.is_setpoint}
+        by_gap = {round(r.reference.gap / MM_TO_M, 6): r for r in ref_studies if r.reference.is_setpoint}
         for g in config.slice_setpoints_mm:
             rs = by_gap.get(round(g, 6))
             if rs is None:
                 continue
             say(f"slices at {g:g} mm")
             ref = rs.reference
-            g_lo, g_hi = feasible.gap_range or (5 * MM, 35 * MM)
+            g_lo, g_hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
             p_lo, p_hi = feasible.position_range or (-0.06, 0.06)
             e_rng = (g_lo - ref.gap, g_hi - ref.gap)
             for axes, yr in (
@@ -365,7 +365,11 @@ def operating_region_study(
     t0 = time.perf_counter()
     if config.quantization_samples:
         target = next(
-            (r for r in ref_studies if r.reference.is_setpoint and abs(r.reference.gap - 20 * MM) < 1e-9),
+            (
+                r
+                for r in ref_studies
+                if r.reference.is_setpoint and abs(r.reference.gap - 20 * MM_TO_M) < 1e-9
+            ),
             None,
         )
         target = target or ref_studies[0]
@@ -451,8 +455,8 @@ def _large_step(model, feasible, loop, proc, builder, sim, config, timings, limi
 
     # sampled estimate: start gap x target gap (start at rest at position 0, target position 20 mm)
     t0 = time.perf_counter()
-    starts = np.asarray(config.map_starts_mm, dtype=float) * MM
-    targets = np.asarray(config.map_targets_mm, dtype=float) * MM
+    starts = np.asarray(config.map_starts_mm, dtype=float) * MM_TO_M
+    targets = np.asarray(config.map_targets_mm, dtype=float) * MM_TO_M
     fl_ctrl = sim.controller
     maps: dict[str, dict[str, np.ndarray]] = {}
     for ctrl in (fl_ctrl, *ctrls):
@@ -480,7 +484,7 @@ def _large_step(model, feasible, loop, proc, builder, sim, config, timings, limi
     timings["large step: sampled start x target map"] = time.perf_counter() - t0
     j = int(np.argmin(np.abs(starts - x0[0])))
     sweep = {name: {k: v[:, j] for k, v in d.items()} for name, d in maps.items()}
-    fg = np.array([10, 12, 14, 16, 18, 22, 26], dtype=float) * MM
+    fg = np.array([10, 12, 14, 16, 18, 22, 26], dtype=float) * MM_TO_M
     fp = frozen_poles(model, ctrls[0], ref, fg)
     return LargeStepStudy(
         ref, x0, ratio_l, ratio_s, aimed, fl_run, tuple(linear), starts, targets, maps, sweep, fg, fp
@@ -507,11 +511,11 @@ def certificate_rows(study: OperatingRegionStudy) -> list[tuple]:
                     c.level_upper,
                     c.tightness,
                     c.binding,
-                    s["e1"] / MM,
-                    s["e1_rate"] / MM,
-                    s["e2"] / MM,
-                    s["e2_rate"] / MM,
-                    f"{a / MM:.2f} x {b / MM:.2f}",
+                    s["e1"] / MM_TO_M,
+                    s["e1_rate"] / MM_TO_M,
+                    s["e2"] / MM_TO_M,
+                    s["e2_rate"] / MM_TO_M,
+                    f"{a / MM_TO_M:.2f} x {b / MM_TO_M:.2f}",
                 )
             )
     return rows
@@ -519,5 +523,5 @@ def certificate_rows(study: OperatingRegionStudy) -> list[tuple]:
 
 def _short(ref: Reference) -> str:
     if ref.is_setpoint:
-        return f"{ref.gap / MM:g} mm"
+        return f"{ref.gap / MM_TO_M:g} mm"
     return "sinusoid"

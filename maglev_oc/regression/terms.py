@@ -31,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.model.parameters import StageParameters
+from maglev_oc.results import Estimate
 
 __all__ = [
     "AXES",
@@ -53,22 +54,6 @@ AXES = ("vertical", "horizontal", "both")
 REFERENCE_GAP = 15e-3
 """[m] Gap at which gap-dependent forces (cogging) are quoted; 000 Fig. 6 shows the peak cogging
 force becoming appreciable below it."""
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """A physical quantity estimated from data: value, standard error and unit (SI)."""
-
-    value: float
-    stderr: float
-    unit: str
-
-    def to_dict(self) -> dict:
-        def num(v):
-            v = float(v)
-            return v if math.isfinite(v) else None
-
-        return {"value": num(self.value), "stderr": num(self.stderr), "unit": self.unit}
 
 
 PhysicalMap = Callable[[np.ndarray, np.ndarray, Mapping[str, float]], dict[str, Estimate]]

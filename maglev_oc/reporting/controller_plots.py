@@ -10,8 +10,8 @@ from maglev_oc.reporting.pdf import new_figure
 from maglev_oc.sim.comparison import Comparison, StepSweep
 from maglev_oc.sim.engine import SimulationResult
 from maglev_oc.sim.metrics import BANDS
+from maglev_oc.units import M_TO_MM
 
-MM = 1e3
 MAX_POINTS = 2500
 COLORS = {
     "FL regulator": "tab:blue",
@@ -55,19 +55,19 @@ def scenario_figure(cmp: Comparison, scenario: str, twin: str) -> Figure:
         lw = 1.6 if name == cmp.controllers[0] else 0.8
         label = name if res.success else f"{name} (failed)"
         for col, (row_x, row_r, row_u) in enumerate(((0, 0, 1), (2, 3, 0))):
-            axes[0, col].plot(res.t[::k], res.x[row_x, ::k] * MM, color=c, lw=lw, label=label)
+            axes[0, col].plot(res.t[::k], res.x[row_x, ::k] * M_TO_MM, color=c, lw=lw, label=label)
             te, ee = _envelope(res.t, (res.y[col] - res.reference[row_r]))
-            axes[1, col].semilogy(te, np.maximum(ee * MM, 1e-4), color=c, lw=lw)
+            axes[1, col].semilogy(te, np.maximum(ee * M_TO_MM, 1e-4), color=c, lw=lw)
             axes[2, col].plot(res.t[::k], res.u[row_u, ::k], color=c, lw=lw)
     if first is not None:
         k = _stride(first.t.size)
         for col, row_r in enumerate((0, 3)):
             axes[0, col].plot(
-                first.t[::k], first.reference[row_r, ::k] * MM, "k--", lw=0.8, label="reference"
+                first.t[::k], first.reference[row_r, ::k] * M_TO_MM, "k--", lw=0.8, label="reference"
             )
     for col in range(2):
         for band in BANDS:
-            axes[1, col].axhline(band * MM, color="0.5", ls=":", lw=0.8)
+            axes[1, col].axhline(band * M_TO_MM, color="0.5", ls=":", lw=0.8)
         axes[1, col].set_ylim(1e-4, 50)
         for lim in (PEAK_CURRENT_LIMIT, -PEAK_CURRENT_LIMIT):
             axes[2, col].axhline(lim, color="tab:red", ls=":", lw=0.8)
@@ -92,13 +92,15 @@ def scenario_figure(cmp: Comparison, scenario: str, twin: str) -> Figure:
 def sweep_figure(sweep: StepSweep) -> Figure:
     fig = new_figure((8.27, 4.8))
     ax = fig.subplots()
-    g = sweep.target_gaps * MM
+    g = sweep.target_gaps * M_TO_MM
     for i, name in enumerate(sweep.controllers):
         ok = sweep.success[i]
-        ax.plot(g, sweep.min_gap[i] * MM, "-", color=color(name), label=name)
-        ax.plot(g[~ok], sweep.min_gap[i, ~ok] * MM, "x", color=color(name), ms=9, mew=2)
+        ax.plot(g, sweep.min_gap[i] * M_TO_MM, "-", color=color(name), label=name)
+        ax.plot(g[~ok], sweep.min_gap[i, ~ok] * M_TO_MM, "x", color=color(name), ms=9, mew=2)
     ax.plot(g, g, "k:", lw=0.8, label="target gap")
-    ax.set_xlabel("target gap [mm] (start 26 mm, horizontal step to %.0f mm)" % (sweep.target_position * MM))
+    ax.set_xlabel(
+        "target gap [mm] (start 26 mm, horizontal step to %.0f mm)" % (sweep.target_position * M_TO_MM)
+    )
     ax.set_ylabel("smallest gap reached [mm]")
     ax.set_title("Step size each controller copes with (x: hit a stopper / diverged)")
     ax.grid(alpha=0.3)

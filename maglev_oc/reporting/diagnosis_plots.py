@@ -9,13 +9,13 @@ from maglev_oc.diagnose.diagnosis import Diagnosis, Effect
 from maglev_oc.diagnose.feedback import CompensationStudy
 from maglev_oc.regression.base import AXIS_NAMES
 from maglev_oc.reporting.pdf import new_figure
+from maglev_oc.units import M_TO_MM
 
-MM = 1e3
 _VARIABLE = {
-    "gap": ("gap x1 [mm]", lambda d: d.x[0] * MM),
-    "gap_rate": ("gap rate x2 [mm/s]", lambda d: d.x[1] * MM),
-    "position": ("horizontal position x3 [mm]", lambda d: d.x[2] * MM),
-    "position_rate": ("horizontal rate x4 [mm/s]", lambda d: d.x[3] * MM),
+    "gap": ("gap x1 [mm]", lambda d: d.x[0] * M_TO_MM),
+    "gap_rate": ("gap rate x2 [mm/s]", lambda d: d.x[1] * M_TO_MM),
+    "position": ("horizontal position x3 [mm]", lambda d: d.x[2] * M_TO_MM),
+    "position_rate": ("horizontal rate x4 [mm/s]", lambda d: d.x[3] * M_TO_MM),
     "current_rate": ("d i_q / dt (horizontal), d i_d / dt (vertical) [A/s]", None),
     "current": ("i_d (horizontal), i_q (vertical) [A]", None),
 }
@@ -35,12 +35,12 @@ def spectrum_figure(diag: Diagnosis) -> Figure:
     fig = new_figure((8.27, 5.5))
     axes = fig.subplots(2, 1, sharex=True)
     for a, ax in enumerate(axes):
-        ax.semilogx(tr.periods * MM, tr.spectrum[a] * 100, "k", lw=1)
+        ax.semilogx(tr.periods * M_TO_MM, tr.spectrum[a] * 100, "k", lw=1)
         for name, lam in tr.motor_periods.items():
-            ax.axvline(lam * MM, color="tab:red", ls=":", lw=1)
+            ax.axvline(lam * M_TO_MM, color="tab:red", ls=":", lw=1)
             if a == 0:
                 ax.text(
-                    lam * MM,
+                    lam * M_TO_MM,
                     0.97,
                     f"{name.replace('_', ' ')} ",
                     rotation=90,
@@ -62,10 +62,10 @@ def dependence_figure(diag: Diagnosis) -> Figure:
     fig = new_figure((8.27, 8.5))
     axes = fig.subplots(3, 2)
     panels = (
-        ("gap", "gap [mm]", MM),
-        ("position", "x3 [mm]", MM),
-        ("gap_rate", "gap rate [mm/s]", MM),
-        ("position_rate", "x3 rate [mm/s]", MM),
+        ("gap", "gap [mm]", M_TO_MM),
+        ("position", "x3 [mm]", M_TO_MM),
+        ("gap_rate", "gap rate [mm/s]", M_TO_MM),
+        ("position_rate", "x3 rate [mm/s]", M_TO_MM),
     )
     for ax, (key, label, scale) in zip(axes.ravel()[:4], panels, strict=True):
         b = tr.binned[key]
@@ -172,7 +172,7 @@ def compensation_figure(study: CompensationStudy) -> Figure:
         err = np.vstack([res.y[0] - res.reference[0], res.y[1] - res.reference[3]])
         k = max(1, res.t.size // 3000)
         for a, ax in enumerate(axes):
-            ax.plot(res.t[::k], err[a, ::k] * MM, color=color, lw=0.8, label=name)
+            ax.plot(res.t[::k], err[a, ::k] * M_TO_MM, color=color, lw=0.8, label=name)
     for a, ax in enumerate(axes):
         ax.set_ylabel(f"{AXIS_NAMES[a]} error [mm]")
         ax.grid(alpha=0.3)

@@ -18,8 +18,8 @@ from maglev_oc.identify.layout import CONSTANT_NAMES, UNITS
 from maglev_oc.identify.result import FitResult, NpfsiResult
 from maglev_oc.identify.verification import EquilibriumComparison, ParabolaComparison, ParabolaFit
 from maglev_oc.reporting.pdf import PdfReport, new_figure
+from maglev_oc.units import M_TO_MM
 
-MM = 1e3
 EPS_COLORS = {0.001: "tab:blue", 0.01: "tab:green", 0.05: "tab:red"}
 
 
@@ -89,16 +89,16 @@ def single_shooting_figure(log: Log, open_loop: np.ndarray, output_error: FitRes
     ax1, ax2 = fig.subplots(1, 2)
     k = open_loop.shape[1]
     t = log.t[:k] - log.t[0]
-    ax1.plot(t, log.x[0, :k] * MM, "k.", ms=1.5, label="encoder reading x1")
-    ax1.plot(t, open_loop[0] * MM, "tab:red", lw=1.2, label="model, true constants, open loop")
+    ax1.plot(t, log.x[0, :k] * M_TO_MM, "k.", ms=1.5, label="encoder reading x1")
+    ax1.plot(t, open_loop[0] * M_TO_MM, "tab:red", lw=1.2, label="model, true constants, open loop")
     ax1.set_xlabel("time [s]")
     ax1.set_ylabel("air gap [mm]")
     ax1.set_title("Single shooting: the unstable gap diverges", fontsize=9)
     ax1.legend(fontsize=8)
     ax1.grid(alpha=0.3)
     finite = np.isfinite(open_loop[0])
-    lo = float(np.nanmin(log.x[0, :k])) * MM - 1
-    hi = float(np.nanmax(log.x[0, :k])) * MM + 1
+    lo = float(np.nanmin(log.x[0, :k])) * M_TO_MM - 1
+    hi = float(np.nanmax(log.x[0, :k])) * M_TO_MM + 1
     ax1.set_ylim(max(lo, 0), hi)
     if not np.all(finite):
         ax1.axvline(t[np.argmin(finite)], color="tab:red", ls=":", lw=0.8)
@@ -211,8 +211,15 @@ def parabola_figure(fits: Sequence[ParabolaFit]) -> Figure:
     cmap = [f"C{k}" for k in range(10)]
     for k, f in enumerate(fits):
         c = cmap[k % 10]
-        ax1.plot(f.t[::8], f.x3[::8] * MM, ".", color=c, ms=2.5)
-        ax1.plot(f.t, f.position(f.t) * MM, "-", color=c, lw=0.9, label=f"{f.gap * MM:g} mm: L1 = {f.L1:.3f}")
+        ax1.plot(f.t[::8], f.x3[::8] * M_TO_MM, ".", color=c, ms=2.5)
+        ax1.plot(
+            f.t,
+            f.position(f.t) * M_TO_MM,
+            "-",
+            color=c,
+            lw=0.9,
+            label=f"{f.gap * M_TO_MM:g} mm: L1 = {f.L1:.3f}",
+        )
         ax2.plot(f.t, (f.x3 - f.position(f.t)) * 1e6, color=c, lw=0.5)
     ax1.set_ylabel("horizontal position x3 [mm]")
     ax1.set_title(
@@ -234,9 +241,9 @@ def l1_comparison_figure(
     fig = new_figure((8.27, 6.2))
     ax1, ax2 = fig.subplots(2, 1, height_ratios=(2.2, 1), sharex=True)
     first = next(iter(comparisons.values()))
-    g = first.gap * MM
+    g = first.gap * M_TO_MM
     for label, (gaps, values) in curves.items():
-        ax1.plot(gaps * MM, values, lw=1.0, ls="--" if "truth" in label else "-", label=label)
+        ax1.plot(gaps * M_TO_MM, values, lw=1.0, ls="--" if "truth" in label else "-", label=label)
     ax1.plot(g, first.parabola, "ko", ms=5, mfc="none", label="parabola fits")
     for eps, comp in comparisons.items():
         color = _eps_color(eps)
@@ -274,14 +281,14 @@ def equilibrium_figure(
     ax1, ax2, ax3 = fig.subplots(3, 1, height_ratios=(2, 1.2, 1.2), sharex=True)
     markers = ("o", "s", "^", "d")
     for k, (label, (gaps, current)) in enumerate(measured.items()):
-        ax1.plot(gaps * MM, current, markers[k % 4], ms=5, mfc="none", label=label)
+        ax1.plot(gaps * M_TO_MM, current, markers[k % 4], ms=5, mfc="none", label=label)
     for k, (label, (gaps, current)) in enumerate(models.items()):
-        ax1.plot(gaps * MM, current, "-", lw=1.0, color=f"C{k + 2}", label=label)
+        ax1.plot(gaps * M_TO_MM, current, "-", lw=1.0, color=f"C{k + 2}", label=label)
     styles = ("o-", "s--", "^:")
     for k, (label, comp) in enumerate(errors.items()):
         color = f"C{k + 5}"
-        ax2.plot(comp.gap * MM, comp.error * 1e3, styles[k % 3], ms=3, lw=0.9, color=color, label=label)
-        ax3.plot(comp.gap * MM, comp.error_pct, styles[k % 3], ms=3, lw=0.9, color=color)
+        ax2.plot(comp.gap * M_TO_MM, comp.error * 1e3, styles[k % 3], ms=3, lw=0.9, color=color, label=label)
+        ax3.plot(comp.gap * M_TO_MM, comp.error_pct, styles[k % 3], ms=3, lw=0.9, color=color)
     ax1.axvspan(15, 25, color="tab:green", alpha=0.07)
     ax1.set_ylabel("equilibrium i_d = u2 [A]")
     ax1.set_title("Equilibrium currents: measured on the twin vs predicted by eq. (8) of 000", fontsize=9)
@@ -306,11 +313,17 @@ def cogging_figure(
     """000 Fig. 6: the peak cogging force from the C2 difference, against the twin's."""
     fig = new_figure((8.27, 4.8))
     ax = fig.subplots()
-    ax.plot(gaps * MM, np.abs(truth), "k--", lw=1.2, label="twin's cogging, |xi(x1)| = 1.5 N (15 mm / x1)^3")
+    ax.plot(
+        gaps * M_TO_MM, np.abs(truth), "k--", lw=1.2, label="twin's cogging, |xi(x1)| = 1.5 N (15 mm / x1)^3"
+    )
     for k, (label, xi) in enumerate(estimates.items()):
-        ax.plot(gaps * MM, np.abs(xi), lw=2.2 - k, ls=("-", "--", ":")[k % 3], label=label)
+        ax.plot(gaps * M_TO_MM, np.abs(xi), lw=2.2 - k, ls=("-", "--", ":")[k % 3], label=label)
     ax.axvspan(
-        excited[0] * MM, excited[1] * MM, color="tab:green", alpha=0.08, label="gaps covered by the run"
+        excited[0] * M_TO_MM,
+        excited[1] * M_TO_MM,
+        color="tab:green",
+        alpha=0.08,
+        label="gaps covered by the run",
     )
     ax.axhline(1.0, color="0.5", ls=":", lw=0.8)
     ax.set_xlabel("air gap [mm]")

@@ -9,14 +9,13 @@ from maglev_oc.control.gains import GainCheck
 from maglev_oc.model.hardware import CONTINUOUS_CURRENT_LIMIT, PEAK_CURRENT_LIMIT
 from maglev_oc.model.summary import ModelSummary
 from maglev_oc.reporting.pdf import new_figure
-
-MM = 1e3
+from maglev_oc.units import M_TO_MM
 
 
 def equilibrium_figure(s: ModelSummary) -> Figure:
     fig = new_figure()
     ax = fig.subplots()
-    g = s.gap * MM
+    g = s.gap * M_TO_MM
     for name, curve in s.equilibrium_by_set.items():
         ax.plot(g, curve.current, lw=1.0, ls="--", label=f"{name} (000 Table III)")
     ax.plot(g, s.equilibrium.current, "k", lw=2, label=f"this model ({s.model.constants.source})")
@@ -30,10 +29,10 @@ def equilibrium_figure(s: ModelSummary) -> Figure:
     ax.axhline(0, color="0.6", lw=0.6)
     ax.axvspan(15, 25, color="tab:green", alpha=0.08, label="verified range 15-25 mm (000)")
     if s.zero_current_gap is not None:
-        ax.axvline(s.zero_current_gap * MM, color="0.4", lw=0.8, ls="-.")
+        ax.axvline(s.zero_current_gap * M_TO_MM, color="0.4", lw=0.8, ls="-.")
         ax.annotate(
-            f"i_d = 0 at {s.zero_current_gap * MM:.2f} mm",
-            (s.zero_current_gap * MM, 0),
+            f"i_d = 0 at {s.zero_current_gap * M_TO_MM:.2f} mm",
+            (s.zero_current_gap * M_TO_MM, 0),
             xytext=(8, 25),
             textcoords="offset points",
             fontsize=8,
@@ -50,7 +49,7 @@ def equilibrium_figure(s: ModelSummary) -> Figure:
 def coefficients_figure(s: ModelSummary) -> Figure:
     fig = new_figure((8.27, 7.0))
     axes = fig.subplots(2, 2, sharex=True)
-    g = s.gap * MM
+    g = s.gap * M_TO_MM
     labels = (
         ("L1 [m/(s² A)]", "propulsion gain L1 (horizontal)"),
         ("L2 [m/s²]", "PM attraction L2 (vertical)"),
@@ -73,7 +72,7 @@ def coefficients_figure(s: ModelSummary) -> Figure:
 def open_loop_figure(s: ModelSummary) -> Figure:
     fig = new_figure()
     ax = fig.subplots()
-    g = s.gap * MM
+    g = s.gap * M_TO_MM
     ol = s.open_loop
     ax.plot(g, ol.vertical[:, 0].real, "tab:red", label="vertical, unstable: +sqrt(dx2'/dx1)")
     ax.plot(g, ol.vertical[:, 1].real, "tab:blue", label="vertical, stable: -sqrt(dx2'/dx1)")
@@ -90,7 +89,7 @@ def open_loop_figure(s: ModelSummary) -> Figure:
 def field_fit_figure(s: ModelSummary) -> Figure:
     fig = new_figure((8.27, 7.0))
     ax_b, ax_e = fig.subplots(2, 1, sharex=True)
-    g = s.gap * MM
+    g = s.gap * M_TO_MM
     ax_b.plot(g, s.field * 1e3, "k", lw=2, label="closed form (magnetic-charge model, SPEC 1)")
     ax_b.plot(
         g,
@@ -108,7 +107,7 @@ def field_fit_figure(s: ModelSummary) -> Figure:
     ax_e.grid(alpha=0.3)
     f = s.field_fit
     ax_e.set_title(
-        f"max |error| over {f.fit_range[0] * MM:g}-{f.fit_range[1] * MM:g} mm: "
+        f"max |error| over {f.fit_range[0] * M_TO_MM:g}-{f.fit_range[1] * M_TO_MM:g} mm: "
         f"{f.max_error * 1e6:.3g} µT ({f.max_relative_error * 100:.2g} % of B)",
         fontsize=10,
     )
@@ -119,9 +118,9 @@ def field_fit_figure(s: ModelSummary) -> Figure:
 def feasible_acceleration_figure(s: ModelSummary) -> Figure:
     fig = new_figure()
     ax = fig.subplots()
-    ax.plot(s.gap * MM, s.v2_max, "k")
+    ax.plot(s.gap * M_TO_MM, s.v2_max, "k")
     ax.fill_between(
-        s.gap * MM,
+        s.gap * M_TO_MM,
         s.v2_max,
         np.max(s.v2_max) * 1.1,
         color="tab:red",

@@ -13,8 +13,8 @@ from maglev_oc.region.feasibility import CONSTRAINT_LABELS, CONSTRAINT_NAMES, SL
 from maglev_oc.region.montecarlo import SliceCheck
 from maglev_oc.region.study import LargeStepStudy, OperatingRegionStudy, ReferenceStudy
 from maglev_oc.reporting.pdf import new_figure
+from maglev_oc.units import M_TO_MM
 
-MM = 1e3
 COLORS = {
     "margin": "tab:purple",
     "headroom": "tab:red",
@@ -27,13 +27,13 @@ CERT_STYLE = {"Lyapunov P": ("tab:blue", "--"), "SDP P": ("tab:green", "-")}
 
 # slice variable -> (label, scale to display units, offset source)
 _AXIS = {
-    "e1": ("air gap x1 [mm]", MM),
-    "e1_rate": ("gap rate x2 [mm/s]", MM),
-    "e2": ("horizontal position x3 [mm]", MM),
-    "e2_rate": ("horizontal rate x4 [mm/s]", MM),
-    "xi_v1": ("internal model xi_v1 (deviation) [mm s^2]", MM),
-    "xi_v2": ("internal model xi_v2 (deviation) [mm s]", MM),
-    "xi_v3": ("internal model xi_v3 (deviation) [mm]", MM),
+    "e1": ("air gap x1 [mm]", M_TO_MM),
+    "e1_rate": ("gap rate x2 [mm/s]", M_TO_MM),
+    "e2": ("horizontal position x3 [mm]", M_TO_MM),
+    "e2_rate": ("horizontal rate x4 [mm/s]", M_TO_MM),
+    "xi_v1": ("internal model xi_v1 (deviation) [mm s^2]", M_TO_MM),
+    "xi_v2": ("internal model xi_v2 (deviation) [mm s]", M_TO_MM),
+    "xi_v3": ("internal model xi_v3 (deviation) [mm]", M_TO_MM),
     "phase": ("exosystem phase omega0 t [rad]", 1.0),
 }
 
@@ -43,9 +43,9 @@ def _offset(axis: str, ref, phase=0.0) -> float:
     if not ref.is_setpoint:
         return 0.0
     if axis == "e1":
-        return ref.gap * MM
+        return ref.gap * M_TO_MM
     if axis == "e2":
-        return ref.position * MM
+        return ref.position * M_TO_MM
     return 0.0
 
 
@@ -162,15 +162,19 @@ def certified_sets_figure(study: OperatingRegionStudy) -> Figure:
             color, style = CERT_STYLE[label]
             e = _ellipse(cert.P[np.ix_([5, 0], [5, 0])], cert.level)
             ax_map.plot(
-                e[0] * MM + ref.position * MM, e[1] * MM + ref.gap * MM, color=color, ls=style, lw=1.3
+                e[0] * M_TO_MM + ref.position * M_TO_MM,
+                e[1] * M_TO_MM + ref.gap * M_TO_MM,
+                color=color,
+                ls=style,
+                lw=1.3,
             )
-        ax_map.plot(ref.position * MM, ref.gap * MM, "k+", ms=8)
+        ax_map.plot(ref.position * M_TO_MM, ref.gap * M_TO_MM, "k+", ms=8)
     if f.gap_range:
         for g in f.gap_range:
-            ax_map.axhline(g * MM, color="0.3", lw=1.2)
+            ax_map.axhline(g * M_TO_MM, color="0.3", lw=1.2)
     if f.position_range:
         for p in f.position_range:
-            ax_map.axvline(p * MM, color="0.55", lw=1.2)
+            ax_map.axvline(p * M_TO_MM, color="0.55", lw=1.2)
     ax_map.set_xlabel("horizontal position x3 [mm]")
     ax_map.set_ylabel("air gap x1 [mm]")
     ax_map.set_title(
@@ -185,7 +189,7 @@ def certified_sets_figure(study: OperatingRegionStudy) -> Figure:
         fontsize=8,
         loc="upper right",
     )
-    labels = [f"{r.reference.gap * MM:g}" for r in sps]
+    labels = [f"{r.reference.gap * M_TO_MM:g}" for r in sps]
     xs = np.arange(len(sps))
     w = 0.2
     for k, name in enumerate(("gap error e1", "horizontal error e2")):
@@ -194,7 +198,7 @@ def certified_sets_figure(study: OperatingRegionStudy) -> Figure:
             for rs in sps:
                 cert = rs.lyapunov if label == "Lyapunov P" else (rs.sdp.certified if rs.sdp else None)
                 vals.append(
-                    cert.initial_conditions.rectangle[k] * MM if cert is not None and cert.success else 0
+                    cert.initial_conditions.rectangle[k] * M_TO_MM if cert is not None and cert.success else 0
                 )
             color = CERT_STYLE[label][0]
             ax_bar.bar(
@@ -260,7 +264,7 @@ def slices_figure(
         if np.any(bad):
             X, Y = np.meshgrid(x, y)
             ax.plot(X[bad], Y[bad], "rx", ms=4)
-        ax.set_title(f"set-point {s.reference.gap * MM:g} mm: {txt}", fontsize=8.5)
+        ax.set_title(f"set-point {s.reference.gap * M_TO_MM:g} mm: {txt}", fontsize=8.5)
         ax.set_xlabel(_AXIS[s.axes[0]][0])
         ax.set_ylabel(_AXIS[s.axes[1]][0])
         ax.grid(alpha=0.25)
@@ -301,11 +305,13 @@ def montecarlo_figure(study: OperatingRegionStudy) -> Figure:
             color = CERT_STYLE["SDP P" if name.startswith("SDP") else "Lyapunov P"][0]
             marker = "." if "full" in name else "x"
             ax_i.plot(chk.start_ratio, chk.outcome.max_current, marker, color=color, ms=2, alpha=0.35)
-            ax_m.plot(chk.start_ratio, _stopper_room(chk, study) * MM, marker, color=color, ms=2, alpha=0.35)
+            ax_m.plot(
+                chk.start_ratio, _stopper_room(chk, study) * M_TO_MM, marker, color=color, ms=2, alpha=0.35
+            )
         for name, chk in rs.worst_start.items():
             color = CERT_STYLE[name][0]
             ax_i.plot(chk.start_ratio, chk.outcome.max_current, "*", color=color, ms=9, mec="k")
-            ax_m.plot(chk.start_ratio, _stopper_room(chk, study) * MM, "*", color=color, ms=9, mec="k")
+            ax_m.plot(chk.start_ratio, _stopper_room(chk, study) * M_TO_MM, "*", color=color, ms=9, mec="k")
     if lim is not None:
         ax_i.axhline(lim, color="tab:red", lw=1.2)
         ax_i.text(0.01, lim, f" current limit {lim:g} A", color="tab:red", va="bottom", fontsize=8)
@@ -343,16 +349,16 @@ def large_step_figure(ls: LargeStepStudy) -> Figure:
     at position 0, target position 20 mm), with the papers' large step marked."""
     fig = new_figure((8.27, 9.0))
     axes = np.asarray(fig.subplots(2, 2, squeeze=False)).ravel()
-    xs = ls.map_starts * MM
-    ys = ls.sweep_targets * MM
+    xs = ls.map_starts * M_TO_MM
+    ys = ls.sweep_targets * M_TO_MM
     for ax, (name, d) in zip(axes, ls.maps.items(), strict=False):
         ax.contourf(xs, ys, d["success"].astype(float), levels=[0.5, 1.5], colors=["#d9f0d3"])
         ax.contourf(xs, ys, (~d["success"]).astype(float), levels=[0.5, 1.5], colors=["#f4cccc"])
         cs = ax.contour(xs, ys, d["max_current"], levels=[9.0], colors=["tab:red"], linestyles=[":"])
         ax.clabel(cs, fmt="9 A", fontsize=7)
-        cg = ax.contour(xs, ys, d["min_gap"] * MM, levels=[10, 12, 14], colors=["0.4"], linewidths=0.8)
+        cg = ax.contour(xs, ys, d["min_gap"] * M_TO_MM, levels=[10, 12, 14], colors=["0.4"], linewidths=0.8)
         ax.clabel(cg, fmt="%g mm", fontsize=7)
-        ax.plot(ls.start[0] * MM, ls.reference.gap * MM, "r*", ms=12, mec="k")
+        ax.plot(ls.start[0] * M_TO_MM, ls.reference.gap * M_TO_MM, "r*", ms=12, mec="k")
         share = 100 * d["success"].mean()
         ax.set_title(f"{name}: {share:.0f} % of the pairs converge", fontsize=8.5)
         ax.set_xlabel("start air gap x1(0) [mm]")
@@ -385,19 +391,19 @@ def sweep_figure(ls: LargeStepStudy, stoppers=None) -> Figure:
     """From the papers' start (26 mm, 0 mm) to targets (g, 20 mm): least gap reached and outcome."""
     fig = new_figure((8.27, 6.8))
     ax_g, ax_i = fig.subplots(2, 1, sharex=True)
-    t = ls.sweep_targets * MM
+    t = ls.sweep_targets * M_TO_MM
     styles = ["k-", "tab:orange", "tab:brown", "tab:cyan", "tab:olive"]
     for k, (name, d) in enumerate(ls.sweep.items()):
         st = styles[k % len(styles)]
         kw = {"color": st} if not st.startswith("k") else {"color": "k"}
-        ax_g.plot(t, d["min_gap"] * MM, "-", lw=1.3, label=name, **kw)
-        ax_g.plot(t[~d["success"]], d["min_gap"][~d["success"]] * MM, "x", ms=7, **kw)
+        ax_g.plot(t, d["min_gap"] * M_TO_MM, "-", lw=1.3, label=name, **kw)
+        ax_g.plot(t[~d["success"]], d["min_gap"][~d["success"]] * M_TO_MM, "x", ms=7, **kw)
         ax_i.plot(t, d["max_current"], "-", lw=1.3, **kw)
     if stoppers is not None:
-        ax_g.axhline(stoppers[0] * MM, color="0.3", lw=1.2)
-        ax_g.text(t[-1], stoppers[0] * MM, "lower stopper ", ha="right", va="bottom", fontsize=8)
-    ax_g.axvline(ls.reference.gap * MM, color="tab:red", ls=":", lw=1)
-    ax_i.axvline(ls.reference.gap * MM, color="tab:red", ls=":", lw=1)
+        ax_g.axhline(stoppers[0] * M_TO_MM, color="0.3", lw=1.2)
+        ax_g.text(t[-1], stoppers[0] * M_TO_MM, "lower stopper ", ha="right", va="bottom", fontsize=8)
+    ax_g.axvline(ls.reference.gap * M_TO_MM, color="tab:red", ls=":", lw=1)
+    ax_i.axvline(ls.reference.gap * M_TO_MM, color="tab:red", ls=":", lw=1)
     ax_i.axhline(9.0, color="tab:red", lw=1)
     ax_i.text(
         t[0], 9.0, " 9 A peak (not enforced by the ideal twin)", color="tab:red", va="bottom", fontsize=8
@@ -416,7 +422,7 @@ def reference_rows(rs: ReferenceStudy) -> list[tuple]:
     """Monte Carlo rows for one reference: (reference, set, runs, violations, max V_end/level,
     least margin, largest |u|)."""
     rows = []
-    name = f"{rs.reference.gap * MM:g} mm" if rs.reference.is_setpoint else "sinusoid"
+    name = f"{rs.reference.gap * M_TO_MM:g} mm" if rs.reference.is_setpoint else "sinusoid"
     for label, chk in rs.checks.items():
         rows.append(
             (

@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
+
 
 def _positive(obj: Any, *names: str, allow_zero: bool = True) -> None:
     for name in names:
@@ -122,7 +124,7 @@ class CurrentAmplifier:
     """
 
     bandwidth_hz: float = 1000.0  # [Hz]
-    peak: float = 9.0  # [A]
+    peak: float = PEAK_CURRENT_LIMIT  # [A]
     continuous: float = 7.0  # [A]
     thermal_time_constant: float = 2.0  # [s]
 
@@ -207,8 +209,8 @@ class Stoppers:
     little outside the working range. A hit stops the axis (inelastic) and is reported.
     """
 
-    gap: tuple[float, float] = (8e-3, 30e-3)  # [m]
-    horizontal: tuple[float, float] = (-60e-3, 60e-3)  # [m]
+    gap: tuple[float, float] = STOPPER_GAP  # [m]
+    horizontal: tuple[float, float] = STOPPER_POSITION  # [m]
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from maglev_oc.control.gains import OMEGA0
-
-MM = 1e-3
+from maglev_oc.units import MM_TO_M
 
 
 @dataclass(frozen=True)
@@ -121,18 +120,18 @@ def paper_scenarios() -> dict[str, Scenario]:
     steps = SetpointSequence(
         times=(0.0, 5.0, 10.0, 15.0, 20.0),
         setpoints=(
-            (17.5 * MM, -30 * MM),
-            (22.5 * MM, 10 * MM),
-            (25 * MM, 40 * MM),
-            (15 * MM, 0.0),
-            (20 * MM, -40 * MM),
+            (17.5 * MM_TO_M, -30 * MM_TO_M),
+            (22.5 * MM_TO_M, 10 * MM_TO_M),
+            (25 * MM_TO_M, 40 * MM_TO_M),
+            (15 * MM_TO_M, 0.0),
+            (20 * MM_TO_M, -40 * MM_TO_M),
         ),
     )
     return {
         "setpoint_steps": Scenario(
             "setpoint_steps",
             "Five set-point steps over [-50, 50] mm x [15, 25] mm",
-            (20 * MM, 0.0, 0.0, 0.0),
+            (20 * MM_TO_M, 0.0, 0.0, 0.0),
             steps,
             25.0,
             paper={
@@ -147,24 +146,29 @@ def paper_scenarios() -> dict[str, Scenario]:
         "small_step": Scenario(
             "small_step",
             "Small step (0.026, 0, 0, 0) -> (0.024, 0, 0.005, 0)",
-            (26 * MM, 0.0, 0.0, 0.0),
-            SetpointSequence((0.0,), ((24 * MM, 5 * MM),)),
+            (26 * MM_TO_M, 0.0, 0.0, 0.0),
+            SetpointSequence((0.0,), ((24 * MM_TO_M, 5 * MM_TO_M),)),
             8.0,
             paper={"outcome": "both linear and nonlinear settle", "source": "002 Fig. 12"},
         ),
         "large_step": Scenario(
             "large_step",
             "Large step (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0)",
-            (26 * MM, 0.0, 0.0, 0.0),
-            SetpointSequence((0.0,), ((18 * MM, 20 * MM),)),
+            (26 * MM_TO_M, 0.0, 0.0, 0.0),
+            SetpointSequence((0.0,), ((18 * MM_TO_M, 20 * MM_TO_M),)),
             8.0,
             paper={"outcome": "linear regulator unstable, nonlinear settles", "source": "002 Fig. 12"},
         ),
         "sinusoid": Scenario(
             "sinusoid",
             "Ellipse: r_h = 30 mm sin(w0 t), r_v = 20 + 5 cos(w0 t) mm, w0 = 1.5 pi",
-            (20 * MM, 0.0, 0.0, 0.0),  # the amplitudes ramp in from the centre over 2 s
-            Sinusoids(20 * MM, ((5 * MM, OMEGA0, math.pi / 2),), ((30 * MM, OMEGA0, 0.0),), ramp_time=2.0),
+            (20 * MM_TO_M, 0.0, 0.0, 0.0),  # the amplitudes ramp in from the centre over 2 s
+            Sinusoids(
+                20 * MM_TO_M,
+                ((5 * MM_TO_M, OMEGA0, math.pi / 2),),
+                ((30 * MM_TO_M, OMEGA0, 0.0),),
+                ramp_time=2.0,
+            ),
             20.0,
             evaluate_from=8.0,
             paper={
@@ -180,7 +184,7 @@ def paper_scenarios() -> dict[str, Scenario]:
     }
 
 
-def excitation_scenario(duration: float = 60.0, seed: int = 0, gap_offset: float = 20 * MM) -> Scenario:
+def excitation_scenario(duration: float = 60.0, seed: int = 0, gap_offset: float = 20 * MM_TO_M) -> Scenario:
     """Sum-of-sines references for identification (000 Sec. IV: "a summation of sinusoids at
     various frequencies"), tracked by the PID regulators. Six incommensurate frequencies per
     axis over 0.1-3 Hz with random phases; amplitudes fall as 1/sqrt(f) and sum to at most
@@ -188,8 +192,8 @@ def excitation_scenario(duration: float = 60.0, seed: int = 0, gap_offset: float
     rng = np.random.default_rng(seed)
     freqs_v = np.array([0.13, 0.37, 0.71, 1.13, 1.9, 2.9])
     freqs_h = np.array([0.11, 0.29, 0.53, 0.97, 1.7, 2.6])
-    amps_v = 4 * MM / np.sqrt(freqs_v / freqs_v[0]) / 3
-    amps_h = 40 * MM / np.sqrt(freqs_h / freqs_h[0]) / 3.3
+    amps_v = 4 * MM_TO_M / np.sqrt(freqs_v / freqs_v[0]) / 3
+    amps_h = 40 * MM_TO_M / np.sqrt(freqs_h / freqs_h[0]) / 3.3
     vertical = tuple(
         (float(a), float(2 * math.pi * f), float(p))
         for a, f, p in zip(amps_v, freqs_v, rng.uniform(0, 2 * math.pi, freqs_v.size), strict=True)
