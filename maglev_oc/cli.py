@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import math
 import pkgutil
 import sys
 import time
@@ -284,10 +285,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         _excited_axes(log, check_excitation)
         logs.append(log)
     diag = diagnose(logs, model, holdout_fraction=args.holdout)
-    write_text_atomic(args.json, json.dumps(diag.to_json(), indent=2) + "\n")
+    write_text_atomic(args.json, json.dumps(diag.to_dict(), indent=2) + "\n")
     print(diag.message)
-    for a in diag.error_before:
-        print(f"  held-out error {a}: {diag.error_before[a]:.4g} -> {diag.error_after[a]:.4g} m/s^2")
+    for a, before in diag.error_before.items():
+        if math.isfinite(before):
+            print(f"  held-out error {a}: {before:.4g} -> {diag.error_after[a]:.4g} m/s^2")
     for e in diag.effects:
         print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {e.finding}")
     for n in diag.not_separable:

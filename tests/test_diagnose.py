@@ -68,7 +68,7 @@ def test_shared_clean_log_claims_nothing():
     # ../shared/logs/README.md: "no missing effect". The issue measured a 9 N vertical force
     # offset claimed here with confidence 1.00; now nothing is claimed and nothing is confounded.
     d = _diagnose(SHARED_CLEAN)
-    j = d.to_json()
+    j = d.to_dict()
     assert j["effects"] == []
     assert j["not_separable"] == []
     # the constants the diagnosis starts from: the errors-in-variables compensation lifts C1
@@ -127,7 +127,7 @@ def _marks(name: str) -> list:
 def test_each_effect_alone_is_found_first_and_sized(generated, stem, name):
     path, truth = generated("single", stem)
     d = _diagnose(path)
-    s = score(stem, truth, d.to_json()["effects"])
+    s = score(stem, truth, d.to_dict()["effects"])
     assert s.no_false_claim, s.claimed
     assert s.true_first, (s.claimed, s.notes)
     assert s.size_right, s.notes  # within 30 % of the truth (the issue's bound)
@@ -156,7 +156,7 @@ KNOWN_PAIR_FAILURES = {
 def test_two_effects_together_are_both_found(generated, stem):
     path, truth = generated("pairs", stem)
     d = _diagnose(path)
-    s = score(stem, truth, d.to_json()["effects"])
+    s = score(stem, truth, d.to_dict()["effects"])
     assert s.true_first, s.claimed
     assert s.no_false_claim, s.claimed
     assert s.size_right, (s.claimed, s.notes)  # both found, each within 30 %
@@ -246,4 +246,4 @@ def test_locked_axis_and_fast_log(model):
     assert list(d.data.moving) == [True, False]
     assert d.data.settings["logging_error_share"] == [0.0]  # 5 kHz commands of a 5 kHz loop
     assert np.isnan(d.constants_final["C1"].value)
-    assert d.to_json()["error_before"]["horizontal"] is None
+    assert d.to_dict()["error_before"]["horizontal"] is None

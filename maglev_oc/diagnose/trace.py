@@ -23,8 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from maglev_oc.model.parameters import StageParameters
-
-AXIS_NAMES = ("vertical", "horizontal")
+from maglev_oc.results import AXES
 
 
 @dataclass(frozen=True)
@@ -111,7 +110,7 @@ def trace(
             if s[j] < min_share:
                 break
             if 0 < j < s.size - 1 and s[j] >= s[j - 1] and s[j] >= s[j + 1]:
-                peaks.append((AXIS_NAMES[a], float(periods[j]), float(s[j])))
+                peaks.append((AXES[a], float(periods[j]), float(s[j])))
     binned = {}
     for name, unit, v in (
         ("gap", "m", x[0]),

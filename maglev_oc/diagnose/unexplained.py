@@ -27,11 +27,11 @@ import numpy as np
 from maglev_oc.diagnose.library import PROBE_VARIABLES, Candidate, smooth_probes
 from maglev_oc.diagnose.selection import SelectionSettings, _holdout_residual, holdout_significance
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.base import AXIS_NAMES
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
 from maglev_oc.regression.terms import AccelerationTerm, term_function
+from maglev_oc.results import AXES
 
 __all__ = ["Unexplained", "find_unexplained"]
 
@@ -72,7 +72,7 @@ def _probe(name: str, axis: int, build, k: int) -> AccelerationTerm:
         return ca.vertcat(val, 0) if axis == 0 else ca.vertcat(0, val)
 
     return AccelerationTerm(
-        name, "probe", AXIS_NAMES[axis], tuple(f"q{i}" for i in range(k)), function=term_function(name, fn, k)
+        name, "probe", AXES[axis], tuple(f"q{i}" for i in range(k)), function=term_function(name, fn, k)
     )
 
 
@@ -100,10 +100,10 @@ def find_unexplained(
     p = model.params
     probes: list[tuple[AccelerationTerm, str, str, float | None]] = []
     for (axis, var), term in smooth_probes(data).items():
-        if data.moving[AXIS_NAMES.index(axis)]:
+        if data.moving[AXES.index(axis)]:
             probes.append((term, var, PROBE_VARIABLES[var][1], None))
     for axis, period in periods:
-        a = AXIS_NAMES.index(axis)
+        a = AXES.index(axis)
         if data.moving[a]:
             probes.append(
                 (
@@ -119,7 +119,7 @@ def find_unexplained(
     design = build_design(data, model, terms=terms, fit=fit_mask, holdout=holdout, weights=weights)
     current = ["base", *[c.name for c in explained]]
     out: list[Unexplained] = []
-    found = {axis: 0 for axis in AXIS_NAMES}
+    found = {axis: 0 for axis in AXES}
     remaining = list(probes)
     while remaining:
         cur_fit = fit_subset(design, current, covariance=False)
@@ -128,7 +128,7 @@ def find_unexplained(
         best = None
         for entry in remaining:
             term, key, words, period = entry
-            a = AXIS_NAMES.index(term.axis)
+            a = AXES.index(term.axis)
             if found[term.axis] >= max_per_axis:
                 continue
             fit = fit_subset(design, [*current, term.name], covariance=False)
@@ -140,7 +140,7 @@ def find_unexplained(
             break
         gain, entry, fit, r1 = best
         term, key, words, period = entry
-        a = AXIS_NAMES.index(term.axis)
+        a = AXES.index(term.axis)
         gain, z = holdout_significance(design, r0, r1, np.array([a]))
         size = float(np.sqrt(np.mean((r0[a] - r1[a]) ** 2)))  # net change of the prediction
         if gain < settings.min_gain or z < settings.min_z or size < settings.min_effect:

@@ -40,7 +40,6 @@ from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.identify.result import FitResult
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import (
-    AXIS_NAMES,
     CONSTANT_NAMES,
     GAP_OFFSET,
     GAP_OFFSET_BOUND,
@@ -51,6 +50,7 @@ from maglev_oc.regression.data import as_log_list, delayed_inputs, prepare
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
 from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.results import AXES
 
 __all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error", "sample_masks"]
 
@@ -286,7 +286,7 @@ class EquationError:
             design = first
             sub = fit_subset(design, list(design.groups), band=hac_band)
             status, message, iterations = (
-                1,
+                "converged",
                 "linear least squares (exact: the accelerations are affine in theta)",
                 1,
             )
@@ -304,19 +304,19 @@ class EquationError:
                 )
 
             design, sub, status, message, iterations = fit_nonlinear(build, init, lower, upper, scale)
-            design = build(sub.coef) if status > 0 else design
+            design = build(sub.coef) if status == "converged" else design
             sub = fit_subset(design, list(design.groups), band=hac_band)
         if sub.message:
             message = f"{message}; {sub.message}"
         solve_time = time.perf_counter() - solve_t0
         cov = sub.covariance
-        success = status > 0 and bool(np.all(np.isfinite(cov)))
-        if status > 0 and not success:
-            status, message = -1, "singular normal matrix"
+        success = status == "converged" and bool(np.all(np.isfinite(cov)))
+        if status == "converged" and not success:
+            status, message = "singular", "singular normal matrix"
         theta = sub.coef
         res = residuals(design, sub)
         res_list = self._per_log(res, fit_mask)
-        rms = {a: float(np.sqrt(np.mean(res[k, fit_mask] ** 2))) for k, a in enumerate(AXIS_NAMES)}
+        rms = {a: float(np.sqrt(np.mean(res[k, fit_mask] ** 2))) for k, a in enumerate(AXES)}
         with np.errstate(divide="ignore", invalid="ignore"):
             inflation = np.where(np.diag(sub.naive) > 0, np.diag(cov) / np.diag(sub.naive), np.nan)
         names = self.names
@@ -360,7 +360,7 @@ class EquationError:
                 "acceleration_window": self.differentiator.acceleration_window,
                 "edge_samples": prep.edge,
                 "input_delay_s": self.input_delay,
-                "axis_weights": dict(zip(AXIS_NAMES, weights.tolist(), strict=True)),
+                "axis_weights": dict(zip(AXES, weights.tolist(), strict=True)),
                 "linear": self.linear,
                 "terms": [t.name for t in self.terms],
                 "logging_error_variance_A2": prep.current_noise.tolist(),

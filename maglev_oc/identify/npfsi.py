@@ -187,7 +187,7 @@ class NpfsiEstimator:
         k = 0
         steps = n - 1
         chunk_fn: dict[int, ca.Function] = {}
-        status, message = 1, "completed"
+        status, message = "completed", "completed"
         while k < steps:
             size = min(CHUNK, steps - k)
             if size not in chunk_fn:
@@ -198,15 +198,15 @@ class NpfsiEstimator:
             z = zs[:, -1]
             k += size
             if not np.all(np.isfinite(z)):
-                status, message = -1, f"diverged (non-finite estimate) before t = {k * h:.3f} s"
+                status, message = "diverged", f"diverged (non-finite estimate) before t = {k * h:.3f} s"
                 traj[:, k + 1 :] = np.nan
                 break
         sigma = z[p + m :].reshape(p, p, order="F")
-        success = status > 0
+        success = status == "completed"
         if success:
             eig = np.linalg.eigvalsh(0.5 * (sigma + sigma.T))
             if eig.min() <= 0:
-                success, status = False, -2
+                success, status = False, "ill_posed"
                 message = (
                     f"Sigma lost positive definiteness (smallest eigenvalue {eig.min():.3g}); lower Q or "
                     "raise gamma"
@@ -227,7 +227,7 @@ class NpfsiEstimator:
             success=success,
             status=status,
             message=message,
-            wall_time=time.perf_counter() - t0,
+            timings={"total": time.perf_counter() - t0},
             sources=tuple(sources),
             settings={
                 "sample_time_s": h,

@@ -44,18 +44,24 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from maglev_oc.data.logs import Log
 from maglev_oc.estimation.differentiate import SavitzkyGolay, differentiate_log
+from maglev_oc.identify.constrained_gn import (
+    GaussNewtonOutcome,
+    constrained_gauss_newton,
+    constrained_inverse_rows,
+)
 from maglev_oc.identify.equation_error import fit_equation_error
 from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET, ParameterLayout
-from maglev_oc.identify.result import AXIS_NAMES, FitResult
+from maglev_oc.identify.result import FitResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import rk4_step
 from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from, long_run_covariance
 from maglev_oc.regression.data import as_log_list, delayed_inputs
 from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.results import AXES
 
 DEFAULT_SEGMENT = 0.05
 """[s] Shooting segment: the fastest open-loop pole (64 1/s at 10 mm) grows e^3.2-fold over it."""
@@ -175,12 +181,7 @@ class MultipleShooting:
         for k in range(M):
             ys.append(ca.vertcat(x[0] - offset, x[2]))
             u0, u1 = U[:, k], U[:, k + 1]
-            um = 0.5 * (u0 + u1)
-            k1 = f(x, u0)
-            k2 = f(x + h / 2 * k1, um)
-            k3 = f(x + h / 2 * k2, um)
-            k4 = f(x + h * k3, u1)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4_step(f, x, h, u0, args_mid=(0.5 * (u0 + u1),), args_end=(u1,))
         Y = ca.vertcat(*ys)  # (2M,) time-major, (gap, horizontal) at each sample
         z = ca.vertcat(s0, theta)
         jy = ca.jacobian(Y, z)
@@ -218,235 +219,63 @@ class MultipleShooting:
             Stop when the largest scaled step is below this and the constraints are met.
         hac_band : float
             [Hz] Spectral window of the long-run covariance.
+
+        Returns
+        -------
+        FitResult
+            ``status`` is a word of :mod:`.constrained_gn` or ``"covariance_singular"``.
         """
         t0 = time.perf_counter()
-        layout = self.layout
-        q = layout.n
-        init_time = 0.0
-        if initial is None:
-            ti = time.perf_counter()
-            ee = fit_equation_error(self.logs, self.model, estimate=self.estimate, terms=self.terms)
-            init_time = time.perf_counter() - ti
-            initial = ee if ee.success else None
-        if isinstance(initial, FitResult):
-            initial = {k: initial.values[k] for k in layout.names if k in initial.values}
-        theta = layout.initial_vector(initial)
-        offset0 = theta[layout.names.index(GAP_OFFSET)] if GAP_OFFSET in layout.names else 0.0
-        nodes = []
-        for sg in self.segments:
-            S = sg.nodes0.copy()
-            S[0] += offset0
-            nodes.append(S)
-
-        th_scale = np.array(layout.scale)
+        theta, nodes, init_time = self._start(initial)
+        start = theta.copy()
+        th_scale = np.array(self.layout.scale)
         col_scale = np.concatenate([th_scale] + [np.tile(STATE_SCALE, sg.J) for sg in self.segments])
-
-        def pack(th, ns):
-            return np.concatenate([th] + [S.T.ravel() for S in ns])
-
-        def unpack(w):
-            th = w[:q]
-            ns, k = [], q
-            for sg in self.segments:
-                ns.append(w[k : k + 4 * sg.J].reshape(sg.J, 4).T.copy())
-                k += 4 * sg.J
-            return th, ns
-
-        def linearize(th, ns):
-            evals = self._evaluate(th, ns)
-            rs, cs = [], []
-            jr_rows, jr_cols, jr_vals = [], [], []
-            jc_rows, jc_cols, jc_vals = [], [], []
-            r_off = c_off = 0
-            var_off = q
-            for sg, S, (Y, s_end, dY, ds) in zip(self.segments, ns, evals, strict=True):
-                J, M = sg.J, sg.M
-                nz = 4 + q
-                y_meas = sg.y.reshape(2, J, M).transpose(1, 2, 0).reshape(J, 2 * M)  # time-major
-                r = (y_meas - Y.T) / OUTPUT_SCALE
-                rs.append(r.ravel())
-                # segment j's Jacobian block sits at columns j*nz:(j+1)*nz of the mapped output
-                dYr = dY.reshape(2 * M, J, nz).transpose(1, 0, 2)  # (J, 2M, nz)
-                col = np.empty((J, 1, nz), dtype=np.int64)
-                col[:, 0, :4] = var_off + 4 * np.arange(J)[:, None] + np.arange(4)[None, :]
-                col[:, 0, 4:] = np.arange(q)[None, :]
-                row = r_off + (np.arange(J)[:, None] * 2 * M + np.arange(2 * M)[None, :])[:, :, None]
-                jr_rows.append(np.broadcast_to(row, dYr.shape).ravel())
-                jr_cols.append(np.broadcast_to(col, dYr.shape).ravel())
-                jr_vals.append((-dYr / OUTPUT_SCALE).ravel())
-                links = sg.links  # segments j joined to j + 1 by continuity
-                nl = links.size
-                dsr = (
-                    ds.reshape(4, J, nz).transpose(1, 0, 2)[links] / STATE_SCALE[None, :, None]
-                )  # (nl, 4, nz)
-                c = (s_end[:, links] - S[:, links + 1]) / STATE_SCALE[:, None]
-                cs.append(c.T.ravel())
-                crow = c_off + (4 * np.arange(nl)[:, None] + np.arange(4)[None, :])[:, :, None]
-                jc_rows.append(np.broadcast_to(crow, dsr.shape).ravel())
-                jc_cols.append(np.broadcast_to(col[links], dsr.shape).ravel())
-                jc_vals.append(dsr.ravel())
-                jc_rows.append(crow[:, :, 0].ravel())
-                jc_cols.append((var_off + 4 * (links[:, None] + 1) + np.arange(4)[None, :]).ravel())
-                jc_vals.append(np.broadcast_to(-1.0 / STATE_SCALE, (nl, 4)).ravel())
-                r_off += J * 2 * M
-                c_off += 4 * nl
-                var_off += 4 * J
-            nvar = var_off
-            r = np.concatenate(rs)
-            c = np.concatenate(cs)
-            Jr = sp.csr_matrix(
-                (np.concatenate(jr_vals), (np.concatenate(jr_rows), np.concatenate(jr_cols))),
-                shape=(r.size, nvar),
-            )
-            Jc = sp.csr_matrix(
-                (np.concatenate(jc_vals), (np.concatenate(jc_rows), np.concatenate(jc_cols))),
-                shape=(c.size, nvar),
-            )
-            # columns in scaled variables: d/dw~ = d/dw * scale
-            D = sp.diags(col_scale)
-            return r, c, (Jr @ D).tocsc(), (Jc @ D).tocsc()
-
-        def merit(r, c, rho):
-            return 0.5 * float(r @ r) + rho * float(np.sum(np.abs(c)))
-
-        w = pack(theta, nodes)
-        lin_t = solve_t = 0.0
-        status, message = 0, "maximum iterations reached"
-        iterations = 0
-        rho = 1.0
-        tl = time.perf_counter()
-        r, c, Jr, Jc = linearize(*unpack(w))
-        lin_t += time.perf_counter() - tl
-        kkt_lu = None
-        for it in range(max_iterations):
-            iterations = it + 1
-            ts = time.perf_counter()
-            H = (Jr.T @ Jr).tocsc()
-            g = Jr.T @ r
-            nvar = H.shape[0]
-            K = sp.bmat([[H, Jc.T], [Jc, None]], format="csc")
-            try:
-                kkt_lu = splu(K)
-            except RuntimeError:
-                try:  # Levenberg-Marquardt damping if the reduced Hessian is singular
-                    damp = 1e-6 * max(float(H.diagonal().max()), 1.0) * sp.identity(nvar, format="csc")
-                    kkt_lu = splu(sp.bmat([[H + damp, Jc.T], [Jc, None]], format="csc"))
-                except RuntimeError as err:
-                    status, message = -1, f"KKT matrix singular: {err}"
-                    break
-            sol = kkt_lu.solve(np.concatenate([-g, -c]))
-            step = sol[:nvar]
-            lam = sol[nvar:]
-            solve_t += time.perf_counter() - ts
-            rho = max(rho, 2.0 * float(np.max(np.abs(lam)))) if lam.size else rho
-            m0 = merit(r, c, rho)
-            # directional derivative of the merit along the step (Nocedal & Wright eq. 18.29)
-            dm = float(g @ step) - rho * float(np.sum(np.abs(c)))
-            alpha = 1.0
-            accepted = False
-            while alpha > 1e-4:
-                w_try = w + alpha * step * col_scale
-                tl = time.perf_counter()
-                r_t, c_t, Jr_t, Jc_t = linearize(*unpack(w_try))
-                lin_t += time.perf_counter() - tl
-                if np.all(np.isfinite(r_t)) and merit(r_t, c_t, rho) <= m0 + 1e-4 * alpha * min(dm, 0.0):
-                    accepted = True
-                    break
-                alpha *= 0.5
-            if not accepted:
-                status, message = -2, "line search failed"
-                break
-            w, r, c, Jr, Jc = w_try, r_t, c_t, Jr_t, Jc_t
-            c_max = float(np.max(np.abs(c))) if c.size else 0.0
-            if alpha * np.max(np.abs(step)) < tolerance and c_max < 1e-6:
-                status, message = 1, f"converged: scaled step below {tolerance:g}, continuity met"
-                break
-            if alpha == 1.0 and np.max(np.abs(step)) < 1e3 * tolerance and c_max < 1e-6:
-                status, message = 1, f"converged: scaled step {np.max(np.abs(step)):.2g}, continuity met"
-                break
-
-        theta, nodes = unpack(w)
-        success = status > 0
-        # --- covariance from the KKT system at the solution ------------------------------
+        gn = constrained_gauss_newton(
+            self._linearize,
+            self._pack(theta, nodes),
+            col_scale,
+            max_iterations=max_iterations,
+            tolerance=tolerance,
+        )
+        theta, _ = self._unpack(gn.w)
         tc = time.perf_counter()
-        names = layout.names
-        nvar = Jr.shape[1]
-        n_res = r.size
-        n_con = Jc.shape[0]
-        dof = max(n_res - (nvar - n_con), 1)
-        chi2 = float(r @ r)
-        cov = naive = np.full((q, q), np.nan)
-        hac_m, inflation = 0, np.full(q, np.nan)
-        if success:
-            H = (Jr.T @ Jr).tocsc()
-            K = sp.bmat([[H, Jc.T], [Jc, None]], format="csc")
-            try:
-                lu = splu(K)
-                E = np.zeros((K.shape[0], q))
-                E[np.arange(q), np.arange(q)] = 1.0
-                P = lu.solve(E)[:nvar].T  # (q, nvar): theta rows of the constrained inverse
-                P_tt = P[:, :q] * np.outer(th_scale, th_scale)
-                naive = chi2 / dof * P_tt
-                G = (Jr @ P.T).T  # (q, n_res) sensitivity of theta~ to each residual
-                contrib = (G * r[None, :]) * th_scale[:, None]  # (q, n_res) in theta units
-                influence = []
-                k = 0
-                for sg in self.segments:
-                    size = sg.J * 2 * sg.M
-                    block = contrib[:, k : k + size].reshape(q, sg.J * sg.M, 2).sum(axis=2)
-                    influence.append(block)
-                    k += size
-                lr = long_run_covariance(influence, naive, self.sample_time, band=hac_band)
-                cov, hac_m, inflation = lr.covariance, lr.frequencies, lr.variance_inflation
-            except RuntimeError as err:
-                success, status, message = False, -3, f"covariance: KKT matrix singular ({err})"
+        cov, naive, hac_m, inflation, status, message = self._covariance(gn, th_scale, hac_band)
         cov_t = time.perf_counter() - tc
-
-        residuals = []
-        k = 0
-        rms_acc = np.zeros(2)
-        count = 0
-        for sg in self.segments:
-            size = sg.J * 2 * sg.M
-            rr = r[k : k + size].reshape(sg.J * sg.M, 2).T * OUTPUT_SCALE
-            full = np.full((2, sg.n), np.nan)
-            full[:, : sg.J * sg.M] = rr
-            residuals.append(full)
-            rms_acc += np.sum(rr**2, axis=1)
-            count += sg.J * sg.M
-            k += size
-        rms = {a: float(np.sqrt(rms_acc[i] / count)) for i, a in enumerate(AXIS_NAMES)}
-        total = time.perf_counter() - t0
+        residuals, rms, count = self._residual_arrays(gn.r)
+        names, q = self.layout.names, self.layout.n
+        chi2 = float(gn.r @ gn.r)
+        dof = max(gn.r.size - (gn.Jr.shape[1] - gn.Jc.shape[0]), 1)
+        success = status == "converged"
         return FitResult(
             method="output_error",
             names=names,
             values=dict(zip(names, theta, strict=True)),
             stderr=dict(zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)), strict=True)),
             stderr_naive=dict(zip(names, np.sqrt(np.clip(np.diag(naive), 0, None)), strict=True)),
-            initial=dict(zip(names, layout.initial_vector(initial), strict=True)),
-            fixed=layout.fixed(),
+            initial=dict(zip(names, start, strict=True)),
+            fixed=self.layout.fixed(),
             covariance=cov,
             correlation=correlation_from(cov) if success else np.full((q, q), np.nan),
             residual_rms=rms,
             residual_unit="m",
-            residuals=tuple(residuals),
+            residuals=residuals,
             n_samples=count,
-            n_residuals=n_res,
+            n_residuals=gn.r.size,
             chi_square=chi2,
             reduced_chi_square=chi2 / dof,
             hac_frequencies=hac_m,
             variance_inflation=dict(zip(names, inflation, strict=True)),
             success=success,
             status=status,
-            message=message,
-            iterations=iterations,
+            message=gn.message if message is None else message,
+            iterations=gn.iterations,
             timings={
                 "prepare": self.prepare_time,
                 "initial_fit": init_time,
-                "simulate_and_linearize": lin_t,
-                "kkt_solves": solve_t,
+                "simulate_and_linearize": gn.timings["linearize"],
+                "kkt_solves": gn.timings["kkt_solves"],
                 "covariance": cov_t,
-                "total": total + self.prepare_time,
+                "total": time.perf_counter() - t0 + self.prepare_time,
             },
             sources=tuple(sg.source for sg in self.segments),
             settings={
@@ -460,6 +289,131 @@ class MultipleShooting:
                 "terms": [t.name for t in self.terms],
             },
         )
+
+    # ------------------------------------------------------------------------------------
+    def _start(self, initial):
+        """Starting constants (an equation-error fit unless given) and node states."""
+        init_time = 0.0
+        if initial is None:
+            ti = time.perf_counter()
+            ee = fit_equation_error(self.logs, self.model, estimate=self.estimate, terms=self.terms)
+            init_time = time.perf_counter() - ti
+            initial = ee if ee.success else None
+        if isinstance(initial, FitResult):
+            initial = {k: initial.values[k] for k in self.layout.names if k in initial.values}
+        theta = self.layout.initial_vector(initial)
+        names = self.layout.names
+        offset0 = theta[names.index(GAP_OFFSET)] if GAP_OFFSET in names else 0.0
+        nodes = []
+        for sg in self.segments:
+            S = sg.nodes0.copy()
+            S[0] += offset0
+            nodes.append(S)
+        return theta, nodes, init_time
+
+    def _pack(self, theta: np.ndarray, nodes: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([theta] + [S.T.ravel() for S in nodes])
+
+    def _unpack(self, w: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        q = self.layout.n
+        nodes, k = [], q
+        for sg in self.segments:
+            nodes.append(w[k : k + 4 * sg.J].reshape(sg.J, 4).T.copy())
+            k += 4 * sg.J
+        return w[:q], nodes
+
+    def _linearize(self, w: np.ndarray):
+        """Residuals r (in encoder counts), continuity defects c (in STATE_SCALE) and their sparse
+        Jacobians with respect to the scaled variables."""
+        theta, nodes = self._unpack(w)
+        q = self.layout.n
+        rs, cs, jr, jc = [], [], ([], [], []), ([], [], [])
+        r_off = c_off = 0
+        var_off = q
+        for sg, S, (Y, s_end, dY, ds) in zip(self.segments, nodes, self._evaluate(theta, nodes), strict=True):
+            J, M, nz = sg.J, sg.M, 4 + q
+            y_meas = sg.y.reshape(2, J, M).transpose(1, 2, 0).reshape(J, 2 * M)  # time-major
+            rs.append(((y_meas - Y.T) / OUTPUT_SCALE).ravel())
+            # segment j's Jacobian block sits at columns j*nz:(j+1)*nz of the mapped output
+            dYr = dY.reshape(2 * M, J, nz).transpose(1, 0, 2)  # (J, 2M, nz)
+            col = np.empty((J, 1, nz), dtype=np.int64)
+            col[:, 0, :4] = var_off + 4 * np.arange(J)[:, None] + np.arange(4)[None, :]
+            col[:, 0, 4:] = np.arange(q)[None, :]
+            row = r_off + (np.arange(J)[:, None] * 2 * M + np.arange(2 * M)[None, :])[:, :, None]
+            _append(jr, np.broadcast_to(row, dYr.shape), np.broadcast_to(col, dYr.shape), -dYr / OUTPUT_SCALE)
+            links = sg.links  # segments j joined to j + 1 by continuity
+            nl = links.size
+            dsr = ds.reshape(4, J, nz).transpose(1, 0, 2)[links] / STATE_SCALE[None, :, None]  # (nl, 4, nz)
+            cs.append(((s_end[:, links] - S[:, links + 1]) / STATE_SCALE[:, None]).T.ravel())
+            crow = c_off + (4 * np.arange(nl)[:, None] + np.arange(4)[None, :])[:, :, None]
+            _append(jc, np.broadcast_to(crow, dsr.shape), np.broadcast_to(col[links], dsr.shape), dsr)
+            next_node = var_off + 4 * (links[:, None] + 1) + np.arange(4)[None, :]
+            _append(jc, crow[:, :, 0], next_node, np.broadcast_to(-1.0 / STATE_SCALE, (nl, 4)))
+            r_off += J * 2 * M
+            c_off += 4 * nl
+            var_off += 4 * J
+        r, c = np.concatenate(rs), np.concatenate(cs)
+        D = sp.diags(
+            np.concatenate([self.layout.scale] + [np.tile(STATE_SCALE, sg.J) for sg in self.segments])
+        )
+        return r, c, (_sparse(jr, r.size, var_off) @ D).tocsc(), (_sparse(jc, c.size, var_off) @ D).tocsc()
+
+    def _covariance(self, gn: GaussNewtonOutcome, th_scale: np.ndarray, hac_band: float):
+        """(covariance, plain covariance, HAC frequencies, inflation, status, message or None)
+        of the constants at the solution: the theta block of the inverse KKT matrix and its
+        long-run version from the per-sample influence."""
+        q = self.layout.n
+        nan = np.full((q, q), np.nan)
+        if not gn.success:
+            return nan, nan, 0, np.full(q, np.nan), gn.status, None
+        try:
+            P = constrained_inverse_rows(gn.Jr, gn.Jc, q)  # (q, nvar), scaled
+        except RuntimeError as err:
+            return (
+                nan,
+                nan,
+                0,
+                np.full(q, np.nan),
+                "covariance_singular",
+                f"covariance: KKT matrix singular ({err})",
+            )
+        dof = max(gn.r.size - (gn.Jr.shape[1] - gn.Jc.shape[0]), 1)
+        naive = float(gn.r @ gn.r) / dof * P[:, :q] * np.outer(th_scale, th_scale)
+        G = (gn.Jr @ P.T).T  # (q, n_res) sensitivity of theta~ to each residual
+        contrib = (G * gn.r[None, :]) * th_scale[:, None]  # (q, n_res) in theta units
+        influence, k = [], 0
+        for sg in self.segments:
+            size = sg.J * 2 * sg.M
+            influence.append(contrib[:, k : k + size].reshape(q, sg.J * sg.M, 2).sum(axis=2))
+            k += size
+        lr = long_run_covariance(influence, naive, self.sample_time, band=hac_band)
+        return lr.covariance, naive, lr.frequencies, lr.variance_inflation, gn.status, None
+
+    def _residual_arrays(self, r: np.ndarray):
+        """Per log (2, n) residuals [m] (NaN past the last segment), RMS per axis, samples used."""
+        residuals, k, acc, count = [], 0, np.zeros(2), 0
+        for sg in self.segments:
+            size = sg.J * 2 * sg.M
+            rr = r[k : k + size].reshape(sg.J * sg.M, 2).T * OUTPUT_SCALE
+            full = np.full((2, sg.n), np.nan)
+            full[:, : sg.J * sg.M] = rr
+            residuals.append(full)
+            acc += np.sum(rr**2, axis=1)
+            count += sg.J * sg.M
+            k += size
+        rms = {a: float(np.sqrt(acc[i] / count)) for i, a in enumerate(AXES)}
+        return tuple(residuals), rms, count
+
+
+def _append(triplets, rows, cols, values) -> None:
+    """Add (rows, cols, values) of one block to the (rows, cols, values) lists of a sparse matrix."""
+    for store, a in zip(triplets, (rows, cols, values), strict=True):
+        store.append(np.asarray(a).ravel())
+
+
+def _sparse(triplets, n_rows: int, n_cols: int) -> sp.csr_matrix:
+    rows, cols, values = (np.concatenate(a) for a in triplets)
+    return sp.csr_matrix((values, (rows, cols)), shape=(n_rows, n_cols))
 
 
 def fit_output_error(
@@ -500,7 +454,10 @@ def simulate_open_loop(
     if x0 is None:
         der = differentiate_log(log, SavitzkyGolay(log.sample_time))
         x0 = np.array([der.position[0, 0], der.velocity[0, 0], der.position[1, 0], der.velocity[1, 0]])
-    f = model.f
+
+    def rhs(x, u):
+        return np.asarray(model.f(x, u)).ravel()
+
     h = log.sample_time
     u = np.asarray(log.u, dtype=float)
     out = np.full((4, k), np.nan)
@@ -510,12 +467,7 @@ def simulate_open_loop(
         if i == k - 1:
             break
         u0, u1 = u[:, i], u[:, i + 1]
-        um = 0.5 * (u0 + u1)
-        k1 = np.asarray(f(x, u0)).ravel()
-        k2 = np.asarray(f(x + h / 2 * k1, um)).ravel()
-        k3 = np.asarray(f(x + h / 2 * k2, um)).ravel()
-        k4 = np.asarray(f(x + h * k3, u1)).ravel()
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4_step(rhs, x, h, u0, args_mid=(0.5 * (u0 + u1),), args_end=(u1,))
         if not (np.all(np.isfinite(x)) and 0 < x[0] < 0.1):
             break
     return out

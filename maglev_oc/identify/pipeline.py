@@ -32,6 +32,7 @@ from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import as_log_list
 from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.results import Result
 
 METHODS = ("equation_error", "output_error", "npfsi")
 MIN_DURATION = 5.0
@@ -111,7 +112,7 @@ def check_identifiable(
 
 
 @dataclass(frozen=True, eq=False)
-class IdentificationOutcome:
+class IdentificationOutcome(Result):
     """What :func:`identify` found: the fits that were run, in the papers' terms.
 
     Attributes
@@ -122,7 +123,11 @@ class IdentificationOutcome:
         The model's constants (initial guesses; the ones held fixed).
     estimate : tuple of str
     sources : tuple of str
-    wall_times : mapping method -> s
+    timings : mapping method -> s
+        Wall times of each method and ``total``.
+    success, status, message
+        From the fits: ``"converged"`` when the best fit did, ``"npfsi_only"`` when only NPFSI
+        ran (and stayed well posed), else ``"failed"`` with the solver's reason.
     """
 
     equation_error: FitResult | None
@@ -131,7 +136,23 @@ class IdentificationOutcome:
     base_constants: LumpedConstants
     estimate: tuple[str, ...]
     sources: tuple[str, ...]
-    wall_times: dict[str, float] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status in ("converged", "npfsi_only")
+
+    @property
+    def status(self) -> str:
+        if self.best is not None:
+            return "converged" if self.best.success else "failed"
+        return "npfsi_only" if self.npfsi and all(r.success for r in self.npfsi) else "failed"
+
+    @property
+    def message(self) -> str:
+        if self.best is not None:
+            return f"{self.best.method}: {self.best.message}"
+        return "; ".join(f"NPFSI eps = {r.eps:g}: {r.message}" for r in self.npfsi)
 
     @property
     def best(self) -> FitResult | None:
@@ -174,7 +195,10 @@ class IdentificationOutcome:
             "equation_error": None if self.equation_error is None else self.equation_error.to_dict(),
             "output_error": None if self.output_error is None else self.output_error.to_dict(),
             "npfsi": [run.to_dict() for run in self.npfsi],
-            "wall_times_s": dict(self.wall_times),
+            "success": self.success,
+            "status": self.status,
+            "message": self.message,
+            "timings": dict(self.timings),
         }
 
 
@@ -254,6 +278,7 @@ def identify(
         for eps in npfsi_eps:
             runs.append(npfsi(logs[0], model, estimate=constants, eps=eps, gamma=npfsi_gamma))
         times["npfsi"] = time.perf_counter() - t0
+    times["total"] = sum(times.values())
     return IdentificationOutcome(
         ee, oe, tuple(runs), model.constants, estimate, tuple(log.source for log in logs), times
     )

@@ -21,8 +21,8 @@ import numpy as np
 from maglev_oc.identify.layout import CONSTANT_NAMES, UNITS
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
+from maglev_oc.results import AXES, Estimate, Result, jsonable
 
-AXIS_NAMES = ("vertical", "horizontal")
 METHOD_TITLES = {
     "equation_error": "equation error (filtered accelerations, linear in C)",
     "output_error": "output error (multiple shooting, constrained Gauss-Newton)",
@@ -40,7 +40,7 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class FitResult:
+class FitResult(Result):
     """A least-squares identification result.
 
     Attributes
@@ -69,7 +69,9 @@ class FitResult:
     hac_frequencies : int
         Fourier frequencies the long-run covariance averages (:mod:`~maglev_oc.regression.covariance`);
         ``variance_inflation`` = HAC / plain variance per parameter.
-    success, status, message : bool, int, str
+    success, status, message : bool, str, str
+        ``status``: ``"converged"``, or why not (``"iteration_limit"``, ``"no_decrease"``,
+        ``"singular"``, ``"kkt_singular"``, ``"line_search_failed"``, ``"covariance_singular"``).
     iterations : int
     timings : mapping
         Wall times [s]: ``prepare`` (derivatives, regressors), ``solve``, ``covariance``, ``total``.
@@ -98,7 +100,7 @@ class FitResult:
     hac_frequencies: int
     variance_inflation: Mapping[str, float]
     success: bool
-    status: int
+    status: str
     message: str
     iterations: int
     timings: Mapping[str, float]
@@ -119,6 +121,12 @@ class FitResult:
         set_(self, "sources", tuple(self.sources))
 
     # ------------------------------------------------------------------------------------
+    @property
+    def estimates(self) -> dict[str, Estimate]:
+        """Every estimated parameter as an :class:`~maglev_oc.results.Estimate` (value, HAC
+        standard error, unit)."""
+        return {k: Estimate(self.values[k], self.stderr[k], UNITS.get(k, "")) for k in self.names}
+
     def vector(self) -> np.ndarray:
         """The estimates in the order of ``names``."""
         return np.array([self.values[k] for k in self.names])
@@ -165,7 +173,7 @@ class FitResult:
         lines.append(f"    iterations         = {self.iterations}")
         lines.append(f"    chi-square         = {self.chi_square:.6g}")
         lines.append(f"    reduced chi-square = {self.reduced_chi_square:.6g}")
-        for axis in AXIS_NAMES:
+        for axis in AXES:
             if axis in self.residual_rms:
                 lines.append(
                     f"    residual RMS {axis:<10s}= {self.residual_rms[axis]:.4g} {self.residual_unit}"
@@ -237,14 +245,14 @@ class FitResult:
             "status": self.status,
             "message": self.message,
             "iterations": self.iterations,
-            "timings_s": dict(self.timings),
+            "timings": dict(self.timings),
             "sources": list(self.sources),
-            "settings": {k: _jsonable(v) for k, v in self.settings.items()},
+            "settings": jsonable(dict(self.settings)),
         }
 
 
 @dataclass(frozen=True, eq=False)
-class NpfsiResult:
+class NpfsiResult(Result):
     """A run of the reduced-order NPFSI estimator along a log (eq. (3) of 000, 002 sidebar).
 
     Attributes
@@ -269,7 +277,9 @@ class NpfsiResult:
     velocity_method : str
         How the velocities y2, y4 were obtained ("high_gain_observer" as in the papers).
     success, status, message
-    wall_time : float [s]
+        ``status``: ``"completed"``, ``"diverged"`` or ``"ill_posed"`` (Sigma lost definiteness).
+    timings : mapping
+        Wall times [s]: ``total``.
     sources : tuple of str
     """
 
@@ -285,9 +295,9 @@ class NpfsiResult:
     sigma_final: np.ndarray
     velocity_method: str
     success: bool
-    status: int
+    status: str
     message: str
-    wall_time: float
+    timings: Mapping[str, float]
     sources: tuple[str, ...] = ()
     settings: Mapping[str, Any] = field(default_factory=dict)
 
@@ -295,6 +305,7 @@ class NpfsiResult:
         set_ = object.__setattr__
         set_(self, "values", _frozen({k: float(v) for k, v in self.values.items()}))
         set_(self, "theta0", _frozen({k: float(v) for k, v in self.theta0.items()}))
+        set_(self, "timings", _frozen(dict(self.timings)))
         set_(self, "settings", _frozen(dict(self.settings)))
         set_(self, "t", _readonly(self.t))
         set_(self, "trajectory", _readonly(self.trajectory))
@@ -326,7 +337,7 @@ class NpfsiResult:
             f"    logs               = {', '.join(self.sources)}",
             f"    # samples          = {self.t.size}",
             f"    velocities         = {self.velocity_method}",
-            f"    wall time          = {self.wall_time:.3f} s",
+            f"    wall time          = {self.timings['total']:.3f} s",
             "[[Variables]]",
         ]
         width = max(len(n) for n in self.names)
@@ -352,21 +363,7 @@ class NpfsiResult:
             "success": self.success,
             "status": self.status,
             "message": self.message,
-            "wall_time_s": self.wall_time,
+            "timings": dict(self.timings),
             "sources": list(self.sources),
-            "settings": {k: _jsonable(v) for k, v in self.settings.items()},
+            "settings": jsonable(dict(self.settings)),
         }
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, (str, int, float, bool)) or value is None:
-        return value
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    return str(value)

@@ -118,7 +118,7 @@ class IdentificationStudy:
     prediction_cogging: EquilibriumComparison
     prediction_cogging_corrected: EquilibriumComparison
     table2_model: StageModel
-    wall_times: dict[str, float] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def truth_values(self) -> dict[str, float]:
@@ -304,5 +304,5 @@ def run_study(
         prediction_cogging=pred1,
         prediction_cogging_corrected=pred1c,
         table2_model=table2_model,
-        wall_times=times,
+        timings=times,
     )

@@ -8,9 +8,10 @@ gap. Everything that needs to know which constant belongs to which axis reads it
 
 from __future__ import annotations
 
+from maglev_oc.results import AXES
+
 __all__ = [
     "AXIS_INDEX",
-    "AXIS_NAMES",
     "CONSTANT_AXIS",
     "CONSTANT_NAMES",
     "ESTIMABLE",
@@ -21,9 +22,8 @@ __all__ = [
     "axis_of",
 ]
 
-AXIS_NAMES = ("vertical", "horizontal")
+AXIS_INDEX = {name: k for k, name in enumerate(AXES)}
 """Rows of every per-axis array: 0 = vertical (x2', the gap), 1 = horizontal (x4')."""
-AXIS_INDEX = {name: k for k, name in enumerate(AXIS_NAMES)}
 CONSTANT_NAMES = ("C1", "C2", "C3", "C4")
 CONSTANT_AXIS = {"C1": "horizontal", "C2": "vertical", "C3": "vertical", "C4": "vertical"}
 GAP_OFFSET = "gap_offset"

@@ -251,10 +251,10 @@ def fit_nonlinear(
     compensate: bool = True,
     max_iterations: int = 30,
     tolerance: float = 1e-8,
-) -> tuple[Design, SubsetFit, int, str, int]:
+) -> tuple[Design, SubsetFit, str, str, int]:
     """Gauss-Newton with step halving: ``build(at)`` gives the design linearized at ``at`` (all
     parameters, in the design's order). Returns (design, fit, status, message, iterations);
-    status 1 converged, 0 iteration limit, -1 no decrease."""
+    status "converged", "iteration_limit" or "no_decrease"."""
     at = np.clip(np.asarray(at, dtype=float), lower, upper)
     design = build(at)
     groups = list(design.groups)
@@ -272,9 +272,15 @@ def fit_nonlinear(
                 break
             t *= 0.5
         if t < 1e-6 and c_t > cost:
-            return design, fit, -1, "Gauss-Newton: no decrease along the step", it
+            return design, fit, "no_decrease", "Gauss-Newton: no decrease along the step", it
         moved = float(np.max(np.abs(trial - at) / scale))
         at, design, fit, cost = trial, d_t, f_t, c_t
         if moved < tolerance:
-            return design, fit, 1, f"Gauss-Newton (exact Jacobian) converged in {it} iterations", it
-    return design, fit, 0, f"Gauss-Newton: {max_iterations} iterations without convergence", max_iterations
+            return design, fit, "converged", f"Gauss-Newton (exact Jacobian) converged in {it} iterations", it
+    return (
+        design,
+        fit,
+        "iteration_limit",
+        f"Gauss-Newton: {max_iterations} iterations without convergence",
+        max_iterations,
+    )

@@ -7,8 +7,8 @@ from matplotlib.figure import Figure
 
 from maglev_oc.diagnose.diagnosis import Diagnosis, Effect
 from maglev_oc.diagnose.feedback import CompensationStudy
-from maglev_oc.regression.base import AXIS_NAMES
 from maglev_oc.reporting.pdf import new_figure
+from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM
 
 _VARIABLE = {
@@ -50,7 +50,7 @@ def spectrum_figure(diag: Diagnosis) -> Figure:
                     color="tab:red",
                     transform=ax.get_xaxis_transform(),
                 )
-        ax.set_ylabel(f"{AXIS_NAMES[a]}: variance\nexplained [%]")
+        ax.set_ylabel(f"{AXES[a]}: variance\nexplained [%]")
         ax.grid(alpha=0.3, which="both")
     axes[-1].set_xlabel("period in the horizontal position x3 [mm]")
     fig.suptitle("Spatial spectrum of the base model's residual (red: motor periods)")
@@ -77,7 +77,7 @@ def dependence_figure(diag: Diagnosis) -> Figure:
                 color=color,
                 lw=1,
                 marker=".",
-                label=AXIS_NAMES[a],
+                label=AXES[a],
             )
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_xlabel(label)
@@ -88,7 +88,7 @@ def dependence_figure(diag: Diagnosis) -> Figure:
         ax.plot(tr.lags * 1e3, tr.lag_correlation[a], "k")
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_xlabel("lag [ms]")
-        ax.set_ylabel(f"corr({AXIS_NAMES[a]} residual, di/dt)")
+        ax.set_ylabel(f"corr({AXES[a]} residual, di/dt)")
         ax.grid(alpha=0.3)
     fig.suptitle("Base-model residual against the signals effects depend on (±2 s.e.)")
     return fig
@@ -108,7 +108,7 @@ def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
     """The residual that the effect explains against its variable, before (base-model residual
     with the other effects removed) and after (final residual), held-out block, binned."""
     d = diag.data
-    axes_used = [0, 1] if effect.axis == "both" else [AXIS_NAMES.index(effect.axis)]
+    axes_used = [0, 1] if effect.axis == "both" else [AXES.index(effect.axis)]
     fig = new_figure((8.27, 4.3 * len(axes_used)))
     axs = np.atleast_1d(fig.subplots(len(axes_used), 1))
     contrib = np.asarray(effect.candidate.term.acceleration(effect.coefficients).map(d.n)(d.x, d.u, d.du))
@@ -131,7 +131,7 @@ def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
             ax.plot(centers, m, "-", color=color, lw=2, label=name)
         ax.axhline(0, color="0.4", lw=0.6)
         ax.set_xlabel(label)
-        ax.set_ylabel(f"{AXIS_NAMES[a]} residual [m/s²]")
+        ax.set_ylabel(f"{AXES[a]} residual [m/s²]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"{plain(effect.name)}: residual before and after, held-out data (lines: bin means)")
@@ -154,7 +154,7 @@ def timeseries_figure(diag: Diagnosis, seconds: float = 4.0) -> Figure:
         ax.plot(
             t, meas - diag.residual_after[a, sl], "tab:green", lw=0.9, ls="--", label="base + found effects"
         )
-        ax.set_ylabel(f"{AXIS_NAMES[a]} acceleration\n(x{2 if a == 0 else 4}') [m/s²]")
+        ax.set_ylabel(f"{AXES[a]} acceleration\n(x{2 if a == 0 else 4}') [m/s²]")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[-1].set_xlabel("time in the log [s] (held-out block)")
@@ -174,7 +174,7 @@ def compensation_figure(study: CompensationStudy) -> Figure:
         for a, ax in enumerate(axes):
             ax.plot(res.t[::k], err[a, ::k] * M_TO_MM, color=color, lw=0.8, label=name)
     for a, ax in enumerate(axes):
-        ax.set_ylabel(f"{AXIS_NAMES[a]} error [mm]")
+        ax.set_ylabel(f"{AXES[a]} error [mm]")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[-1].set_xlabel("time [s]")

@@ -55,14 +55,14 @@ def summary_paragraphs(diag: Diagnosis) -> list[str]:
         )
     out.append(
         "Held-out error before → after:  "
-        + ";  ".join(f"{a} {eb[a]:.3g} → {ea[a]:.3g} m/s²" for a in eb if math.isfinite(eb[a]))
+        + ";  ".join(f"{a} {b:.3g} → {ea[a]:.3g} m/s²" for a, b in eb.items() if math.isfinite(b))
         + f"  ({ERROR_METRIC})."
     )
     ob, oa = diag.output_error_before, diag.output_error_after
     out.append(
         "Position error of the model simulated over 50 ms from the estimated state (held out), "
         "before → after:  "
-        + ";  ".join(f"{a} {ob[a] * 1e6:.1f} → {oa[a] * 1e6:.1f} µm" for a in ob if math.isfinite(ob[a]))
+        + ";  ".join(f"{a} {b * 1e6:.1f} → {oa[a] * 1e6:.1f} µm" for a, b in ob.items() if math.isfinite(b))
         + "."
     )
     return out

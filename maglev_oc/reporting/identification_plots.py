@@ -354,7 +354,7 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         [
             f"{run.eps:g}",
             *(f"{run.values.get(k, float('nan')):.5g}" for k in CONSTANT_NAMES),
-            f"{run.wall_time:.2f}",
+            f"{run.timings['total']:.2f}",
         ]
         for run in outcome.npfsi
     ]
@@ -369,7 +369,7 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         "by the same kernel; output error: multiple shooting over 50 ms segments joined by continuity "
         "within 0.2 s windows. Standard errors are long-run (HAC) ones: residuals of both fits are "
         "autocorrelated.",
-        "Wall times: " + ", ".join(f"{k} {v:.2f} s" for k, v in outcome.wall_times.items()),
+        "Wall times: " + ", ".join(f"{k} {v:.2f} s" for k, v in outcome.timings.items()),
     ]
     with PdfReport(path, "maglev_oc — identification", subtitle="maglev-oc identify") as pdf:
         pdf.add_text("Identification of C1..C4", summary, first_page=True)

@@ -1,0 +1,251 @@
+"""The candidate type of the diagnosis and the building blocks its library is written with.
+
+A :class:`Candidate` is an :class:`~maglev_oc.regression.terms.AccelerationTerm` (linear in its
+coefficients, so every fit is an exact linear solve) plus what the diagnosis needs around it: the
+family it belongs to, the signal its signature lives in, a physical plausibility check, the
+experiment that would separate it from the base constants, and a sentence saying what was found
+in plain words. :class:`LibraryContext` carries what every candidate of one log is built from:
+the model whose constants are the magnetic references, and the logged ranges.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.results import Estimate
+
+__all__ = [
+    "FAMILIES",
+    "MAX_FORCE_SHARE",
+    "VARIABLES",
+    "Candidate",
+    "LibraryContext",
+    "Plausibility",
+    "all_of",
+    "delta_method",
+    "detected",
+    "fmt",
+    "legendre",
+    "not_below",
+    "with_physical",
+    "within",
+]
+
+VARIABLES = ("gap", "gap_rate", "position", "position_rate", "current_rate", "current")
+FAMILIES = ("friction", "periodic", "profile", "current", "constant", "geometry")
+MAX_FORCE_SHARE = 0.25
+"""An effect whose RMS force exceeds this share of its axis's weight (M g) is not plausible as an
+unmodelled detail of a working stage: the papers' model predicts the equilibrium currents to
+5 % (002 Sec. 5.2), so a missing force of a quarter of the weight would have shown there."""
+
+
+Plausibility = Callable[[Mapping[str, Estimate]], str | None]
+"""physical parameters -> None when plausible, else the reason it is not."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate effect: a term and what the diagnosis needs to judge and report it.
+
+    Attributes
+    ----------
+    term : AccelerationTerm
+    family : str  one of :data:`FAMILIES`
+    variable : str  the signal its signature lives in (one of :data:`VARIABLES`)
+    separate_by : str  the experiment that separates it from the base constants
+    plausible : callable  physical parameters -> None or the reason they are not physical
+    describe : callable  physical parameters -> one sentence with the sizes, plain words
+    """
+
+    term: AccelerationTerm
+    family: str
+    variable: str
+    separate_by: str
+    plausible: Plausibility = field(repr=False)
+    describe: Callable[[Mapping[str, Estimate]], str] = field(repr=False)
+    nuisance: tuple[str, ...] = ()
+    """Parameters that only shape the term (not reported as its size) and are expected to be
+    correlated with the constants: left out of the separability test."""
+
+    def __post_init__(self) -> None:
+        if self.family not in FAMILIES:
+            raise ValueError(f"Candidate {self.term.name}: family must be one of {FAMILIES}")
+        if self.variable not in VARIABLES:
+            raise ValueError(f"Candidate {self.term.name}: variable must be one of {VARIABLES}")
+
+    @property
+    def name(self) -> str:
+        return self.term.name
+
+    @property
+    def axis(self) -> str:
+        return self.term.axis
+
+
+# --- helpers -----------------------------------------------------------------------------------
+def not_below(name: str, what: str, k: float = 2.0) -> Plausibility:
+    """Refuse a parameter that is negative by more than k standard errors."""
+
+    def check(est):
+        e = est[name]
+        if e.value < -k * max(e.stderr, 0.0):
+            sigmas = e.value / max(e.stderr, 1e-300)
+            return f"{what} of {e.value:.3g} {e.unit} is negative ({sigmas:.1f} standard errors)"
+        return None
+
+    return check
+
+
+def detected(name: str, what: str, k: float = 2.0) -> Plausibility:
+    """Refuse unless a parameter is positive by more than k standard errors."""
+
+    def check(est):
+        e = est[name]
+        if not e.value > k * max(e.stderr, 0.0):
+            return (
+                f"no {what}: {e.value:.3g} ± {e.stderr:.2g} {e.unit} is not positive by {k:g} standard errors"
+            )
+        return None
+
+    return check
+
+
+def within(name: str, bound: float, what: str) -> Plausibility:
+    def check(est):
+        e = est[name]
+        if abs(e.value) > bound:
+            return f"{what} of {e.value:.3g} {e.unit} is beyond the physical bound {bound:g} {e.unit}"
+        return None
+
+    return check
+
+
+def all_of(*checks: Plausibility) -> Plausibility:
+    def check(est):
+        for c in checks:
+            reason = c(est)
+            if reason:
+                return reason
+        return None
+
+    return check
+
+
+def fmt(e: Estimate, scale: float = 1.0, unit: str | None = None, digits: int = 2) -> str:
+    u = e.unit if unit is None else unit
+    return f"{e.value * scale:.{digits}g} ± {e.stderr * scale:.1g} {u}".strip()
+
+
+def delta_method(f: Callable[[np.ndarray], float], p: np.ndarray, cov: np.ndarray, unit: str) -> Estimate:
+    """f(p) with the delta method (central differences on the gradient)."""
+    p = np.asarray(p, dtype=float)
+    val = float(f(p))
+    g = np.zeros_like(p)
+    for k in range(p.size):
+        h = 1e-6 * max(abs(p[k]), 1e-6)
+        d = np.zeros_like(p)
+        d[k] = h
+        g[k] = (f(p + d) - f(p - d)) / (2 * h)
+    return Estimate(val, float(math.sqrt(max(g @ cov @ g, 0.0))), unit)
+
+
+def legendre(xi, orders):
+    """Legendre polynomials P_k(xi) for k in orders (symbolic or numeric)."""
+    out = []
+    for k in orders:
+        if k == 1:
+            out.append(xi)
+        elif k == 2:
+            out.append((3 * xi**2 - 1) / 2)
+        elif k == 3:
+            out.append((5 * xi**3 - 3 * xi) / 2)
+        elif k == 4:
+            out.append((35 * xi**4 - 30 * xi**2 + 3) / 8)
+        else:
+            raise ValueError(f"Legendre order {k} not provided")
+    return out
+
+
+def with_physical(term: AccelerationTerm, physical) -> AccelerationTerm:
+    """``term`` with another conversion to physical parameters."""
+    return dataclasses.replace(term, physical=physical)
+
+
+@dataclass(frozen=True, eq=False)
+class LibraryContext:
+    """What the candidates of one log are built from.
+
+    ``model``: geometry and the magnetic references (the base fit's constants); ``data``: the
+    prepared log, whose valid samples give the ranges (1st-99th percentiles) that profiles and
+    reports use.
+    """
+
+    model: StageModel
+    data: PreparedLogs
+    gap_range: tuple[float, float] = field(init=False)
+    position_range: tuple[float, float] = field(init=False)
+    gap_median: float = field(init=False)
+    hold_delay: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        x = self.fitted_states
+        set_ = object.__setattr__
+        set_(self, "gap_range", tuple(float(v) for v in np.percentile(x[0], [1, 99])))
+        set_(self, "position_range", tuple(float(v) for v in np.percentile(x[2], [1, 99])))
+        set_(self, "gap_median", float(np.median(x[0])))
+        # the loop holds each command for one control period: on average the force follows the
+        # command by half of it (0.1 ms at the rig's 5 kHz)
+        set_(self, "hold_delay", 0.5 / self.data.settings.get("control_rate_hz", 1.0 / RIG_SAMPLE_TIME))
+
+    @property
+    def fitted_states(self) -> np.ndarray:
+        return self.data.x[:, self.data.valid]
+
+    @property
+    def params(self):
+        return self.model.params
+
+    @property
+    def references(self):
+        """The constants the magnetic columns are scaled with (the base fit's)."""
+        return self.model.constants
+
+    def mass(self, axis: str) -> float:
+        return self.params.mass_vertical if axis == "vertical" else self.params.mass_horizontal
+
+    def weight(self, axis: str) -> float:
+        return self.mass(axis) * self.params.gravity
+
+    def shapes(self, x):
+        """The shape functions l1..l4 at the gap x[0] (L = C l)."""
+        return self.model.shape(x[0])
+
+    def modelled(self, axis: str) -> Callable:
+        """(x, u) -> the base model's acceleration on ``axis``, with the references."""
+        row = 1 if axis == "vertical" else 3
+        return lambda x, u: self.model.f(x, u)[row]
+
+    def gap_sensitivity(self, x, u):
+        """d(x2', x4')/d x1 of the model with the references, at (x, u)."""
+        xs = ca.SX.sym("xs", 4)
+        acc = self.model.f(xs, u)[[1, 3]]
+        return ca.substitute(ca.jacobian(acc, xs[0]), xs, x)
+
+    def normal_force(self, x, u):
+        """The magnetic normal force F_n = M_v (G - x2'_model) [N], positive towards the stator."""
+        return self.params.mass_vertical * (self.params.gravity - self.model.f(x, u)[1])
+
+    def reference_ratio(self, name: str, constants: Mapping[str, float]) -> float:
+        """reference / fitted value of one constant (1 when the fit has none)."""
+        ref = getattr(self.references, name)
+        return ref / constants.get(name, ref)

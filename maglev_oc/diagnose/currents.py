@@ -1,0 +1,147 @@
+"""Candidates that act through the currents: thrust ripple, commutation offset, amplifier lag."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from maglev_oc.diagnose.candidate import (
+    Candidate,
+    LibraryContext,
+    all_of,
+    delta_method,
+    detected,
+    fmt,
+    within,
+)
+from maglev_oc.regression.terms import AccelerationTerm, linear_physical, term_function
+from maglev_oc.results import Estimate
+
+__all__ = ["commutation_candidate", "lag_candidate", "ripple_candidate"]
+
+
+def ripple_candidate(ctx: LibraryContext) -> Candidate:
+    """The thrust per ampere rippling over the slot pitch and the pole pitch."""
+    t1, tau = ctx.params.slot_pitch, ctx.params.pole_pitch
+    periods = (t1, tau)  # slotting (the slot pitch) and the winding's pole-pitch harmonic
+    c1 = ctx.references.C1
+
+    def ripple(x, u, du, q):
+        thrust = -c1 * ctx.shapes(x)[0] * u[0]
+        total = 0
+        for k, period in enumerate(periods):
+            arg = 2 * math.pi * x[2] / period
+            total = total + q[2 * k] * ca.sin(arg) + q[2 * k + 1] * ca.cos(arg)
+        return ca.vertcat(0, thrust * total)
+
+    def physical(q, cov, c):
+        s = ctx.reference_ratio("C1", c)
+        out = {}
+        for k, (label, period) in enumerate(zip(("", "_pole_pitch"), periods, strict=True)):
+            sl = slice(2 * k, 2 * k + 2)
+            out[f"amplitude{label}"] = delta_method(
+                lambda v: s * math.hypot(v[0], v[1]), q[sl], cov[sl, sl], "1"
+            )
+            out[f"phase{label}"] = delta_method(lambda v: math.atan2(v[1], v[0]), q[sl], cov[sl, sl], "rad")
+            out[f"period{label}"] = Estimate(period, 0.0, "m")
+        return out
+
+    return Candidate(
+        AccelerationTerm(
+            "thrust_ripple",
+            f"The thrust per ampere ripples along the track over the slot pitch ({t1 * 1e3:.2f} mm) and the "
+            f"pole pitch ({tau * 1e3:.2f} mm) (slotting and winding harmonics), so the propulsion force "
+            "ripples in proportion to i_q.",
+            "horizontal",
+            ("sin_slot", "cos_slot", "sin_pole", "cos_pole"),
+            function=term_function("ripple", ripple, 4),
+            physical=physical,
+            signature="residual proportional to i_q and periodic in x3",
+        ),
+        "current",
+        "position",
+        "runs with the same path at two different accelerations separate thrust ripple from a "
+        "position-periodic force",
+        all_of(
+            within("amplitude", 0.3, "ripple amplitude"),
+            within("amplitude_pole_pitch", 0.3, "ripple amplitude"),
+        ),
+        lambda e: (
+            f"The thrust ripples by {fmt(e['amplitude'], 100, '%')} of its value over the slot pitch and "
+            f"{fmt(e['amplitude_pole_pitch'], 100, '%')} over the pole pitch."
+        ),
+    )
+
+
+def commutation_candidate(ctx: LibraryContext) -> Candidate:
+    """The amplifiers' electrical angle offset from the magnet poles (i_d and i_q mix)."""
+    c_ref = ctx.references
+
+    def commutation(x, u, du, q):
+        l = ctx.shapes(x)
+        # i_q' = i_q + d i_d, i_d' = i_d - d i_q (first order in d): x2' = ... - L3 i_d' -> +L3 d i_q
+        return ca.vertcat(c_ref.C3 * l[2] * u[0] * q[0], -c_ref.C1 * l[0] * u[1] * q[0])
+
+    return Candidate(
+        AccelerationTerm(
+            "commutation_offset",
+            "The amplifiers' electrical angle is offset from the magnet poles, so part of i_d produces "
+            "thrust and part of i_q normal force.",
+            "both",
+            ("angle",),
+            function=term_function("commutation", commutation, 1),
+            physical=linear_physical([("angle", "rad", 1.0)]),
+            signature="horizontal residual proportional to i_d (and vertical to i_q)",
+        ),
+        "current",
+        "current",
+        "a run at two levitation gaps (different i_d) with the same horizontal motion separates it "
+        "from the thrust constant",
+        within("angle", 0.35, "commutation angle"),
+        lambda e: f"The commutation angle is off by {fmt(e['angle'], 180 / math.pi, 'degrees')}.",
+    )
+
+
+def lag_candidate(ctx: LibraryContext) -> Candidate:
+    """The forces following the commanded currents late by a time constant (first order)."""
+    c_ref = ctx.references
+    hold = ctx.hold_delay
+
+    def lag(x, u, du, q):
+        l = ctx.shapes(x)
+        # acc(u - T du) - acc(u) = -(d acc / d u) du T (first order in T)
+        dv_du2 = -c_ref.C3 * l[2] - 2 * c_ref.C4 * l[3] * u[1]
+        dv_du1 = -2 * c_ref.C4 * l[3] * u[0]
+        dh_du1 = -c_ref.C1 * l[0]
+        return ca.vertcat(-(dv_du2 * du[1] + dv_du1 * du[0]) * q[0], -dh_du1 * du[0] * q[0])
+
+    def physical(q, cov, c):
+        sd = math.sqrt(max(cov[0, 0], 0))
+        return {
+            "time_constant": Estimate(float(q[0]) - hold, sd, "s"),
+            "total_delay": Estimate(float(q[0]), sd, "s"),
+            "hold_delay": Estimate(hold, 0.0, "s"),
+        }
+
+    return Candidate(
+        AccelerationTerm(
+            "current_amplifier_lag",
+            "The current amplifiers (or the real-time loop) deliver the commanded currents late, so the "
+            "forces lag the commands by a small time constant.",
+            "both",
+            ("time_constant",),
+            function=term_function("lag", lag, 1),
+            physical=physical,
+            signature="residual correlated with the rate of the commanded currents",
+        ),
+        "current",
+        "current_rate",
+        "current steps at several amplitudes, measured with a current probe, separate an amplifier lag "
+        "from the regulator's own dynamics",
+        all_of(detected("total_delay", "lag"), within("time_constant", 5e-3, "lag")),
+        lambda e: (
+            f"The currents lag their commands by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
+            f"{hold * 1e3:.2g} ms of the loop's zero-order hold."
+        ),
+    )

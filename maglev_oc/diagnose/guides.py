@@ -1,0 +1,321 @@
+"""Candidates of the linear guides and what hangs on them: friction, tilt, cable carrier, forces,
+misalignment and waviness (papers 000/002 name guide friction and misalignment as what limits the
+2-DOF stage; the rest is what real linear-guide stages are known for)."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.diagnose.candidate import (
+    MAX_FORCE_SHARE,
+    Candidate,
+    LibraryContext,
+    all_of,
+    delta_method,
+    detected,
+    fmt,
+    not_below,
+    with_physical,
+    within,
+)
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.terms import (
+    AccelerationTerm,
+    amplitude_phase,
+    constant_force,
+    guide_friction,
+    linear_physical,
+    term_function,
+)
+from maglev_oc.results import Estimate
+
+__all__ = [
+    "cable_candidate",
+    "friction_candidates",
+    "gap_offset_candidate",
+    "level_candidates",
+    "misalignment_candidate",
+    "refine_waviness_period",
+    "waviness_candidate",
+]
+
+
+def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """Coulomb + viscous friction of each axis's guides, with the share held while sticking."""
+    out = []
+    for axis in ("vertical", "horizontal"):
+        term = guide_friction(ctx.params, axis, holding=ctx.modelled(axis))
+        out.append(
+            Candidate(
+                with_physical(term, _friction_physical(ctx, term, axis)),
+                "friction",
+                "gap_rate" if axis == "vertical" else "position_rate",
+                "slow constant-speed sweeps in both directions (speed reversals at several speeds) separate "
+                "Coulomb from viscous friction and from the thrust constant",
+                all_of(
+                    detected("coulomb", "Coulomb friction (sticking without friction is not physical)"),
+                    not_below("viscous", "viscous friction"),
+                    within("coulomb", MAX_FORCE_SHARE * ctx.weight(axis), "Coulomb friction"),
+                    within("holding", 1.5, "share of the force held while sticking"),
+                ),
+                lambda e, axis=axis: (
+                    f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
+                    f"and {fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+                ),
+                nuisance=("holding",),
+            )
+        )
+    return out
+
+
+def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
+    base = term.physical
+
+    def convert(q, cov, c):
+        out = base(q, cov, c)
+        if axis == "horizontal":  # the holding column carries the reference C1
+            k = ctx.reference_ratio("C1", c)
+            h = out["holding"]
+            out["holding"] = Estimate(h.value * k, h.stderr * abs(k), "1")
+        return out
+
+    return convert
+
+
+def level_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """A constant horizontal force (guides not level) and a constant vertical force."""
+    weight_h = ctx.weight("horizontal")
+    tilt = constant_force(
+        ctx.params,
+        "horizontal",
+        name="horizontal_guides_not_level",
+        explanation="The horizontal guides are not level, so gravity pulls the platform along them "
+        "with a constant force.",
+    )
+
+    def tilt_physical(q, cov, c):
+        sd = math.sqrt(max(cov[0, 0], 0))
+        return {
+            "force": Estimate(float(q[0]), sd, "N"),
+            "tilt": Estimate(math.asin(max(-1.0, min(1.0, q[0] / weight_h))), sd / weight_h, "rad"),
+        }
+
+    vertical = constant_force(
+        ctx.params,
+        "vertical",
+        name="constant_vertical_force",
+        explanation="A constant vertical force the model lacks (a cable's weight, a preload of the vertical "
+        "guides); positive towards the stator.",
+    )
+    return [
+        Candidate(
+            with_physical(tilt, tilt_physical),
+            "constant",
+            "position",
+            "runs centred at different horizontal positions separate a constant force from a spring",
+            within("force", MAX_FORCE_SHARE * weight_h, "horizontal force"),
+            lambda e: (
+                f"The horizontal guides are tilted by {fmt(e['tilt'], 1e3, 'mrad')}: a constant force "
+                f"of {fmt(e['force'])} along the track."
+            ),
+        ),
+        Candidate(
+            vertical,
+            "constant",
+            "gap",
+            "a run with a known mass added to the platform (a load change) or over a wider gap range "
+            "separates a constant force from the scale of the magnetic force, which near equilibrium "
+            "always carries the weight",
+            within("force", MAX_FORCE_SHARE * ctx.weight("vertical"), "vertical force"),
+            lambda e: f"A constant vertical force of {fmt(e['force'])} (positive towards the stator).",
+        ),
+    ]
+
+
+def cable_candidate(ctx: LibraryContext) -> Candidate:
+    """A spring along the track (cable carrier): F = -k x3 + F0."""
+    mh = ctx.mass("horizontal")
+    lo, hi = ctx.position_range
+    term = AccelerationTerm(
+        "cable_carrier_force",
+        "The cable carrier (or a spring-like connection) pushes the platform back towards a neutral "
+        "position with a force growing along the track.",
+        "horizontal",
+        ("stiffness", "force_at_zero"),
+        function=term_function("cable", lambda x, u, du, q: ca.vertcat(0, (-q[0] * x[2] + q[1]) / mh), 2),
+        physical=lambda q, cov, c: {
+            "stiffness": Estimate(float(q[0]), math.sqrt(max(cov[0, 0], 0)), "N/m"),
+            "neutral_position": delta_method(lambda v: v[1] / v[0] if v[0] else float("nan"), q, cov, "m"),
+        },
+        signature="residual linear in the horizontal position",
+    )
+
+    def not_too_strong(e):
+        force = abs(e["stiffness"].value) * max(abs(lo), abs(hi))
+        if force <= MAX_FORCE_SHARE * ctx.weight("horizontal"):
+            return None
+        return "spring force beyond a quarter of the platform's weight over the travel"
+
+    return Candidate(
+        term,
+        "constant",
+        "position",
+        "runs over different parts of the travel separate a spring from a constant force and from the "
+        "thrust's variation along the stator",
+        all_of(not_below("stiffness", "cable stiffness"), not_too_strong),
+        lambda e: (
+            f"A spring-like force along the track (cable carrier): stiffness {fmt(e['stiffness'])}, "
+            f"neutral at {fmt(e['neutral_position'], 1e3, 'mm')}."
+        ),
+    )
+
+
+def misalignment_candidate(ctx: LibraryContext) -> Candidate:
+    """Horizontal guides sloping against a level stator (true gap = reading + slope x3)."""
+    mh, weight_h = ctx.mass("horizontal"), ctx.weight("horizontal")
+    lo, hi = ctx.position_range
+
+    def misalignment(x, u, du, q):
+        # the gap error changes both accelerations; along the sloping guides the weight of what
+        # moves horizontally pulls down-slope and the normal force towards the stator
+        along = ca.vertcat(0, (weight_h - ctx.normal_force(x, u)) / mh)
+        return (ctx.gap_sensitivity(x, u) * x[2] + along) * q[0]
+
+    def physical(q, cov, c):
+        sd = math.sqrt(max(cov[0, 0], 0))
+        return {
+            "slope": Estimate(float(q[0]), sd, "rad"),
+            "gap_change_over_travel": Estimate(float(q[0]) * (hi - lo), sd * (hi - lo), "m"),
+        }
+
+    return Candidate(
+        AccelerationTerm(
+            "guide_misalignment",
+            "The horizontal guides are not parallel to the stator: the magnetic gap changes along the "
+            "track in proportion to the position while the gap encoder does not see it, and the normal "
+            "force and the weight push the platform along the sloping guides.",
+            "both",
+            ("slope",),
+            function=term_function("misalign", misalignment, 1),
+            physical=physical,
+            signature="vertical residual growing along the track with the model's gap sensitivity",
+        ),
+        "geometry",
+        "position",
+        "a gauge-block check of the gap at both ends of the travel, or set-point runs at several positions "
+        "at one gap reading",
+        within("slope", 0.05, "guide slope"),
+        lambda e: (
+            f"The gap the encoder reads is off by {fmt(e['gap_change_over_travel'], 1e3, 'mm')} from one "
+            f"end of the travel to the other (slope {fmt(e['slope'], 1e3, 'mrad')})."
+        ),
+    )
+
+
+def gap_offset_candidate(ctx: LibraryContext) -> Candidate:
+    """The gap encoder's zero offset from the true gap."""
+    return Candidate(
+        AccelerationTerm(
+            "gap_sensor_offset",
+            "The gap encoder's zero is offset from the true magnetic gap, so every gap-dependent force is "
+            "evaluated at the wrong gap.",
+            "both",
+            ("offset",),
+            function=term_function("gapoff", lambda x, u, du, q: ctx.gap_sensitivity(x, u) * q[0], 1),
+            physical=linear_physical([("offset", "m", 1.0)]),
+            signature="vertical residual following the model's gap sensitivity",
+        ),
+        "geometry",
+        "gap",
+        "the gap measured with a gauge block at a stopper, or equilibrium currents over a wide gap range",
+        within("offset", 2e-3, "gap offset"),
+        lambda e: f"The gap encoder reads {fmt(e['offset'], 1e3, 'mm')} off the true gap.",
+    )
+
+
+def waviness_candidate(model: StageModel, data: PreparedLogs, period: float) -> Candidate:
+    """Guide waviness at a period the residual's spatial spectrum points to (no motor period).
+
+    The horizontal guides are not straight: the magnetic gap differs from the reading by
+    w(x3) = a sin(2 pi x3 / P) + b cos(2 pi x3 / P), which changes both accelerations through the
+    model's gap sensitivity and, along the locally sloping guides (slope w'(x3)), lets the weight
+    and the magnetic normal force push the platform: x4' += w'(x3) (M_h G - F_n) / M_h, as for a
+    uniform slope (:func:`misalignment_candidate`)."""
+    ctx = LibraryContext(model, data)
+    mh, weight_h = ctx.mass("horizontal"), ctx.weight("horizontal")
+    k = 2 * math.pi / period
+
+    def build(x, u, du, q):
+        w = q[0] * ca.sin(k * x[2]) + q[1] * ca.cos(k * x[2])
+        slope = k * (q[0] * ca.cos(k * x[2]) - q[1] * ca.sin(k * x[2]))
+        return ctx.gap_sensitivity(x, u) * w + ca.vertcat(0, slope * (weight_h - ctx.normal_force(x, u)) / mh)
+
+    mm = period * 1e3
+    term = AccelerationTerm(
+        f"guide_waviness_{mm:.0f}mm",
+        f"The horizontal guides are not straight: the magnetic gap the encoder does not see changes "
+        f"periodically along the track over {mm:.1f} mm (a period found in the residual, not a motor "
+        "period).",
+        "both",
+        ("sin", "cos"),
+        function=term_function(f"waviness{mm:.0f}", build, 2),
+        physical=lambda q, cov, c: {
+            **amplitude_phase("m", 1.0)(q, cov, c),
+            "period": Estimate(period, 0.0, "m"),
+        },
+        signature=f"vertical residual periodic in x3 ({mm:.1f} mm) following the gap sensitivity",
+    )
+    return Candidate(
+        term,
+        "geometry",
+        "position",
+        "a straightness measurement of the guides, or set-point runs along the track at one gap reading",
+        within("amplitude", 5e-4, "waviness"),
+        lambda e: (
+            f"The guides wave by {fmt(e['amplitude'], 1e6, 'um')} over {mm:.1f} mm: the gap changes "
+            "periodically along the track."
+        ),
+    )
+
+
+def refine_waviness_period(
+    model: StageModel,
+    data: PreparedLogs,
+    residual: np.ndarray,
+    weights: np.ndarray,
+    fit: np.ndarray,
+    guess: float,
+    *,
+    span: float = 0.25,
+    points: int = 41,
+) -> float:
+    """The waviness period near ``guess`` that explains most of ``residual`` (2, n) on the fitted
+    samples: a periodogram peak over a travel of one or two periods is broad, and a slope or an
+    end effect shifts it; this scans periods within +-``span`` of the guess by least squares on
+    the waviness's own columns (both axes, filtered and weighted like the design)."""
+    ctx = LibraryContext(model, data)
+    x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
+    along = (ctx.weight("horizontal") - ctx.normal_force(x, u)) / ctx.mass("horizontal")
+    fn = ca.Function("wav_parts", [x, u], [ctx.gap_sensitivity(x, u), along])
+    sens, along_v = (np.asarray(v) for v in fn.map(data.n)(data.x, data.u))
+    x3 = data.x[2]
+    best, best_sse = guess, np.inf
+    y = (residual * weights[:, None])[:, fit].reshape(-1)
+    zero = np.zeros_like(x3)
+    for period in guess * np.linspace(1 - span, 1 + span, points):
+        k = 2 * math.pi / period
+        sn, cs = np.sin(k * x3), np.cos(k * x3)
+        cols = np.stack(
+            [sens * sn + np.vstack([zero, along_v * k * cs]), sens * cs - np.vstack([zero, along_v * k * sn])]
+        )
+        cols = data.filter(cols) * weights[None, :, None]
+        a = cols[:, :, fit].reshape(2, -1).T
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        sse = float(np.sum((y - a @ coef) ** 2))
+        if sse < best_sse:
+            best, best_sse = float(period), sse
+    return best

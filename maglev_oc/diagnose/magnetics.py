@@ -1,0 +1,214 @@
+"""Candidates of the motor's magnetics: cogging and detent forces, end effects, the attraction's
+gap dependence (000 Sec. V-C names cogging; end effects and field errors are what slotted PMLSMs
+of a finite stator are known for)."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.diagnose.candidate import (
+    MAX_FORCE_SHARE,
+    Candidate,
+    LibraryContext,
+    all_of,
+    delta_method,
+    fmt,
+    legendre,
+    with_physical,
+    within,
+)
+from maglev_oc.regression.terms import REFERENCE_GAP, AccelerationTerm, cogging_force, term_function
+from maglev_oc.results import Estimate
+
+__all__ = ["END_WIDTH", "cogging_candidates", "end_effects_candidate", "gap_dependence_candidate"]
+
+END_WIDTH = 0.015
+"""[m] Over how much travel the forces fall towards the ends (variants at half and twice): about a
+quarter of the pole pitch, the scale over which the magnets' end field fringes."""
+
+
+def cogging_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """Normal cogging and longitudinal detent forces at the motor's periods."""
+    t1, tau = ctx.params.slot_pitch, ctx.params.pole_pitch
+    periodic = (
+        ("vertical", t1, 2, "the slot pitch"),
+        ("vertical", 2 * t1, 1, "two slot pitches (000 eq. (9))"),
+        ("horizontal", t1, 2, "the slot pitch"),
+        ("horizontal", tau, 1, "the pole pitch (the mover's ends)"),
+    )
+    out = []
+    for axis, period, harmonics, what in periodic:
+        mm = period * 1e3
+        kind = "normal (vertical)" if axis == "vertical" else "longitudinal (detent)"
+        term = cogging_force(
+            ctx.params,
+            axis,
+            period,
+            harmonics=harmonics,
+            reference_gap=ctx.gap_median,
+            name=f"cogging_{axis}_{mm:.0f}mm",
+            explanation=(
+                f"The stator teeth and the magnet edges attract each other, adding a {kind} force "
+                f"periodic in the position over {what} ({mm:.1f} mm) that grows as the gap closes."
+            ),
+        )
+        out.append(
+            Candidate(
+                with_physical(term, _cogging_physical(term, period)),
+                "periodic",
+                "position",
+                "runs at two gaps separate a force that grows as the gap closes from guide waviness",
+                within("amplitude", MAX_FORCE_SHARE * ctx.weight(axis), "peak force"),
+                lambda e, kind=kind, mm=mm: (
+                    f"A {kind} cogging force of {fmt(e['amplitude'])} peak at a "
+                    f"{e['at_gap'].value * 1e3:.1f} mm gap ({fmt(e['amplitude_15mm'])} at 15 mm), periodic "
+                    f"over {mm:.1f} mm."
+                ),
+            )
+        )
+    return out
+
+
+def _cogging_physical(term: AccelerationTerm, period: float):
+    """The term's conversion plus the fundamental's peak at 15 mm (the papers' reference gap)."""
+    base = term.physical
+
+    def convert(q, cov, c):
+        out = base(q, cov, c)
+        amp, at = out["amplitude"], out["at_gap"].value
+        k = math.exp(-(REFERENCE_GAP - at) * 2 * math.pi / period)
+        out["amplitude_15mm"] = Estimate(amp.value * k, amp.stderr * k, "N")
+        return out
+
+    return convert
+
+
+def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Candidate:
+    """Thrust (and the currents' normal force) and the magnets' attraction falling towards both
+    ends of the logged travel, over ``width``."""
+    lo, hi = ctx.position_range
+    c_ref = ctx.references
+
+    def profile(x3, w):
+        """1 at the logged ends of the travel, decaying inwards over ``w``."""
+        return ca.exp((x3 - hi) / w) + ca.exp((lo - x3) / w)
+
+    def fn(w):
+        def build(x, u, du, q):
+            l = ctx.shapes(x)
+            prof = profile(x[2], w)
+            thrust = -c_ref.C1 * l[0] * u[0]
+            winding_normal = -(c_ref.C3 * l[2] * u[1] + c_ref.C4 * l[3] * (u[0] ** 2 + u[1] ** 2))
+            magnets = -c_ref.C2 * l[1]
+            # a loss fraction q of each force at the ends: acc changes by -q * force * profile
+            return ca.vertcat(-(q[0] * winding_normal + q[1] * magnets) * prof, -q[0] * thrust * prof)
+
+        return term_function("end_effects", build, 2)
+
+    def physical(q, cov, c):
+        drop = 1 + float(np.exp(-(hi - lo) / width)) - float(2 * np.exp(-(hi - lo) / (2 * width)))
+        scale_t = drop * ctx.reference_ratio("C1", c)  # profile at an end minus at the centre
+        scale_a = drop * ctx.reference_ratio("C2", c)
+        return {
+            "thrust_loss_at_ends": Estimate(q[0] * scale_t, math.sqrt(max(cov[0, 0], 0)) * scale_t, "1"),
+            "attraction_loss_at_ends": Estimate(q[1] * scale_a, math.sqrt(max(cov[1, 1], 0)) * scale_a, "1"),
+            "low_end_position": Estimate(lo, 0.0, "m"),
+            "high_end_position": Estimate(hi, 0.0, "m"),
+            "width": Estimate(width, 0.0, "m"),
+        }
+
+    def falls(e):
+        if e["thrust_loss_at_ends"].value + e["attraction_loss_at_ends"].value > 0:
+            return None
+        return "the forces grow, not fall, towards the ends"
+
+    return Candidate(
+        AccelerationTerm(
+            "end_effects",
+            "Towards the ends of the travel the mover overhangs the stator: the thrust (and the normal force "
+            "the currents make) and the magnets' attraction fall smoothly.",
+            "both",
+            ("winding_loss", "magnet_loss"),
+            function=fn(width),
+            physical=physical,
+            signature="thrust- and attraction-proportional residual growing towards both ends of the travel",
+            variants=(fn(width / 2), fn(width * 2)),
+            variant_note=f"fall-off width {width / 2 * 1e3:g}-{width * 2 * 1e3:g} mm",
+        ),
+        "profile",
+        "position",
+        "set-point runs at several positions along the stator at one gap (equilibrium currents and "
+        "parabola fits of L1 per position, 000 Sec. V-A) separate it from the constants",
+        all_of(
+            within("thrust_loss_at_ends", 0.5, "thrust loss at the ends"),
+            within("attraction_loss_at_ends", 0.5, "attraction loss at the ends"),
+            falls,
+        ),
+        lambda e: (
+            f"Towards the ends of the travel ({lo * 1e3:.0f} and {hi * 1e3:.0f} mm) the thrust falls by "
+            f"{fmt(e['thrust_loss_at_ends'], 100, '%')} and the magnets' attraction by "
+            f"{fmt(e['attraction_loss_at_ends'], 100, '%')} relative to the centre."
+        ),
+    )
+
+
+def gap_dependence_candidate(ctx: LibraryContext) -> Candidate:
+    """The attraction's dependence on the gap differing smoothly from the field model: C2's column
+    times mean-free Legendre polynomials (orders 1, 2) of the gap over its logged range."""
+    lo, hi = ctx.gap_range
+    centre, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-4)
+    means = [float(np.mean(b)) for b in legendre((ctx.fitted_states[0] - centre) / half, (1, 2))]
+    c2 = ctx.references.C2
+
+    def build(x, u, du, q):
+        b1, b2 = (b - m for b, m in zip(legendre((x[0] - centre) / half, (1, 2)), means, strict=True))
+        return ca.vertcat(-c2 * ctx.shapes(x)[1] * (q[0] * b1 + q[1] * b2), 0)
+
+    def physical(q, cov, c):
+        s = ctx.reference_ratio("C2", c)
+        out = {}
+        for label, xi in (("at_smallest_gap", -1.0), ("at_largest_gap", 1.0)):
+            # the change relative to the centre of the logged gaps: P1(xi) + (P2(xi) - P2(0))
+            out[f"attraction_change_{label}"] = delta_method(
+                lambda v, xi=xi: s * (v[0] * xi + v[1] * (3 * xi**2 - 1) / 2 + v[1] / 2), q, cov, "1"
+            )
+        out["smallest_gap"] = Estimate(lo, 0.0, "m")
+        out["largest_gap"] = Estimate(hi, 0.0, "m")
+        return out
+
+    def bounded(e):
+        worst = max(
+            abs(e["attraction_change_at_smallest_gap"].value),
+            abs(e["attraction_change_at_largest_gap"].value),
+        )
+        return (
+            None
+            if worst <= 0.3
+            else "attraction off the field model by more than 30 % within the logged gaps"
+        )
+
+    return Candidate(
+        AccelerationTerm(
+            "attraction_gap_dependence",
+            "The magnets' attraction changes with the gap differently from the field model (field shape, "
+            "magnet height or iron saturation), leaving a smooth error that varies with the gap.",
+            "vertical",
+            ("P1", "P2"),
+            function=term_function("gapdep", build, 2),
+            physical=physical,
+            signature="residual proportional to the attraction varying smoothly with the gap",
+        ),
+        "profile",
+        "gap",
+        "equilibrium currents over a wide range of gaps (000 Sec. V-B, 10-25 mm) separate the field's "
+        "gap dependence from C2..C4",
+        bounded,
+        lambda e: (
+            "The attraction departs from the field model by "
+            f"{fmt(e['attraction_change_at_smallest_gap'], 100, '%')} at a {lo * 1e3:.1f} mm gap and "
+            f"{fmt(e['attraction_change_at_largest_gap'], 100, '%')} at {hi * 1e3:.1f} mm."
+        ),
+    )

@@ -1,0 +1,129 @@
+"""Joint refits of the base constants with chosen effects: the constants after a fit, the
+magnetic references iterated to convergence, and the model-form spread of an effect's parameters."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from maglev_oc.diagnose.candidate import Candidate
+from maglev_oc.diagnose.library import candidate_library
+from maglev_oc.diagnose.selection import fitted_constants
+from maglev_oc.model.parameters import LumpedConstants
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES, UNITS
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.design import Design, build_design
+from maglev_oc.regression.solve import SubsetFit, fit_subset
+from maglev_oc.results import AXES, Estimate
+
+__all__ = [
+    "CALIBRATION",
+    "REFIT_TOLERANCE",
+    "constants_of",
+    "converged_references",
+    "fitted_model",
+    "moved",
+    "with_model_form_spread",
+]
+
+CALIBRATION = 0.01
+"""Relative uncertainty of every estimated acceleration: the Savitzky-Golay differentiator is
+within 1 % of the exact derivative over its band (``SavitzkyGolay.tolerance``), so every
+parameter proportional to an acceleration carries it."""
+REFIT_TOLERANCE = 0.02
+"""Rebuild the library when the refitted constants move by more than this from its references."""
+
+
+def constants_of(design: Design, fit: SubsetFit, model: StageModel) -> dict[str, Estimate]:
+    """C1..C4 with standard errors; NaN for the constants of an axis that did not move."""
+    out = {}
+    for name in CONSTANT_NAMES:
+        if design.moving[AXES.index(CONSTANT_AXIS[name])] and name in fit.names:
+            out[name] = Estimate(fit.value(name), fit.stderr(name), UNITS[name])
+        else:
+            out[name] = Estimate(float("nan"), float("nan"), UNITS[name])
+    return out
+
+
+def fitted_model(model: StageModel, fit: SubsetFit, moving: np.ndarray, source: str) -> StageModel:
+    """The model with the fitted constants (a locked axis's, or a non-positive fit, keeps the model's)."""
+    c = np.asarray(model.constants.as_array(), dtype=float)
+    for k, name in enumerate(CONSTANT_NAMES):
+        v = fit.value(name)
+        if moving[AXES.index(CONSTANT_AXIS[name])] and math.isfinite(v) and v > 0:
+            c[k] = v
+    return model.with_constants(LumpedConstants(*c, source=source))
+
+
+def moved(a: StageModel, b: StageModel) -> float:
+    """Largest relative change between two models' constants."""
+    return float(np.max(np.abs(np.asarray(a.constants.as_array()) / np.asarray(b.constants.as_array()) - 1)))
+
+
+def converged_references(
+    model: StageModel,
+    fitted: StageModel,
+    data: PreparedLogs,
+    chosen: Sequence[str],
+    train: np.ndarray,
+    hold: np.ndarray,
+    weights: np.ndarray,
+    *,
+    tolerance: float = 1e-3,
+    max_rounds: int = 12,
+) -> StageModel:
+    """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
+    the effects' magnetic references (which scale some of their columns) agree with them.
+
+    Terms such as the commutation offset are bilinear in a constant and their own parameter;
+    their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
+    repeated here (a few tenths of a second each: only the chosen effects' columns) until the
+    constants move by less than ``tolerance``."""
+    for _ in range(max_rounds):
+        by_name = {c.name: c for c in candidate_library(fitted, data)}
+        terms = [by_name[n].term for n in chosen]
+        design = build_design(data, fitted, terms=terms, fit=train, holdout=hold, weights=weights)
+        refit = fitted_model(
+            model,
+            fit_subset(design, list(design.groups), covariance=False),
+            data.moving,
+            "diagnose: refit with the effects",
+        )
+        done = moved(refit, fitted) <= tolerance
+        fitted = refit
+        if done:
+            break
+    return fitted
+
+
+def with_model_form_spread(
+    params: dict[str, Estimate],
+    data: PreparedLogs,
+    model: StageModel,
+    chosen: list[Candidate],
+    cand: Candidate,
+    train: np.ndarray,
+    hold: np.ndarray,
+    weights: np.ndarray,
+) -> dict[str, Estimate]:
+    """Standard errors with the systematic parts added in quadrature: half the spread of each
+    parameter over the candidate's variants (everything refitted with the variant) and the
+    differentiator's calibration (:data:`CALIBRATION`, not applied to angles, periods, gaps)."""
+    values: dict[str, list[float]] = {k: [v.value] for k, v in params.items()}
+    for fn in cand.term.variants:
+        alt = [c.term.with_function(fn) if c.name == cand.name else c.term for c in chosen]
+        design = build_design(data, model, terms=alt, fit=train, holdout=hold, weights=weights)
+        fit = fit_subset(design, list(design.groups))
+        coef, cov = fit.group(design, cand.name)
+        consts = fitted_constants(fit)
+        for k, v in cand.term.physical_parameters(coef, cov, consts).items():
+            values[k].append(v.value)
+    out = {}
+    for k, v in params.items():
+        spread = 0.5 * (max(values[k]) - min(values[k]))
+        systematic = 0.0 if v.unit in ("rad", "m") else CALIBRATION * abs(v.value)
+        out[k] = Estimate(v.value, math.sqrt(v.stderr**2 + spread**2 + systematic**2), v.unit)
+    return out

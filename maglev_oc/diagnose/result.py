@@ -1,0 +1,202 @@
+"""The diagnosis's result: the effects found, what is not separable or not explained, the
+errors before and after (SPEC 3: ``Diagnosis.to_dict()`` is the JSON ``maglev-oc diagnose`` writes)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from maglev_oc.diagnose.candidate import Candidate
+from maglev_oc.diagnose.selection import Judgement, Selection
+from maglev_oc.diagnose.trace import Trace
+from maglev_oc.diagnose.unexplained import Unexplained
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.results import AXES, Estimate, PerAxis, Result, jsonable
+
+__all__ = ["ERROR_METRIC", "Diagnosis", "Effect", "NotSeparable"]
+
+ERROR_METRIC = (
+    "RMS of the acceleration equation error (measured minus model, both through the same "
+    "zero-phase filter) on the held-out block at the end of each log, per axis, in m/s^2 "
+    "(null for an axis that does not move in the logs)"
+)
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A selected effect with its physical parameters (value, standard error, unit)."""
+
+    name: str
+    explanation: str
+    finding: str  # what was found, in one sentence with the sizes
+    axis: str
+    parameters: dict[str, Estimate]
+    confidence: float  # bootstrap share choosing it at its step
+    gain: float  # relative drop of the held-out error on its axes when it was added
+    z: float
+    contribution_rms: tuple[float, float]  # held-out RMS of its acceleration per axis [m/s^2]
+    force_rms: tuple[float, float]  # the same in N
+    runner_up: str
+    signature: str
+    coefficients: np.ndarray
+    candidate: Candidate = field(repr=False)
+
+
+@dataclass(frozen=True)
+class NotSeparable:
+    """A candidate that is real in the fit but confounded on this log."""
+
+    name: str
+    confounded_with: tuple[str, ...]
+    experiment: str
+    gain: float
+    reason: str
+    parameters: dict[str, Estimate]
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "confounded_with": list(self.confounded_with),
+            "experiment": self.experiment,
+            "holdout_gain": _num(self.gain),
+            "reason": self.reason,
+            "parameters_if_it_were_separable": {k: v.to_dict() for k, v in self.parameters.items()},
+        }
+
+
+@dataclass(frozen=True)
+class Diagnosis(Result):
+    """What :func:`diagnose` found (``to_dict()``: the SPEC 3 contract plus details)."""
+
+    success: bool
+    status: str  # "effects_found", "nothing_found" or "unexplained_only"
+    message: str
+    sources: tuple[str, ...]
+    constants_base: dict[str, Estimate]  # base model alone
+    constants_final: dict[str, Estimate]  # refitted with the effects
+    effects: list[Effect]
+    not_separable: list[NotSeparable]
+    rejected: list[Judgement]
+    unexplained: list[Unexplained]
+    error_before: PerAxis  # [m/s^2] held-out RMS of the equation error, base model
+    error_after: PerAxis  # [m/s^2] with the effects
+    output_error_before: PerAxis  # [m] RMS over 50 ms simulations, held out
+    output_error_after: PerAxis
+    selection: Selection
+    trace: Trace
+    residual_before: np.ndarray  # (2, n) [m/s^2]
+    residual_after: np.ndarray
+    data: PreparedLogs = field(repr=False)
+    train: np.ndarray = field(repr=False)
+    holdout: np.ndarray = field(repr=False)
+    settings: dict = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ranking(self) -> list[tuple[str, float]]:
+        return self.selection.ranking
+
+    def to_dict(self) -> dict:
+        """The SPEC 3 contract, plus details (all plain JSON types)."""
+
+        def phys(d: dict[str, Estimate]) -> dict:
+            return {k: _num(v.value) for k, v in d.items()}
+
+        def phys_full(d: dict[str, Estimate]) -> dict:
+            return {k: v.to_dict() for k, v in d.items()}
+
+        return {
+            "effects": [
+                {
+                    "name": e.name,
+                    "explanation": e.explanation,
+                    "finding": e.finding,
+                    "axis": e.axis,
+                    "parameters": phys(e.parameters),
+                    "parameter_details": phys_full(e.parameters),
+                    "confidence": _num(e.confidence),
+                    "holdout_gain": _num(e.gain),
+                    "z": _num(e.z),
+                    "contribution_rms": dict(zip(AXES, map(_num, e.contribution_rms), strict=True)),
+                    "force_rms_N": dict(zip(AXES, map(_num, e.force_rms), strict=True)),
+                    "runner_up": e.runner_up,
+                    "evidence": e.signature,
+                }
+                for e in self.effects
+            ],
+            "not_separable": [n.to_dict() for n in self.not_separable],
+            "unexplained": [u.to_dict() for u in self.unexplained],
+            "error_before": self.error_before.to_dict(),
+            "error_after": self.error_after.to_dict(),
+            "error_metric": ERROR_METRIC,
+            "output_error_before": self.output_error_before.to_dict(),
+            "output_error_after": self.output_error_after.to_dict(),
+            "output_error_metric": "RMS position error of the model simulated over 50 ms windows "
+            "from the estimated state with the logged currents, held-out "
+            "block, per axis, in m",
+            "constants_base": phys_full(self.constants_base),
+            "constants_final": phys_full(self.constants_final),
+            "rejected": [
+                {
+                    "name": j.name,
+                    "verdict": j.verdict,
+                    "reason": j.reason,
+                    "holdout_gain": _num(j.gain),
+                    "z": _num(j.z),
+                }
+                for j in self.rejected
+            ],
+            "candidate_ranking": [{"name": n, "holdout_gain": _num(g)} for n, g in self.ranking],
+            "selection_steps": [
+                {
+                    "chosen": s.chosen,
+                    "confidence": _num(s.confidence),
+                    "candidates": [
+                        {
+                            "name": j.name,
+                            "verdict": j.verdict,
+                            "holdout_gain": _num(j.gain),
+                            "z": _num(j.z),
+                            "wald": _num(j.wald),
+                            "vif": _num(j.vif),
+                        }
+                        for j in sorted(s.judgements.values(), key=lambda j: -j.gain)
+                    ],
+                }
+                for s in self.selection.steps
+            ],
+            "logs": list(self.sources),
+            "holdout": {
+                "fraction": self.settings.get("holdout_fraction"),
+                "samples": int(self.holdout.sum()),
+                "fit_samples": int(self.train.sum()),
+            },
+            "settings": jsonable(self.settings),
+            "success": self.success,
+            "status": self.status,
+            "message": self.message,
+            "timings": {k: _num(v) for k, v in self.timings.items()},
+        }
+
+    def report(self) -> str:
+        """What was found, in plain words (the first page of the PDF report as text)."""
+        lines = [f"Diagnosis ({self.status}): {self.message}"]
+        for e in self.effects:
+            lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {e.finding}")
+        for n in self.not_separable:
+            lines.append(
+                f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}"
+            )
+        for u in self.unexplained:
+            lines.append(f"  unexplained: {u.description}")
+        for a, before in self.error_before.items():
+            if math.isfinite(before):
+                lines.append(f"  held-out error {a}: {before:.4g} -> {self.error_after[a]:.4g} m/s^2")
+        return "\n".join(lines)
