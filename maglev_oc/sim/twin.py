@@ -28,6 +28,8 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
 from maglev_oc.sim.effects import TwinEffects
 
+__all__ = ["RigTwin"]
+
 
 @dataclass(frozen=True, eq=False)
 class RigTwin:
