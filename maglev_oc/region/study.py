@@ -33,8 +33,10 @@ from maglev_oc.region.montecarlo import (
     CertificateCheck,
     SliceCheck,
     check_error_states,
-    concat_outcomes,
     fl_slice,
+    merge_checks,
+    reference_samples,
+    regulator_state,
     uniform_in_ellipsoid,
 )
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
@@ -192,29 +194,8 @@ def _inside_checks(sim, loop, reference, cert: Procedure2Result, n, rng, label, 
                 )
             )
         if runs:
-            out[f"{label}, {kind}"] = _merge(runs)
+            out[f"{label}, {kind}"] = merge_checks(runs)
     return out
-
-
-def _merge(runs: list[CertificateCheck]) -> CertificateCheck:
-    if len(runs) == 1:
-        return runs[0]
-    first = runs[0]
-    import dataclasses
-
-    cat = np.concatenate
-    return dataclasses.replace(
-        first,
-        n=sum(r.n for r in runs),
-        violations=sum(r.violations for r in runs),
-        violating=cat([r.violating for r in runs]),
-        start_ratio=cat([r.start_ratio for r in runs]),
-        final_ratio=cat([r.final_ratio for r in runs]),
-        min_margin=min(r.min_margin for r in runs),
-        max_current=max(r.max_current for r in runs),
-        outcome=concat_outcomes([r.outcome for r in runs]),
-        wall_time=sum(r.wall_time for r in runs),
-    )
 
 
 def _worst_start(sim, loop, reference, cert: Procedure2Result, limit) -> CertificateCheck | None:
@@ -382,24 +363,22 @@ def operating_region_study(
             )
             z = uniform_in_ellipsoid(cert.P, cert.level, config.quantization_samples, rng)
             x, xi = loop.physical_state(z, target.reference, 0.0)
-            from maglev_oc.region.montecarlo import reference_samples, regulator_state
-
             ref_s = reference_samples(target.reference, 0.0, sim_q.n_steps, twin_q.sample_time)
             noise = rng.standard_normal((2, sim_q.n_steps))
             out = sim_q.run(x, regulator_state(x, xi), ref_s, noise)
             bad = out.violations(limit)
-            quant = CertificateCheck(
-                target.reference,
-                cert.level,
-                z.shape[1],
-                int(bad.sum()),
-                bad,
-                np.einsum("in,ij,jn->n", z, cert.P, z) / cert.level,
-                np.full(z.shape[1], np.nan),
-                float(np.nanmin(out.min_margin)),
-                float(np.nanmax(out.max_current)),
-                out,
-                out.wall_time,
+            quant = CertificateCheck.of(
+                out.timings,
+                reference=target.reference,
+                level=cert.level,
+                n=z.shape[1],
+                violations=int(bad.sum()),
+                violating=bad,
+                start_ratio=np.einsum("in,ij,jn->n", z, cert.P, z) / cert.level,
+                final_ratio=np.full(z.shape[1], np.nan),
+                min_margin=float(np.nanmin(out.min_margin)),
+                max_current=float(np.nanmax(out.max_current)),
+                outcome=out,
             )
     timings["Monte Carlo with encoder quantisation"] = time.perf_counter() - t0
 
