@@ -38,18 +38,41 @@ encoder quantisation are not covered; :mod:`maglev_oc.region.montecarlo` checks 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference, RegulatorLoop
-from maglev_oc.region.feasibility import CONSTRAINT_NAMES, FeasibleSet
+from maglev_oc.region.feasibility import CONSTRAINT_NAMES, FeasibleSet, transformation_constraints
 from maglev_oc.region.interval import IntervalFunction
+from maglev_oc.results import PerAxis, Result
+
+__all__ = [
+    "GAP_DOMAIN",
+    "LADDER",
+    "MAX_ATTEMPTS",
+    "NONLINEAR",
+    "BoundaryMinimizer",
+    "BoundaryMinimum",
+    "BoxSearch",
+    "EllipsoidImage",
+    "InitialConditionSet",
+    "LevelCertifier",
+    "Procedure2",
+    "Procedure2Result",
+    "ellipsoid_image",
+    "initial_condition_set",
+    "max_rectangle",
+    "travel_levels",
+]
 
 NONLINEAR = ("margin", "headroom")
+"""The constraints of F that are not linear in z~ (checked by branch and bound)."""
 LADDER = (0.995, 0.98, 0.95, 0.9, 0.8, 0.65, 0.5, 0.3, 0.15, 0.05, 0.01)
 """Fractions of the best upper bound at which a certificate is attempted, in this order."""
 GAP_DOMAIN = (2e-3, 80e-3)
@@ -74,6 +97,18 @@ class EllipsoidImage:
 
 
 def ellipsoid_image(loop: RegulatorLoop, P: np.ndarray) -> EllipsoidImage:
+    """What {V <= c} looks like through (e1, v1, v2) and the four linear functions F depends on.
+
+    Parameters
+    ----------
+    loop : RegulatorLoop
+    P : (10, 10) array
+        Symmetric positive definite.
+
+    Returns
+    -------
+    EllipsoidImage
+    """
     P = _check_p(P)
     M = loop.output[[0, 2, 3]]
     pinv_mt = np.linalg.solve(P, M.T)
@@ -93,7 +128,21 @@ def _check_p(P) -> np.ndarray:
 
 
 def travel_levels(feasible: FeasibleSet, loop: RegulatorLoop, reference: Reference, P) -> dict[str, float]:
-    """Exact min of V over each violated stopper half-space {x1 < g_lo}, ... (closed form)."""
+    """Exact min of V over each violated stopper half-space {x1 < g_lo}, ... (closed form).
+
+    Parameters
+    ----------
+    feasible : FeasibleSet
+        Supplies the stoppers [m] (a missing one gives an infinite level).
+    loop : RegulatorLoop
+    reference : Reference
+    P : (10, 10) array
+
+    Returns
+    -------
+    dict of str to float
+        The level per stopper constraint (gap_low, gap_high, position_low, position_high).
+    """
     img = ellipsoid_image(loop, P)
     F = loop.offset_coefficients(reference)
     out = {}
@@ -114,16 +163,42 @@ def travel_levels(feasible: FeasibleSet, loop: RegulatorLoop, reference: Referen
 
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class BoxSearch:
-    """Outcome of one branch and bound on {V <= c}: 'certified', 'refuted' or 'undecided'."""
+class BoxSearch(Result):
+    """Outcome of one branch and bound on {V <= c}: ``status`` ``"certified"``, ``"refuted"``
+    (an infeasible point was found: ``witness``) or ``"undecided"`` (box budget spent)."""
 
+    success: bool
     status: str
+    message: str
     level: float
     witness: np.ndarray | None  # (4,) zeta (3) and phase of an infeasible point, if refuted
     witness_level: float  # V at the witness (c |zeta|^2)
     binding: str  # constraint violated at the witness ('' otherwise)
     boxes: int  # boxes evaluated
-    wall_time: float
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
+
+    @classmethod
+    def of(
+        cls,
+        status: str,
+        level: float,
+        boxes: int,
+        t0: float,
+        *,
+        witness: np.ndarray | None = None,
+        witness_level: float = math.inf,
+        binding: str = "",
+    ) -> BoxSearch:
+        """The outcome with its message; ``t0`` is the search's start (``time.perf_counter``)."""
+        message = {
+            "certified": f"every box of {{V <= {level:.4g}}} proved feasible ({boxes} boxes)",
+            "refuted": f"{binding} < 0 at V = {witness_level:.4g} ({boxes} boxes)",
+            "undecided": f"box budget spent after {boxes} boxes",
+        }[status]
+        timings = {"total": time.perf_counter() - t0}
+        return cls(
+            status == "certified", status, message, level, witness, witness_level, binding, boxes, timings
+        )
 
 
 class LevelCertifier:
@@ -153,15 +228,27 @@ class LevelCertifier:
         offs = ca.mtimes(off, basis)
         x1 = offs[0] + ell[0]
         v = ca.vertcat(offs[2] + ell[1], offs[3] + ell[2])
-        from maglev_oc.region.feasibility import transformation_constraints
-
         margin, headroom = transformation_constraints(feasible.model, x1, v, feasible.current_limit)
         h = ca.vertcat(margin, headroom)
         self._fn = ca.Function("h_zeta", [zeta, phi, ca.vec(lmat), ca.vec(off)], [h])
         self._ifn = IntervalFunction(self._fn)
 
     def certify(self, reference: Reference, P, level: float, *, phase_cells: int = 24) -> BoxSearch:
-        """Branch and bound for the nonlinear constraints on {V <= level}."""
+        """Branch and bound for the nonlinear constraints on {V <= level}.
+
+        Parameters
+        ----------
+        reference : Reference
+        P : (10, 10) array
+        level : float
+            c, positive and finite.
+        phase_cells : int
+            Initial cells over the phase [0, 2 pi) for a sinusoid.
+
+        Returns
+        -------
+        BoxSearch
+        """
         t0 = time.perf_counter()
         if not (level > 0 and math.isfinite(level)):
             raise ValueError(f"level must be positive and finite, got {level!r}")
@@ -170,22 +257,9 @@ class LevelCertifier:
         par_l = lmat.ravel(order="F")[:, None]
         par_f = self.loop.offset_coefficients(reference).ravel(order="F")[:, None]
         periodic = not reference.is_setpoint
-        n0 = 4
-        edges = np.linspace(-1, 1, n0 + 1)
-        g = np.array(np.meshgrid(range(n0), range(n0), range(n0), indexing="ij")).reshape(3, -1)
-        lo = edges[g]
-        hi = edges[g + 1]
-        if periodic:
-            pe = np.linspace(0, 2 * math.pi, phase_cells + 1)
-            k = np.arange(phase_cells)
-            lo = np.vstack([np.repeat(lo, phase_cells, axis=1), np.tile(pe[k], lo.shape[1])])
-            hi = np.vstack([np.repeat(hi, phase_cells, axis=1), np.tile(pe[k + 1], hi.shape[1])])
-        else:
-            lo = np.vstack([lo, np.zeros(lo.shape[1])])
-            hi = np.vstack([hi, np.zeros(hi.shape[1])])
+        lo, hi = _initial_boxes(periodic, phase_cells)
         scale = np.array([1.0, 1.0, 1.0, 1.0 / math.pi])  # phase widths count per pi
         boxes = 0
-        best = (math.inf, None, "")
         while lo.shape[1] > 0:
             # boxes outside the unit ball hold no point of the ellipsoid's image
             near = np.clip(0.0, lo[:3], hi[:3])
@@ -205,26 +279,23 @@ class LevelCertifier:
             vals = np.asarray(self._fn.map(lo.shape[1])(near, phase_mid[None, :], par_l, par_f))
             bad = np.any(vals < 0, axis=0)
             if np.any(bad):
-                r2 = np.sum(near**2, axis=0)
-                r2 = np.where(bad, r2, np.inf)
+                r2 = np.where(bad, np.sum(near**2, axis=0), np.inf)
                 k = int(np.argmin(r2))
                 j = int(np.argmin(vals[:, k]))
-                best = (level * float(r2[k]), np.concatenate([near[:, k], [phase_mid[k]]]), NONLINEAR[j])
-                return BoxSearch("refuted", level, best[1], best[0], best[2], boxes, time.perf_counter() - t0)
+                witness = np.concatenate([near[:, k], [phase_mid[k]]])
+                return BoxSearch.of(
+                    "refuted",
+                    level,
+                    boxes,
+                    t0,
+                    witness=witness,
+                    witness_level=level * float(r2[k]),
+                    binding=NONLINEAR[j],
+                )
             if boxes > self.max_boxes:
-                return BoxSearch("undecided", level, None, math.inf, "", boxes, time.perf_counter() - t0)
-            width = (hi - lo) * scale[:, None]
-            if not periodic:
-                width[3] = 0
-            dim = np.argmax(width, axis=0)
-            cols = np.arange(lo.shape[1])
-            mid = 0.5 * (lo[dim, cols] + hi[dim, cols])
-            lo2, hi2 = lo.copy(), hi.copy()
-            hi[dim, cols] = mid
-            lo2[dim, cols] = mid
-            lo = np.hstack([lo, lo2])
-            hi = np.hstack([hi, hi2])
-        return BoxSearch("certified", level, None, math.inf, "", boxes, time.perf_counter() - t0)
+                return BoxSearch.of("undecided", level, boxes, t0)
+            lo, hi = _bisect_boxes(lo, hi, scale, periodic)
+        return BoxSearch.of("certified", level, boxes, t0)
 
     def zeta_to_state(self, P, level: float, zeta) -> np.ndarray:
         """The z~ of least V whose l equals sqrt(level) chol(S) zeta (V there = level |zeta|^2)."""
@@ -233,11 +304,51 @@ class LevelCertifier:
         return img.Pinv_Mt @ np.linalg.solve(img.S, ell)
 
 
+def _initial_boxes(periodic: bool, phase_cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (4, k): a 4 x 4 x 4 grid over the cube [-1, 1]^3 of zeta, times ``phase_cells``
+    cells over [0, 2 pi) for a sinusoid (the phase pinned at 0 for a set-point)."""
+    n0 = 4
+    edges = np.linspace(-1, 1, n0 + 1)
+    g = np.array(np.meshgrid(range(n0), range(n0), range(n0), indexing="ij")).reshape(3, -1)
+    lo = edges[g]
+    hi = edges[g + 1]
+    if periodic:
+        pe = np.linspace(0, 2 * math.pi, phase_cells + 1)
+        k = np.arange(phase_cells)
+        lo = np.vstack([np.repeat(lo, phase_cells, axis=1), np.tile(pe[k], lo.shape[1])])
+        hi = np.vstack([np.repeat(hi, phase_cells, axis=1), np.tile(pe[k + 1], hi.shape[1])])
+    else:
+        lo = np.vstack([lo, np.zeros(lo.shape[1])])
+        hi = np.vstack([hi, np.zeros(hi.shape[1])])
+    return lo, hi
+
+
+def _bisect_boxes(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, periodic: bool):
+    """Every box halved along its widest (scaled) side; the phase only for a sinusoid."""
+    width = (hi - lo) * scale[:, None]
+    if not periodic:
+        width[3] = 0
+    dim = np.argmax(width, axis=0)
+    cols = np.arange(lo.shape[1])
+    mid = 0.5 * (lo[dim, cols] + hi[dim, cols])
+    lo2, hi2 = lo.copy(), hi.copy()
+    hi[dim, cols] = mid
+    lo2[dim, cols] = mid
+    return np.hstack([lo, lo2]), np.hstack([hi, hi2])
+
+
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class BoundaryMinimum:
-    """min V on the boundary of one constraint by multistart IPOPT (an upper bound on c*)."""
+class BoundaryMinimum(Result):
+    """min V on the boundary of one constraint by multistart IPOPT (an upper bound on c*).
 
+    ``success``: at least one start converged onto the boundary (``status`` ``"found"``, else
+    ``"not_found"``: no boundary point was met along the start rays, or none converged).
+    """
+
+    success: bool
+    status: str
+    message: str
     constraint: str
     level: float  # best V found (inf if no start converged)
     state: np.ndarray | None  # z~ (10,)
@@ -245,7 +356,7 @@ class BoundaryMinimum:
     starts: int
     converged: int
     levels: np.ndarray  # V of every converged start
-    wall_time: float
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
 
 class BoundaryMinimizer:
@@ -285,9 +396,31 @@ class BoundaryMinimizer:
             }
             self._solvers[name] = (ca.nlpsol(f"min_V_{name}", "ipopt", nlp, opts), len(g))
 
+    @property
+    def constraints(self) -> tuple[str, ...]:
+        """The constraints with a solver: margin, and headroom when F has a current limit."""
+        return tuple(self._solvers)
+
     def minimize(
         self, reference: Reference, P, constraint: str, *, starts: int = 12, seed: int = 0
     ) -> BoundaryMinimum:
+        """min V on the boundary of ``constraint`` from ``starts`` rays (multistart IPOPT).
+
+        Parameters
+        ----------
+        reference : Reference
+        P : (10, 10) array
+        constraint : str
+            One of :attr:`constraints`.
+        starts : int
+            Rays: the six coordinate directions of zeta, then random ones.
+        seed : int
+            Seed of the random rays and phases.
+
+        Returns
+        -------
+        BoundaryMinimum
+        """
         t0 = time.perf_counter()
         if constraint not in self._solvers:
             raise ValueError(f"constraint must be one of {list(self._solvers)}, got {constraint!r}")
@@ -336,7 +469,16 @@ class BoundaryMinimizer:
             levels.append(lev)
             if lev < best_level:
                 best_level, best_z, best_phi = lev, x[:N_ERROR], float(x[-1]) % (2 * math.pi)
+        found = bool(levels)
+        message = (
+            f"least V on {constraint} = 0: {best_level:.4g} ({len(levels)} of {len(dirs)} starts converged)"
+            if found
+            else f"no start reached the boundary of {constraint} ({len(dirs)} starts)"
+        )
         return BoundaryMinimum(
+            found,
+            "found" if found else "not_found",
+            message,
             constraint,
             best_level,
             best_z,
@@ -344,7 +486,7 @@ class BoundaryMinimizer:
             len(dirs),
             len(levels),
             np.array(levels),
-            time.perf_counter() - t0,
+            {"total": time.perf_counter() - t0},
         )
 
 
@@ -359,22 +501,46 @@ class InitialConditionSet:
     box |e1| <= a1, |e2| <= a2 (rates and internal models at steady state) inside the set.
     """
 
-    semi_axes: dict[str, float]
-    rectangle: tuple[float, float]
+    semi_axes: dict[str, float]  # e1, e1_rate, e2, e2_rate
+    rectangle: PerAxis  # (a1 on e1, vertical; a2 on e2, horizontal)
 
 
 def initial_condition_set(P, level: float) -> InitialConditionSet:
+    """The set {z~' P z~ <= level} seen through the initial conditions users set.
+
+    Parameters
+    ----------
+    P : (10, 10) array
+    level : float
+        c (0 gives the empty set's zero sizes).
+
+    Returns
+    -------
+    InitialConditionSet
+    """
     P = _check_p(P)
     semi = {
         name: math.sqrt(level / P[i, i])
         for name, i in (("e1", E1), ("e1_rate", DE1), ("e2", E2), ("e2_rate", DE2))
     }
-    return InitialConditionSet(semi, max_rectangle(P[np.ix_([E1, E2], [E1, E2])], level))
+    return InitialConditionSet(semi, PerAxis.of(max_rectangle(P[np.ix_([E1, E2], [E1, E2])], level)))
 
 
 def max_rectangle(P2, level: float) -> tuple[float, float]:
     """Half-sides (a, b) of the largest-area axis-aligned box centred at 0 inside the ellipse
-    {y' P2 y <= level} (2 x 2): corners (a, +-b) must satisfy a^2 p11 + b^2 p22 + 2|a b p12| <= level."""
+    {y' P2 y <= level} (2 x 2): corners (a, +-b) must satisfy a^2 p11 + b^2 p22 + 2|a b p12| <= level.
+
+    Parameters
+    ----------
+    P2 : (2, 2) array
+        Symmetric positive definite.
+    level : float
+
+    Returns
+    -------
+    (float, float)
+        a, b in the units of y.
+    """
     p11, p22, p12 = P2[0, 0], P2[1, 1], abs(P2[0, 1])
     # with a = r cos t / sqrt(p11), b = r sin t / sqrt(p22): r^2 (1 + k sin 2t) = level,
     # k = p12 / sqrt(p11 p22); area ~ sin 2t / (1 + k sin 2t) is largest at t = pi/4.
@@ -384,7 +550,7 @@ def max_rectangle(P2, level: float) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class Procedure2Result:
+class Procedure2Result(Result):
     """The adapted Procedure 2 for one reference and one P (module docstring).
 
     ``level`` is the certified c (0 if nothing could be certified); c* lies in
@@ -407,7 +573,32 @@ class Procedure2Result:
     initial_conditions: InitialConditionSet
     attempts: tuple[BoxSearch, ...]
     minima: tuple[BoundaryMinimum, ...]
-    timings: dict[str, float] = field(default_factory=dict)
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] nlp, certify, total
+
+
+@dataclass
+class _UpperBounds:
+    """The best infeasible points known per nonlinear constraint, improved by refutations."""
+
+    upper: dict[str, float]  # constraint -> least V found on its violation
+    witness: dict[str, tuple[np.ndarray | None, float]]  # constraint -> (z~, phase) there
+    best: float  # least of them (or a stand-in when IPOPT found no boundary point)
+
+    @classmethod
+    def of(cls, minima: tuple[BoundaryMinimum, ...], travel: dict[str, float]) -> _UpperBounds:
+        upper = {m.constraint: m.level for m in minima}
+        witness = {m.constraint: (m.state, m.phase) for m in minima}
+        best = min(upper.values())
+        if not math.isfinite(best):
+            # no boundary point found by IPOPT: bound the search by the stoppers' level
+            best = min(v for v in travel.values()) * 4 if math.isfinite(min(travel.values())) else 1.0
+        return cls(upper, witness, best)
+
+    def refuted(self, name: str, level: float, state: np.ndarray, phase: float) -> None:
+        """A branch-and-bound refutation found an infeasible point of ``name`` at V = level."""
+        self.best = level
+        self.witness[name] = (state, phase)
+        self.upper[name] = min(self.upper.get(name, math.inf), level)
 
 
 class Procedure2:
@@ -438,67 +629,83 @@ class Procedure2:
         self.build_time = time.perf_counter() - t0
 
     def run(self, reference: Reference, P=None, *, seed: int = 0) -> Procedure2Result:
+        """Certify the largest level set of V = z~' P z~ inside F for ``reference`` (module docstring).
+
+        Parameters
+        ----------
+        reference : Reference
+        P : (10, 10) array, optional
+            A Lyapunov matrix of the loop (default: the Lyapunov equation's,
+            :meth:`RegulatorLoop.lyapunov_matrix`).
+        seed : int
+            Seed of the multistart rays.
+
+        Returns
+        -------
+        Procedure2Result
+            ``status`` ``"certified"`` or ``"not_certified"`` (nothing within the branch-and-bound
+            budget).
+        """
         t0 = time.perf_counter()
         P = self.loop.lyapunov_matrix() if P is None else _check_p(P)
         if not self.loop.is_lyapunov(P):
             raise ValueError("P is not a Lyapunov matrix of the loop (A' P + P A must be <= 0, P > 0)")
         timings: dict[str, float] = {}
-        # 1. exact levels of the stoppers
-        travel = travel_levels(self.feasible, self.loop, reference, P)
-        # 2. upper bounds on the nonlinear constraints' levels from multistart IPOPT
+        travel = travel_levels(self.feasible, self.loop, reference, P)  # exact, closed form
         t1 = time.perf_counter()
         minima = tuple(
             self.minimizer.minimize(reference, P, name, starts=self.starts, seed=seed)
-            for name in self.minimizer._solvers
+            for name in self.minimizer.constraints
         )
         timings["nlp"] = time.perf_counter() - t1
-        upper = {m.constraint: m.level for m in minima}
-        witness = {m.constraint: (m.state, m.phase) for m in minima}
-        nl_upper = min(upper.values())
-        if not math.isfinite(nl_upper):
-            # no boundary point found by IPOPT: bound the search by the stoppers' level
-            nl_upper = min(v for v in travel.values()) * 4 if math.isfinite(min(travel.values())) else 1.0
-        # 3. certify the nonlinear constraints on a ladder of levels below the best upper bound,
-        #    but no higher than the stoppers allow (the certified set is their minimum anyway)
+        bounds = _UpperBounds.of(minima, travel)
         t1 = time.perf_counter()
-        cap = min(travel.values())
+        certified_nl, attempts = self._ladder(reference, P, min(travel.values()), bounds)
+        timings["certify"] = time.perf_counter() - t1
+        result = self._result(reference, P, travel, bounds, certified_nl, attempts, minima)
+        timings["total"] = time.perf_counter() - t0
+        return dataclasses.replace(result, timings=timings)
+
+    def _ladder(
+        self, reference: Reference, P: np.ndarray, cap: float, bounds: _UpperBounds
+    ) -> tuple[float, tuple[BoxSearch, ...]]:
+        """Certify the nonlinear constraints on a ladder of levels below the best upper bound, but
+        no higher than the stoppers allow (``cap``: the certified set is their minimum anyway).
+        A refutation lowers the bound and the same rung is tried again below it."""
         attempts = []
-        target = min(nl_upper, cap / LADDER[0]) if math.isfinite(cap) else nl_upper
-        certified_nl = 0.0
+        target = min(bounds.best, cap / LADDER[0]) if math.isfinite(cap) else bounds.best
         k = 0
         while k < len(LADDER) and len(attempts) < MAX_ATTEMPTS:
             lev = LADDER[k] * target
             res = self.certifier.certify(reference, P, lev)
             attempts.append(res)
             if res.status == "certified":
-                certified_nl = lev
-                break
-            if res.status == "refuted" and res.witness_level < nl_upper:
-                nl_upper = res.witness_level
+                return lev, tuple(attempts)
+            if res.status == "refuted" and res.witness_level < bounds.best:
                 zt = self.certifier.zeta_to_state(P, lev, res.witness[:3])
-                witness[res.binding] = (zt, float(res.witness[3]))
-                upper[res.binding] = min(upper.get(res.binding, math.inf), res.witness_level)
+                bounds.refuted(res.binding, res.witness_level, zt, float(res.witness[3]))
                 target = res.witness_level  # retry the same fraction of the better bound
                 continue
             k += 1
-        timings["certify"] = time.perf_counter() - t1
-        if certified_nl >= cap:
-            certified_nl = max(certified_nl, 0.0)
+        return 0.0, tuple(attempts)
+
+    def _result(self, reference, P, travel, bounds, certified_nl, attempts, minima) -> Procedure2Result:
+        """The certified level, the bounds per constraint, the binding one and its witness."""
+        cap = min(travel.values())
         level = min(certified_nl, cap)
         levels: dict[str, tuple[float, float]] = {}
         for name in CONSTRAINT_NAMES:
             if name in travel:
                 levels[name] = (travel[name], travel[name])
-            elif name in upper or name in NONLINEAR:
-                levels[name] = (certified_nl, upper.get(name, math.inf))
-        all_upper = {**{k: v[1] for k, v in levels.items()}}
+            elif name in bounds.upper or name in NONLINEAR:
+                levels[name] = (certified_nl, bounds.upper.get(name, math.inf))
+        all_upper = {k: v[1] for k, v in levels.items()}
         binding = min(all_upper, key=all_upper.get)
         level_upper = all_upper[binding]
-        wz, wphi = witness.get(binding, (None, 0.0))
+        wz, wphi = bounds.witness.get(binding, (None, 0.0))
         if binding in travel and wz is None:
             wz, wphi = self._travel_witness(reference, P, binding, level_upper)
         success = level > 0
-        status = "certified" if success else "not certified"
         if success and level >= cap and certified_nl >= cap:
             message = f"certified up to the stoppers' exact level ({binding})"
         elif success:
@@ -508,10 +715,9 @@ class Procedure2:
             )
         else:
             message = "no level could be certified within the branch-and-bound budget"
-        timings["total"] = time.perf_counter() - t0
         return Procedure2Result(
             success,
-            status,
+            "certified" if success else "not_certified",
             message,
             reference,
             P,
@@ -523,9 +729,8 @@ class Procedure2:
             wphi,
             levels,
             initial_condition_set(P, level) if success else initial_condition_set(P, 0.0),
-            tuple(attempts),
+            attempts,
             minima,
-            timings,
         )
 
     def _travel_witness(self, reference: Reference, P, name: str, level: float):
