@@ -705,7 +705,7 @@ class Procedure2:
         wz, wphi = bounds.witness.get(binding, (None, 0.0))
         if binding in travel and wz is None:
             wz, wphi = self._travel_witness(reference, P, binding, level_upper)
-        success = level > 0
+        success = bool(level > 0)
         if success and level >= cap and certified_nl >= cap:
             message = f"certified up to the stoppers' exact level ({binding})"
         elif success:
