@@ -151,7 +151,17 @@ class Log:
         return tuple(bool(np.all(np.isfinite(row))) for row in self.x)  # type: ignore[return-value]
 
     def index_slice(self, start: int | None = None, stop: int | None = None) -> Log:
-        """Samples ``start:stop`` (Python slice semantics) as a new Log with a note saying so."""
+        """Samples ``start:stop`` (Python slice semantics) as a new Log with a note saying so.
+
+        Parameters
+        ----------
+        start, stop : int or None
+            Sample indices.
+
+        Returns
+        -------
+        Log
+        """
         rows = range(self.n)[slice(start, stop)]
         if len(rows) < 2:
             raise ValueError(
@@ -165,7 +175,17 @@ class Log:
         )
 
     def time_slice(self, t_start: float, t_stop: float) -> Log:
-        """Samples with ``t_start <= t < t_stop`` [s] as a new Log (e.g. a held-out part)."""
+        """Samples with ``t_start <= t < t_stop`` as a new Log (e.g. a held-out part).
+
+        Parameters
+        ----------
+        t_start, t_stop : float
+            [s], ``t_start < t_stop``.
+
+        Returns
+        -------
+        Log
+        """
         if not t_start < t_stop:
             raise ValueError(f"Log.time_slice: need t_start < t_stop, got {t_start!r}, {t_stop!r}")
         start = int(np.searchsorted(self.t, t_start, side="left"))

@@ -28,6 +28,11 @@ def phase_currents_to_inputs(
         Horizontal mover position [m].
     pole_pitch : float
         tau [m] (``StageParameters().pole_pitch`` = 57.15 mm).
+
+    Returns
+    -------
+    (2, n) array
+        (i_q, i_d) [A].
     """
     theta = np.pi * np.asarray(x3, dtype=float) / pole_pitch
     shifts = (0.0, -2 * np.pi / 3, 2 * np.pi / 3)
@@ -43,6 +48,20 @@ def inputs_to_phase_currents(u: np.ndarray, x3: np.ndarray, pole_pitch: float) -
     The inverse of :func:`phase_currents_to_inputs` for currents that sum to zero (the star-
     connected stator): i_k = cos(theta_k) i_d - sin(theta_k) i_q with theta_k = pi x3 / tau,
     theta - 2 pi/3, theta + 2 pi/3. This is what the controller sends to the amplifiers (002 Fig. 8).
+
+    Parameters
+    ----------
+    u : (2, n) array
+        (i_q, i_d) [A].
+    x3 : (n,) array
+        Horizontal mover position [m].
+    pole_pitch : float
+        tau [m].
+
+    Returns
+    -------
+    (3, n) array
+        (ia, ib, ic) [A].
     """
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[0] != 2:

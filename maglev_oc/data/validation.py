@@ -106,7 +106,17 @@ class RawLog:
 
 
 def check_required_columns(names: list[str], source: str, *, where: str | None, line: int | None) -> None:
-    """Raise LogError unless ``names`` hold t, x1, x3 and either u1, u2 or all of ia, ib, ic."""
+    """Raise LogError unless ``names`` hold t, x1, x3 and either u1, u2 or all of ia, ib, ic.
+
+    Parameters
+    ----------
+    names : list of str
+        The file's column (or variable) names.
+    source : str
+        The file, for the message.
+    where, line : str or None, int or None
+        The header's location (CSV) or None (.mat).
+    """
     present = set(names)
     partial = [c for c in PHASE_COLUMNS if c in present]
     if partial and len(partial) < len(PHASE_COLUMNS):

@@ -27,8 +27,22 @@ def write_log(path: str | os.PathLike, log: Log) -> Path:
     measured. ``.mat``: the columns as column vectors and a ``metadata`` struct of strings.
     ``notes`` are not written (they describe how this Log was made, not the data).
 
-    Returns the path. Raises ``ValueError`` for an unknown suffix or metadata that the format
-    cannot hold (newlines, ':' in a CSV key, a key that is not a MATLAB name for .mat).
+    Parameters
+    ----------
+    path : path-like
+        ``.mat``, ``.csv`` or ``.txt``.
+    log : Log
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        An unknown suffix, or metadata that the format cannot hold (newlines, ':' in a CSV key,
+        a key that is not a MATLAB name for .mat).
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -70,9 +84,24 @@ def write_log_arrays(
     metadata: Mapping[str, str] | None = None,
     currents_measured: bool = False,
 ) -> Path:
-    """Write arrays as a log: ``t`` (n,) [s], ``x`` (4, n) (NaN rows for unmeasured x2/x4), ``u`` (2, n) [A].
+    """Write arrays as a log; they are validated as for :class:`Log` (see :func:`write_log` for the formats).
 
-    The arrays are validated as for :class:`Log`; see :func:`write_log` for the formats.
+    Parameters
+    ----------
+    path : path-like
+    t : (n,) array
+        Time [s].
+    x : (4, n) array
+        States [m, m/s, m, m/s]; NaN rows for unmeasured x2/x4.
+    u : (2, n) array
+        Inputs (i_q, i_d) [A].
+    metadata : mapping of str to str, optional
+    currents_measured : bool
+        Whether the currents were measured (else commanded).
+
+    Returns
+    -------
+    Path
     """
     log = Log(t, x, u, metadata=dict(metadata or {}), source=str(path), currents_measured=currents_measured)
     return write_log(path, log)

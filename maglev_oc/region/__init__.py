@@ -16,26 +16,40 @@
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibilityMap, FeasibleSet, feasibility_map
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
+from maglev_oc.region.montecarlo import (
+    BatchSimulator,
+    CertificateCheck,
+    SliceCheck,
+    check_error_states,
+    fl_slice,
+    uniform_in_ellipsoid,
+)
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa
 from maglev_oc.region.sdp import SdpResult, enlarge
+from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, operating_region_study
 
 __all__ = [
     "BatchSimulator",
+    "CertificateCheck",
     "FeasibilityMap",
     "FeasibleSet",
     "IntervalFunction",
     "LinearizedLoop",
+    "OperatingRegionStudy",
     "Procedure2",
     "Procedure2Result",
     "Reference",
     "RegulatorLoop",
     "RoaResult",
     "SdpResult",
+    "SliceCheck",
+    "StudyConfig",
     "certify_roa",
     "check_error_states",
     "enlarge",
     "feasibility_map",
+    "fl_slice",
+    "operating_region_study",
     "uniform_in_ellipsoid",
 ]

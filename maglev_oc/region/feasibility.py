@@ -191,7 +191,20 @@ class FeasibleSet:
         return f"R >= 0, {cur}, {gap}"
 
     def evaluate(self, x1, v1, v2) -> np.ndarray:
-        """(margin [m/s^2], headroom [A^2]) for arrays broadcast together; shape (2, ...)."""
+        """The constraints of F at given gaps and accelerations.
+
+        Parameters
+        ----------
+        x1 : array
+            Gap [m].
+        v1, v2 : arrays
+            Accelerations [m/s^2], broadcast with x1.
+
+        Returns
+        -------
+        (2, ...) array
+            (margin [m/s^2], headroom [A^2]).
+        """
         x1, v1, v2 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x1, v1, v2)))
         n = x1.size
         out = np.asarray(self.pointwise.map(n)(x1.reshape(1, n), np.vstack([v1.ravel(), v2.ravel()])))

@@ -39,7 +39,6 @@ __all__ = [
     "CertificateCheck",
     "SliceCheck",
     "check_error_states",
-    "concat_outcomes",
     "fl_slice",
     "merge_checks",
     "reference_samples",
@@ -90,7 +89,17 @@ class BatchOutcome(Result):
         return cls(diverged == 0, status, message, timings=dict(timings), **arrays)
 
     def violations(self, current_limit: float | None) -> np.ndarray:
-        """Runs that left the feasible set F (R < 0, |u| > limit, stopper) or diverged."""
+        """Runs that left the feasible set F (R < 0, |u| > limit, stopper) or diverged.
+
+        Parameters
+        ----------
+        current_limit : float or None
+            |u| limit [A] (None: no current constraint).
+
+        Returns
+        -------
+        (n,) bool array
+        """
         bad = ~self.finite | self.stopper_hit
         with np.errstate(invalid="ignore"):
             bad |= self.min_margin < 0
@@ -223,7 +232,7 @@ class BatchSimulator:
         )
 
 
-def concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
+def _concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
     """One BatchOutcome holding the runs of several (in order)."""
     cat = np.concatenate
     return BatchOutcome.of(
@@ -242,8 +251,24 @@ def concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
 
 # ----------------------------------------------------------------------------------------------
 def uniform_in_ellipsoid(P, level: float, n: int, rng: np.random.Generator, dims=None) -> np.ndarray:
-    """n points (10, n) uniform in {z' P z <= level} restricted to the coordinates ``dims``
-    (others zero): uniform in that slice's ellipse/ellipsoid."""
+    """n points uniform in {z' P z <= level} restricted to the coordinates ``dims`` (others zero):
+    uniform in that slice's ellipse/ellipsoid.
+
+    Parameters
+    ----------
+    P : (m, m) array
+        Symmetric positive definite.
+    level : float
+    n : int
+        Number of points.
+    rng : numpy.random.Generator
+    dims : sequence of int, optional
+        The coordinates that vary (default all).
+
+    Returns
+    -------
+    (m, n) array
+    """
     P = np.asarray(P, dtype=float)
     dims = list(range(P.shape[0])) if dims is None else list(dims)
     Ps = P[np.ix_(dims, dims)]
@@ -260,16 +285,43 @@ def uniform_in_ellipsoid(P, level: float, n: int, rng: np.random.Generator, dims
 
 # ----------------------------------------------------------------------------------------------
 def regulator_state(x, xi) -> np.ndarray:
-    """Controller state of the output regulators (10, n) for runs started at mechanical state x
-    (4, n) with internal-model states xi (6, n): observers at the true position and velocity
-    (the certificate assumes exact velocities), internal models at xi."""
+    """Controller state of the output regulators for runs started at mechanical state x with
+    internal-model states xi: observers at the true position and velocity (the certificate
+    assumes exact velocities), internal models at xi.
+
+    Parameters
+    ----------
+    x : (4, n) array
+        [m, m/s, m, m/s].
+    xi : (6, n) array
+        (xi_v, xi_h) [m s^2, m s, m] per axis.
+
+    Returns
+    -------
+    (10, n) array
+    """
     x = np.asarray(x, dtype=float).reshape(4, -1)
     xi = np.asarray(xi, dtype=float).reshape(6, -1)
     return np.vstack([x[0], x[1], x[2], x[3], xi])
 
 
 def reference_samples(reference: Reference, phase: float, n_steps: int, sample_time: float) -> np.ndarray:
-    """The reference (6, n_steps) on the sample grid, starting at phase phi (exosystem, no ramp)."""
+    """The reference on the sample grid, starting at phase phi (exosystem, no ramp).
+
+    Parameters
+    ----------
+    reference : Reference
+    phase : float
+        [rad] at the first sample.
+    n_steps : int
+    sample_time : float
+        [s].
+
+    Returns
+    -------
+    (6, n_steps) array
+        (r_v, r_v', r_v'', r_h, r_h', r_h'') [m, m/s, m/s^2].
+    """
     phases = phase + reference.omega * sample_time * np.arange(n_steps)
     return reference.signals(phases)
 
@@ -373,7 +425,17 @@ def check_error_states(
 
 
 def merge_checks(checks: list[CertificateCheck]) -> CertificateCheck:
-    """One CertificateCheck holding the runs of several of the same certificate (in order)."""
+    """One CertificateCheck holding the runs of several of the same certificate (in order).
+
+    Parameters
+    ----------
+    checks : list of CertificateCheck
+        Runs of one certificate (e.g. one group per reference phase).
+
+    Returns
+    -------
+    CertificateCheck
+    """
     if len(checks) == 1:
         return checks[0]
     first = checks[0]
@@ -389,7 +451,7 @@ def merge_checks(checks: list[CertificateCheck]) -> CertificateCheck:
         final_ratio=cat([c.final_ratio for c in checks]),
         min_margin=min(c.min_margin for c in checks),
         max_current=max(c.max_current for c in checks),
-        outcome=concat_outcomes([c.outcome for c in checks]),
+        outcome=_concat_outcomes([c.outcome for c in checks]),
     )
 
 
@@ -433,7 +495,19 @@ class SliceCheck(Result):
         return self.safe.size
 
     def with_certificate(self, P, level: float, offset=None) -> SliceCheck:
-        """The same runs judged against another certified set {(z - offset)' P (z - offset) <= level}."""
+        """The same runs judged against another certified set {(z - offset)' P (z - offset) <= level}.
+
+        Parameters
+        ----------
+        P : (10, 10) array
+        level : float
+        offset : (10,) array, optional
+            Centre of the set in the grid's error coordinates (default 0).
+
+        Returns
+        -------
+        SliceCheck
+        """
         z = self.starts - (0.0 if offset is None else np.asarray(offset, dtype=float)[:, None])
         cert = (np.einsum("in,ij,jn->n", z, np.asarray(P, float), z) <= level).reshape(self.safe.shape)
         unsafe = int(np.sum(cert & ~self.safe))

@@ -180,7 +180,17 @@ class RoaResult(Result):
     timings: Mapping[str, float] = field(default_factory=dict)  # [s] stability, total
 
     def value(self, zhat) -> float:
-        """V(z^) / level (<= 1 inside the certified set)."""
+        """V(z^) / level (<= 1 inside the certified set; inf when nothing was certified).
+
+        Parameters
+        ----------
+        zhat : (10,) array
+            z^ = z - z_eq (e.g. :meth:`LinearizedLoop.initial_error`).
+
+        Returns
+        -------
+        float
+        """
         z = np.asarray(zhat, dtype=float)
         return float(z @ self.P @ z / self.level) if self.level > 0 else math.inf
 

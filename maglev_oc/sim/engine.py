@@ -178,7 +178,21 @@ class ClosedLoop:
 
     # ------------------------------------------------------------------------------------
     def run(self, scenario: Scenario, *, seed: int = 0, x0=None) -> SimulationResult:
-        """Simulate ``scenario`` (optionally from another mechanical state ``x0``)."""
+        """Simulate ``scenario``.
+
+        Parameters
+        ----------
+        scenario : Scenario
+        seed : int
+            Seed of the encoder noise (used when the twin has an encoder).
+        x0 : (4,) array, optional
+            Another starting mechanical state [m, m/s, m, m/s] (default ``scenario.x0``); the run
+            starts at rest with the current that holds the plant at that gap.
+
+        Returns
+        -------
+        SimulationResult
+        """
         twin, ctrl = self.twin, self.controller
         t, ref = scenario.sample(twin.sample_time)
         n = t.size
@@ -282,5 +296,18 @@ def simulate(
     *,
     seed: int = 0,
 ) -> SimulationResult:
-    """One-off simulation; for several runs build a :class:`ClosedLoop` once and reuse it."""
+    """One-off simulation; for several runs build a :class:`ClosedLoop` once and reuse it.
+
+    Parameters
+    ----------
+    twin : RigTwin
+    controller : ExpressionController or OnlineController
+    scenario : Scenario
+    seed : int
+        Seed of the encoder noise.
+
+    Returns
+    -------
+    SimulationResult
+    """
     return ClosedLoop(twin, controller).run(scenario, seed=seed)

@@ -266,7 +266,19 @@ class RigTwin:
 
     # ------------------------------------------------------------------------------------
     def initial_state(self, x0, u0=(0.0, 0.0)) -> np.ndarray:
-        """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing."""
+        """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing.
+
+        Parameters
+        ----------
+        x0 : (4,) array
+            [m, m/s, m, m/s] (a locked axis is put at its lock).
+        u0 : (2,) array
+            (i_q, i_d) [A], also filling the delay buffer; the thermal state is |u0|^2.
+
+        Returns
+        -------
+        (n_state,) array
+        """
         x0 = np.array(x0, dtype=float).reshape(4)
         u0 = np.asarray(u0, dtype=float).reshape(2)
         if self.effects.locked_gap is not None:
