@@ -129,7 +129,6 @@ class BatchSimulator:
             raise ValueError(f"duration must be positive [s], got {duration!r}")
         if threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads!r}")
-        t0 = time.perf_counter()
         self.twin = twin
         self.controller = controller
         self.loop = ClosedLoop(twin, controller)
@@ -144,7 +143,6 @@ class BatchSimulator:
         self._fn = jit(fn, symbolic="MX") if compile else fn
         self.compiled = self._fn is not fn
         self._maps: dict[int, ca.Function] = {}
-        self.build_time = time.perf_counter() - t0
 
     def _accumulating_step(self) -> ca.Function:
         """The engine's fused step with the running extremes (:data:`EXTREMA_NAMES`) appended

@@ -623,10 +623,8 @@ class Procedure2:
         self.feasible = feasible
         self.loop = loop
         self.starts = int(starts)
-        t0 = time.perf_counter()
         self.certifier = LevelCertifier(feasible, loop, max_boxes=max_boxes)
         self.minimizer = BoundaryMinimizer(feasible, loop)
-        self.build_time = time.perf_counter() - t0
 
     def run(self, reference: Reference, P=None, *, seed: int = 0) -> Procedure2Result:
         """Certify the largest level set of V = z~' P z~ inside F for ``reference`` (module docstring).

@@ -136,7 +136,6 @@ class LinearStudy:
     controller: str
     roa: RoaResult
     large_step_ratio: float  # V(start)/level for the large step (<= 1: certified)
-    slice: SliceCheck | None  # a sampled slice, when computed
 
 
 @dataclass(frozen=True)
@@ -541,7 +540,7 @@ def _linear_regions(run: _Run, ctrls, ref: Reference, x0: np.ndarray) -> tuple[L
         roa = certify_roa(run.model, ctrl, ref, feasible=run.feasible)
         zh = LinearizedLoop(run.model, ctrl, ref).initial_error(x0)
         ratio = float(zh @ roa.P @ zh / roa.level) if roa.level > 0 else math.inf
-        linear.append(LinearStudy(ctrl.name, roa, ratio, None))
+        linear.append(LinearStudy(ctrl.name, roa, ratio))
     return tuple(linear)
 
 

@@ -65,7 +65,6 @@ class Comparison(Result):
     twins: tuple[str, ...]
     results: dict[tuple[str, str, str], SimulationResult] = field(repr=False)
     metrics: dict[tuple[str, str, str], RunMetrics]
-    descriptions: dict[str, str] = field(default_factory=dict)
     timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
     def metric(self, controller: str, scenario: str, twin: str) -> RunMetrics:
