@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.ellipsoid import ellipsoid_image, max_rectangle
 from maglev_oc.region.feasibility import FeasibleSet
-from maglev_oc.region.procedure2 import Procedure2, ellipsoid_image, max_rectangle
+from maglev_oc.region.procedure2 import Procedure2
 from maglev_oc.results import PerAxis, check_result
 
 

@@ -6,7 +6,9 @@
   maps with exact boundaries (:class:`FeasibleSet`, :func:`feasibility_map`).
 * :mod:`~maglev_oc.region.interval` — interval arithmetic over CasADi graphs (:class:`IntervalFunction`).
 * :mod:`~maglev_oc.region.procedure2` — Procedure 2 of Maggiore & Becerril adapted and certified
-  (:class:`Procedure2`).
+  (:class:`Procedure2`), from its parts: :mod:`~maglev_oc.region.ellipsoid` (level sets and the
+  initial conditions they hold), :mod:`~maglev_oc.region.branch_and_bound` (the certificate) and
+  :mod:`~maglev_oc.region.boundary` (IPOPT's upper bounds).
 * :mod:`~maglev_oc.region.sdp` — P chosen by SDP over a proved inner polytope (:func:`enlarge`).
 * :mod:`~maglev_oc.region.roa` — regions of attraction of the linear regulators (:func:`certify_roa`).
 * :mod:`~maglev_oc.region.montecarlo` — vectorised runs of the sampled twin (:class:`BatchSimulator`).

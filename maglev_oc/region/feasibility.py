@@ -42,6 +42,7 @@ __all__ = [
     "CONSTRAINT_NAMES",
     "CONSTRAINT_UNITS",
     "GAP_TRAVEL",
+    "NONLINEAR",
     "POSITION_TRAVEL",
     "SLICE_VARIABLES",
     "FeasibilityMap",
@@ -57,6 +58,8 @@ POSITION_TRAVEL = STOPPER_POSITION
 """Horizontal position between the stoppers [m] (:data:`maglev_oc.model.hardware.STOPPER_POSITION`)."""
 
 CONSTRAINT_NAMES = ("margin", "headroom", "gap_low", "gap_high", "position_low", "position_high")
+NONLINEAR = CONSTRAINT_NAMES[:2]
+"""The constraints of F that are not linear in the loop's error state (R >= 0 and |u| <= I)."""
 CONSTRAINT_LABELS = (
     "R >= 0 (transformation exists)",
     "|u| <= current limit",

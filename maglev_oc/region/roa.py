@@ -51,9 +51,9 @@ from maglev_oc.control.linear_regulator import ScheduledLinearRegulator, axis_li
 from maglev_oc.model.equilibrium import equilibrium
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference
+from maglev_oc.region.ellipsoid import InitialConditionSet, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.procedure2 import InitialConditionSet, initial_condition_set
 from maglev_oc.results import Result
 
 __all__ = ["LinearizedLoop", "RoaCertifier", "RoaResult", "certify_roa", "frozen_poles"]

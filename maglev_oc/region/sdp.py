@@ -41,13 +41,14 @@ from scipy.spatial import ConvexHull
 
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.region.closed_loop import E1, E2, N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.ellipsoid import max_rectangle
 from maglev_oc.region.feasibility import (
     FeasibleSet,
     constraints_from_coefficients,
     transformation_constraints,
 )
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.procedure2 import Procedure2, Procedure2Result, max_rectangle
+from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.results import PerAxis, Result
 
 __all__ = [
