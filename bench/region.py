@@ -21,7 +21,7 @@ from maglev_oc.region.feasibility import FeasibleSet, feasibility_map
 from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
 from maglev_oc.region.procedure2 import Procedure2
 from maglev_oc.region.roa import certify_roa
-from maglev_oc.region.sdp import PolygonBuilder, _solve_sdp, enlarge
+from maglev_oc.region.sdp import PolygonBuilder, enlarge, solve_sdp
 from maglev_oc.sim.twin import RigTwin
 
 
@@ -61,9 +61,9 @@ def main() -> None:
     print(f"feasibility map 101 x 101 + Newton boundary:        {fmt(t)} ({roots} roots)")
 
     res, t = timed(lambda: proc.run(ref))
-    nlp = sum(m.wall_time for m in res.minima)
+    nlp = sum(m.timings["total"] for m in res.minima)
     starts = sum(m.starts for m in res.minima)
-    cert = sum(a.wall_time for a in res.attempts)
+    cert = sum(a.timings["total"] for a in res.attempts)
     boxes = sum(a.boxes for a in res.attempts)
     print(
         f"Procedure 2 at 20 mm (Lyapunov P):                  {fmt(t)}  "
@@ -76,7 +76,7 @@ def main() -> None:
     builder = PolygonBuilder(feasible, loop)
     poly, t = timed(lambda: builder.build(ref, 7.5e-3))
     print(f"inner polygon (24 vertices proved by intervals):    {fmt(t)} ({poly.cells} cells)")
-    (status, _, dt), t = timed(lambda: _solve_sdp(loop, ref, poly, feasible, 0.1, (1.0, 1.0)))
+    (status, _, dt), t = timed(lambda: solve_sdp(loop, ref, poly, feasible, 0.1, (1.0, 1.0)))
     print(f"one SDP (cvxpy + Clarabel), status {status}:        {fmt(dt)} solve, {fmt(t)} with modelling")
     sdp, t = timed(lambda: enlarge(proc, ref, builder=builder))
     print(f"SDP enlargement, 4 half-widths incl. certification: {fmt(t)} ({sdp.message})")

@@ -67,6 +67,8 @@ def jit(fun: ca.Function, *, flags: Sequence[str] = ("-O3",), symbolic: str = "S
     ins = [sym(fun.name_in(k), fun.sparsity_in(k)) for k in range(fun.n_in())]
     opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": list(flags), "verbose": False}}
     try:
-        return ca.Function(fun.name() + "_jit", ins, fun(*ins), fun.name_in(), fun.name_out(), opts)
+        # call() returns a list whatever the number of outputs (fun(*ins) gives a bare
+        # expression for one output, which ca.Function refuses)
+        return ca.Function(fun.name() + "_jit", ins, fun.call(ins), fun.name_in(), fun.name_out(), opts)
     except RuntimeError:
         return fun

@@ -87,6 +87,13 @@ class PerAxis:
     def __iter__(self):
         return iter((self.vertical, self.horizontal))
 
+    def __len__(self) -> int:
+        return 2
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        """``np.asarray(v)`` is the pair (vertical, horizontal), as a tuple was before."""
+        return np.array([self.vertical, self.horizontal], dtype=dtype)
+
     def items(self):
         return (("vertical", self.vertical), ("horizontal", self.horizontal))
 

@@ -11,6 +11,7 @@ from maglev_oc.region.feasibility import (
     FeasibleSet,
     feasibility_map,
 )
+from maglev_oc.results import check_result
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +60,8 @@ def test_map_boundary_is_exact(feasible):
         feasible, loop, Reference.setpoint(0.02), ("e1", "e1_rate"), (-0.011, 0.009), (-0.6, 0.6), n=41
     )
     assert fm.newton_failures == 0
+    check_result(fm)
+    assert fm.status == "mapped"
     pts = fm.boundary["headroom"]
     assert pts.shape[1] > 20
     fn = feasible.loop_function(loop, Reference.setpoint(0.02))

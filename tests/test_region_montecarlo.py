@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.numerics import c_compiler
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.montecarlo import (
@@ -20,6 +21,7 @@ from maglev_oc.region.montecarlo import (
     uniform_in_ellipsoid,
 )
 from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.results import check_result
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
@@ -51,6 +53,9 @@ def test_no_violation_inside_the_certified_set(sim, loop, cert):
     chk = check_error_states(sim, loop, REF, cert.P, cert.level, z)
     assert chk.violations == 0
     assert np.all(chk.final_ratio < 0.5)  # every run is well inside again after 0.4 s
+    check_result(chk)
+    check_result(chk.outcome)
+    assert chk.success and chk.status == "no_violations" and chk.outcome.status == "completed"
 
 
 def test_the_certified_edge_is_real_on_the_twin(sim, loop, cert):
@@ -62,6 +67,7 @@ def test_the_certified_edge_is_real_on_the_twin(sim, loop, cert):
     chk = check_error_states(sim, loop, REF, cert.P, cert.level, z)
     assert not chk.violating[0] and chk.outcome.max_current[0] > 8.8
     assert chk.violating[1] and chk.outcome.max_current[1] > 9.0
+    assert not chk.success and chk.status == "violations" and "1 left F" in chk.message
 
 
 def test_batch_matches_the_engine(model):
@@ -87,6 +93,20 @@ def test_slice_certified_starts_are_safe(sim, loop, cert):
     s = fl_slice(sim, loop, REF, cert.P, cert.level, ("e1", "e2"), (-0.008, 0.008), (-0.01, 0.01), n=5)
     assert s.unsafe_certified == 0
     assert s.certified.sum() > 0 and 0 < s.coverage <= 1
+    check_result(s)
+    assert s.success and s.status == "sound"
+    # a slice reaching past the stoppers, judged against a set 1000 times too large: unsafe starts
+    # are "certified", and the verdict says so
+    far = fl_slice(sim, loop, REF, cert.P, cert.level, ("e1", "e2"), (-0.015, 0.015), (-0.01, 0.01), n=5)
+    wide = far.with_certificate(cert.P, 1000 * cert.level)
+    assert wide.unsafe_certified > 0 and not wide.success and wide.status == "unsound"
+
+
+@pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
+def test_horizon_is_compiled_when_a_compiler_exists(model, sim):
+    """numerics.jit compiles the one-output horizon Function (it once fell back silently)."""
+    short = BatchSimulator(sim.twin, sim.controller, duration=0.002, compile=True, threads=1)
+    assert short.compiled
 
 
 def test_validation(sim):

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.ellipsoid import ellipsoid_image, max_rectangle
 from maglev_oc.region.feasibility import FeasibleSet
-from maglev_oc.region.procedure2 import Procedure2, ellipsoid_image, max_rectangle
+from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.results import PerAxis, check_result
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +93,19 @@ def test_refutes_a_level_that_is_too_large(proc, at20):
     assert out.status == "refuted"
     assert out.witness_level <= 1.5 * at20.level_upper
     assert out.binding == "headroom"
+    check_result(out)
+    assert not out.success
+
+
+def test_results_follow_the_convention(at20):
+    """Procedure2Result and its parts: success, status word, message, timings [s], to_dict, report."""
+    check_result(at20)
+    assert at20.status == "certified" and set(at20.timings) == {"nlp", "certify", "total"}
+    for part in (*at20.attempts, *at20.minima):
+        check_result(part)
+    assert at20.attempts[-1].status == "certified" and all(m.status == "found" for m in at20.minima)
+    rect = at20.initial_conditions.rectangle
+    assert isinstance(rect, PerAxis) and at20.to_dict()["initial_conditions"]["rectangle"] == rect.to_dict()
 
 
 def test_rejects_a_non_lyapunov_matrix(proc):

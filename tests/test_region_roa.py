@@ -11,6 +11,7 @@ from maglev_oc.control.gains import PAPER_GAINS, axis_poles
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.region.closed_loop import Reference
 from maglev_oc.region.roa import LinearizedLoop, certify_roa, frozen_poles
+from maglev_oc.results import check_result
 
 TARGET = Reference.setpoint(0.018, 0.020)
 
@@ -43,6 +44,8 @@ def test_certified_level_has_decreasing_V_on_the_nonlinear_plant(model, linear, 
     """Independent check: V' = 2 z' P z' < 0 with the full nonlinear closed loop at 5000 points of
     the certified ellipsoid (not the bound used to certify it)."""
     assert roa.success and roa.level > 0
+    check_result(roa)
+    assert roa.status == "certified" and set(roa.timings) == {"stability", "total"}
     loop = LinearizedLoop(model, linear, TARGET)
     rng = np.random.default_rng(0)
     g = rng.standard_normal((10, 5000))

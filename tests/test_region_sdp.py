@@ -9,6 +9,7 @@ from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.procedure2 import Procedure2
 from maglev_oc.region.sdp import PolygonBuilder, enlarge
+from maglev_oc.results import PerAxis, check_result
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +27,8 @@ def test_polygon_vertices_are_feasible_on_the_whole_gap_range(proc, builder):
     ref = Reference.setpoint(0.02)
     poly = builder.build(ref, 5e-3)
     assert poly.success
+    check_result(poly)
+    assert poly.status == "proved"
     gaps = np.linspace(0.015, 0.025, 801)
     for v in poly.vertices.T:
         h = proc.feasible.evaluate(gaps, v[0], v[1])
@@ -42,6 +45,9 @@ def test_sdp_enlarges_the_certified_rectangle(proc, builder):
     res = enlarge(proc, ref, fractions=(0.75,), builder=builder)
     assert res.success
     best = res.best
+    check_result(res)
+    check_result(best)
+    assert res.status == best.status == "certified" and isinstance(best.rectangle, PerAxis)
     assert proc.loop.is_lyapunov(best.P, 0.05)
     assert best.construction_level >= 1 - 1e-6  # the polytope holds the SDP's level set
     assert best.certified.level >= best.construction_level * (1 - 1e-6)  # exact F allows at least as much
@@ -64,3 +70,11 @@ def test_sdp_aimed_at_the_papers_large_step_certifies_it(proc, builder):
 def test_validation(proc):
     with pytest.raises(ValueError, match="decay"):
         enlarge(proc, Reference.setpoint(0.02), decay=-1)
+
+
+def test_a_reference_at_the_stoppers_is_infeasible(proc):
+    """A sinusoid whose gap orbit reaches the upper stopper (30 mm) leaves no room: the result says so."""
+    ref = Reference(0.027, gap_amplitude=0.004)
+    res = enlarge(proc, ref)
+    check_result(res)
+    assert not res.success and res.status == "infeasible" and res.certified is None

@@ -1,12 +1,16 @@
-"""The whole operating-region study and its report (slow: about a minute)."""
+"""The whole operating-region study and its report (the QUICK configuration is slow: about a minute)."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
-pytestmark = pytest.mark.slow
+from maglev_oc.region.study import StudyConfig, operating_region_study
+from maglev_oc.results import check_result
 
 
+@pytest.mark.slow
 def test_quick_report(tmp_path, model):
     from maglev_oc.analyses import operating_region
 
@@ -14,10 +18,9 @@ def test_quick_report(tmp_path, model):
     assert out.is_file() and out.stat().st_size > 50_000
 
 
+@pytest.mark.slow
 def test_quick_study_numbers(model):
     from maglev_oc.analyses.operating_region import QUICK
-
-    from maglev_oc.region.study import operating_region_study
 
     st = operating_region_study(model, QUICK)
     assert st.inside_totals()["violations"] == 0
@@ -25,3 +28,30 @@ def test_quick_study_numbers(model):
     ls = st.large_step
     assert ls.fl_direction.best.reach >= 1.0  # the papers' large step is certified for the FL regulator
     assert all(x.large_step_ratio > 1 for x in ls.linear)  # and outside the linear ROA certificates
+
+
+def test_tiny_study_follows_the_result_convention(model):
+    """One set-point, a few runs, no SDP or linear regulators (about a second): the study is a
+    result (success, status word, message, timings by step, JSON-able to_dict, report)."""
+    cfg = StudyConfig(
+        setpoints_mm=(20.0,),
+        sinusoid=False,
+        sdp=False,
+        samples=8,
+        slice_setpoints_mm=(20.0,),
+        slice_points=5,
+        linear=False,
+        quantization_samples=8,
+        map_points=11,
+        horizon=0.2,
+        compile=False,
+        threads=1,
+    )
+    st = operating_region_study(model, cfg)
+    check_result(st)
+    assert st.success and st.status == "certified"
+    assert st.inside_totals() == {"runs": 16, "violations": 0}  # 8 full + 8 at rest
+    steps = list(st.timings)
+    assert steps[0] == "build solvers" and steps[-1] == "total"
+    doc = json.loads(json.dumps(st.to_dict()))
+    assert doc["status"] == "certified" and len(doc["references"]) == 1

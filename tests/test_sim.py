@@ -12,6 +12,9 @@ from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.control.lqr import lqr_regulator
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.model.equilibrium import equilibrium
+from maglev_oc.numerics import c_compiler
+from maglev_oc.results import PerAxis, check_result
+from maglev_oc.sim.comparison import run_comparison
 from maglev_oc.sim.effects import Cogging, CurrentAmplifier, Encoder, GuideFriction, TwinEffects
 from maglev_oc.sim.engine import CHUNK, ClosedLoop
 from maglev_oc.sim.metrics import evaluate
@@ -205,7 +208,7 @@ def test_commutation_ripple_and_cable_effects(model):
     assert_allclose(acc[1] - base[1], -8.0 * (x[2] + 20 * MM) / model.params.mass_horizontal, rtol=1e-12)
 
 
-@pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="no C compiler")
+@pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
 def test_c_backend_reproduces_the_virtual_machine(model, fl):
     # The generated C loop evaluates the same expression graph: results agree to rounding.
     # (No encoder: a rounding difference at a quantization boundary would flip a 10 um count.)
@@ -217,3 +220,30 @@ def test_c_backend_reproduces_the_virtual_machine(model, fl):
     assert_allclose(b.u, a.u, rtol=0, atol=1e-6)
     with pytest.raises(ValueError, match="backend"):
         ClosedLoop(twin, fl, backend="fortran")
+
+
+def test_results_follow_the_convention(model, ideal_twin, fl):
+    """SimulationResult, RunMetrics and Comparison: success, status word, message, timings [s],
+    to_dict, report; per-axis figures as PerAxis."""
+    sc = paper_scenarios()["small_step"]
+    res = ClosedLoop(ideal_twin, fl).run(sc)
+    check_result(res)
+    assert res.status == "completed" and res.timings["total"] > 0
+    m = evaluate(res, sc)
+    check_result(m)
+    assert isinstance(m.mean_error, PerAxis) and isinstance(m.steps[0].overshoot_pct, PerAxis)
+    assert m.to_dict()["mean_error"] == {"vertical": m.mean_error[0], "horizontal": m.mean_error[1]}
+    short = Scenario("short", "short", sc.x0, sc.reference, 0.2)
+    cmp = run_comparison([fl], {"short": short}, {"ideal": ideal_twin})
+    check_result(cmp)
+    assert cmp.success and cmp.status == "all_stable"
+
+
+def test_a_stopper_hit_is_a_failed_run_that_says_so(model, ideal_twin, fl):
+    """Gains far too aggressive drive the gap into a stopper: success False, status 'stopper_hit'."""
+    hot = FeedbackLinearizingRegulator(model, K_v=np.array(PAPER_GAINS["K_v"].printed) * 30.0, name="hot")
+    sc = Scenario("s", "s", (15 * MM, 0, 0, 0), SetpointSequence((0.0,), ((29 * MM, 0.0),)), 0.5)
+    res = ClosedLoop(ideal_twin, hot).run(sc)
+    check_result(res)
+    assert not res.success and res.status == "stopper_hit"
+    assert "t = " in res.message

@@ -6,7 +6,9 @@
   maps with exact boundaries (:class:`FeasibleSet`, :func:`feasibility_map`).
 * :mod:`~maglev_oc.region.interval` — interval arithmetic over CasADi graphs (:class:`IntervalFunction`).
 * :mod:`~maglev_oc.region.procedure2` — Procedure 2 of Maggiore & Becerril adapted and certified
-  (:class:`Procedure2`).
+  (:class:`Procedure2`), from its parts: :mod:`~maglev_oc.region.ellipsoid` (level sets and the
+  initial conditions they hold), :mod:`~maglev_oc.region.branch_and_bound` (the certificate) and
+  :mod:`~maglev_oc.region.boundary` (IPOPT's upper bounds).
 * :mod:`~maglev_oc.region.sdp` — P chosen by SDP over a proved inner polytope (:func:`enlarge`).
 * :mod:`~maglev_oc.region.roa` — regions of attraction of the linear regulators (:func:`certify_roa`).
 * :mod:`~maglev_oc.region.montecarlo` — vectorised runs of the sampled twin (:class:`BatchSimulator`).
@@ -16,26 +18,40 @@
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibilityMap, FeasibleSet, feasibility_map
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
+from maglev_oc.region.montecarlo import (
+    BatchSimulator,
+    CertificateCheck,
+    SliceCheck,
+    check_error_states,
+    fl_slice,
+    uniform_in_ellipsoid,
+)
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa
 from maglev_oc.region.sdp import SdpResult, enlarge
+from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, operating_region_study
 
 __all__ = [
     "BatchSimulator",
+    "CertificateCheck",
     "FeasibilityMap",
     "FeasibleSet",
     "IntervalFunction",
     "LinearizedLoop",
+    "OperatingRegionStudy",
     "Procedure2",
     "Procedure2Result",
     "Reference",
     "RegulatorLoop",
     "RoaResult",
     "SdpResult",
+    "SliceCheck",
+    "StudyConfig",
     "certify_roa",
     "check_error_states",
     "enlarge",
     "feasibility_map",
+    "fl_slice",
+    "operating_region_study",
     "uniform_in_ellipsoid",
 ]

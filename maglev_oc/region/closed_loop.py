@@ -36,6 +36,18 @@ from scipy.linalg import block_diag, solve_continuous_lyapunov, solve_sylvester
 
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, augmented_axis, checked_gains
 
+__all__ = [
+    "DE1",
+    "DE2",
+    "E1",
+    "E2",
+    "ERROR_STATE_NAMES",
+    "ERROR_STATE_UNITS",
+    "N_ERROR",
+    "Reference",
+    "RegulatorLoop",
+]
+
 N_ERROR = 10
 """Dimension of z~ (two axes of (e, e', xi1, xi2, xi3))."""
 E1, DE1, E2, DE2 = 0, 1, 5, 6
@@ -218,8 +230,22 @@ class RegulatorLoop:
 
     # ------------------------------------------------------------------------------------
     def error_state(self, x, xi, reference: Reference, phase: float = 0.0) -> np.ndarray:
-        """z~ (10, n) from mechanical states x (4, n) and internal-model states xi (6, n) =
-        (xi_v, xi_h), with the reference at phase phi (scalar)."""
+        """z~ from mechanical and internal-model states, with the reference at phase phi.
+
+        Parameters
+        ----------
+        x : (4, n) array
+            [m, m/s, m, m/s].
+        xi : (6, n) array
+            (xi_v, xi_h).
+        reference : Reference
+        phase : float
+            [rad].
+
+        Returns
+        -------
+        (10, n) array
+        """
         x = np.asarray(x, dtype=float).reshape(4, -1)
         xi = np.asarray(xi, dtype=float).reshape(6, -1)
         sig = reference.signals(phase)[:, 0]
@@ -227,7 +253,19 @@ class RegulatorLoop:
         return z - self.steady_state(reference, phase)
 
     def physical_state(self, ztilde, reference: Reference, phase: float = 0.0):
-        """Inverse of :meth:`error_state`: (x (4, n), xi (6, n)) from z~ (10, n)."""
+        """Inverse of :meth:`error_state`.
+
+        Parameters
+        ----------
+        ztilde : (10, n) array
+        reference : Reference
+        phase : float
+            [rad].
+
+        Returns
+        -------
+        (x (4, n), xi (6, n))
+        """
         zt = np.asarray(ztilde, dtype=float).reshape(N_ERROR, -1)
         z = zt + self.steady_state(reference, phase)
         sig = reference.signals(phase)[:, 0]

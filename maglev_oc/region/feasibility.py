@@ -25,6 +25,7 @@ Over 8-30 mm the root at R = 0 needs i_d = -L3/(2 L4) >= 18 A, twice the peak li
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -34,6 +35,22 @@ from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_PO
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.interval import IntervalFunction
+from maglev_oc.results import Result
+
+__all__ = [
+    "CONSTRAINT_LABELS",
+    "CONSTRAINT_NAMES",
+    "CONSTRAINT_UNITS",
+    "GAP_TRAVEL",
+    "NONLINEAR",
+    "POSITION_TRAVEL",
+    "SLICE_VARIABLES",
+    "FeasibilityMap",
+    "FeasibleSet",
+    "constraints_from_coefficients",
+    "feasibility_map",
+    "transformation_constraints",
+]
 
 GAP_TRAVEL = STOPPER_GAP
 """Gap between the stoppers [m] (:data:`maglev_oc.model.hardware.STOPPER_GAP`; 002 Fig. 5)."""
@@ -41,6 +58,8 @@ POSITION_TRAVEL = STOPPER_POSITION
 """Horizontal position between the stoppers [m] (:data:`maglev_oc.model.hardware.STOPPER_POSITION`)."""
 
 CONSTRAINT_NAMES = ("margin", "headroom", "gap_low", "gap_high", "position_low", "position_high")
+NONLINEAR = CONSTRAINT_NAMES[:2]
+"""The constraints of F that are not linear in the loop's error state (R >= 0 and |u| <= I)."""
 CONSTRAINT_LABELS = (
     "R >= 0 (transformation exists)",
     "|u| <= current limit",
@@ -57,6 +76,22 @@ def transformation_constraints(model: StageModel, x1, v, current_limit: float | 
 
     ``headroom`` uses sqrt(max(R, 0)); it is meaningful where margin >= 0. With
     ``current_limit=None`` headroom is returned as the constant 1 (no current constraint).
+
+    Parameters
+    ----------
+    model : StageModel
+        Supplies L1..L4 and gravity.
+    x1 : CasADi scalar
+        Gap [m].
+    v : CasADi (2,)
+        Accelerations (v1, v2) [m/s^2].
+    current_limit : float or None
+        |u| limit [A].
+
+    Returns
+    -------
+    (margin, headroom)
+        CasADi expressions [m/s^2], [A^2].
     """
     L1, L2, L3, L4 = model.L(x1)
     G = model.params.gravity
@@ -71,8 +106,24 @@ def transformation_constraints(model: StageModel, x1, v, current_limit: float | 
 
 
 def constraints_from_coefficients(coefficients, v1, v2, gravity: float, current_limit: float | None):
-    """numpy twin of :func:`transformation_constraints` given L1..L4 (4, ...) at the gaps:
-    (margin [m/s^2], headroom [A^2]), broadcast over the trailing shape."""
+    """numpy twin of :func:`transformation_constraints` given L1..L4 (4, ...) at the gaps.
+
+    Parameters
+    ----------
+    coefficients : (4, ...) array
+        L1..L4 at the gaps (``StageModel.coefficients``).
+    v1, v2 : arrays
+        Accelerations [m/s^2], broadcast with the trailing shape.
+    gravity : float
+        [m/s^2].
+    current_limit : float or None
+        |u| limit [A] (None: headroom is 1).
+
+    Returns
+    -------
+    (margin, headroom)
+        Arrays [m/s^2], [A^2].
+    """
     L1, L2, L3, L4 = coefficients
     u1 = -v1 / L1
     margin = L3**2 / (4 * L4) + gravity - L2 - L4 * u1**2 - v2
@@ -143,7 +194,20 @@ class FeasibleSet:
         return f"R >= 0, {cur}, {gap}"
 
     def evaluate(self, x1, v1, v2) -> np.ndarray:
-        """(margin [m/s^2], headroom [A^2]) for arrays broadcast together; shape (2, ...)."""
+        """The constraints of F at given gaps and accelerations.
+
+        Parameters
+        ----------
+        x1 : array
+            Gap [m].
+        v1, v2 : arrays
+            Accelerations [m/s^2], broadcast with x1.
+
+        Returns
+        -------
+        (2, ...) array
+            (margin [m/s^2], headroom [A^2]).
+        """
         x1, v1, v2 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x1, v1, v2)))
         n = x1.size
         out = np.asarray(self.pointwise.map(n)(x1.reshape(1, n), np.vstack([v1.ravel(), v2.ravel()])))
@@ -199,7 +263,7 @@ SLICE_VARIABLES = {
 
 
 @dataclass(frozen=True)
-class FeasibilityMap:
+class FeasibilityMap(Result):
     """The constraints of F on a 2-D slice through the steady state of a reference.
 
     ``values`` has shape (6, ny, nx) (CONSTRAINT_NAMES order) on the grid ``x`` (nx) x ``y`` (ny)
@@ -207,9 +271,13 @@ class FeasibilityMap:
     points (x, y) where that constraint is exactly zero, found by Newton's method on the grid
     lines (columns: y varies; rows: x varies) that bracket a sign change, and kept only where
     every other constraint holds; ``newton_failures`` counts brackets where Newton left the
-    bracket and bisection was used instead.
+    bracket and bisection was used instead (the point is exact either way: ``status``
+    ``"mapped"``).
     """
 
+    success: bool
+    status: str
+    message: str
     reference: Reference
     axes: tuple[str, str]
     x: np.ndarray
@@ -219,7 +287,7 @@ class FeasibilityMap:
     boundary: dict[str, np.ndarray]
     newton_failures: int
     base: np.ndarray  # (11,) z~ and phase of the slice's origin
-    wall_time: float
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
 
 def feasibility_map(
@@ -235,7 +303,23 @@ def feasibility_map(
 ) -> FeasibilityMap:
     """Constraints of F on the slice spanned by ``axes`` through z~ = 0 at ``phase``.
 
-    ``x_range``/``y_range`` are in the slice coordinates' SI units (e.g. (-0.01, 0.01) m for e1).
+    Parameters
+    ----------
+    feasible : FeasibleSet
+    loop : RegulatorLoop
+    reference : Reference
+    axes : (str, str)
+        Two different keys of :data:`SLICE_VARIABLES`.
+    x_range, y_range : (float, float)
+        In the slice coordinates' SI units (e.g. (-0.01, 0.01) m for e1).
+    n : int
+        Grid points per axis (>= 3).
+    phase : float
+        Reference phase of the slice [rad].
+
+    Returns
+    -------
+    FeasibilityMap
     """
     t0 = time.perf_counter()
     for a in axes:
@@ -258,52 +342,93 @@ def feasibility_map(
     vals = np.asarray(fn.map(X.size)(pts[:N_ERROR], pts[N_ERROR:]))
     values = vals.reshape(len(CONSTRAINT_NAMES), *X.shape)
     ok = np.all(values >= 0, axis=0)
-
-    # exact boundary: Newton on the lines that bracket a sign change
-    s = ca.SX.sym("s")
-    p0 = ca.SX.sym("p0", N_ERROR + 1)
-    d = ca.SX.sym("d", N_ERROR + 1)
-    point = p0 + s * d
-    hs = fn(point[:N_ERROR], point[N_ERROR])
-    boundary: dict[str, list] = {name: [] for name in CONSTRAINT_NAMES}
-    failures = 0
-    for j, name in enumerate(CONSTRAINT_NAMES):
-        g = ca.Function("g", [s, ca.vertcat(p0, d)], [hs[j]])
-        solver = ca.rootfinder("root", "newton", g, {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False})
-        vj = values[j]
-        for direction in (0, 1):  # 0: along y (columns), 1: along x (rows)
-            lines = vj.T if direction == 0 else vj
-            grid = ys if direction == 0 else xs
-            other = xs if direction == 0 else ys
-            sign = np.signbit(lines)
-            idx_line, idx_k = np.nonzero(sign[:, :-1] != sign[:, 1:])
-            for li, k in zip(idx_line, idx_k, strict=True):
-                a_val, b_val = lines[li, k], lines[li, k + 1]
-                lo, hi = grid[k], grid[k + 1]
-                start = lo + (hi - lo) * a_val / (a_val - b_val)
-                p = base.copy()
-                dvec = np.zeros(N_ERROR + 1)
-                if direction == 0:
-                    p[ix] += other[li]
-                    dvec[iy] = 1.0
-                else:
-                    p[iy] += other[li]
-                    dvec[ix] = 1.0
-                par = np.concatenate([p, dvec])
-                root = float(solver(start, par))
-                if not (lo - 1e-12 <= root <= hi + 1e-12) or not np.isfinite(root):
-                    failures += 1
-                    root = _bisect(g, lo, hi, par)
-                pt = p + root * dvec
-                h_all = np.asarray(fn(pt[:N_ERROR], pt[N_ERROR])).ravel()
-                others = np.delete(h_all, j)
-                if np.all(others >= -1e-9 * np.maximum(1, np.abs(others))):
-                    xy = (pt[ix] - base[ix], pt[iy] - base[iy])
-                    boundary[name].append(xy)
-    bnd = {k: (np.array(v).T if v else np.zeros((2, 0))) for k, v in boundary.items()}
-    return FeasibilityMap(
-        reference, tuple(axes), xs, ys, values, ok, bnd, failures, base, time.perf_counter() - t0
+    slicer = _Slice(fn, base, ix, iy, xs, ys)
+    boundary, failures = slicer.boundary(values)
+    points = sum(b.shape[1] for b in boundary.values())
+    message = (
+        f"{n} x {n} grid on ({axes[0]}, {axes[1]}): {ok.mean():.0%} feasible; {points} boundary points "
+        f"({failures} by bisection where Newton left the bracket)"
     )
+    return FeasibilityMap(
+        True,
+        "mapped",
+        message,
+        reference,
+        tuple(axes),
+        xs,
+        ys,
+        values,
+        ok,
+        boundary,
+        failures,
+        base,
+        {"total": time.perf_counter() - t0},
+    )
+
+
+@dataclass(frozen=True)
+class _Slice:
+    """A slice of F: the loop's constraint Function, the origin (11,) and the grid."""
+
+    fn: ca.Function
+    base: np.ndarray
+    ix: int
+    iy: int
+    xs: np.ndarray
+    ys: np.ndarray
+
+    def boundary(self, values: np.ndarray) -> tuple[dict[str, np.ndarray], int]:
+        """Exact boundary points (2, k) per constraint: Newton on the grid lines that bracket a
+        sign change; and the number of brackets where bisection replaced Newton."""
+        s = ca.SX.sym("s")
+        p0 = ca.SX.sym("p0", N_ERROR + 1)
+        d = ca.SX.sym("d", N_ERROR + 1)
+        point = p0 + s * d
+        hs = self.fn(point[:N_ERROR], point[N_ERROR])
+        boundary: dict[str, list] = {name: [] for name in CONSTRAINT_NAMES}
+        failures = 0
+        for j, name in enumerate(CONSTRAINT_NAMES):
+            g = ca.Function("g", [s, ca.vertcat(p0, d)], [hs[j]])
+            opts = {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False}
+            solver = ca.rootfinder("root", "newton", g, opts)
+            for direction in (0, 1):  # 0: along y (columns), 1: along x (rows)
+                failures += self._line_roots(j, values[j], direction, g, solver, boundary[name])
+        bnd = {k: (np.array(v).T if v else np.zeros((2, 0))) for k, v in boundary.items()}
+        return bnd, failures
+
+    def _line_roots(self, j: int, vj: np.ndarray, direction: int, g, solver, found: list) -> int:
+        """Roots of constraint j on every grid line of one direction that brackets a sign change,
+        appended to ``found`` as slice coordinates where the other constraints hold; returns the
+        number of brackets where Newton left the bracket (bisection was used)."""
+        lines = vj.T if direction == 0 else vj
+        grid = self.ys if direction == 0 else self.xs
+        other = self.xs if direction == 0 else self.ys
+        sign = np.signbit(lines)
+        idx_line, idx_k = np.nonzero(sign[:, :-1] != sign[:, 1:])
+        failures = 0
+        for li, k in zip(idx_line, idx_k, strict=True):
+            a_val, b_val = lines[li, k], lines[li, k + 1]
+            lo, hi = grid[k], grid[k + 1]
+            start = lo + (hi - lo) * a_val / (a_val - b_val)
+            p = self.base.copy()
+            dvec = np.zeros(N_ERROR + 1)
+            if direction == 0:
+                p[self.ix] += other[li]
+                dvec[self.iy] = 1.0
+            else:
+                p[self.iy] += other[li]
+                dvec[self.ix] = 1.0
+            par = np.concatenate([p, dvec])
+            root = float(solver(start, par))
+            if not (lo - 1e-12 <= root <= hi + 1e-12) or not np.isfinite(root):
+                failures += 1
+                root = _bisect(g, lo, hi, par)
+            pt = p + root * dvec
+            h_all = np.asarray(self.fn(pt[:N_ERROR], pt[N_ERROR])).ravel()
+            others = np.delete(h_all, j)
+            if np.all(others >= -1e-9 * np.maximum(1, np.abs(others))):
+                found.append((pt[self.ix] - self.base[self.ix], pt[self.iy] - self.base[self.iy]))
+        return failures
 
 
 def _bisect(g: ca.Function, lo: float, hi: float, par: np.ndarray, iters: int = 60) -> float:

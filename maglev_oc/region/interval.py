@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+__all__ = ["IntervalFunction"]
+
 _EPS = np.finfo(float).eps
 _PAD = 4 * _EPS  # relative outward padding per operation
 _TINY = 1e-300  # absolute padding so that bounds at 0 move outward too
@@ -178,18 +180,20 @@ class IntervalFunction:
         object.__setattr__(self, "_program", tuple(program))
 
     def __call__(self, lo, hi) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Enclosures of the function's outputs on boxes.
+
+        Parameters
+        ----------
+        lo, hi : lists of arrays
+            One per input, each broadcastable to ``(size_in, n_boxes)``, ``lo <= hi``.
+
+        Returns
+        -------
+        (list of arrays, list of arrays)
+            Lower and upper bounds of each output, ``(size_out, n_boxes)``.
+        """
         f = self.function
-        lo = [np.atleast_2d(np.asarray(a, dtype=float)) for a in lo]
-        hi = [np.atleast_2d(np.asarray(a, dtype=float)) for a in hi]
-        if len(lo) != f.n_in() or len(hi) != f.n_in():
-            raise ValueError(f"{f.name()} takes {f.n_in()} inputs, got {len(lo)} and {len(hi)}")
-        n = max(a.shape[1] for a in lo + hi)
-        for k in range(f.n_in()):
-            shape = (f.nnz_in(k), n)
-            lo[k] = np.broadcast_to(lo[k], shape)
-            hi[k] = np.broadcast_to(hi[k], shape)
-            if np.any(lo[k] > hi[k]):
-                raise ValueError(f"{f.name()}: input {k} has lo > hi")
+        lo, hi, n = self._boxes(lo, hi)
         w_lo: dict[int, np.ndarray] = {}
         w_hi: dict[int, np.ndarray] = {}
         out_lo = [np.full((f.nnz_out(k), n), np.nan) for k in range(f.n_out())]
@@ -207,58 +211,76 @@ class IntervalFunction:
                 w_lo[outs[0]] = np.full(n, const)
                 w_hi[outs[0]] = np.full(n, const)
                 continue
-            a_lo, a_hi = w_lo[ins[0]], w_hi[ins[0]]
-            if len(ins) > 1:
-                b_lo, b_hi = w_lo[ins[1]], w_hi[ins[1]]
+            a = (w_lo[ins[0]], w_hi[ins[0]])
+            b = (w_lo[ins[1]], w_hi[ins[1]]) if len(ins) > 1 else (None, None)
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                if op == ca.OP_ASSIGN:
-                    r_lo, r_hi = a_lo, a_hi
-                elif op == ca.OP_ADD:
-                    r_lo, r_hi = a_lo + b_lo, a_hi + b_hi
-                elif op == ca.OP_SUB:
-                    r_lo, r_hi = a_lo - b_hi, a_hi - b_lo
-                elif op == ca.OP_MUL:
-                    r_lo, r_hi = _mul(a_lo, a_hi, b_lo, b_hi)
-                elif op == ca.OP_DIV:
-                    i_lo, i_hi = _inv(b_lo, b_hi)
-                    r_lo, r_hi = _mul(a_lo, a_hi, i_lo, i_hi)
-                elif op == ca.OP_NEG:
-                    r_lo, r_hi = -a_hi, -a_lo
-                elif op == ca.OP_SQ:
-                    r_lo, r_hi = _sq(a_lo, a_hi)
-                elif op == ca.OP_TWICE:
-                    r_lo, r_hi = 2 * a_lo, 2 * a_hi
-                elif op == ca.OP_INV:
-                    r_lo, r_hi = _inv(a_lo, a_hi)
-                elif op == ca.OP_SQRT:
-                    r_lo = np.sqrt(np.maximum(a_lo, 0.0))
-                    r_hi = np.where(a_hi < 0, np.nan, np.sqrt(np.maximum(a_hi, 0.0)))
-                elif op == ca.OP_LOG:
-                    r_lo = np.where(a_lo <= 0, -np.inf, np.log(np.maximum(a_lo, 0.0)))
-                    r_hi = np.where(a_hi <= 0, np.nan, np.log(np.maximum(a_hi, 0.0)))
-                elif op in _UNARY_MONOTONE_INCREASING:
-                    fn = _UNARY_MONOTONE_INCREASING[op]
-                    r_lo, r_hi = fn(a_lo), fn(a_hi)
-                elif op == ca.OP_COSH:
-                    r_lo, r_hi = _cosh(a_lo, a_hi)
-                elif op == ca.OP_COS:
-                    r_lo, r_hi = _cos(a_lo, a_hi)
-                elif op == ca.OP_SIN:
-                    r_lo, r_hi = _cos(a_lo - math.pi / 2, a_hi - math.pi / 2)
-                elif op == ca.OP_FABS:
-                    r_lo, r_hi = _fabs(a_lo, a_hi)
-                elif op == ca.OP_FMIN:
-                    r_lo, r_hi = np.minimum(a_lo, b_lo), np.minimum(a_hi, b_hi)
-                elif op == ca.OP_FMAX:
-                    r_lo, r_hi = np.maximum(a_lo, b_lo), np.maximum(a_hi, b_hi)
-                elif op == ca.OP_CONSTPOW:
-                    expo = float(np.unique(b_lo)[0]) if np.all(b_lo == b_hi) else None
-                    if expo is None or np.unique(b_lo).size != 1:
-                        raise NotImplementedError("pow with a non-constant exponent")
-                    r_lo, r_hi = _constpow(a_lo, a_hi, expo)
-                else:  # pragma: no cover - screened in __post_init__
-                    raise NotImplementedError(op)
+                r_lo, r_hi = _operation(op, *a, *b)
                 r_lo, r_hi = _pad(np.asarray(r_lo, dtype=float), np.asarray(r_hi, dtype=float))
             w_lo[outs[0]] = r_lo
             w_hi[outs[0]] = r_hi
         return out_lo, out_hi
+
+    def _boxes(self, lo, hi) -> tuple[list[np.ndarray], list[np.ndarray], int]:
+        """The inputs' bounds broadcast to (nnz_in, n), checked, and the number of boxes n."""
+        f = self.function
+        lo = [np.atleast_2d(np.asarray(a, dtype=float)) for a in lo]
+        hi = [np.atleast_2d(np.asarray(a, dtype=float)) for a in hi]
+        if len(lo) != f.n_in() or len(hi) != f.n_in():
+            raise ValueError(f"{f.name()} takes {f.n_in()} inputs, got {len(lo)} and {len(hi)}")
+        n = max(a.shape[1] for a in lo + hi)
+        for k in range(f.n_in()):
+            shape = (f.nnz_in(k), n)
+            lo[k] = np.broadcast_to(lo[k], shape)
+            hi[k] = np.broadcast_to(hi[k], shape)
+            if np.any(lo[k] > hi[k]):
+                raise ValueError(f"{f.name()}: input {k} has lo > hi")
+        return lo, hi, n
+
+
+def _operation(op: int, a_lo, a_hi, b_lo, b_hi):
+    """The exact range (before padding) of one elementary operation on [a] (and [b])."""
+    if op == ca.OP_ASSIGN:
+        return a_lo, a_hi
+    if op == ca.OP_ADD:
+        return a_lo + b_lo, a_hi + b_hi
+    if op == ca.OP_SUB:
+        return a_lo - b_hi, a_hi - b_lo
+    if op == ca.OP_MUL:
+        return _mul(a_lo, a_hi, b_lo, b_hi)
+    if op == ca.OP_DIV:
+        i_lo, i_hi = _inv(b_lo, b_hi)
+        return _mul(a_lo, a_hi, i_lo, i_hi)
+    if op == ca.OP_NEG:
+        return -a_hi, -a_lo
+    if op == ca.OP_SQ:
+        return _sq(a_lo, a_hi)
+    if op == ca.OP_TWICE:
+        return 2 * a_lo, 2 * a_hi
+    if op == ca.OP_INV:
+        return _inv(a_lo, a_hi)
+    if op == ca.OP_SQRT:
+        return np.sqrt(np.maximum(a_lo, 0.0)), np.where(a_hi < 0, np.nan, np.sqrt(np.maximum(a_hi, 0.0)))
+    if op == ca.OP_LOG:
+        r_lo = np.where(a_lo <= 0, -np.inf, np.log(np.maximum(a_lo, 0.0)))
+        return r_lo, np.where(a_hi <= 0, np.nan, np.log(np.maximum(a_hi, 0.0)))
+    if op in _UNARY_MONOTONE_INCREASING:
+        fn = _UNARY_MONOTONE_INCREASING[op]
+        return fn(a_lo), fn(a_hi)
+    if op == ca.OP_COSH:
+        return _cosh(a_lo, a_hi)
+    if op == ca.OP_COS:
+        return _cos(a_lo, a_hi)
+    if op == ca.OP_SIN:
+        return _cos(a_lo - math.pi / 2, a_hi - math.pi / 2)
+    if op == ca.OP_FABS:
+        return _fabs(a_lo, a_hi)
+    if op == ca.OP_FMIN:
+        return np.minimum(a_lo, b_lo), np.minimum(a_hi, b_hi)
+    if op == ca.OP_FMAX:
+        return np.maximum(a_lo, b_lo), np.maximum(a_hi, b_hi)
+    if op == ca.OP_CONSTPOW:
+        expo = float(np.unique(b_lo)[0]) if np.all(b_lo == b_hi) else None
+        if expo is None or np.unique(b_lo).size != 1:
+            raise NotImplementedError("pow with a non-constant exponent")
+        return _constpow(a_lo, a_hi, expo)
+    raise NotImplementedError(op)  # pragma: no cover - screened in IntervalFunction.__post_init__

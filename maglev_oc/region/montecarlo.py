@@ -19,23 +19,49 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
+from maglev_oc.numerics import jit
+from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
+from maglev_oc.results import Result
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.twin import RigTwin
 
-N_EXTREMA = 6
+__all__ = [
+    "EXTREMA_NAMES",
+    "BatchOutcome",
+    "BatchSimulator",
+    "CertificateCheck",
+    "SliceCheck",
+    "check_error_states",
+    "fl_slice",
+    "merge_checks",
+    "reference_samples",
+    "regulator_state",
+    "uniform_in_ellipsoid",
+]
+
 EXTREMA_NAMES = ("min_margin", "max_current_sq", "stopper_hit", "min_gap", "max_gap", "max_abs_position")
+"""The running extremes carried through a horizon, in the order of the state's extra rows."""
+_N_EXTREMA = len(EXTREMA_NAMES)
 
 
 @dataclass(frozen=True)
-class BatchOutcome:
-    """Outcomes of n runs (arrays of shape (n,), states (n_state, n))."""
+class BatchOutcome(Result):
+    """Outcomes of n runs (arrays of shape (n,), states (n_state, n)).
 
+    ``success``: every run stayed finite (``status`` ``"completed"``, else ``"diverged"``);
+    stopper hits and margins are judged by :meth:`violations`, which needs the current limit.
+    """
+
+    success: bool
+    status: str
+    message: str
     min_margin: np.ndarray  # [m/s^2], NaN without a margin diagnostic
     max_current: np.ndarray  # [A] largest |u| commanded
     stopper_hit: np.ndarray  # bool
@@ -45,14 +71,35 @@ class BatchOutcome:
     final_twin: np.ndarray  # (n_twin, n)
     final_controller: np.ndarray  # (n_ctrl, n)
     finite: np.ndarray  # bool
-    wall_time: float
+    timings: Mapping[str, float]  # [s] {"total": ...}
 
     @property
     def n(self) -> int:
+        """Number of runs."""
         return self.min_margin.size
 
+    @classmethod
+    def of(cls, timings: Mapping[str, float], **arrays: np.ndarray) -> BatchOutcome:
+        """The outcome of the runs in ``arrays`` (the fields), with its verdict."""
+        finite, hit = arrays["finite"], arrays["stopper_hit"]
+        n = int(finite.size)
+        diverged = int(np.sum(~finite))
+        message = f"{n} runs: {diverged} diverged, {int(np.sum(hit))} hit a stopper"
+        status = "completed" if diverged == 0 else "diverged"
+        return cls(diverged == 0, status, message, timings=dict(timings), **arrays)
+
     def violations(self, current_limit: float | None) -> np.ndarray:
-        """Runs that left the feasible set F (R < 0, |u| > limit, stopper) or diverged."""
+        """Runs that left the feasible set F (R < 0, |u| > limit, stopper) or diverged.
+
+        Parameters
+        ----------
+        current_limit : float or None
+            |u| limit [A] (None: no current constraint).
+
+        Returns
+        -------
+        (n,) bool array
+        """
         bad = ~self.finite | self.stopper_hit
         with np.errstate(invalid="ignore"):
             bad |= self.min_margin < 0
@@ -82,20 +129,30 @@ class BatchSimulator:
             raise ValueError(f"duration must be positive [s], got {duration!r}")
         if threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads!r}")
-        t0 = time.perf_counter()
         self.twin = twin
         self.controller = controller
         self.loop = ClosedLoop(twin, controller)
         self.n_steps = round(duration / twin.sample_time)
         self.threads = int(threads)
-        step = self.loop.step_function
-        ns, nc = twin.n_state, controller.n_state
-        nz = ns + nc
+        self._nz = twin.n_state + controller.n_state
+        horizon = self._accumulating_step().mapaccum("horizon", self.n_steps)
+        z0 = ca.MX.sym("z0", self._nz + _N_EXTREMA)
+        ref = ca.MX.sym("r", 6, self.n_steps)
+        noise = ca.MX.sym("w", 2, self.n_steps)
+        fn = ca.Function("horizon", [z0, ref, noise], [horizon(z0, ref, noise)[:, -1]])
+        self._fn = jit(fn, symbolic="MX") if compile else fn
+        self.compiled = self._fn is not fn
+        self._maps: dict[int, ca.Function] = {}
+
+    def _accumulating_step(self) -> ca.Function:
+        """The engine's fused step with the running extremes (:data:`EXTREMA_NAMES`) appended
+        to the state: (z + extremes, r, w) -> z_next + extremes_next."""
+        controller, nz = self.controller, self._nz
         nd = len(controller.diag_names)
-        z = ca.SX.sym("z", nz + N_EXTREMA)
+        z = ca.SX.sym("z", nz + _N_EXTREMA)
         r = ca.SX.sym("r", 6)
         w = ca.SX.sym("w", 2)
-        z_next, out = step(z[:nz], r, w)
+        z_next, out = self.loop.step_function(z[:nz], r, w)
         u = out[2:4]
         margin = (
             out[4 + controller.diag_names.index("margin")] if "margin" in controller.diag_names else ca.inf
@@ -111,37 +168,27 @@ class BatchSimulator:
             ca.fmax(ext[4], x1),
             ca.fmax(ext[5], ca.fabs(x3)),
         )
-        acc = ca.Function("acc_step", [z, r, w], [ca.vertcat(z_next, ext_next)])
-        horizon = acc.mapaccum("horizon", self.n_steps)
-        z0 = ca.MX.sym("z0", nz + N_EXTREMA)
-        ref = ca.MX.sym("r", 6, self.n_steps)
-        noise = ca.MX.sym("w", 2, self.n_steps)
-        zs = horizon(z0, ref, noise)
-        self.compiled = False
-        fn = None
-        if compile:
-            try:
-                fn = ca.Function(
-                    "horizon_jit",
-                    [z0, ref, noise],
-                    [zs[:, -1]],
-                    {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O3"]}},
-                )
-                self.compiled = True
-            except RuntimeError:
-                fn = None
-        if fn is None:
-            fn = ca.Function("horizon", [z0, ref, noise], [zs[:, -1]])
-        self._fn = fn
-        self._nz = nz
-        self._maps: dict[int, ca.Function] = {}
-        self.build_time = time.perf_counter() - t0
+        return ca.Function("acc_step", [z, r, w], [ca.vertcat(z_next, ext_next)])
 
     def run(self, x0, c0, reference, noise=None) -> BatchOutcome:
-        """Simulate from mechanical states ``x0`` (4, n) and controller states ``c0`` (n_ctrl, n)
-        with the sampled ``reference`` (6, n_steps) shared by all runs (or (6,) constant) and the
-        encoder noise ``noise`` (2, n_steps) in standard deviations, shared by all runs (default
-        zero; only twins with an encoder use it)."""
+        """Simulate n runs over the horizon at once.
+
+        Parameters
+        ----------
+        x0 : (4, n) array
+            Mechanical states [m, m/s, m, m/s].
+        c0 : (n_ctrl, n) array
+            Controller states (e.g. :func:`regulator_state`).
+        reference : (6, n_steps) or (6,) array
+            The sampled reference (control.base layout), shared by all runs; (6,) is constant.
+        noise : (2, n_steps) array, optional
+            Encoder noise in standard deviations, shared by all runs (default zero; only twins
+            with an encoder use it).
+
+        Returns
+        -------
+        BatchOutcome
+        """
         t0 = time.perf_counter()
         x0 = np.asarray(x0, dtype=float)
         c0 = np.asarray(c0, dtype=float)
@@ -169,7 +216,8 @@ class BatchSimulator:
         ns = self.twin.n_state
         ext = zf[self._nz :]
         has_margin = "margin" in self.controller.diag_names
-        return BatchOutcome(
+        return BatchOutcome.of(
+            {"total": time.perf_counter() - t0},
             min_margin=ext[0] if has_margin else np.full(n, np.nan),
             max_current=np.sqrt(ext[1]),
             stopper_hit=ext[2] > 0.5,
@@ -179,14 +227,14 @@ class BatchSimulator:
             final_twin=zf[:ns],
             final_controller=zf[ns : self._nz],
             finite=np.all(np.isfinite(zf[: self._nz]), axis=0),
-            wall_time=time.perf_counter() - t0,
         )
 
 
-def concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
+def _concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
     """One BatchOutcome holding the runs of several (in order)."""
     cat = np.concatenate
-    return BatchOutcome(
+    return BatchOutcome.of(
+        {"total": sum(o.timings["total"] for o in outcomes)},
         min_margin=cat([o.min_margin for o in outcomes]),
         max_current=cat([o.max_current for o in outcomes]),
         stopper_hit=cat([o.stopper_hit for o in outcomes]),
@@ -196,14 +244,29 @@ def concat_outcomes(outcomes: list[BatchOutcome]) -> BatchOutcome:
         final_twin=np.hstack([o.final_twin for o in outcomes]),
         final_controller=np.hstack([o.final_controller for o in outcomes]),
         finite=cat([o.finite for o in outcomes]),
-        wall_time=sum(o.wall_time for o in outcomes),
     )
 
 
 # ----------------------------------------------------------------------------------------------
 def uniform_in_ellipsoid(P, level: float, n: int, rng: np.random.Generator, dims=None) -> np.ndarray:
-    """n points (10, n) uniform in {z' P z <= level} restricted to the coordinates ``dims``
-    (others zero): uniform in that slice's ellipse/ellipsoid."""
+    """n points uniform in {z' P z <= level} restricted to the coordinates ``dims`` (others zero):
+    uniform in that slice's ellipse/ellipsoid.
+
+    Parameters
+    ----------
+    P : (m, m) array
+        Symmetric positive definite.
+    level : float
+    n : int
+        Number of points.
+    rng : numpy.random.Generator
+    dims : sequence of int, optional
+        The coordinates that vary (default all).
+
+    Returns
+    -------
+    (m, n) array
+    """
     P = np.asarray(P, dtype=float)
     dims = list(range(P.shape[0])) if dims is None else list(dims)
     Ps = P[np.ix_(dims, dims)]
@@ -220,29 +283,60 @@ def uniform_in_ellipsoid(P, level: float, n: int, rng: np.random.Generator, dims
 
 # ----------------------------------------------------------------------------------------------
 def regulator_state(x, xi) -> np.ndarray:
-    """Controller state of the output regulators (10, n) for runs started at mechanical state x
-    (4, n) with internal-model states xi (6, n): observers at the true position and velocity
-    (the certificate assumes exact velocities), internal models at xi."""
+    """Controller state of the output regulators for runs started at mechanical state x with
+    internal-model states xi: observers at the true position and velocity (the certificate
+    assumes exact velocities), internal models at xi.
+
+    Parameters
+    ----------
+    x : (4, n) array
+        [m, m/s, m, m/s].
+    xi : (6, n) array
+        (xi_v, xi_h) [m s^2, m s, m] per axis.
+
+    Returns
+    -------
+    (10, n) array
+    """
     x = np.asarray(x, dtype=float).reshape(4, -1)
     xi = np.asarray(xi, dtype=float).reshape(6, -1)
     return np.vstack([x[0], x[1], x[2], x[3], xi])
 
 
 def reference_samples(reference: Reference, phase: float, n_steps: int, sample_time: float) -> np.ndarray:
-    """The reference (6, n_steps) on the sample grid, starting at phase phi (exosystem, no ramp)."""
+    """The reference on the sample grid, starting at phase phi (exosystem, no ramp).
+
+    Parameters
+    ----------
+    reference : Reference
+    phase : float
+        [rad] at the first sample.
+    n_steps : int
+    sample_time : float
+        [s].
+
+    Returns
+    -------
+    (6, n_steps) array
+        (r_v, r_v', r_v'', r_h, r_h', r_h'') [m, m/s, m/s^2].
+    """
     phases = phase + reference.omega * sample_time * np.arange(n_steps)
     return reference.signals(phases)
 
 
 @dataclass(frozen=True)
-class CertificateCheck:
+class CertificateCheck(Result):
     """Runs of the sampled twin started inside (or outside) a certified set {z~' P z~ <= level}.
 
     ``violations`` counts runs that left F (R < 0, |u| above the limit, a stopper); for runs
-    started inside, it must be zero. ``final_ratio`` = V(end)/level per run: below 1 means the
-    run is back inside the certified set when the horizon ends.
+    started inside, it must be zero: ``success`` is ``violations == 0`` (``status``
+    ``"no_violations"``, else ``"violations"``). ``final_ratio`` = V(end)/level per run: below 1
+    means the run is back inside the certified set when the horizon ends.
     """
 
+    success: bool
+    status: str
+    message: str
     reference: Reference
     level: float
     n: int
@@ -252,8 +346,19 @@ class CertificateCheck:
     final_ratio: np.ndarray  # V(end)/level (n,)
     min_margin: float  # [m/s^2] over all runs
     max_current: float  # [A] over all runs
-    outcome: BatchOutcome
-    wall_time: float
+    outcome: BatchOutcome = field(repr=False)
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
+
+    @classmethod
+    def of(cls, timings: Mapping[str, float], **fields) -> CertificateCheck:
+        """The check of the runs described by ``fields``, with its verdict."""
+        n, bad = fields["n"], fields["violations"]
+        message = (
+            f"{n} runs at level {fields['level']:.4g}: {bad} left F; least margin "
+            f"{fields['min_margin']:.4g} m/s^2, largest |u| {fields['max_current']:.4g} A"
+        )
+        status = "no_violations" if bad == 0 else "violations"
+        return cls(bad == 0, status, message, timings=dict(timings), **fields)
 
 
 def check_error_states(
@@ -265,12 +370,35 @@ def check_error_states(
     ztilde,
     *,
     phase: float = 0.0,
-    current_limit: float | None = 9.0,
+    current_limit: float | None = PEAK_CURRENT_LIMIT,
 ) -> CertificateCheck:
-    """Run the FL loop from error states z~ (10, n) at reference phase phi (module docstring)."""
+    """Run the FL loop from error states z~ and judge the runs against F (module docstring).
+
+    Parameters
+    ----------
+    sim : BatchSimulator
+        The FL regulator on the twin.
+    loop : RegulatorLoop
+        The loop in error coordinates (maps z~ to physical states).
+    reference : Reference
+    P : (10, 10) array
+        The certificate's matrix.
+    level : float
+        Its level c (ratios are V / c).
+    ztilde : (10, n) array
+        Starting error states [SI, see ``closed_loop.ERROR_STATE_UNITS``].
+    phase : float
+        Reference phase at the start [rad].
+    current_limit : float or None
+        |u| limit [A] of F (None: no current constraint).
+
+    Returns
+    -------
+    CertificateCheck
+    """
     t0 = time.perf_counter()
     P = np.asarray(P, dtype=float)
-    zt = np.asarray(ztilde, dtype=float).reshape(10, -1)
+    zt = np.asarray(ztilde, dtype=float).reshape(N_ERROR, -1)
     x, xi = loop.physical_state(zt, reference, phase)
     ref = reference_samples(reference, phase, sim.n_steps, sim.twin.sample_time)
     out = sim.run(x, regulator_state(x, xi), ref)
@@ -279,31 +407,72 @@ def check_error_states(
     z_end = loop.error_state(out.final_twin[:4], out.final_controller[4:10], reference, end_phase)
     v_start = np.einsum("in,ij,jn->n", zt, P, zt) / level
     v_end = np.einsum("in,ij,jn->n", z_end, P, z_end) / level
-    return CertificateCheck(
-        reference,
-        level,
-        zt.shape[1],
-        int(bad.sum()),
-        bad,
-        v_start,
-        np.where(out.finite, v_end, np.inf),
-        float(np.nanmin(out.min_margin)) if np.any(np.isfinite(out.min_margin)) else math.nan,
-        float(np.nanmax(out.max_current)),
-        out,
-        time.perf_counter() - t0,
+    return CertificateCheck.of(
+        {"total": time.perf_counter() - t0},
+        reference=reference,
+        level=level,
+        n=zt.shape[1],
+        violations=int(bad.sum()),
+        violating=bad,
+        start_ratio=v_start,
+        final_ratio=np.where(out.finite, v_end, np.inf),
+        min_margin=float(np.nanmin(out.min_margin)) if np.any(np.isfinite(out.min_margin)) else math.nan,
+        max_current=float(np.nanmax(out.max_current)),
+        outcome=out,
     )
 
 
+def merge_checks(checks: list[CertificateCheck]) -> CertificateCheck:
+    """One CertificateCheck holding the runs of several of the same certificate (in order).
+
+    Parameters
+    ----------
+    checks : list of CertificateCheck
+        Runs of one certificate (e.g. one group per reference phase).
+
+    Returns
+    -------
+    CertificateCheck
+    """
+    if len(checks) == 1:
+        return checks[0]
+    first = checks[0]
+    cat = np.concatenate
+    return CertificateCheck.of(
+        {"total": sum(c.timings["total"] for c in checks)},
+        reference=first.reference,
+        level=first.level,
+        n=sum(c.n for c in checks),
+        violations=sum(c.violations for c in checks),
+        violating=cat([c.violating for c in checks]),
+        start_ratio=cat([c.start_ratio for c in checks]),
+        final_ratio=cat([c.final_ratio for c in checks]),
+        min_margin=min(c.min_margin for c in checks),
+        max_current=max(c.max_current for c in checks),
+        outcome=_concat_outcomes([c.outcome for c in checks]),
+    )
+
+
+def _slice_verdict(unsafe_certified: int, coverage: float) -> tuple[bool, str, str]:
+    message = (
+        f"certificate covers {coverage:.1%} of the safe starts; {unsafe_certified} certified starts unsafe"
+    )
+    return unsafe_certified == 0, "sound" if unsafe_certified == 0 else "unsound", message
+
+
 @dataclass(frozen=True)
-class SliceCheck:
+class SliceCheck(Result):
     """A 2-D grid of starts on a slice, each labelled safe (empirically) and certified.
 
-    For the FL regulator *safe* means the run never left F; for a linear regulator it means
-    the run converged (|e| below ``tolerance`` at the end) without hitting a stopper. The
-    *conservativeness* figure is the share of the safe starts that the certificate covers,
-    |certified and safe| / |safe|; ``unsafe_certified`` (certified but not safe) must be 0.
+    For the FL regulator *safe* means the run never left F. The *conservativeness* figure is the
+    share of the safe starts that the certificate covers, |certified and safe| / |safe|;
+    ``unsafe_certified`` (certified but not safe) must be 0: ``success`` says so (``status``
+    ``"sound"``, else ``"unsound"``).
     """
 
+    success: bool
+    status: str
+    message: str
     controller: str
     reference: Reference
     axes: tuple[str, str]
@@ -315,22 +484,41 @@ class SliceCheck:
     coverage: float  # |certified & safe| / |safe|
     min_gap: np.ndarray  # (ny, nx) [m]
     max_current: np.ndarray  # (ny, nx) [A]
-    starts: np.ndarray  # (10, ny * nx) error states of the grid (z~ or z - z_eq before offsets)
-    wall_time: float
+    starts: np.ndarray = field(repr=False)  # (10, ny * nx) error states z~ of the grid
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
     @property
     def n(self) -> int:
+        """Number of starts."""
         return self.safe.size
 
     def with_certificate(self, P, level: float, offset=None) -> SliceCheck:
-        """The same runs judged against another certified set {(z - offset)' P (z - offset) <= level}."""
+        """The same runs judged against another certified set {(z - offset)' P (z - offset) <= level}.
+
+        Parameters
+        ----------
+        P : (10, 10) array
+        level : float
+        offset : (10,) array, optional
+            Centre of the set in the grid's error coordinates (default 0).
+
+        Returns
+        -------
+        SliceCheck
+        """
         z = self.starts - (0.0 if offset is None else np.asarray(offset, dtype=float)[:, None])
         cert = (np.einsum("in,ij,jn->n", z, np.asarray(P, float), z) <= level).reshape(self.safe.shape)
+        unsafe = int(np.sum(cert & ~self.safe))
+        coverage = float(np.sum(cert & self.safe) / max(np.sum(self.safe), 1))
+        success, status, message = _slice_verdict(unsafe, coverage)
         return dataclasses.replace(
             self,
+            success=success,
+            status=status,
+            message=message,
             certified=cert,
-            unsafe_certified=int(np.sum(cert & ~self.safe)),
-            coverage=float(np.sum(cert & self.safe) / max(np.sum(self.safe), 1)),
+            unsafe_certified=unsafe,
+            coverage=coverage,
         )
 
 
@@ -344,7 +532,7 @@ def _grid(axes, x_range, y_range, n):
     xs = np.linspace(*x_range, n)
     ys = np.linspace(*y_range, n)
     X, Y = np.meshgrid(xs, ys)
-    z = np.zeros((10, X.size))
+    z = np.zeros((N_ERROR, X.size))
     z[_SLICE_INDEX[axes[0]]] = X.ravel()
     z[_SLICE_INDEX[axes[1]]] = Y.ravel()
     return xs, ys, z
@@ -361,16 +549,46 @@ def fl_slice(
     y_range,
     *,
     n: int = 41,
-    current_limit: float | None = 9.0,
+    current_limit: float | None = PEAK_CURRENT_LIMIT,
 ) -> SliceCheck:
-    """FL regulator on a slice of error states (deviations from the steady state at phase 0)."""
+    """FL regulator on a slice of error states (deviations from the steady state at phase 0).
+
+    Parameters
+    ----------
+    sim : BatchSimulator
+        The FL regulator on the twin.
+    loop : RegulatorLoop
+    reference : Reference
+    P : (10, 10) array
+        The certificate judged against (V = z~' P z~).
+    level : float
+        Its level.
+    axes : (str, str)
+        Slice coordinates among e1 [m], e1_rate [m/s], e2 [m], e2_rate [m/s].
+    x_range, y_range : (float, float)
+        Their ranges, SI units.
+    n : int
+        Grid points per axis.
+    current_limit : float or None
+        |u| limit [A] of F.
+
+    Returns
+    -------
+    SliceCheck
+    """
     t0 = time.perf_counter()
     xs, ys, z = _grid(axes, x_range, y_range, n)
     chk = check_error_states(sim, loop, reference, P, level, z, current_limit=current_limit)
     shape = (ys.size, xs.size)
     safe = ~chk.violating.reshape(shape)
     cert = (chk.start_ratio <= 1.0).reshape(shape)
+    unsafe = int(np.sum(cert & ~safe))
+    coverage = float(np.sum(cert & safe) / max(np.sum(safe), 1))
+    success, status, message = _slice_verdict(unsafe, coverage)
     return SliceCheck(
+        success,
+        status,
+        message,
         sim.controller.name,
         reference,
         tuple(axes),
@@ -378,60 +596,10 @@ def fl_slice(
         ys,
         safe,
         cert,
-        int(np.sum(cert & ~safe)),
-        float(np.sum(cert & safe) / max(np.sum(safe), 1)),
+        unsafe,
+        coverage,
         chk.outcome.min_gap.reshape(shape),
         chk.outcome.max_current.reshape(shape),
         z,
-        time.perf_counter() - t0,
-    )
-
-
-def linear_slice(
-    sim: BatchSimulator,
-    reference: Reference,
-    axes: tuple[str, str],
-    x_range,
-    y_range,
-    *,
-    n: int = 41,
-    roa=None,
-    z_eq=None,
-    tolerance: float = 1e-4,
-) -> SliceCheck:
-    """A linear regulator (or any output regulator) started at rest with empty internal models
-    on a slice of initial errors; safe = converged without a stopper hit (a *sampled estimate*
-    of the region of attraction). ``roa`` (a RoaResult) marks the certified starts."""
-    t0 = time.perf_counter()
-    if not reference.is_setpoint:
-        raise ValueError("linear_slice needs a set-point reference")
-    xs, ys, z = _grid(axes, x_range, y_range, n)
-    x0 = np.vstack([reference.gap + z[0], z[1], reference.position + z[5], z[6]])
-    ref = np.array([reference.gap, 0, 0, reference.position, 0, 0])
-    out = sim.run(x0, regulator_state(x0, np.zeros((6, x0.shape[1]))), ref)
-    e1 = out.final_twin[0] - reference.gap
-    e2 = out.final_twin[2] - reference.position
-    with np.errstate(invalid="ignore"):
-        conv = out.finite & ~out.stopper_hit & (np.abs(e1) < tolerance) & (np.abs(e2) < tolerance)
-    shape = (ys.size, xs.size)
-    safe = conv.reshape(shape)
-    if roa is not None:
-        zh = z - (roa.z_eq if z_eq is None else np.asarray(z_eq))[:, None]
-        cert = (np.einsum("in,ij,jn->n", zh, roa.P, zh) <= roa.level).reshape(shape)
-    else:
-        cert = np.zeros(shape, dtype=bool)
-    return SliceCheck(
-        sim.controller.name,
-        reference,
-        tuple(axes),
-        xs,
-        ys,
-        safe,
-        cert,
-        int(np.sum(cert & ~safe)),
-        float(np.sum(cert & safe) / max(np.sum(safe), 1)),
-        out.min_gap.reshape(shape),
-        out.max_current.reshape(shape),
-        z,
-        time.perf_counter() - t0,
+        {"total": time.perf_counter() - t0},
     )

@@ -30,8 +30,8 @@ attraction of the continuous-time loop with exact velocities and no current limi
 (|u| <= |u_eq| + sqrt(c lambda_max(S_du)) on Omega_c), reported separately because the ideal
 twin does not limit the current.
 
-**Sampled estimate.** :func:`sampled_region` (in :mod:`maglev_oc.region.validation`) runs the
-sampled twin from a grid of initial conditions; it is labelled as an estimate, not a certificate.
+**Sampled estimate.** The operating-region study (:mod:`maglev_oc.region.study`) runs the sampled
+twin from a grid of starts and targets; that is labelled as an estimate, not a certificate.
 """
 
 from __future__ import annotations
@@ -39,20 +39,24 @@ from __future__ import annotations
 import itertools
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 from scipy.linalg import block_diag, solve_continuous_lyapunov
 
-from maglev_oc.control.gains import augmented_axis
-from maglev_oc.control.linear_regulator import ScheduledLinearRegulator
+from maglev_oc.control.gains import augmented_axis, axis_poles
+from maglev_oc.control.linear_regulator import ScheduledLinearRegulator, axis_linearizations
 from maglev_oc.model.equilibrium import equilibrium
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference
+from maglev_oc.region.ellipsoid import InitialConditionSet, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.procedure2 import InitialConditionSet, initial_condition_set
+from maglev_oc.results import Result
+
+__all__ = ["LinearizedLoop", "RoaCertifier", "RoaResult", "certify_roa", "frozen_poles"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,12 +154,13 @@ class LinearizedLoop:
 
 
 @dataclass(frozen=True)
-class RoaResult:
+class RoaResult(Result):
     """Certified region of attraction {z^' P z^ <= level} of a linear regulator at a set-point.
 
     ``level`` = min(level_stability, level_travel); ``level_current`` is the largest level on
     which the commanded |u| stays within the current limit (inf if no limit was given).
     ``jacobian_box``: the enclosure of the remainder's Jacobian on the certified level set.
+    ``status`` ``"certified"``, or ``"not_certified"`` when no level set could be certified.
     """
 
     success: bool
@@ -172,15 +177,20 @@ class RoaResult:
     jacobian_box: tuple[np.ndarray, np.ndarray]  # (lo, hi) (2, 3) enclosure of dg/dl at level_stability
     initial_conditions: InitialConditionSet
     bisections: int
-    timings: dict[str, float] = field(default_factory=dict)
-
-    def contains(self, zhat) -> bool:
-        """Whether z^ (10,) is in the certified set."""
-        z = np.asarray(zhat, dtype=float)
-        return bool(z @ self.P @ z <= self.level)
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] stability, total
 
     def value(self, zhat) -> float:
-        """V(z^) / level (<= 1 inside the certified set)."""
+        """V(z^) / level (<= 1 inside the certified set; inf when nothing was certified).
+
+        Parameters
+        ----------
+        zhat : (10,) array
+            z^ = z - z_eq (e.g. :meth:`LinearizedLoop.initial_error`).
+
+        Returns
+        -------
+        float
+        """
         z = np.asarray(zhat, dtype=float)
         return float(z @ self.P @ z / self.level) if self.level > 0 else math.inf
 
@@ -257,7 +267,23 @@ def certify_roa(
 ) -> RoaResult:
     """Largest certified level set of V = z^' P z^ in the region of attraction (module docstring).
 
-    ``feasible`` supplies the stoppers and the current limit (default: FeasibleSet(model)).
+    Parameters
+    ----------
+    model : StageModel
+        The plant (equal to the regulator's design model here).
+    controller : ScheduledLinearRegulator
+    reference : Reference
+        A set-point.
+    P : (10, 10) array, optional
+        Default: the Lyapunov equation's (:meth:`LinearizedLoop.lyapunov_matrix`).
+    feasible : FeasibleSet, optional
+        Supplies the stoppers [m] and the current limit [A] (default: FeasibleSet(model)).
+    iterations : int
+        Most levels tried by the bisection.
+
+    Returns
+    -------
+    RoaResult
     """
     t0 = time.perf_counter()
     feasible = FeasibleSet(model) if feasible is None else feasible
@@ -265,7 +291,39 @@ def certify_roa(
     P = loop.lyapunov_matrix() if P is None else 0.5 * (np.asarray(P, float) + np.asarray(P, float).T)
     cert = RoaCertifier(loop)
     Pinv = np.linalg.inv(P)
-    # stoppers: exact levels
+    travel = _travel_level(feasible, reference, Pinv)
+    current = _current_level(feasible, loop, Pinv)
+    t1 = time.perf_counter()
+    stable, best_box, n_iter = _stability_level(cert, P, travel, iterations)
+    t_stab = time.perf_counter() - t1
+    level = min(stable, travel)
+    success = bool(level > 0)
+    msg = (
+        f"certified level {level:.4g} (stability {stable:.4g}, stoppers {travel:.4g}, current {current:.4g})"
+        if success
+        else "no level set could be certified"
+    )
+    return RoaResult(
+        success,
+        "certified" if success else "not_certified",
+        msg,
+        controller.name,
+        reference,
+        P,
+        loop.z_eq.copy(),
+        level,
+        stable,
+        travel,
+        current,
+        best_box,
+        initial_condition_set(P, level),
+        n_iter,
+        {"stability": t_stab, "total": time.perf_counter() - t0},
+    )
+
+
+def _travel_level(feasible: FeasibleSet, reference: Reference, Pinv: np.ndarray) -> float:
+    """The exact level at which {V <= c} touches a stopper (inf without stoppers)."""
     travel = math.inf
     for row, rng, centre in (
         (E1, feasible.gap_range, reference.gap),
@@ -275,15 +333,23 @@ def certify_roa(
             continue
         room = min(centre - rng[0], rng[1] - centre)
         travel = min(travel, max(room, 0.0) ** 2 / Pinv[row, row])
-    # current: |u| <= |u_eq| + sqrt(c lambda_max(S_du)) <= I
-    current = math.inf
-    if feasible.current_limit is not None:
-        Mu = loop.output[1:3]
-        lam = float(np.linalg.eigvalsh(Mu @ Pinv @ Mu.T).max())
-        room = feasible.current_limit - float(np.linalg.norm(loop.u_eq))
-        current = max(room, 0.0) ** 2 / lam
-    # stability: bisection on a log scale between a certified and a failed level
-    t1 = time.perf_counter()
+    return travel
+
+
+def _current_level(feasible: FeasibleSet, loop: LinearizedLoop, Pinv: np.ndarray) -> float:
+    """The level up to which |u| <= |u_eq| + sqrt(c lambda_max(S_du)) <= I (inf without a limit)."""
+    if feasible.current_limit is None:
+        return math.inf
+    Mu = loop.output[1:3]
+    lam = float(np.linalg.eigvalsh(Mu @ Pinv @ Mu.T).max())
+    room = feasible.current_limit - float(np.linalg.norm(loop.u_eq))
+    return max(room, 0.0) ** 2 / lam
+
+
+def _stability_level(cert: RoaCertifier, P: np.ndarray, travel: float, iterations: int):
+    """(largest certified level, its Jacobian box, levels tried): bisection on a log scale between
+    a certified and a failed level, starting at the stoppers' level (or 1) and growing 4x until a
+    level fails or exceeds 4x the stoppers' level."""
     lo_c, hi_c = 0.0, None
     c = travel if math.isfinite(travel) else 1.0
     best_box = (np.zeros((2, 3)), np.zeros((2, 3)))
@@ -304,31 +370,7 @@ def certify_roa(
             if lo_c > 0 and hi_c / lo_c < 1.01:
                 break
             c = math.sqrt(lo_c * hi_c) if lo_c > 0 else hi_c / 4
-    t_stab = time.perf_counter() - t1
-    level = min(lo_c, travel)
-    success = level > 0
-    msg = (
-        f"certified level {level:.4g} (stability {lo_c:.4g}, stoppers {travel:.4g}, current {current:.4g})"
-        if success
-        else "no level set could be certified"
-    )
-    return RoaResult(
-        success,
-        "certified" if success else "not certified",
-        msg,
-        controller.name,
-        reference,
-        P,
-        loop.z_eq.copy(),
-        level,
-        lo_c,
-        travel,
-        current,
-        best_box,
-        initial_condition_set(P, level),
-        n_iter,
-        {"stability": t_stab, "total": time.perf_counter() - t0},
-    )
+    return lo_c, best_box, n_iter
 
 
 def frozen_poles(
@@ -336,10 +378,22 @@ def frozen_poles(
 ) -> np.ndarray:
     """Vertical closed-loop poles (n, 5) when the gains designed for ``reference`` meet the plant's
     linearization at the equilibrium of each gap in ``gaps`` [m] (a frozen-time picture of what the
-    linear regulator faces along a large step)."""
-    from maglev_oc.control.gains import axis_poles
-    from maglev_oc.control.linear_regulator import axis_linearizations
+    linear regulator faces along a large step).
 
+    Parameters
+    ----------
+    model : StageModel
+    controller : ScheduledLinearRegulator
+    reference : Reference
+        The set-point whose gains are frozen.
+    gaps : array-like (n,)
+        Gaps [m] of the equilibria.
+
+    Returns
+    -------
+    (n, 5) complex array
+        The poles [1/s].
+    """
     _, kv = controller.gains_at(reference.gap)
     lin = axis_linearizations(model, np.asarray(gaps, dtype=float))
     return np.array(

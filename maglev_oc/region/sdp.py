@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -38,35 +39,51 @@ import cvxpy as cp
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.region.closed_loop import E1, E2, N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.ellipsoid import max_rectangle
 from maglev_oc.region.feasibility import (
     FeasibleSet,
     constraints_from_coefficients,
     transformation_constraints,
 )
 from maglev_oc.region.interval import IntervalFunction
-from maglev_oc.region.procedure2 import Procedure2, Procedure2Result, max_rectangle
+from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
+from maglev_oc.results import PerAxis, Result
+
+__all__ = [
+    "HALFWIDTH_FRACTIONS",
+    "InnerPolygon",
+    "PolygonBuilder",
+    "SdpCandidate",
+    "SdpResult",
+    "construction_level",
+    "enlarge",
+    "solve_sdp",
+]
 
 HALFWIDTH_FRACTIONS = (0.35, 0.55, 0.75, 0.95)
 """Gap half-widths tried, as fractions of the room to the nearer stopper."""
 
 
 @dataclass(frozen=True)
-class InnerPolygon:
+class InnerPolygon(Result):
     """A polygon Poly in dv = (v1 - v1_ss, v2 - v2_ss) [m/s^2] with [-E, E] x Poly inside F for
     every phase (proved: vertices by interval branch and bound, convexity of F's slices).
 
-    Faces are n' dv <= b (``normals`` (k, 2), ``offsets`` (k,)).
+    Faces are n' dv <= b (``normals`` (k, 2), ``offsets`` (k,)). ``status`` ``"proved"``, or
+    ``"not_proved"`` with the reason in ``message``.
     """
 
     success: bool
+    status: str
     message: str
     halfwidth: float  # E [m]
     vertices: np.ndarray  # (2, k)
     normals: np.ndarray
     offsets: np.ndarray
     cells: int  # interval evaluations spent on the proof
-    wall_time: float
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
 
 class PolygonBuilder:
@@ -108,11 +125,28 @@ class PolygonBuilder:
         shrink: float = 0.995,
         max_cells: int = 200_000,
     ) -> InnerPolygon:
+        """An inner polygon for the gap half-width ``halfwidth`` (module docstring).
+
+        Parameters
+        ----------
+        reference : Reference
+        halfwidth : float
+            E [m]: gap errors |e1| <= E around the reference's whole orbit.
+        n_vertices : int
+            Directions in dv, scaled so that each asks for about the same current.
+        shrink : float
+            Fraction of the sampled radius at which a vertex is first tried.
+        max_cells : int
+            Interval evaluations per vertex before it counts as not proved.
+
+        Returns
+        -------
+        InnerPolygon
+        """
         t0 = time.perf_counter()
         if not (halfwidth > 0):
             raise ValueError(f"halfwidth must be positive [m], got {halfwidth!r}")
         F = self.loop.offset_coefficients(reference)
-        fpar = F.ravel(order="F")[:, None]
         amp = math.hypot(F[0, 1], F[0, 2])
         gap_lo, gap_hi = F[0, 0] - amp - halfwidth, F[0, 0] + amp + halfwidth
         if gap_lo <= 0:
@@ -120,16 +154,38 @@ class PolygonBuilder:
         if not self.convex_slices(gap_lo, gap_hi):
             return self._fail(halfwidth, t0, "could not prove F's slices convex on the gap range")
         periodic = not reference.is_setpoint
-        # 1. radius of the intersection of the slices along each direction (sampled)
         L1, _, L3, _ = self.feasible.model.coefficients([F[0, 0]])[:, 0]
-        lim = self.feasible.current_limit or 9.0
+        lim = self.feasible.current_limit or PEAK_CURRENT_LIMIT
         scale = np.array([L1 * lim, abs(L3) * lim])
         th = np.linspace(0, 2 * math.pi, n_vertices, endpoint=False)
         dirs = np.vstack([np.cos(th), np.sin(th)]) * scale[:, None]
+        radius = self._sampled_radii(F, dirs, halfwidth, periodic) * shrink
+        radii, cells_used, pending = self._proved_radii(F, dirs, radius, halfwidth, periodic, max_cells)
+        if pending.size:
+            return self._fail(halfwidth, t0, f"vertices {pending.tolist()} could not be proved inside F")
+        verts = dirs * radii[None, :]
+        if np.any(radius <= 0):
+            return self._fail(halfwidth, t0, "the origin dv = 0 is not strictly inside F on this range")
+        hull = ConvexHull(verts.T)
+        return InnerPolygon(
+            True,
+            "proved",
+            f"{hull.vertices.size} vertices proved on gap [{gap_lo * 1e3:.3f}, {gap_hi * 1e3:.3f}] mm",
+            halfwidth,
+            verts[:, hull.vertices],
+            hull.equations[:, :2],
+            -hull.equations[:, 2],
+            cells_used,
+            {"total": time.perf_counter() - t0},
+        )
+
+    def _sampled_radii(self, F: np.ndarray, dirs: np.ndarray, halfwidth: float, periodic: bool) -> np.ndarray:
+        """Radius (k,) of the intersection of F's slices along each direction, on a sample of
+        gap errors and phases (bisection on the numpy constraints)."""
         es = np.linspace(-halfwidth, halfwidth, 41)
         ps = np.linspace(0, 2 * math.pi, 73)[:-1] if periodic else np.zeros(1)
         E, PH = (a.ravel() for a in np.meshgrid(es, ps))
-        nd = n_vertices
+        nd = dirs.shape[1]
         offs = F @ np.vstack([np.ones_like(PH), np.sin(PH), np.cos(PH)])  # (4, ns)
         coef = self.feasible.model.coefficients(offs[0] + E)[:, None, :]  # (4, 1, ns)
         G = self.feasible.model.params.gravity
@@ -143,12 +199,16 @@ class PolygonBuilder:
             ok = (m_ >= 0) & (h_ >= 0)
             lo_t = np.where(ok, mid, lo_t)
             hi_t = np.where(ok, hi_t, mid)
-        radius = lo_t.min(axis=1) * shrink
-        # 2. prove the vertices on all (e1, phi) cells (one batched branch and bound), shrinking
-        #    any vertex that cannot be proved
+        return lo_t.min(axis=1)
+
+    def _proved_radii(self, F, dirs, radius, halfwidth, periodic, max_cells):
+        """(radii (k,), cells spent, vertices still unproved): the vertices proved on all (e1, phi)
+        cells by one batched branch and bound, any vertex that cannot be proved shrunk by 3 %
+        and tried again (12 rounds)."""
+        fpar = F.ravel(order="F")[:, None]
         cells_used = 0
         radii = radius.copy()
-        pending = np.arange(nd)
+        pending = np.arange(dirs.shape[1])
         for _ in range(12):
             proved, used = self._prove_vertices(
                 dirs[:, pending] * radii[pending], halfwidth, periodic, fpar, max_cells
@@ -158,25 +218,7 @@ class PolygonBuilder:
             if pending.size == 0:
                 break
             radii[pending] *= 0.97
-        else:
-            return self._fail(halfwidth, t0, f"vertices {pending.tolist()} could not be proved inside F")
-        verts = list((dirs * radii[None, :]).T)
-        verts = np.array(verts).T
-        if np.any(radius <= 0):
-            return self._fail(halfwidth, t0, "the origin dv = 0 is not strictly inside F on this range")
-        hull = ConvexHull(verts.T)
-        normals = hull.equations[:, :2]
-        offsets = -hull.equations[:, 2]
-        return InnerPolygon(
-            True,
-            f"{hull.vertices.size} vertices proved on gap [{gap_lo * 1e3:.3f}, {gap_hi * 1e3:.3f}] mm",
-            halfwidth,
-            verts[:, hull.vertices],
-            normals,
-            offsets,
-            cells_used,
-            time.perf_counter() - t0,
-        )
+        return radii, cells_used, pending
 
     def _prove_vertices(self, verts, halfwidth, periodic, fpar, max_cells) -> tuple[np.ndarray, int]:
         """Interval branch and bound over (e1, phi) for every vertex (2, k) at once."""
@@ -221,34 +263,82 @@ class PolygonBuilder:
     @staticmethod
     def _fail(halfwidth, t0, message) -> InnerPolygon:
         z = np.zeros((2, 0))
+        timings = {"total": time.perf_counter() - t0}
         return InnerPolygon(
-            False, message, halfwidth, z, np.zeros((0, 2)), np.zeros(0), 0, time.perf_counter() - t0
+            False, "not_proved", message, halfwidth, z, np.zeros((0, 2)), np.zeros(0), 0, timings
         )
 
 
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class SdpCandidate:
-    """One SDP solve for one gap half-width, with its re-certification."""
+class SdpCandidate(Result):
+    """One SDP solve for one gap half-width, with its re-certification by Procedure 2.
 
-    halfwidth: float
+    ``status`` ``"certified"`` when Procedure 2 certified the SDP's P, else ``"not_certified"``;
+    ``solver_status`` is what the SDP solver (or the step before it) said.
+    """
+
+    success: bool
+    status: str
+    message: str
+    halfwidth: float  # E [m]
     polygon: InnerPolygon
     solver_status: str
     P: np.ndarray | None  # level 1 is inside the polytope (after the floating-point re-check)
     construction_level: float  # largest c <= 1 with {V <= c} inside the polytope, re-checked
-    rectangle: tuple[float, float]  # [m] at the certified level
+    rectangle: PerAxis  # [m] half-sides (e1, e2) at the certified level
     certified: Procedure2Result | None
-    solve_time: float
     reach: float = 0.0  # with a direction d: largest t with t d in the certified set
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"sdp": solve time}
+
+    @classmethod
+    def of(
+        cls,
+        halfwidth: float,
+        polygon: InnerPolygon,
+        solver_status: str,
+        *,
+        P: np.ndarray | None = None,
+        construction_level: float = 0.0,
+        rectangle=(0.0, 0.0),
+        certified: Procedure2Result | None = None,
+        reach: float = 0.0,
+        solve_time: float = 0.0,
+    ) -> SdpCandidate:
+        """The candidate with its verdict; ``solve_time`` [s] of the SDP."""
+        ok = bool(certified is not None and certified.success)
+        message = f"E = {halfwidth * 1e3:.3g} mm: SDP {solver_status}"
+        if certified is not None:
+            message += f"; Procedure 2: {certified.message}"
+        return cls(
+            ok,
+            "certified" if ok else "not_certified",
+            message,
+            halfwidth,
+            polygon,
+            solver_status,
+            P,
+            construction_level,
+            PerAxis.of(rectangle),
+            certified,
+            reach,
+            {"sdp": solve_time},
+        )
 
     @property
     def score(self) -> float:
+        """What :func:`enlarge` maximises: ``reach`` with a direction, else the rectangle's area [m^2]."""
         return self.reach if self.reach > 0 else self.rectangle[0] * self.rectangle[1]
 
 
 @dataclass(frozen=True)
-class SdpResult:
-    """The SDP-enlarged certificate for one reference (module docstring)."""
+class SdpResult(Result):
+    """The SDP-enlarged certificate for one reference (module docstring).
+
+    ``status`` ``"certified"`` (``best`` is the candidate with the largest score),
+    ``"not_certified"`` (no candidate P could be certified) or ``"infeasible"`` (the reference
+    reaches the stoppers).
+    """
 
     success: bool
     status: str
@@ -257,14 +347,15 @@ class SdpResult:
     best: SdpCandidate | None
     candidates: tuple[SdpCandidate, ...]
     decay: float
-    timings: dict[str, float] = field(default_factory=dict)
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] polygon, sdp, certify, total
 
     @property
     def certified(self) -> Procedure2Result | None:
+        """The best candidate's certificate (None without one)."""
         return None if self.best is None else self.best.certified
 
 
-def _solve_sdp(
+def solve_sdp(
     loop: RegulatorLoop,
     reference: Reference,
     polygon: InnerPolygon,
@@ -272,11 +363,31 @@ def _solve_sdp(
     decay: float,
     weights: tuple[float, float],
     direction: np.ndarray | None = None,
-):
-    """The SDP in acceleration-scaled coordinates; returns (status, Q in SI or None, time).
+) -> tuple[str, np.ndarray | None, float]:
+    """The SDP of the module docstring, in acceleration-scaled coordinates (cvxpy + Clarabel).
 
     Objective: the (e1, e2) rectangle, or with ``direction`` (10,) the largest t with
-    +-t direction in the set."""
+    +-t direction in the set.
+
+    Parameters
+    ----------
+    loop : RegulatorLoop
+    reference : Reference
+    polygon : InnerPolygon
+        The proved faces n' dv <= b the level set must respect.
+    feasible : FeasibleSet
+        Supplies the horizontal stoppers [m].
+    decay : float
+        Guaranteed decay rate of V [1/s].
+    weights : (float, float)
+        Weights of log a1, log a2.
+    direction : (10,) array, optional
+
+    Returns
+    -------
+    (str, array or None, float)
+        The solver's status, Q = P^-1 in SI units (None if not solved) and the solve time [s].
+    """
     d = loop.state_scale()
     Dm = np.diag(d)
     A = np.diag(1 / d) @ loop.A @ Dm
@@ -326,7 +437,20 @@ def _solve_sdp(
 
 
 def construction_level(loop: RegulatorLoop, P: np.ndarray, polygon: InnerPolygon, room_e1: float) -> float:
-    """Largest c <= 1 with {V <= c} inside [-E, E] x Poly, recomputed from P in floating point."""
+    """Largest c <= 1 with {V <= c} inside [-E, E] x Poly, recomputed from P in floating point.
+
+    Parameters
+    ----------
+    loop : RegulatorLoop
+    P : (10, 10) array
+    polygon : InnerPolygon
+    room_e1 : float
+        E [m].
+
+    Returns
+    -------
+    float
+    """
     Pinv = np.linalg.inv(P)
     Mv = loop.output[2:4]
     levels = [1.0]
@@ -363,69 +487,90 @@ def enlarge(
     direction : array (10,) or None
         If given, maximise instead how far along this z~ (e.g. one start's initial error) the
         certified set reaches; ``best.reach`` >= 1 means that start is certified.
+    builder : PolygonBuilder, optional
+        Reused across calls (built here otherwise).
+
+    Returns
+    -------
+    SdpResult
     """
     t0 = time.perf_counter()
     if decay < 0:
         raise ValueError(f"decay must be >= 0 [1/s], got {decay!r}")
     feasible, loop = procedure.feasible, procedure.loop
     builder = builder or PolygonBuilder(feasible, loop)
+    room = _gap_room(feasible, loop, reference)
+    if room <= 0:
+        timings = {"total": time.perf_counter() - t0}
+        return SdpResult(
+            False, "infeasible", "the reference reaches the stoppers", reference, None, (), decay, timings
+        )
+    clock = {"polygon": 0.0, "sdp": 0.0, "certify": 0.0}
+    cands = tuple(
+        _candidate(procedure, builder, reference, frac * room, decay, weights, direction, clock)
+        for frac in fractions
+    )
+    good = [c for c in cands if c.success]
+    timings = {**clock, "total": time.perf_counter() - t0}
+    if not good:
+        message = "no candidate P could be certified"
+        return SdpResult(False, "not_certified", message, reference, None, cands, decay, timings)
+    best = max(good, key=lambda c: c.score)
+    return SdpResult(
+        True, "certified", _best_message(best, direction), reference, best, cands, decay, timings
+    )
+
+
+def _gap_room(feasible: FeasibleSet, loop: RegulatorLoop, reference: Reference) -> float:
+    """Room [m] from the reference's gap orbit to the nearer stopper (to 2 mm without stoppers)."""
     F = loop.offset_coefficients(reference)
     amp = math.hypot(F[0, 1], F[0, 2])
     if feasible.gap_range is not None:
-        room = min(F[0, 0] - amp - feasible.gap_range[0], feasible.gap_range[1] - F[0, 0] - amp)
-    else:
-        room = F[0, 0] - amp - 2e-3
-    if room <= 0:
-        return SdpResult(
-            False, "infeasible", "the reference reaches the stoppers", reference, None, (), decay
-        )
-    cands = []
-    t_poly = t_sdp = t_cert = 0.0
-    for frac in fractions:
-        E = frac * room
-        tp = time.perf_counter()
-        poly = builder.build(reference, E)
-        t_poly += time.perf_counter() - tp
-        if not poly.success:
-            cands.append(SdpCandidate(E, poly, "no polygon", None, 0.0, (0.0, 0.0), None, 0.0))
-            continue
-        status, Q, dt = _solve_sdp(loop, reference, poly, feasible, decay, weights, direction)
-        t_sdp += dt
-        if Q is None:
-            cands.append(SdpCandidate(E, poly, status, None, 0.0, (0.0, 0.0), None, dt))
-            continue
-        P = np.linalg.inv(Q)
-        P = 0.5 * (P + P.T)
-        if not loop.is_lyapunov(P, decay * 0.5):
-            cands.append(
-                SdpCandidate(E, poly, status + " (Lyapunov check failed)", None, 0.0, (0.0, 0.0), None, dt)
-            )
-            continue
-        c_con = construction_level(loop, P, poly, E)
-        tc = time.perf_counter()
-        cert = procedure.run(reference, P)
-        t_cert += time.perf_counter() - tc
-        level = max(cert.level, 0.0)
-        rect = max_rectangle(P[np.ix_([E1, E2], [E1, E2])], level) if level > 0 else (0.0, 0.0)
-        reach = 0.0
-        if direction is not None and level > 0:
-            dvec = np.asarray(direction, float)
-            reach = math.sqrt(level / (dvec @ P @ dvec))
-        cands.append(SdpCandidate(E, poly, status, P, c_con, rect, cert, dt, reach))
-    good = [c for c in cands if c.certified is not None and c.certified.success]
-    timings = {"polygon": t_poly, "sdp": t_sdp, "certify": t_cert, "total": time.perf_counter() - t0}
-    if not good:
-        return SdpResult(
-            False,
-            "failed",
-            "no candidate P could be certified",
-            reference,
-            None,
-            tuple(cands),
-            decay,
-            timings,
-        )
-    best = max(good, key=lambda c: c.score)
+        return min(F[0, 0] - amp - feasible.gap_range[0], feasible.gap_range[1] - F[0, 0] - amp)
+    return F[0, 0] - amp - 2e-3
+
+
+def _candidate(procedure, builder, reference, E, decay, weights, direction, clock) -> SdpCandidate:
+    """Polygon, SDP, floating-point checks and Procedure 2 for one half-width E [m]; the time of
+    each step is added to ``clock``."""
+    loop = procedure.loop
+    tp = time.perf_counter()
+    poly = builder.build(reference, E)
+    clock["polygon"] += time.perf_counter() - tp
+    if not poly.success:
+        return SdpCandidate.of(E, poly, "no polygon")
+    status, Q, dt = solve_sdp(loop, reference, poly, procedure.feasible, decay, weights, direction)
+    clock["sdp"] += dt
+    if Q is None:
+        return SdpCandidate.of(E, poly, status, solve_time=dt)
+    P = np.linalg.inv(Q)
+    P = 0.5 * (P + P.T)
+    if not loop.is_lyapunov(P, decay * 0.5):
+        return SdpCandidate.of(E, poly, status + " (Lyapunov check failed)", solve_time=dt)
+    c_con = construction_level(loop, P, poly, E)
+    tc = time.perf_counter()
+    cert = procedure.run(reference, P)
+    clock["certify"] += time.perf_counter() - tc
+    level = max(cert.level, 0.0)
+    rect = max_rectangle(P[np.ix_([E1, E2], [E1, E2])], level) if level > 0 else (0.0, 0.0)
+    reach = 0.0
+    if direction is not None and level > 0:
+        dvec = np.asarray(direction, float)
+        reach = math.sqrt(level / (dvec @ P @ dvec))
+    return SdpCandidate.of(
+        E,
+        poly,
+        status,
+        P=P,
+        construction_level=c_con,
+        rectangle=rect,
+        certified=cert,
+        reach=reach,
+        solve_time=dt,
+    )
+
+
+def _best_message(best: SdpCandidate, direction) -> str:
     msg = (
         f"best half-width E = {best.halfwidth * 1e3:.3g} mm: rectangle |e1| <= {best.rectangle[0] * 1e3:.3g} "
         "mm, "
@@ -437,4 +582,4 @@ def enlarge(
     if direction is not None and best.reach < 1:
         # success refers to certifying something; whether the direction is covered is in reach
         msg += " (not covered)"
-    return SdpResult(True, "certified", msg, reference, best, tuple(cands), decay, timings)
+    return msg

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,16 +33,32 @@ from maglev_oc.region.montecarlo import (
     CertificateCheck,
     SliceCheck,
     check_error_states,
-    concat_outcomes,
     fl_slice,
+    merge_checks,
+    reference_samples,
+    regulator_state,
     uniform_in_ellipsoid,
 )
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa, frozen_poles
 from maglev_oc.region.sdp import PolygonBuilder, SdpResult, enlarge
+from maglev_oc.results import Result
 from maglev_oc.sim.effects import Encoder, TwinEffects
 from maglev_oc.sim.twin import RigTwin
-from maglev_oc.units import MM_TO_M
+from maglev_oc.units import M_TO_MM, MM_TO_M
+
+__all__ = [
+    "LARGE_STEP_START",
+    "LARGE_STEP_TARGET",
+    "Enlargement",
+    "LargeStepStudy",
+    "LinearStudy",
+    "OperatingRegionStudy",
+    "ReferenceStudy",
+    "StudyConfig",
+    "certificate_rows",
+    "operating_region_study",
+]
 
 LARGE_STEP_START = (26 * MM_TO_M, 0.0, 0.0, 0.0)
 LARGE_STEP_TARGET = (18 * MM_TO_M, 20 * MM_TO_M)
@@ -120,7 +136,6 @@ class LinearStudy:
     controller: str
     roa: RoaResult
     large_step_ratio: float  # V(start)/level for the large step (<= 1: certified)
-    slice: SliceCheck | None  # a sampled slice, when computed
 
 
 @dataclass(frozen=True)
@@ -143,22 +158,51 @@ class LargeStepStudy:
 
 
 @dataclass(frozen=True)
-class OperatingRegionStudy:
+class OperatingRegionStudy(Result):
+    """Everything the operating-region report shows (module docstring).
+
+    ``status``: ``"certified"`` when every reference has a certificate, no run started inside a
+    certified set left F and no certified slice start was unsafe; ``"violations"`` when a run or
+    a slice contradicts a certificate (an assumption of the certificate does not hold on the
+    sampled twin); ``"not_certified"`` when some reference has no certificate. ``timings`` [s]
+    by step, in the order run, with the ``total``.
+    """
+
+    success: bool
+    status: str
+    message: str
     config: StudyConfig
     feasible: FeasibleSet
     loop: RegulatorLoop
     references: tuple[ReferenceStudy, ...]
     maps: tuple[FeasibilityMap, ...]
-    slices: dict[str, tuple[SliceCheck, ...]]  # "lyapunov"/"sdp" -> FL slices judged against it
+    slices: dict[str, tuple[SliceCheck, ...]]  # "Lyapunov P"/"SDP P" -> FL slices judged against it
     large_step: LargeStepStudy | None
     quantization: CertificateCheck | None
-    timings: dict[str, float] = field(default_factory=dict)
+    timings: Mapping[str, float] = field(default_factory=dict)
 
     def inside_totals(self) -> dict[str, int]:
         """Runs started inside certified sets and their violations, over all references."""
         n = sum(c.n for r in self.references for c in r.checks.values())
         bad = sum(c.violations for r in self.references for c in r.checks.values())
         return {"runs": n, "violations": bad}
+
+
+def _verdict(references, slices) -> tuple[bool, str, str]:
+    """(success, status, message) of a study from its certificates, inside runs and slices."""
+    certified = sum(r.lyapunov.success for r in references)
+    runs = sum(c.n for r in references for c in r.checks.values())
+    bad = sum(c.violations for r in references for c in r.checks.values())
+    unsafe = sum(s.unsafe_certified for v in slices.values() for s in v)
+    message = (
+        f"{certified} of {len(references)} references certified; {runs} runs inside the certified sets, "
+        f"{bad} left F; {unsafe} certified slice starts unsafe"
+    )
+    if bad or unsafe:
+        return False, "violations", message
+    if certified < len(references):
+        return False, "not_certified", message
+    return True, "certified", message
 
 
 def _enlargement(lyap: Procedure2Result, sdp: SdpResult | None) -> Enlargement | None:
@@ -192,29 +236,8 @@ def _inside_checks(sim, loop, reference, cert: Procedure2Result, n, rng, label, 
                 )
             )
         if runs:
-            out[f"{label}, {kind}"] = _merge(runs)
+            out[f"{label}, {kind}"] = merge_checks(runs)
     return out
-
-
-def _merge(runs: list[CertificateCheck]) -> CertificateCheck:
-    if len(runs) == 1:
-        return runs[0]
-    first = runs[0]
-    import dataclasses
-
-    cat = np.concatenate
-    return dataclasses.replace(
-        first,
-        n=sum(r.n for r in runs),
-        violations=sum(r.violations for r in runs),
-        violating=cat([r.violating for r in runs]),
-        start_ratio=cat([r.start_ratio for r in runs]),
-        final_ratio=cat([r.final_ratio for r in runs]),
-        min_margin=min(r.min_margin for r in runs),
-        max_current=max(r.max_current for r in runs),
-        outcome=concat_outcomes([r.outcome for r in runs]),
-        wall_time=sum(r.wall_time for r in runs),
-    )
 
 
 def _worst_start(sim, loop, reference, cert: Procedure2Result, limit) -> CertificateCheck | None:
@@ -230,6 +253,27 @@ def _worst_start(sim, loop, reference, cert: Procedure2Result, limit) -> Certifi
     )
 
 
+@dataclass
+class _Run:
+    """What every step of one study shares."""
+
+    model: StageModel
+    config: StudyConfig
+    feasible: FeasibleSet
+    loop: RegulatorLoop
+    rng: np.random.Generator
+    say: Callable[[str], None]
+    timings: dict[str, float]
+
+    @property
+    def limit(self) -> float | None:
+        return self.feasible.current_limit
+
+    def simulator(self, twin: RigTwin, controller, duration: float) -> BatchSimulator:
+        c = self.config
+        return BatchSimulator(twin, controller, duration=duration, threads=c.threads, compile=c.compile)
+
+
 def operating_region_study(
     model: StageModel,
     config: StudyConfig | None = None,
@@ -238,30 +282,81 @@ def operating_region_study(
     feasible: FeasibleSet | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> OperatingRegionStudy:
-    """Run the whole study (module docstring) for ``model`` (plant = controller model)."""
-    config = config or StudyConfig()
-    say = progress or (lambda _msg: None)
-    timings: dict[str, float] = {}
+    """Run the whole study (module docstring) for ``model`` (plant = controller model).
+
+    Parameters
+    ----------
+    model : StageModel
+    config : StudyConfig, optional
+        What to compute and how much (default: the report's).
+    loop : RegulatorLoop, optional
+        The FL loop (default: the papers' gains).
+    feasible : FeasibleSet, optional
+        F (default: 9 A and the stoppers).
+    progress : callable, optional
+        Called with a line of text as each step starts.
+
+    Returns
+    -------
+    OperatingRegionStudy
+    """
     t_all = time.perf_counter()
+    config = config or StudyConfig()
     loop = loop or RegulatorLoop()
     feasible = feasible or FeasibleSet(model)
-    limit = feasible.current_limit
-    rng = np.random.default_rng(config.seed)
-
+    run = _Run(
+        model, config, feasible, loop, np.random.default_rng(config.seed), progress or (lambda _m: None), {}
+    )
     t0 = time.perf_counter()
     proc = Procedure2(feasible, loop)
     builder = PolygonBuilder(feasible, loop)
-    timings["build solvers"] = time.perf_counter() - t0
+    run.timings["build solvers"] = time.perf_counter() - t0
+    certs = _certificates(run, proc, builder)
+    maps = _timed(run, "feasibility maps", lambda: _maps(run))
+    t0 = time.perf_counter()
+    fl = FeedbackLinearizingRegulator(model, loop.K_h, loop.K_v, omega0=loop.omega0)
+    sim = run.simulator(RigTwin(model), fl, config.horizon)
+    run.timings["build Monte Carlo (FL)"] = time.perf_counter() - t0
+    ref_studies = _timed(run, "Monte Carlo inside the certified sets", lambda: _inside_runs(run, sim, certs))
+    slices = _timed(run, "Monte Carlo on slices (conservativeness)", lambda: _slices(run, sim, ref_studies))
+    quant = _timed(run, "Monte Carlo with encoder quantisation", lambda: _quantization(run, fl, ref_studies))
+    large = None
+    if config.linear:
+        run.say("large step and linear regulators")
+        large = _large_step(run, proc, builder, sim)
+    run.timings["total"] = time.perf_counter() - t_all
+    return OperatingRegionStudy(
+        *_verdict(ref_studies, slices),
+        config,
+        feasible,
+        loop,
+        tuple(ref_studies),
+        maps,
+        slices,
+        large,
+        quant,
+        run.timings,
+    )
 
+
+def _timed(run: _Run, name: str, step: Callable[[], object]):
+    t0 = time.perf_counter()
+    out = step()
+    run.timings[name] = time.perf_counter() - t0
+    return out
+
+
+def _certificates(run: _Run, proc: Procedure2, builder: PolygonBuilder) -> list[tuple]:
+    """(reference, Procedure 2 with the Lyapunov equation's P, SDP result or None) per reference:
+    the set-points across ``setpoints_mm`` and the papers' sinusoid."""
+    config = run.config
     refs = [Reference.setpoint(g * MM_TO_M, config.position) for g in config.setpoints_mm]
     if config.sinusoid:
         refs.append(Reference.paper_sinusoid())
-
-    # 1. Procedure 2 (Lyapunov P) and the SDP
     certs = []
     t_p2 = t_sdp = 0.0
     for ref in refs:
-        say(f"Procedure 2: {ref.label}")
+        run.say(f"Procedure 2: {ref.label}")
         t0 = time.perf_counter()
         lyap = proc.run(ref, seed=config.seed)
         t_p2 += time.perf_counter() - t0
@@ -271,44 +366,38 @@ def operating_region_study(
             sdp = enlarge(proc, ref, builder=builder)
             t_sdp += time.perf_counter() - t0
         certs.append((ref, lyap, sdp))
-    timings["procedure 2 (Lyapunov P)"] = t_p2
-    timings["SDP enlargement (incl. re-certification)"] = t_sdp
+    run.timings["procedure 2 (Lyapunov P)"] = t_p2
+    run.timings["SDP enlargement (incl. re-certification)"] = t_sdp
+    return certs
 
-    # 2. feasibility maps through the middle set-point and the sinusoid
-    t0 = time.perf_counter()
-    maps = []
-    mid = Reference.setpoint(20 * MM_TO_M, config.position)
-    if config.map_points:
-        n = config.map_points
-        g_lo, g_hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
-        e_rng = (g_lo - 2 * MM_TO_M - mid.gap, g_hi + 2 * MM_TO_M - mid.gap)
-        maps.append(feasibility_map(feasible, loop, mid, ("e1", "e1_rate"), e_rng, (-0.6, 0.6), n=n))
-        maps.append(feasibility_map(feasible, loop, mid, ("e1", "e2"), e_rng, (-0.065, 0.065), n=n))
-        maps.append(
-            feasibility_map(feasible, loop, mid, ("e2", "e2_rate"), (-0.065, 0.065), (-0.8, 0.8), n=n)
-        )
-        maps.append(feasibility_map(feasible, loop, mid, ("e1", "xi_v3"), e_rng, (-2e-3, 2e-3), n=n))
-        if config.sinusoid:
-            sin = Reference.paper_sinusoid()
-            maps.append(
-                feasibility_map(feasible, loop, sin, ("phase", "e1"), (0, 2 * math.pi), (-0.012, 0.012), n=n)
-            )
-            maps.append(
-                feasibility_map(feasible, loop, sin, ("phase", "e2"), (0, 2 * math.pi), (-0.04, 0.04), n=n)
-            )
-    timings["feasibility maps"] = time.perf_counter() - t0
 
-    # 3. Monte Carlo inside the certified sets on the sampled ideal twin
-    t0 = time.perf_counter()
-    fl = FeedbackLinearizingRegulator(model, loop.K_h, loop.K_v, omega0=loop.omega0)
-    sim = BatchSimulator(
-        RigTwin(model), fl, duration=config.horizon, threads=config.threads, compile=config.compile
-    )
-    timings["build Monte Carlo (FL)"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    ref_studies = []
+def _maps(run: _Run) -> tuple[FeasibilityMap, ...]:
+    """F on slices through the 20 mm set-point and, with the sinusoid, through its orbit."""
+    feasible, loop, n = run.feasible, run.loop, run.config.map_points
+    if not n:
+        return ()
+    mid = Reference.setpoint(20 * MM_TO_M, run.config.position)
+    g_lo, g_hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
+    e_rng = (g_lo - 2 * MM_TO_M - mid.gap, g_hi + 2 * MM_TO_M - mid.gap)
+    slices = [
+        (mid, ("e1", "e1_rate"), e_rng, (-0.6, 0.6)),
+        (mid, ("e1", "e2"), e_rng, (-0.065, 0.065)),
+        (mid, ("e2", "e2_rate"), (-0.065, 0.065), (-0.8, 0.8)),
+        (mid, ("e1", "xi_v3"), e_rng, (-2e-3, 2e-3)),
+    ]
+    if run.config.sinusoid:
+        sin = Reference.paper_sinusoid()
+        slices.append((sin, ("phase", "e1"), (0, 2 * math.pi), (-0.012, 0.012)))
+        slices.append((sin, ("phase", "e2"), (0, 2 * math.pi), (-0.04, 0.04)))
+    return tuple(feasibility_map(feasible, loop, ref, axes, xr, yr, n=n) for ref, axes, xr, yr in slices)
+
+
+def _inside_runs(run: _Run, sim: BatchSimulator, certs: list[tuple]) -> list[ReferenceStudy]:
+    """Monte Carlo inside each certified set on the sampled ideal twin, and a run from the
+    certified boundary point nearest F's edge."""
+    studies = []
     for ref, lyap, sdp in certs:
-        say(f"Monte Carlo: {ref.label}")
+        run.say(f"Monte Carlo: {ref.label}")
         checks: dict[str, CertificateCheck] = {}
         worst: dict[str, CertificateCheck] = {}
         pairs = [("Lyapunov P", lyap)]
@@ -317,24 +406,30 @@ def operating_region_study(
         for label, cert in pairs:
             if not cert.success:
                 continue
-            if config.samples:
-                checks.update(_inside_checks(sim, loop, ref, cert, config.samples, rng, label, limit))
-            w = _worst_start(sim, loop, ref, cert, limit)
+            if run.config.samples:
+                checks.update(
+                    _inside_checks(sim, run.loop, ref, cert, run.config.samples, run.rng, label, run.limit)
+                )
+            w = _worst_start(sim, run.loop, ref, cert, run.limit)
             if w is not None:
                 worst[label] = w
-        ref_studies.append(ReferenceStudy(ref, lyap, sdp, _enlargement(lyap, sdp), checks, worst))
-    timings["Monte Carlo inside the certified sets"] = time.perf_counter() - t0
+        studies.append(ReferenceStudy(ref, lyap, sdp, _enlargement(lyap, sdp), checks, worst))
+    return studies
 
-    # 4. conservativeness: empirical safe set vs certificate on slices
-    t0 = time.perf_counter()
+
+def _slices(
+    run: _Run, sim: BatchSimulator, ref_studies: list[ReferenceStudy]
+) -> dict[str, tuple[SliceCheck, ...]]:
+    """Conservativeness: the empirical safe set vs each certificate on grids of slices."""
     slices: dict[str, list[SliceCheck]] = {"Lyapunov P": [], "SDP P": []}
+    config, feasible = run.config, run.feasible
     if config.slice_points:
         by_gap = {round(r.reference.gap / MM_TO_M, 6): r for r in ref_studies if r.reference.is_setpoint}
         for g in config.slice_setpoints_mm:
             rs = by_gap.get(round(g, 6))
             if rs is None:
                 continue
-            say(f"slices at {g:g} mm")
+            run.say(f"slices at {g:g} mm")
             ref = rs.reference
             g_lo, g_hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
             p_lo, p_hi = feasible.position_range or (-0.06, 0.06)
@@ -345,7 +440,7 @@ def operating_region_study(
             ):
                 base = fl_slice(
                     sim,
-                    loop,
+                    run.loop,
                     ref,
                     rs.lyapunov.P,
                     rs.lyapunov.level,
@@ -353,120 +448,110 @@ def operating_region_study(
                     e_rng,
                     yr,
                     n=config.slice_points,
-                    current_limit=limit,
+                    current_limit=run.limit,
                 )
                 slices["Lyapunov P"].append(base)
                 if rs.sdp is not None and rs.sdp.certified is not None:
                     slices["SDP P"].append(base.with_certificate(rs.sdp.certified.P, rs.sdp.certified.level))
-    timings["Monte Carlo on slices (conservativeness)"] = time.perf_counter() - t0
+    return {k: tuple(v) for k, v in slices.items()}
 
-    # 5. quantising encoder (10 um) with noise, inside the best certificate at 20 mm
-    quant = None
-    t0 = time.perf_counter()
-    if config.quantization_samples:
-        target = next(
-            (
-                r
-                for r in ref_studies
-                if r.reference.is_setpoint and abs(r.reference.gap - 20 * MM_TO_M) < 1e-9
-            ),
-            None,
-        )
-        target = target or ref_studies[0]
-        cert = target.best
-        if cert.success:
-            say("Monte Carlo with the quantising encoder")
-            twin_q = RigTwin(model, TwinEffects(encoder=Encoder()))
-            sim_q = BatchSimulator(
-                twin_q, fl, duration=config.horizon, threads=config.threads, compile=config.compile
-            )
-            z = uniform_in_ellipsoid(cert.P, cert.level, config.quantization_samples, rng)
-            x, xi = loop.physical_state(z, target.reference, 0.0)
-            from maglev_oc.region.montecarlo import reference_samples, regulator_state
 
-            ref_s = reference_samples(target.reference, 0.0, sim_q.n_steps, twin_q.sample_time)
-            noise = rng.standard_normal((2, sim_q.n_steps))
-            out = sim_q.run(x, regulator_state(x, xi), ref_s, noise)
-            bad = out.violations(limit)
-            quant = CertificateCheck(
-                target.reference,
-                cert.level,
-                z.shape[1],
-                int(bad.sum()),
-                bad,
-                np.einsum("in,ij,jn->n", z, cert.P, z) / cert.level,
-                np.full(z.shape[1], np.nan),
-                float(np.nanmin(out.min_margin)),
-                float(np.nanmax(out.max_current)),
-                out,
-                out.wall_time,
-            )
-    timings["Monte Carlo with encoder quantisation"] = time.perf_counter() - t0
-
-    # 6. the papers' large step, linear regulators' regions of attraction
-    large = None
-    if config.linear:
-        say("large step and linear regulators")
-        large = _large_step(model, feasible, loop, proc, builder, sim, config, timings, limit)
-
-    timings["total"] = time.perf_counter() - t_all
-    return OperatingRegionStudy(
-        config,
-        feasible,
-        loop,
-        tuple(ref_studies),
-        tuple(maps),
-        {k: tuple(v) for k, v in slices.items()},
-        large,
-        quant,
-        timings,
+def _quantization(run: _Run, fl, ref_studies: list[ReferenceStudy]) -> CertificateCheck | None:
+    """The quantising encoder (10 um) with noise, inside the best certificate at 20 mm."""
+    if not run.config.quantization_samples:
+        return None
+    target = next(
+        (r for r in ref_studies if r.reference.is_setpoint and abs(r.reference.gap - 20 * MM_TO_M) < 1e-9),
+        None,
+    )
+    target = target or ref_studies[0]
+    cert = target.best
+    if not cert.success:
+        return None
+    run.say("Monte Carlo with the quantising encoder")
+    twin_q = RigTwin(run.model, TwinEffects(encoder=Encoder()))
+    sim_q = run.simulator(twin_q, fl, run.config.horizon)
+    z = uniform_in_ellipsoid(cert.P, cert.level, run.config.quantization_samples, run.rng)
+    x, xi = run.loop.physical_state(z, target.reference, 0.0)
+    ref_s = reference_samples(target.reference, 0.0, sim_q.n_steps, twin_q.sample_time)
+    noise = run.rng.standard_normal((2, sim_q.n_steps))
+    out = sim_q.run(x, regulator_state(x, xi), ref_s, noise)
+    bad = out.violations(run.limit)
+    return CertificateCheck.of(
+        out.timings,
+        reference=target.reference,
+        level=cert.level,
+        n=z.shape[1],
+        violations=int(bad.sum()),
+        violating=bad,
+        start_ratio=np.einsum("in,ij,jn->n", z, cert.P, z) / cert.level,
+        final_ratio=np.full(z.shape[1], np.nan),
+        min_margin=float(np.nanmin(out.min_margin)),
+        max_current=float(np.nanmax(out.max_current)),
+        outcome=out,
     )
 
 
-def _large_step(model, feasible, loop, proc, builder, sim, config, timings, limit) -> LargeStepStudy:
+def _large_step(run: _Run, proc: Procedure2, builder: PolygonBuilder, sim: BatchSimulator) -> LargeStepStudy:
+    """The papers' large step for every controller: the FL regulator's certificates and run, the
+    linear regulators' certified regions of attraction, and the sampled start x target maps."""
+    model, config = run.model, run.config
     ref = Reference.setpoint(*LARGE_STEP_TARGET)
     x0 = np.array(LARGE_STEP_START)
-    z0 = loop.error_state(x0, np.zeros(6), ref)[:, 0]
+    z0 = run.loop.error_state(x0, np.zeros(6), ref)[:, 0]
     t0 = time.perf_counter()
     lyap = proc.run(ref, seed=config.seed)
     generic = enlarge(proc, ref, builder=builder) if config.sdp else None
     aimed = enlarge(proc, ref, builder=builder, direction=z0) if config.sdp else None
-    timings["large step: FL certificates"] = time.perf_counter() - t0
+    run.timings["large step: FL certificates"] = time.perf_counter() - t0
     ratio_l = float(z0 @ lyap.P @ z0 / lyap.level) if lyap.success else math.inf
     ratio_s = math.inf
     if generic is not None and generic.certified is not None:
         ratio_s = float(z0 @ generic.certified.P @ z0 / generic.certified.level)
-    fl_run = check_error_states(sim, loop, ref, lyap.P, lyap.level, z0[:, None], current_limit=limit)
-
-    # certified regions of attraction of the linear regulators
-    t0 = time.perf_counter()
+    fl_run = check_error_states(sim, run.loop, ref, lyap.P, lyap.level, z0[:, None], current_limit=run.limit)
     ctrls = [
         paper_linear_regulator(model),
         paper_linear_regulator(model, feedforward=False),
         lqr_regulator(model),
     ]
-    linear = []
-    for ctrl in ctrls:
-        roa = certify_roa(model, ctrl, ref, feasible=feasible)
-        zh = LinearizedLoop(model, ctrl, ref).initial_error(x0)
-        ratio = float(zh @ roa.P @ zh / roa.level) if roa.level > 0 else math.inf
-        linear.append(LinearStudy(ctrl.name, roa, ratio, None))
-    timings["large step: certified regions of attraction"] = time.perf_counter() - t0
-
-    # sampled estimate: start gap x target gap (start at rest at position 0, target position 20 mm)
-    t0 = time.perf_counter()
+    linear = _timed(
+        run, "large step: certified regions of attraction", lambda: _linear_regions(run, ctrls, ref, x0)
+    )
     starts = np.asarray(config.map_starts_mm, dtype=float) * MM_TO_M
     targets = np.asarray(config.map_targets_mm, dtype=float) * MM_TO_M
-    fl_ctrl = sim.controller
+    maps = _timed(
+        run,
+        "large step: sampled start x target map",
+        lambda: _start_target_maps(run, (sim.controller, *ctrls), starts, targets),
+    )
+    j = int(np.argmin(np.abs(starts - x0[0])))
+    sweep = {name: {k: v[:, j] for k, v in d.items()} for name, d in maps.items()}
+    fg = np.array([10, 12, 14, 16, 18, 22, 26], dtype=float) * MM_TO_M
+    fp = frozen_poles(model, ctrls[0], ref, fg)
+    return LargeStepStudy(
+        ref, x0, ratio_l, ratio_s, aimed, fl_run, linear, starts, targets, maps, sweep, fg, fp
+    )
+
+
+def _linear_regions(run: _Run, ctrls, ref: Reference, x0: np.ndarray) -> tuple[LinearStudy, ...]:
+    """The linear regulators' certified regions of attraction and where the large step starts."""
+    linear = []
+    for ctrl in ctrls:
+        roa = certify_roa(run.model, ctrl, ref, feasible=run.feasible)
+        zh = LinearizedLoop(run.model, ctrl, ref).initial_error(x0)
+        ratio = float(zh @ roa.P @ zh / roa.level) if roa.level > 0 else math.inf
+        linear.append(LinearStudy(ctrl.name, roa, ratio))
+    return tuple(linear)
+
+
+def _start_target_maps(run: _Run, ctrls, starts: np.ndarray, targets: np.ndarray) -> dict:
+    """Sampled estimate: start gap x target gap (start at rest at position 0, target position
+    20 mm), per controller: success, least gap [m], largest |u| [A], each (n_targets, n_starts).
+    The FL regulator (first) must also stay in F."""
+    fl_ctrl = ctrls[0]
     maps: dict[str, dict[str, np.ndarray]] = {}
-    for ctrl in (fl_ctrl, *ctrls):
-        bsim = BatchSimulator(
-            RigTwin(model),
-            ctrl,
-            duration=config.linear_horizon,
-            threads=config.threads,
-            compile=config.compile,
-        )
+    for ctrl in ctrls:
+        bsim = run.simulator(RigTwin(run.model), ctrl, run.config.linear_horizon)
         xs = np.vstack([starts, np.zeros((3, starts.size))])
         c0 = np.vstack([xs, np.zeros((6, starts.size))])
         ok = np.zeros((targets.size, starts.size), dtype=bool)
@@ -478,23 +563,25 @@ def _large_step(model, feasible, loop, proc, builder, sim, config, timings, limi
                 err = np.hypot(out.final_twin[0] - g, out.final_twin[2] - LARGE_STEP_TARGET[1])
                 good = out.finite & ~out.stopper_hit & (err < 1e-4)
             if ctrl is fl_ctrl:
-                good &= ~out.violations(limit)
+                good &= ~out.violations(run.limit)
             ok[k], gmin[k], imax[k] = good, out.min_gap, out.max_current
         maps[ctrl.name] = {"success": ok, "min_gap": gmin, "max_current": imax}
-    timings["large step: sampled start x target map"] = time.perf_counter() - t0
-    j = int(np.argmin(np.abs(starts - x0[0])))
-    sweep = {name: {k: v[:, j] for k, v in d.items()} for name, d in maps.items()}
-    fg = np.array([10, 12, 14, 16, 18, 22, 26], dtype=float) * MM_TO_M
-    fp = frozen_poles(model, ctrls[0], ref, fg)
-    return LargeStepStudy(
-        ref, x0, ratio_l, ratio_s, aimed, fl_run, tuple(linear), starts, targets, maps, sweep, fg, fp
-    )
+    return maps
 
 
-# convenience for reports: a compact table of the certified sets
 def certificate_rows(study: OperatingRegionStudy) -> list[tuple]:
-    """Rows (reference, P, level, upper, tightness, binding, e1 [mm], e1' [mm/s], e2 [mm],
-    e2' [mm/s], rectangle e1 x e2 [mm])."""
+    """A compact table of the certified sets, for reports.
+
+    Parameters
+    ----------
+    study : OperatingRegionStudy
+
+    Returns
+    -------
+    list of tuple
+        Rows (reference, P, level, upper, tightness, binding, e1 [mm], e1' [mm/s], e2 [mm],
+        e2' [mm/s], rectangle e1 x e2 [mm]).
+    """
     rows = []
     for rs in study.references:
         items = [("Lyapunov eq.", rs.lyapunov)]
@@ -511,11 +598,11 @@ def certificate_rows(study: OperatingRegionStudy) -> list[tuple]:
                     c.level_upper,
                     c.tightness,
                     c.binding,
-                    s["e1"] / MM_TO_M,
-                    s["e1_rate"] / MM_TO_M,
-                    s["e2"] / MM_TO_M,
-                    s["e2_rate"] / MM_TO_M,
-                    f"{a / MM_TO_M:.2f} x {b / MM_TO_M:.2f}",
+                    s["e1"] * M_TO_MM,
+                    s["e1_rate"] * M_TO_MM,
+                    s["e2"] * M_TO_MM,
+                    s["e2_rate"] * M_TO_MM,
+                    f"{a * M_TO_MM:.2f} x {b * M_TO_MM:.2f}",
                 )
             )
     return rows
@@ -523,5 +610,5 @@ def certificate_rows(study: OperatingRegionStudy) -> list[tuple]:
 
 def _short(ref: Reference) -> str:
     if ref.is_setpoint:
-        return f"{ref.gap / MM_TO_M:g} mm"
+        return f"{ref.gap * M_TO_MM:g} mm"
     return "sinusoid"

@@ -15,19 +15,33 @@ import numpy as np
 
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
+from maglev_oc.results import Result
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop, SimulationResult
 from maglev_oc.sim.metrics import RunMetrics, evaluate
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence
 from maglev_oc.sim.twin import RigTwin
 
+__all__ = ["RIG_CONSTANTS", "Comparison", "StepSweep", "run_comparison", "standard_twins", "step_sweep"]
+
 RIG_CONSTANTS = "table3_eps0.001"
 """The rig twin's true constants (the controllers use the model's, Table III at eps = 0.01)."""
 
 
 def standard_twins(model: StageModel) -> dict[str, RigTwin]:
-    """``ideal``: the controllers' own model, no effects. ``rig``: every effect on, and true
-    constants :data:`RIG_CONSTANTS`."""
+    """The two twins of the comparison.
+
+    Parameters
+    ----------
+    model : StageModel
+        The controllers' model.
+
+    Returns
+    -------
+    dict of str to RigTwin
+        ``ideal``: the controllers' own model, no effects. ``rig``: every effect on, and true
+        constants :data:`RIG_CONSTANTS`.
+    """
     return {
         "ideal": RigTwin(model, TwinEffects.ideal()),
         "rig": RigTwin(model.with_constants(PAPER_CONSTANTS[RIG_CONSTANTS]), TwinEffects.rig()),
@@ -35,19 +49,32 @@ def standard_twins(model: StageModel) -> dict[str, RigTwin]:
 
 
 @dataclass(frozen=True)
-class Comparison:
-    """Runs and metrics keyed by (controller name, scenario name, twin name)."""
+class Comparison(Result):
+    """Runs and metrics keyed by (controller name, scenario name, twin name).
 
+    ``success`` is True when every run stayed stable (``status`` ``"all_stable"``, else
+    ``"some_unstable"``, and the ``message`` names the runs that were not); the papers expect some
+    failures (the linear regulator on the large step), so a False here is a finding, not an error.
+    """
+
+    success: bool
+    status: str
+    message: str
     controllers: tuple[str, ...]
-    scenarios: dict[str, Scenario]
+    scenarios: dict[str, Scenario] = field(repr=False)
     twins: tuple[str, ...]
-    results: dict[tuple[str, str, str], SimulationResult]
+    results: dict[tuple[str, str, str], SimulationResult] = field(repr=False)
     metrics: dict[tuple[str, str, str], RunMetrics]
-    descriptions: dict[str, str] = field(default_factory=dict)
-    wall_time: float = 0.0
+    timings: Mapping[str, float] = field(default_factory=dict)  # [s] {"total": ...}
 
     def metric(self, controller: str, scenario: str, twin: str) -> RunMetrics:
+        """The metrics of one run."""
         return self.metrics[(controller, scenario, twin)]
+
+    @property
+    def wall_time(self) -> float:
+        """``timings["total"]`` [s]; an alias kept for callers outside sim/ (analyses/controllers.py)."""
+        return self.timings.get("total", 0.0)
 
 
 def run_comparison(
@@ -57,7 +84,23 @@ def run_comparison(
     *,
     seed: int = 0,
 ) -> Comparison:
-    """Simulate each controller on each scenario on each twin (one ClosedLoop per pair)."""
+    """Simulate each controller on each scenario on each twin (one ClosedLoop per pair).
+
+    Parameters
+    ----------
+    controllers : sequence of controllers
+        Expression or online controllers (:mod:`maglev_oc.control.base`).
+    scenarios : mapping of str to Scenario
+        The runs, by name.
+    twins : mapping of str to RigTwin
+        The plants, by name (e.g. :func:`standard_twins`).
+    seed : int
+        Encoder-noise seed of every run.
+
+    Returns
+    -------
+    Comparison
+    """
     t0 = time.perf_counter()
     results, metrics = {}, {}
     for twin_name, twin in twins.items():
@@ -68,19 +111,30 @@ def run_comparison(
                 key = (ctrl.name, sc_name, twin_name)
                 results[key] = res
                 metrics[key] = evaluate(res, sc)
+    unstable = [" / ".join(key) for key, res in results.items() if not res.success]
+    message = f"{len(results) - len(unstable)} of {len(results)} runs stable"
+    if unstable:
+        message += "; unstable: " + ", ".join(unstable)
     return Comparison(
+        success=not unstable,
+        status="some_unstable" if unstable else "all_stable",
+        message=message,
         controllers=tuple(c.name for c in controllers),
         scenarios=dict(scenarios),
         twins=tuple(twins),
         results=results,
         metrics=metrics,
-        wall_time=time.perf_counter() - t0,
+        timings={"total": time.perf_counter() - t0},
     )
 
 
 @dataclass(frozen=True)
 class StepSweep:
-    """Outcome of steps from one start to a range of target gaps, per controller."""
+    """Outcome of steps from one start to a range of target gaps, per controller.
+
+    A table of outcomes rather than one result: ``success`` is the (n_controllers, n_targets)
+    array of which steps settled (the name the reports read).
+    """
 
     start: tuple[float, float, float, float]
     target_gaps: np.ndarray  # [m]
@@ -101,7 +155,27 @@ def step_sweep(
     duration: float = 5.0,
 ) -> StepSweep:
     """Steps from ``start`` to (gap, 0, ``target_position``, 0) for each target gap: where
-    each controller stops coping (hits a stopper or diverges)."""
+    each controller stops coping (hits a stopper or diverges).
+
+    Parameters
+    ----------
+    controllers : sequence of controllers
+        Expression or online controllers.
+    twin : RigTwin
+        The plant.
+    target_gaps : array-like (n,)
+        Target gaps [m].
+    start : (4,) mechanical state
+        [m, m/s, m, m/s], default the papers' (0.026, 0, 0, 0).
+    target_position : float
+        Target horizontal position [m].
+    duration : float
+        Length of each run [s].
+
+    Returns
+    -------
+    StepSweep
+    """
     gaps = np.asarray(target_gaps, dtype=float)
     ok = np.zeros((len(controllers), gaps.size), dtype=bool)
     gmin = np.full((len(controllers), gaps.size), np.nan)

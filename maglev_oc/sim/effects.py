@@ -17,7 +17,26 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
+from maglev_oc.model.hardware import (
+    CONTINUOUS_CURRENT_LIMIT,
+    ENCODER_RESOLUTION,
+    PEAK_CURRENT_LIMIT,
+    STOPPER_GAP,
+    STOPPER_POSITION,
+)
+
+__all__ = [
+    "CableForce",
+    "Cogging",
+    "CommutationOffset",
+    "CurrentAmplifier",
+    "Encoder",
+    "ForceRipple",
+    "GuideFriction",
+    "GuideMisalignment",
+    "Stoppers",
+    "TwinEffects",
+]
 
 
 def _positive(obj: Any, *names: str, allow_zero: bool = True) -> None:
@@ -125,7 +144,7 @@ class CurrentAmplifier:
 
     bandwidth_hz: float = 1000.0  # [Hz]
     peak: float = PEAK_CURRENT_LIMIT  # [A]
-    continuous: float = 7.0  # [A]
+    continuous: float = CONTINUOUS_CURRENT_LIMIT  # [A]
     thermal_time_constant: float = 2.0  # [s]
 
     def __post_init__(self) -> None:
@@ -149,7 +168,7 @@ class Encoder:
     reading [m] (default 0).
     """
 
-    resolution: float = 10e-6  # [m]
+    resolution: float = ENCODER_RESOLUTION  # [m]
     noise_std: float = 2e-6  # [m]
     offset: tuple[float, float] = (0.0, 0.0)  # [m] (gap, horizontal)
 

@@ -14,6 +14,7 @@ Per sample k (controller and twin share the sample time):
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import casadi as ca
@@ -21,17 +22,22 @@ import numpy as np
 
 from maglev_oc.control.base import ExpressionController, OnlineController
 from maglev_oc.model.equilibrium import equilibrium_currents
+from maglev_oc.numerics import jit
+from maglev_oc.results import Result
 from maglev_oc.sim.scenarios import Scenario
 from maglev_oc.sim.twin import RigTwin
 
+__all__ = ["CHUNK", "ClosedLoop", "SimulationResult", "simulate"]
+
 
 @dataclass(frozen=True)
-class SimulationResult:
+class SimulationResult(Result):
     """One closed-loop run. Signals are (n_rows, n_samples); all share the time grid ``t``.
 
-    ``success`` is False when the run went unstable (non-finite state or a stopper hit); the
-    ``message`` says when and how. ``events`` counts flagged samples (controller clipping,
-    amplifier current limiting, thermal foldback, stopper hits).
+    ``success`` is False when the run went unstable; ``status`` is ``"completed"``,
+    ``"diverged"`` (a non-finite state) or ``"stopper_hit"``, and the ``message`` says when.
+    ``events`` counts flagged samples (controller clipping, amplifier current limiting, thermal
+    foldback, stopper hits). ``timings["total"]`` is the simulation's wall time [s].
     """
 
     controller: str
@@ -48,8 +54,9 @@ class SimulationResult:
     flags: np.ndarray  # (3, n) twin flags, RigTwin.FLAG_NAMES
     events: dict[str, int]
     success: bool
+    status: str
     message: str
-    wall_time: float  # [s] simulation wall time
+    timings: Mapping[str, float]  # [s] {"total": simulation wall time}
     step_times: np.ndarray | None = None  # (n,) [s] per-call time of an online controller
     sample_time: float = 0.0
     evaluate_from: float = 0.0
@@ -65,6 +72,11 @@ class SimulationResult:
         """True tracking error (x1 - r_v, x3 - r_h), (2, n) [m]."""
         return np.vstack([self.x[0] - self.reference[0], self.x[2] - self.reference[3]])
 
+    @property
+    def wall_time(self) -> float:
+        """``timings["total"]`` [s]; an alias kept for callers outside sim/ (cli.py)."""
+        return self.timings["total"]
+
 
 CHUNK = 10_000
 """Samples per ``mapaccum`` call. Runs are simulated chunk by chunk: CasADi's mapaccum build
@@ -79,7 +91,8 @@ class ClosedLoop:
     (scenarios, seeds, Monte Carlo) pay the build cost once. ``backend``:
 
     * ``"vm"`` (default): chunked ``mapaccum`` in CasADi's virtual machine, no compiler needed;
-    * ``"jit"``: the same chunk compiled by CasADi's JIT (about 0.5 s once, 2x faster);
+    * ``"jit"``: the same chunk compiled by CasADi's JIT (about 0.5 s once, 2x faster; the
+      virtual machine when no C compiler is found, :func:`maglev_oc.numerics.jit`);
     * ``"c"``: the step generated as C with a C loop around it (:mod:`maglev_oc.sim.native`;
       about 1 s of gcc once, then several times faster again: no per-step bookkeeping).
     """
@@ -133,13 +146,7 @@ class ClosedLoop:
         if self._chunk is None:
             chunk = self.step_function.mapaccum("closed_loop_chunk", CHUNK)
             if self.backend == "jit":
-                ins = [ca.MX.sym(chunk.name_in(k), chunk.sparsity_in(k)) for k in range(3)]
-                chunk = ca.Function(
-                    "closed_loop_chunk_jit",
-                    ins,
-                    chunk(*ins),
-                    {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O3"]}},
-                )
+                chunk = jit(chunk, symbolic="MX")  # unchanged without a C compiler
             self._chunk = chunk
         return self._chunk
 
@@ -171,7 +178,21 @@ class ClosedLoop:
 
     # ------------------------------------------------------------------------------------
     def run(self, scenario: Scenario, *, seed: int = 0, x0=None) -> SimulationResult:
-        """Simulate ``scenario`` (optionally from another mechanical state ``x0``)."""
+        """Simulate ``scenario``.
+
+        Parameters
+        ----------
+        scenario : Scenario
+        seed : int
+            Seed of the encoder noise (used when the twin has an encoder).
+        x0 : (4,) array, optional
+            Another starting mechanical state [m, m/s, m, m/s] (default ``scenario.x0``); the run
+            starts at rest with the current that holds the plant at that gap.
+
+        Returns
+        -------
+        SimulationResult
+        """
         twin, ctrl = self.twin, self.controller
         t, ref = scenario.sample(twin.sample_time)
         n = t.size
@@ -228,13 +249,14 @@ class ClosedLoop:
         for k, name in enumerate(twin.FLAG_NAMES):
             events[name] = int(np.nansum(flags[k]))
         finite = np.all(np.isfinite(x), axis=0)
-        success, message = True, "completed"
+        success, status = True, "completed"
+        message = f"completed {t.size} samples ({t.size * twin.sample_time:.4g} s) without instability"
         if not np.all(finite):
             k = int(np.argmin(finite))
-            success, message = False, f"state became non-finite at t = {t[k]:.4f} s"
+            success, status, message = False, "diverged", f"state became non-finite at t = {t[k]:.4f} s"
         elif events["stopper_hit"] > 0:
             k = int(np.argmax(flags[1] > 0))
-            success = False
+            success, status = False, "stopper_hit"
             message = f"unstable: hit a mechanical stopper at t = {t[k]:.3f} s"
         return SimulationResult(
             controller=ctrl.name,
@@ -251,8 +273,9 @@ class ClosedLoop:
             flags=flags,
             events=events,
             success=success,
+            status=status,
             message=message,
-            wall_time=wall,
+            timings={"total": wall},
             step_times=step_times,
             sample_time=twin.sample_time,
             evaluate_from=scenario.evaluate_from,
@@ -273,5 +296,18 @@ def simulate(
     *,
     seed: int = 0,
 ) -> SimulationResult:
-    """One-off simulation; for several runs build a :class:`ClosedLoop` once and reuse it."""
+    """One-off simulation; for several runs build a :class:`ClosedLoop` once and reuse it.
+
+    Parameters
+    ----------
+    twin : RigTwin
+    controller : ExpressionController or OnlineController
+    scenario : Scenario
+    seed : int
+        Seed of the encoder noise.
+
+    Returns
+    -------
+    SimulationResult
+    """
     return ClosedLoop(twin, controller).run(scenario, seed=seed)

@@ -15,38 +15,45 @@ report them; on the twin the true error differs from it by the encoder's quantiz
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.results import PerAxis, Result
 from maglev_oc.sim.engine import SimulationResult
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence
 
+__all__ = ["BANDS", "MIN_STEP", "RunMetrics", "StepMetrics", "evaluate"]
+
 BANDS = (1e-4, 1e-5)  # [m]: 0.1 mm (the papers' accuracy goal) and 10 um (encoder resolution)
 MIN_STEP = 5e-4  # [m]: smaller steps are not scored for overshoot
-AXES = ("vertical", "horizontal")
 
 
 @dataclass(frozen=True)
 class StepMetrics:
-    """One set-point change: per axis (vertical, horizontal)."""
+    """One set-point change, per axis (:class:`~maglev_oc.results.PerAxis`: vertical, horizontal)."""
 
     time: float  # [s] when the set-point changed
-    size: tuple[float, float]  # [m] signed step per axis
-    settling_01mm: tuple[float, float]  # [s], NaN if not settled
-    settling_10um: tuple[float, float]  # [s]
-    overshoot_pct: tuple[float, float]  # [%], NaN for steps under MIN_STEP
+    size: PerAxis  # [m] signed step per axis
+    settling_01mm: PerAxis  # [s], NaN if not settled
+    settling_10um: PerAxis  # [s]
+    overshoot_pct: PerAxis  # [%], NaN for steps under MIN_STEP
 
 
 @dataclass(frozen=True)
-class RunMetrics:
+class RunMetrics(Result):
+    """The papers' figures of one run (module docstring); ``success``, ``status``, ``message`` and
+    ``timings`` are the run's (:class:`~maglev_oc.sim.engine.SimulationResult`)."""
+
     controller: str
     scenario: str
     success: bool
+    status: str
     message: str
-    steps: list[StepMetrics]
-    mean_error: tuple[float, float]  # [m] after evaluate_from
-    peak_error: tuple[float, float]  # [m] after evaluate_from
+    steps: tuple[StepMetrics, ...]
+    mean_error: PerAxis  # [m] after evaluate_from
+    peak_error: PerAxis  # [m] after evaluate_from
     rms_current: float  # [A]
     peak_current: float  # [A]
     min_margin: float  # [m/s^2], NaN if the controller has no margin
@@ -55,13 +62,16 @@ class RunMetrics:
     step_time_median: float  # [s], NaN for expression controllers
     step_time_p99: float
     step_time_max: float
-    wall_time: float  # [s]
+    timings: Mapping[str, float]  # [s] the run's
 
-    def worst_settling(self, axis: int, band: str = "01mm") -> float:
+    def worst_settling(self, axis: int | str, band: str = "01mm") -> float:
+        """Longest settling time [s] over the steps on ``axis`` (0/"vertical", 1/"horizontal")
+        to the band "01mm" or "10um"; NaN if a step never settled or there are none."""
         vals = [getattr(s, f"settling_{band}")[axis] for s in self.steps]
         return float(np.max(vals)) if vals and not np.any(np.isnan(vals)) else float("nan")
 
-    def max_overshoot(self, axis: int) -> float:
+    def max_overshoot(self, axis: int | str) -> float:
+        """Largest overshoot [%] over the scored steps on ``axis``; NaN if none was scored."""
         vals = [s.overshoot_pct[axis] for s in self.steps if not np.isnan(s.overshoot_pct[axis])]
         return float(np.max(vals)) if vals else float("nan")
 
@@ -77,32 +87,23 @@ def _settling(t: np.ndarray, err: np.ndarray, band: float) -> float:
 
 
 def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
-    """Metrics of ``result`` (a run of ``scenario``)."""
+    """Metrics of ``result`` (a run of ``scenario``), in the papers' terms (module docstring).
+
+    Parameters
+    ----------
+    result : SimulationResult
+        The run.
+    scenario : Scenario
+        What was run; its set-point changes are scored one by one, its ``evaluate_from`` [s]
+        starts the tracking window.
+
+    Returns
+    -------
+    RunMetrics
+    """
     t = result.t
     err = np.vstack([result.y[0] - result.reference[0], result.y[1] - result.reference[3]])
-    steps: list[StepMetrics] = []
-    if isinstance(scenario.reference, SetpointSequence):
-        times = [*scenario.reference.times, t[-1] + result.sample_time]
-        sp = np.asarray(scenario.reference.setpoints)
-        x0 = np.asarray(scenario.x0)
-        prev = np.array([x0[0], x0[2]])
-        for k in range(len(times) - 1):
-            seg = (t >= times[k]) & (t < times[k + 1])
-            size = sp[k] - prev
-            prev = sp[k]
-            if not np.any(seg):
-                continue
-            settle01, settle10, over = [], [], []
-            for a in range(2):
-                e = err[a, seg]
-                settle01.append(_settling(t[seg], e, BANDS[0]))
-                settle10.append(_settling(t[seg], e, BANDS[1]))
-                if abs(size[a]) < MIN_STEP:
-                    over.append(float("nan"))
-                else:
-                    past = np.max(np.sign(size[a]) * e)  # positive = beyond the set-point
-                    over.append(float(max(past, 0.0) / abs(size[a]) * 100))
-            steps.append(StepMetrics(times[k], tuple(size), tuple(settle01), tuple(settle10), tuple(over)))
+    steps = _step_metrics(t, err, scenario, result.sample_time)
     window = t >= scenario.evaluate_from
     e_win = np.abs(err[:, window])
     mag = np.hypot(result.u[0], result.u[1])
@@ -112,10 +113,11 @@ def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
         controller=result.controller,
         scenario=result.scenario,
         success=result.success,
+        status=result.status,
         message=result.message,
         steps=steps,
-        mean_error=tuple(np.nanmean(e_win, axis=1)),
-        peak_error=tuple(np.nanmax(e_win, axis=1)),
+        mean_error=PerAxis.of(np.nanmean(e_win, axis=1)),
+        peak_error=PerAxis.of(np.nanmax(e_win, axis=1)),
         rms_current=float(np.sqrt(np.nanmean(mag**2))),
         peak_current=float(np.nanmax(mag)),
         min_margin=float(np.nanmin(margin)) if np.any(np.isfinite(margin)) else float("nan"),
@@ -124,5 +126,35 @@ def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
         step_time_median=float(np.nanmedian(st)) if st is not None else float("nan"),
         step_time_p99=float(np.nanpercentile(st, 99)) if st is not None else float("nan"),
         step_time_max=float(np.nanmax(st)) if st is not None else float("nan"),
-        wall_time=result.wall_time,
+        timings=dict(result.timings),
     )
+
+
+def _step_metrics(t: np.ndarray, err: np.ndarray, scenario: Scenario, sample_time: float) -> tuple:
+    """Settling and overshoot of each set-point change of a SetpointSequence (none otherwise)."""
+    if not isinstance(scenario.reference, SetpointSequence):
+        return ()
+    steps = []
+    times = [*scenario.reference.times, t[-1] + sample_time]
+    sp = np.asarray(scenario.reference.setpoints)
+    x0 = np.asarray(scenario.x0)
+    prev = np.array([x0[0], x0[2]])
+    for k in range(len(times) - 1):
+        seg = (t >= times[k]) & (t < times[k + 1])
+        size = sp[k] - prev
+        prev = sp[k]
+        if not np.any(seg):
+            continue
+        settle01, settle10, over = [], [], []
+        for a in range(2):
+            e = err[a, seg]
+            settle01.append(_settling(t[seg], e, BANDS[0]))
+            settle10.append(_settling(t[seg], e, BANDS[1]))
+            if abs(size[a]) < MIN_STEP:
+                over.append(float("nan"))
+            else:
+                past = np.max(np.sign(size[a]) * e)  # positive = beyond the set-point
+                over.append(float(max(past, 0.0) / abs(size[a]) * 100))
+        per_axis = (PerAxis.of(v) for v in (size, settle01, settle10, over))
+        steps.append(StepMetrics(times[k], *per_axis))
+    return tuple(steps)

@@ -10,13 +10,17 @@ gcc), then every run costs only the arithmetic.
 from __future__ import annotations
 
 import ctypes
-import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
+from maglev_oc.errors import SolverError
+from maglev_oc.numerics import c_compiler
+
+__all__ = ["NativeLoop"]
 
 _DRIVER = r"""
 #include <stdlib.h>
@@ -46,14 +50,22 @@ int {name}_run(const double* z0, const double* r, const double* w, double* out, 
 """
 
 
-def compiler_available() -> bool:
-    return shutil.which("gcc") is not None or shutil.which("cc") is not None
-
-
 class NativeLoop:
     """``step`` (z, r, w) -> (z_next, out), all dense column vectors, run in a C loop.
 
     Call with z0 (nz,), r (nr, n), w (nw, n); returns out (nout, n) and the final z.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        (z, r, w) -> (z_next, out), dense columns (the fused closed-loop step of the engine).
+    flags : tuple of str
+        Compiler flags (default ``-O3``).
+
+    Raises
+    ------
+    SolverError
+        No C compiler, or compiling the generated code failed.
     """
 
     def __init__(self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",)) -> None:
@@ -64,9 +76,9 @@ class NativeLoop:
                 raise ValueError(f"input {k} of step must be a dense column")
         self.nz, self.nr, self.nw = (step.size1_in(k) for k in range(3))
         self.nout = step.size1_out(1)
-        cc = shutil.which("gcc") or shutil.which("cc")
+        cc = c_compiler()
         if cc is None:
-            raise RuntimeError("no C compiler (gcc/cc) on PATH: use the CasADi virtual machine")
+            raise SolverError("no C compiler ($CC, gcc, cc, clang) on PATH: use the CasADi virtual machine")
         self._dir = tempfile.TemporaryDirectory(prefix="maglev_oc_native_")
         name = "cl_step"
         ins = [step.sx_in(k) for k in range(3)]
@@ -86,7 +98,7 @@ class NativeLoop:
             check=False,
         )
         if done.returncode != 0:
-            raise RuntimeError(f"compiling the closed loop failed: {done.stderr[-2000:]}")
+            raise SolverError(f"compiling the closed loop failed: {done.stderr[-2000:]}")
         self._lib = ctypes.CDLL(str(lib))
         run = getattr(self._lib, f"{name}_run")
         dbl = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")

@@ -9,6 +9,8 @@ import numpy as np
 from maglev_oc.data.logs import Log
 from maglev_oc.sim.engine import SimulationResult
 
+__all__ = ["result_to_log"]
+
 
 def result_to_log(
     result: SimulationResult,
@@ -31,8 +33,12 @@ def result_to_log(
         Write which twin effects were on (``twin_effects``). Off by default: a log handed to
         identification or diagnosis should not say what is in it.
 
-    Velocities are not logged (the rig has no velocity sensor); the positions are the encoder
-    readings, quantized and noisy when the twin's encoder is on.
+    Returns
+    -------
+    Log
+        Velocities are not logged (the rig has no velocity sensor); the positions are the
+        encoder readings, quantized and noisy when the twin's encoder is on. A run that blew up
+        is kept up to its first non-finite sample.
     """
     fs = 1.0 / result.sample_time
     step = 1

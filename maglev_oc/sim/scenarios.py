@@ -14,6 +14,8 @@ import numpy as np
 from maglev_oc.control.gains import OMEGA0
 from maglev_oc.units import MM_TO_M
 
+__all__ = ["Scenario", "SetpointSequence", "Sinusoids", "excitation_scenario", "paper_scenarios"]
+
 
 @dataclass(frozen=True)
 class SetpointSequence:
@@ -112,7 +114,14 @@ class Scenario:
 
 
 def paper_scenarios() -> dict[str, Scenario]:
-    """The papers' experiments (SPEC 4), by name."""
+    """The papers' experiments (SPEC 4), by name.
+
+    Returns
+    -------
+    dict of str to Scenario
+        ``setpoint_steps``, ``small_step``, ``large_step`` and ``sinusoid``, each with the
+        numbers the papers report in ``paper``.
+    """
     # Five set-points over [-50, 50] mm x [15, 25] mm, 5 s apart (002 Figs. 9-10 show steps
     # every 5 s). The exact set-points are not printed. With the printed gains the linear
     # closed loop overshoots 42 % horizontally and 45 % vertically (the papers measured 43 % and
@@ -188,7 +197,21 @@ def excitation_scenario(duration: float = 60.0, seed: int = 0, gap_offset: float
     """Sum-of-sines references for identification (000 Sec. IV: "a summation of sinusoids at
     various frequencies"), tracked by the PID regulators. Six incommensurate frequencies per
     axis over 0.1-3 Hz with random phases; amplitudes fall as 1/sqrt(f) and sum to at most
-    3.8 mm about ``gap_offset`` vertically and 35 mm horizontally."""
+    3.8 mm about ``gap_offset`` vertically and 35 mm horizontally.
+
+    Parameters
+    ----------
+    duration : float
+        Length of the run [s].
+    seed : int
+        Seed of the random phases.
+    gap_offset : float
+        Centre of the vertical excursion [m].
+
+    Returns
+    -------
+    Scenario
+    """
     rng = np.random.default_rng(seed)
     freqs_v = np.array([0.13, 0.37, 0.71, 1.13, 1.9, 2.9])
     freqs_h = np.array([0.11, 0.29, 0.53, 0.97, 1.7, 2.6])

@@ -25,7 +25,10 @@ import numpy as np
 
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import rk4_step
 from maglev_oc.sim.effects import TwinEffects
+
+__all__ = ["RigTwin"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,71 +146,92 @@ class RigTwin:
         return ca.vertcat(*out)
 
     def _build(self) -> None:
-        e = self.effects
+        """The Functions ``acceleration``, ``step`` and ``measure`` (built once, at construction)."""
         set_ = object.__setattr__
+        set_(self, "acceleration", self._acceleration_function())
+        set_(self, "step", self._step_function())
+        set_(self, "measure", self._measure_function())
+
+    def _acceleration_function(self) -> ca.Function:
         x = ca.SX.sym("x", 4)
         i = ca.SX.sym("i", 2)
         fr = ca.SX.sym("friction", 2)
         acc_v, acc_h = self._accelerations(x, i, fr)
-        set_(
-            self,
-            "acceleration",
-            ca.Function("twin_acc", [x, i, fr], [ca.vertcat(acc_v, acc_h)], ["x", "i", "friction"], ["acc"]),
+        return ca.Function(
+            "twin_acc", [x, i, fr], [ca.vertcat(acc_v, acc_h)], ["x", "i", "friction"], ["acc"]
         )
 
+    def _step_function(self) -> ca.Function:
+        """One sample under ZOH: delay buffer, amplifier, RK4 of the mechanics, stoppers, friction."""
         s = ca.SX.sym("s", self.n_state)
         u_cmd = ca.SX.sym("u", 2)
         xs, cur, heat, fric = s[0:4], s[4:6], s[6], s[7:9]
-        d = e.input_delay_samples
-        if d > 0:
+        u_in, buf_next = self._delayed(s, u_cmd)
+        u_sat, limited, foldback = self._amplified(u_in, heat)
+        z = self._integrate(xs, heat, cur, fric, u_sat)
+        x_next, hit = self._stopped(z[0:4])
+        cur_next = self._current_at(u_sat, cur, self.sample_time)
+        fric_next = self._friction_update(fric, xs, self.sample_time)
+        s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next)
+        flags = ca.vertcat(limited, hit, foldback)
+        return ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"])
+
+    def _delayed(self, s, u_cmd):
+        """(command applied now, next delay buffer): the oldest command in the buffer when the
+        loop has a computation delay, else the command itself."""
+        if self.effects.input_delay_samples > 0:
             buf = s[9:]
-            u_in = buf[0:2]
-            buf_next = ca.vertcat(buf[2:], u_cmd)
-        else:
-            u_in = u_cmd
-            buf_next = ca.SX.zeros(0, 1)
+            return buf[0:2], ca.vertcat(buf[2:], u_cmd)
+        return u_cmd, ca.SX.zeros(0, 1)
 
-        amp = e.amplifier
-        if amp is not None:
-            limit = ca.if_else(heat > amp.continuous**2, amp.continuous, amp.peak)
-            mag = ca.sqrt(u_in[0] ** 2 + u_in[1] ** 2 + 1e-30)
-            scale = ca.fmin(1.0, limit / mag)
-            u_sat = u_in * scale
-            limited = mag > limit
-            foldback = heat > amp.continuous**2
-            tau, tau_th = amp.time_constant, amp.thermal_time_constant
-        else:
-            u_sat = u_in
-            limited = ca.SX(0)
-            foldback = ca.SX(0)
+    def _amplified(self, u_in, heat):
+        """(command the amplifier follows, limited flag, foldback flag): the current-vector
+        magnitude clipped to the peak, or to the continuous limit once the thermal state exceeds it."""
+        amp = self.effects.amplifier
+        if amp is None:
+            return u_in, ca.SX(0), ca.SX(0)
+        limit = ca.if_else(heat > amp.continuous**2, amp.continuous, amp.peak)
+        mag = ca.sqrt(u_in[0] ** 2 + u_in[1] ** 2 + 1e-30)
+        scale = ca.fmin(1.0, limit / mag)
+        return u_in * scale, mag > limit, heat > amp.continuous**2
 
-        def current_at(i0, theta):
-            """The amplifier's current theta [s] into the step: its first-order response to
-            the held command, exact (the lag is linear)."""
-            if amp is None:
-                return u_sat
-            return u_sat + (i0 - u_sat) * math.exp(-theta / tau)
+    def _current_at(self, u_sat, i0, theta: float):
+        """The amplifier's current theta [s] into the step: its first-order response to the held
+        command ``u_sat`` from ``i0``, exact (the lag is linear); ``u_sat`` itself without amplifier."""
+        amp = self.effects.amplifier
+        if amp is None:
+            return u_sat
+        return u_sat + (i0 - u_sat) * math.exp(-theta / amp.time_constant)
+
+    def _integrate(self, xs, heat, i0, fric, u_sat):
+        """(x (4), heat) at the end of the sample: ``substeps`` RK4 steps of the mechanics and the
+        thermal state, the current entering at each stage's time."""
+        amp = self.effects.amplifier
+        tau_heat = amp.thermal_time_constant if amp is not None else 2.0  # bookkeeping only without
 
         def rhs(z, i_applied):
             xz, hz = z[0:4], z[4]
             av, ah = self._accelerations(xz, i_applied, fric)
-            tau_heat = tau_th if amp is not None else 2.0  # bookkeeping only without amplifier
             dh = (i_applied[0] ** 2 + i_applied[1] ** 2 - hz) / tau_heat
             return ca.vertcat(xz[1], av, xz[3], ah, dh)
 
-        # RK4 on the mechanics and the thermal state; the current enters at each stage's time
         z = ca.vertcat(xs, heat)
-        i0 = cur
         h = self.sample_time / self.substeps
         for k in range(self.substeps):
             t0 = k * h
-            k1 = rhs(z, current_at(i0, t0))
-            k2 = rhs(z + h / 2 * k1, current_at(i0, t0 + h / 2))
-            k3 = rhs(z + h / 2 * k2, current_at(i0, t0 + h / 2))
-            k4 = rhs(z + h * k3, current_at(i0, t0 + h))
-            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        x_next = z[0:4]
-        cur_next = current_at(i0, self.sample_time)
+            z = rk4_step(
+                rhs,
+                z,
+                h,
+                self._current_at(u_sat, i0, t0),
+                args_mid=(self._current_at(u_sat, i0, t0 + h / 2),),
+                args_end=(self._current_at(u_sat, i0, t0 + h),),
+            )
+        return z
+
+    def _stopped(self, x_next):
+        """(x after the stoppers and locks, stopper-hit flag): a hit stops the axis (inelastic)."""
+        e = self.effects
         hit = ca.SX(0)
         if e.stoppers is not None:
             (g_lo, g_hi), (h_lo, h_hi) = e.stoppers.gap, e.stoppers.horizontal
@@ -225,27 +249,36 @@ class RigTwin:
             x_next = ca.vertcat(e.locked_gap, 0, x_next[2], x_next[3])
         if e.locked_position is not None:
             x_next = ca.vertcat(x_next[0], x_next[1], e.locked_position, 0)
-        fric_next = self._friction_update(fric, xs, self.sample_time)
-        s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next)
-        flags = ca.vertcat(limited, hit, foldback)
-        set_(
-            self,
-            "step",
-            ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"]),
-        )
+        return x_next, hit
 
+    def _measure_function(self) -> ca.Function:
+        """Encoder readings (gap, horizontal) [m]: offset, noise and quantization when on."""
+        s = ca.SX.sym("s", self.n_state)
         w = ca.SX.sym("w", 2)
-        enc = e.encoder
+        xs = s[0:4]
+        enc = self.effects.encoder
         if enc is not None:
             raw = ca.vertcat(xs[0] + enc.offset[0], xs[2] + enc.offset[1]) + enc.noise_std * w
             y = ca.floor(raw / enc.resolution + 0.5) * enc.resolution
         else:
             y = ca.vertcat(xs[0], xs[2])
-        set_(self, "measure", ca.Function("twin_measure", [s, w], [y], ["s", "w"], ["y"]))
+        return ca.Function("twin_measure", [s, w], [y], ["s", "w"], ["y"])
 
     # ------------------------------------------------------------------------------------
     def initial_state(self, x0, u0=(0.0, 0.0)) -> np.ndarray:
-        """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing."""
+        """Twin state for mechanical state ``x0`` with currents ``u0`` already flowing.
+
+        Parameters
+        ----------
+        x0 : (4,) array
+            [m, m/s, m, m/s] (a locked axis is put at its lock).
+        u0 : (2,) array
+            (i_q, i_d) [A], also filling the delay buffer; the thermal state is |u0|^2.
+
+        Returns
+        -------
+        (n_state,) array
+        """
         x0 = np.array(x0, dtype=float).reshape(4)
         u0 = np.asarray(u0, dtype=float).reshape(2)
         if self.effects.locked_gap is not None:
