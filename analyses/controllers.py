@@ -220,7 +220,7 @@ def build(out: Path, model: StageModel, *, nmpc: bool = True) -> Path:
         "set-point (tens of µm here; it grows with the Coulomb level), and the papers' larger "
         "vertical tracking error (0.24 mm) is not reproduced: our vertical disturbances (cogging, "
         "friction, model mismatch) are rejected by the stiff vertical loop.",
-        f"Total simulation wall time {cmp.wall_time:.1f} s for {len(cmp.results)} runs.",
+        f"Total simulation wall time {cmp.timings['total']:.1f} s for {len(cmp.results)} runs.",
     ]
     with PdfReport(out, TITLE, subtitle="reports/controllers.pdf from analyses/controllers.py") as pdf:
         pdf.add_text("Setup and findings", intro, first_page=True)

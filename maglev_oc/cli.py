@@ -159,7 +159,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     )
     print(
         f"  mean |error| (vertical, horizontal) = {mean[0]}, {mean[1]} mm; "
-        f"peak current {metrics.peak_current:.2f} A; simulated in {result.wall_time:.2f} s"
+        f"peak current {metrics.peak_current:.2f} A; simulated in {result.timings['total']:.2f} s"
     )
     print(f"  wrote {args.out} ({log.n} samples at {1 / log.sample_time:g} Hz)")
     return 0 if result.success else 1

@@ -71,11 +71,6 @@ class Comparison(Result):
         """The metrics of one run."""
         return self.metrics[(controller, scenario, twin)]
 
-    @property
-    def wall_time(self) -> float:
-        """``timings["total"]`` [s]; an alias kept for callers outside sim/ (analyses/controllers.py)."""
-        return self.timings.get("total", 0.0)
-
 
 def run_comparison(
     controllers: Sequence[object],

@@ -72,11 +72,6 @@ class SimulationResult(Result):
         """True tracking error (x1 - r_v, x3 - r_h), (2, n) [m]."""
         return np.vstack([self.x[0] - self.reference[0], self.x[2] - self.reference[3]])
 
-    @property
-    def wall_time(self) -> float:
-        """``timings["total"]`` [s]; an alias kept for callers outside sim/ (cli.py)."""
-        return self.timings["total"]
-
 
 CHUNK = 10_000
 """Samples per ``mapaccum`` call. Runs are simulated chunk by chunk: CasADi's mapaccum build
