@@ -26,6 +26,13 @@ from typing import Protocol, runtime_checkable
 import casadi as ca
 import numpy as np
 
+__all__ = ["N_MEASUREMENTS", "N_REFERENCE", "ExpressionController", "OnlineController"]
+
+N_MEASUREMENTS = 2
+"""Entries of ``y``: (gap, horizontal position) [m]."""
+N_REFERENCE = 6
+"""Rows of ``r``: (r_v, r_v', r_v'', r_h, r_h', r_h'') [m, m/s, m/s^2]."""
+
 
 @runtime_checkable
 class ExpressionController(Protocol):
