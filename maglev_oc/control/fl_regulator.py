@@ -24,6 +24,8 @@ from maglev_oc.model.feedback import transformation_expressions
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 
+__all__ = ["FeedbackLinearizingRegulator"]
+
 
 @dataclass(frozen=True, eq=False)
 class FeedbackLinearizingRegulator:
@@ -47,6 +49,12 @@ class FeedbackLinearizingRegulator:
         the plant with the effect still sees v. Evaluated at the measured positions and the
         observers' velocities.
     name : str
+
+    Attributes
+    ----------
+    step : casadi.Function
+        (c (10), y (2), r (6)) -> (u (2) [A], c_next (10), diag (4)); ``diag`` is
+        (margin [m/s^2], clipped, v1, v2 [m/s^2]).
     """
 
     model: StageModel
@@ -90,4 +98,6 @@ class FeedbackLinearizingRegulator:
         object.__setattr__(self, "step", step)
 
     def initial_state(self, y0, r0, u0=None) -> np.ndarray:
+        """The regulator state (10,) at start: observers at the first reading ``y0`` [m] at rest,
+        internal models empty (``r0`` and ``u0`` are not needed)."""
         return RegulatorCore.initial_state(y0, r0)
