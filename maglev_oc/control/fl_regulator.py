@@ -17,6 +17,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, checked_gains
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
@@ -75,8 +76,8 @@ class FeedbackLinearizingRegulator:
         core = RegulatorCore(self.sample_time, self.omega0, self.observer_epsilon)
         object.__setattr__(self, "core", core)
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         sig = core.signals(c, y, r)
         v1 = ca.dot(ca.DM(self.K_h), sig.z_h)
         v2 = ca.dot(ca.DM(self.K_v), sig.z_v)

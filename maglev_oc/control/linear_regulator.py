@@ -26,6 +26,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, axis_poles, place_axis
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
@@ -173,8 +174,8 @@ class ScheduledLinearRegulator:
         )
         interp = ca.interpolant("schedule", "linear", grid, table.ravel(order="F"))
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         sig = core.signals(c, y, r)
         g_ref = ca.fmin(ca.fmax(r[0], grid[0][0]), grid[0][-1])
         row = interp(g_ref)
@@ -199,7 +200,17 @@ class ScheduledLinearRegulator:
         return RegulatorCore.initial_state(y0, r0)
 
     def gains_at(self, gap: float) -> tuple[np.ndarray, np.ndarray]:
-        """(K_h, K_v) interpolated at ``gap`` [m]."""
+        """The gains at a gap, interpolated in the schedule.
+
+        Parameters
+        ----------
+        gap : float
+            [m].
+
+        Returns
+        -------
+        K_h, K_v : (5,) arrays
+        """
         g = self.schedule.gap
         kh = np.array([np.interp(gap, g, row) for row in self.gains_h])
         kv = np.array([np.interp(gap, g, row) for row in self.gains_v])

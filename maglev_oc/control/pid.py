@@ -18,6 +18,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.linear_regulator import axis_linearizations
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
@@ -114,8 +115,8 @@ class PidRegulator:
         obs = HighGainObserver(self.sample_time, self.observer_epsilon)
         ts = self.sample_time
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         e1, e2 = y[0] - r[0], y[1] - r[3]
         e1d, e2d = c[1] - r[1], c[3] - r[4]
         gv, gh = self.vertical, self.horizontal

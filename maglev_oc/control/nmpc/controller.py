@@ -9,6 +9,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS
 from maglev_oc.control.nmpc.converged import ConvergedSolver
 from maglev_oc.control.nmpc.grid import node_references, shift_matrix
 from maglev_oc.control.nmpc.layout import NU, NX, MemoryLayout, u_index, x_index
@@ -121,7 +122,19 @@ class NonlinearMPC:
         return self.grid.node_offsets
 
     def local_lqr(self, gap: float, position: float = 0.0) -> LocalLQR:
-        """The LQR the NMPC coincides with near the equilibrium at ``gap`` [m] and ``position`` [m]."""
+        """The LQR the NMPC coincides with near an equilibrium.
+
+        Parameters
+        ----------
+        gap : float
+            Equilibrium gap [m].
+        position : float
+            Equilibrium horizontal position [m].
+
+        Returns
+        -------
+        LocalLQR
+        """
         return self._ocp.local_lqr(gap, position)
 
     # ------------------------------------------------------------------------------------
@@ -143,7 +156,7 @@ class NonlinearMPC:
             The memory (:class:`~.layout.MemoryLayout`): no disturbance, the plan holding the
             current position.
         """
-        y0 = np.asarray(y0, dtype=float).reshape(2)
+        y0 = np.asarray(y0, dtype=float).reshape(N_MEASUREMENTS)
         u0 = np.zeros(NU) if u0 is None else np.asarray(u0, dtype=float).reshape(NU)
         at_rest = [y0[0], 0.0, y0[1], 0.0]  # the observer and every node: the reading, no velocity
         z = np.zeros(self.nz)
@@ -154,15 +167,37 @@ class NonlinearMPC:
         return np.concatenate([at_rest, np.zeros(N_DISTURBANCE), z])
 
     def reset(self, y0, r0, u0) -> None:
-        """Prepare a run: memory from :meth:`initial_memory`, ``u0`` [A] as the last current."""
+        """Prepare a run.
+
+        Parameters
+        ----------
+        y0 : (2,) array
+            First encoder reading [m].
+        r0 : (6,) array
+            First reference sample.
+        u0 : (2,) array
+            The current already flowing [A], also the last current applied.
+        """
         self._memory = self.initial_memory(y0, r0, u0)
         self._u_last = np.asarray(u0, dtype=float).reshape(NU).copy()
         if self._converged is not None:
             self._converged.reset()
 
     def node_references(self, k: int, reference: np.ndarray) -> np.ndarray:
-        """The reference (6, N + 1) at the shooting nodes from sample ``k`` on
-        (:func:`~.grid.node_references` with this controller's ``preview``)."""
+        """The reference at the shooting nodes from sample ``k`` on.
+
+        Parameters
+        ----------
+        k : int
+            Current sample.
+        reference : (6, n) array
+            The whole sampled reference.
+
+        Returns
+        -------
+        (6, N + 1) array
+            :func:`~.grid.node_references` with this controller's ``preview``.
+        """
         return node_references(self.grid, k, reference, preview=self.preview)
 
     def control(self, k: int, y, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

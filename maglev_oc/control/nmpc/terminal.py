@@ -64,7 +64,17 @@ class TerminalCostTable:
         return out
 
     def at(self, gap: float) -> np.ndarray:
-        """P at ``gap`` [m] as a (4, 4) array, linear between the tabulated gaps, clamped outside."""
+        """P at a gap, linear between the tabulated gaps, clamped outside.
+
+        Parameters
+        ----------
+        gap : float
+            [m].
+
+        Returns
+        -------
+        (4, 4) array
+        """
         g = float(np.clip(gap, self.gaps[0], self.gaps[-1]))
         return np.array([[np.interp(g, self.gaps, self.P[:, r, c]) for c in range(NX)] for r in range(NX)])
 
