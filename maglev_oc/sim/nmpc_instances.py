@@ -11,6 +11,7 @@ import numpy as np
 
 from maglev_oc.control.codegen import RecordedInstances, instance_row
 from maglev_oc.control.nmpc import NonlinearMPC
+from maglev_oc.errors import InputError
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.scenarios import Scenario
 from maglev_oc.sim.twin import RigTwin
@@ -67,11 +68,16 @@ def record_instances(
     Returns
     -------
     RecordedInstances
+
+    Raises
+    ------
+    InputError
+        For a controller not in mode "rti" or a non-positive ``every``.
     """
     if controller.mode != "rti":
-        raise ValueError(f"instances are recorded from an RTI controller, got mode {controller.mode!r}")
+        raise InputError(f"instances are recorded from an RTI controller, got mode {controller.mode!r}")
     if not (isinstance(every, int) and every >= 1):
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+        raise InputError(f"every must be a positive integer, got {every!r}")
     rec = _Recorder(controller, every, limit)
     ClosedLoop(twin, rec).run(scenario, seed=seed)
     return RecordedInstances.of(controller, rec.rows)
