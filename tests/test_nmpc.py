@@ -15,6 +15,7 @@ from scipy.linalg import solve_continuous_are
 from maglev_oc.control.base import OnlineController
 from maglev_oc.control.nmpc import (
     DIAG_NAMES,
+    NMPCSettings,
     NMPCStep,
     NMPCWeights,
     NonlinearMPC,
@@ -82,6 +83,13 @@ def test_settings_are_validated(model):
         NonlinearMPC(model, disturbance_bandwidth=400.0)
     with pytest.raises(ValueError, match="i_q"):
         NMPCWeights(i_q=0.0)
+    # the settings as one object: defaults resolved, the grid derived, replace re-validates
+    settings = NMPCSettings(horizon=40, preview=False)
+    assert settings.grid.horizon == 40 and settings.weights == NMPCWeights()
+    assert settings.controller_name == "NMPC"
+    assert dataclasses.replace(settings, mode="converged").controller_name == "NMPC (converged, IPOPT)"
+    with pytest.raises(ValueError, match="mode"):
+        dataclasses.replace(settings, mode="sqp")
     with pytest.raises(TypeError):
         NonlinearMPC(model, horizn=20)
     with pytest.raises(RuntimeError, match="reset"):

@@ -76,7 +76,7 @@ class NonlinearMPC:
         self.preview = s.preview
         self.current_limit = float(s.current_limit)
         self.compiled = s.compile
-        self.name = s.name
+        self.name = s.controller_name
         self.diag_names = DIAG_NAMES
         self._ocp = Transcription(
             model, self.grid, s.weights, s.current_limit, s.gap_bounds, s.position_bounds

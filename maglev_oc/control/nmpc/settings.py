@@ -154,6 +154,8 @@ class NMPCSettings:
     ----------
     grid : ShootingGrid
         The shooting grid: one sample, then N - 1 intervals of ``interval``.
+    controller_name : str
+        ``name``, or the default of the mode.
 
     Raises
     ------
@@ -191,7 +193,6 @@ class NMPCSettings:
         weights = NMPCWeights() if self.weights is None else self.weights
         if not isinstance(weights, NMPCWeights):
             raise TypeError(f"weights must be NMPCWeights, got {type(weights).__name__}")
-        default_name = "NMPC" if self.mode == "rti" else "NMPC (converged, IPOPT)"
         for key, value in (
             ("weights", weights),
             ("gap_bounds", tuple(self.gap_bounds)),
@@ -200,7 +201,6 @@ class NMPCSettings:
             ("preview", bool(self.preview)),
             ("unconstrained_shortcut", bool(self.unconstrained_shortcut)),
             ("compile", bool(self.compile)),
-            ("name", self.name or default_name),
             (
                 "grid",
                 ShootingGrid(
@@ -246,3 +246,8 @@ class NMPCSettings:
                 f"disturbance_bandwidth {w_d} rad/s is too close to the observer's "
                 f"1/eps = {1 / eps:g} rad/s (keep w_d eps <= 0.5)"
             )
+
+    @property
+    def controller_name(self) -> str:
+        """``name``, or the default of the mode."""
+        return self.name or ("NMPC" if self.mode == "rti" else "NMPC (converged, IPOPT)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -29,14 +30,16 @@ C leaves qp_iterations at -1 and qp_status at NaN on QP samples (no solver stati
 
 _COL = {name: i for i, name in enumerate(DIAG_NAMES)}
 
-STATUSES: Mapping[str, str] = {
-    "unconstrained": "the unconstrained (Riccati) step satisfied every bound; no QP was solved",
-    "qp_solved": "the QP solver converged and its solution passed the checks",
-    "qp_accepted": "the QP solver reported a failure but its solution passed the checks",
-    "qp_unreported": "the QP solution passed the checks; the solver's statistics were not available",
-    "converged": "IPOPT converged",
-    "fallback": "no solution passed the checks; the shifted previous plan was applied",
-}
+STATUSES: Mapping[str, str] = MappingProxyType(
+    {
+        "unconstrained": "the unconstrained (Riccati) step satisfied every bound; no QP was solved",
+        "qp_solved": "the QP solver converged and its solution passed the checks",
+        "qp_accepted": "the QP solver reported a failure but its solution passed the checks",
+        "qp_unreported": "the QP solution passed the checks; the solver's statistics were not available",
+        "converged": "IPOPT converged",
+        "fallback": "no solution passed the checks; the shifted previous plan was applied",
+    }
+)
 """The status words of :class:`NMPCStep` and what each means."""
 
 
