@@ -36,8 +36,10 @@ from maglev_oc.control import codegen
 from maglev_oc.control.nmpc import NonlinearMPC
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import c_compiler
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
+from maglev_oc.sim.nmpc_instances import record_instances
 from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
@@ -74,7 +76,7 @@ def python_run(model, twin, scenario, **kwargs) -> tuple[dict, float, object]:
 
 
 def c_run(ctrl, twin, scenario, workdir: Path) -> dict:
-    inst = codegen.record_instances(ctrl, twin, scenario)
+    inst = record_instances(ctrl, twin, scenario)
     code = codegen.generate_c(ctrl, workdir)
     t0 = time.perf_counter()
     exe = codegen.build_harness(code, workdir / "harness")
@@ -113,7 +115,7 @@ def main() -> None:
     twin = RigTwin(model.with_constants(PAPER_CONSTANTS["table3_eps0.05"]), TwinEffects.rig(), substeps=4)
     scenario = dataclasses.replace(paper_scenarios()["large_step"], duration=seconds)
     nlp_scenario = dataclasses.replace(scenario, duration=0.1)
-    have_cc = codegen.c_compiler() is not None
+    have_cc = c_compiler() is not None
     results: dict = {"machine": machine(), "scenario": f"large_step, first {seconds:g} s, rig twin"}
     print(f"machine: {machine()}; load average {os.getloadavg()[0]:.2f} (2 cores)")
     print(f"scenario: papers' large step, first {seconds:g} s, rig twin (Table III eps=0.05, all effects)")

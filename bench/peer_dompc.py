@@ -73,10 +73,13 @@ from common import fmt, machine
 
 from maglev_oc.control import codegen
 from maglev_oc.control.nmpc import DEFAULT_GAP_BOUNDS, DEFAULT_POSITION_BOUNDS, NMPCWeights, NonlinearMPC
+from maglev_oc.control.nmpc.converged import IPOPT_OPTIONS
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.feedback import transformation_expressions
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import c_compiler, rk4_step
 from maglev_oc.sim.engine import ClosedLoop, SimulationResult
+from maglev_oc.sim.nmpc_instances import record_instances
 from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
@@ -88,15 +91,9 @@ except ImportError:
     sys.exit("bench/peer_dompc.py needs do-mpc (a peer, not a dependency): pip install -e '.[peers]'")
 
 
-OUR_IPOPT_OPTIONS = {
-    "ipopt.tol": 1e-10,
-    "ipopt.acceptable_tol": 1e-8,
-    "ipopt.max_iter": 200,
-    "ipopt.warm_start_init_point": "yes",
-    "ipopt.mu_strategy": "adaptive",
-}
-"""The IPOPT options of our converged mode (NonlinearMPC._build_nlp), for do-mpc's second row
-(do-mpc passes the previous multipliers to IPOPT, so the primal-dual warm start is the same)."""
+OUR_IPOPT_OPTIONS = {f"ipopt.{key}": value for key, value in IPOPT_OPTIONS.items()}
+"""The IPOPT options of our converged mode (maglev_oc.control.nmpc.converged), for do-mpc's second
+row (do-mpc passes the previous multipliers to IPOPT, so the primal-dual warm start is the same)."""
 DOMPC_ROWS = ("do-mpc (IPOPT defaults)", "do-mpc (IPOPT, our options)")
 
 
@@ -104,11 +101,7 @@ DOMPC_ROWS = ("do-mpc (IPOPT defaults)", "do-mpc (IPOPT, our options)")
 def rk4_function(model: StageModel) -> ca.Function:
     """(x, u, h) -> x after one RK4 step of length h: the same step our NMPC shoots with."""
     x, u, h = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("h")
-    k1 = model.f(x, u)
-    k2 = model.f(x + h / 2 * k1, u)
-    k3 = model.f(x + h / 2 * k2, u)
-    k4 = model.f(x + h * k3, u)
-    return ca.Function("rk4", [x, u, h], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+    return ca.Function("rk4", [x, u, h], [rk4_step(model.f, x, h, u)])
 
 
 def feedforward_function(model: StageModel) -> ca.Function:
@@ -248,7 +241,7 @@ def run(label: str, twin: RigTwin, ctrl, scenario, model, weights) -> tuple[dict
 
 def c_run(ctrl: NonlinearMPC, exe: Path, twin: RigTwin, scenario, workdir: Path) -> dict:
     """Replay the RTI calls of ``scenario`` through the generated C; check against Python."""
-    inst = codegen.record_instances(ctrl, twin, scenario)
+    inst = record_instances(ctrl, twin, scenario)
     path = codegen.write_instances(workdir / "instances.bin", inst)
     timing = codegen.run_harness(exe, path, workdir / "outputs.bin", repeat=2)
     got = codegen.read_outputs(workdir / "outputs.bin")
@@ -286,7 +279,7 @@ def main() -> None:
     rti = NonlinearMPC(model, disturbance_bandwidth=0.0)
     builds = {"ours RTI (VM)": time.perf_counter() - t0}
     controllers: list[tuple[str, object]] = [("ours RTI (VM)", rti)]
-    if not args.no_jit and codegen.c_compiler() is not None:
+    if not args.no_jit and c_compiler() is not None:
         t0 = time.perf_counter()
         controllers.append(("ours RTI (JIT)", NonlinearMPC(model, disturbance_bandwidth=0.0, compile=True)))
         builds["ours RTI (JIT)"] = time.perf_counter() - t0
@@ -301,7 +294,7 @@ def main() -> None:
     builds["do-mpc (both)"] = time.perf_counter() - t0
     exe = None
     workdir = Path(tempfile.mkdtemp(prefix="peer_dompc_"))
-    if not args.no_c and codegen.c_compiler() is not None:
+    if not args.no_c and c_compiler() is not None:
         t0 = time.perf_counter()
         exe = codegen.build_harness(codegen.generate_c(rti, workdir), workdir / "harness")
         builds["ours RTI (C)"] = time.perf_counter() - t0

@@ -14,6 +14,7 @@ from maglev_oc.control.gains import (
     place_axis,
 )
 from maglev_oc.model.equilibrium import equilibrium
+from maglev_oc.results import check_result
 
 
 def test_transformation_linearizes(model, transformation):
@@ -96,6 +97,9 @@ def test_pole_placement_round_trip_and_closed_form():
 def test_printed_gains_move_the_poles():
     # The printed integers are stable but move K_h's real poles off the real axis.
     checks = {c.paper.name: c for c in check_paper_gains()}
+    for c in checks.values():
+        check_result(c)
+        assert c.success and c.status == "stable"  # every printed gain vector stabilizes its axis
     kh = checks["K_h"]
     assert np.all(kh.printed_poles.real < 0)
     assert np.max(np.abs(kh.printed_poles.imag)) > 1.0  # design poles are all real

@@ -15,18 +15,25 @@ from scipy.linalg import solve_continuous_are
 from maglev_oc.control.base import OnlineController
 from maglev_oc.control.nmpc import (
     DIAG_NAMES,
+    NMPCSettings,
+    NMPCStep,
     NMPCWeights,
     NonlinearMPC,
     ShootingGrid,
-    _Estimator,
     shift_matrix,
+    step_status,
 )
+from maglev_oc.estimation.extended_high_gain import ExtendedHighGainObserver
 from maglev_oc.estimation.high_gain import HighGainObserver
 from maglev_oc.model.equilibrium import equilibrium
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.linearization import linearize
 from maglev_oc.model.parameters import PAPER_CONSTANTS
+from maglev_oc.numerics import c_compiler
+from maglev_oc.results import check_result
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
+from maglev_oc.sim.nmpc_instances import record_instances
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence, paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
@@ -76,6 +83,13 @@ def test_settings_are_validated(model):
         NonlinearMPC(model, disturbance_bandwidth=400.0)
     with pytest.raises(ValueError, match="i_q"):
         NMPCWeights(i_q=0.0)
+    # the settings as one object: defaults resolved, the grid derived, replace re-validates
+    settings = NMPCSettings(horizon=40, preview=False)
+    assert settings.grid.horizon == 40 and settings.weights == NMPCWeights()
+    assert settings.controller_name == "NMPC"
+    assert dataclasses.replace(settings, mode="converged").controller_name == "NMPC (converged, IPOPT)"
+    with pytest.raises(ValueError, match="mode"):
+        dataclasses.replace(settings, mode="sqp")
     with pytest.raises(TypeError):
         NonlinearMPC(model, horizn=20)
     with pytest.raises(RuntimeError, match="reset"):
@@ -122,14 +136,14 @@ def test_reference_preview_extrapolates_past_the_end(mpc, model):
     assert_allclose(causal.node_references(90, ref)[3], 0.1 * times, atol=1e-15)
 
 
-def _estimator_function(est: _Estimator) -> ca.Function:
+def _estimator_function(est: ExtendedHighGainObserver) -> ca.Function:
     obs, d, y, u = ca.SX.sym("obs", 4), ca.SX.sym("d", 2), ca.SX.sym("y", 2), ca.SX.sym("u", 2)
     return ca.Function("est", [obs, d, y, u], list(est.update(obs, d, y, u)))
 
 
 def test_estimator_reuses_the_high_gain_observer_and_its_poles(model):
     # With w_d = 0 the (p, q) update is HighGainObserver.step exactly (reuse, not a copy).
-    est = _Estimator(model, TS, 2e-3, 0.0, 5.0)
+    est = ExtendedHighGainObserver(model, TS, 2e-3, 0.0, 5.0)
     hgo = HighGainObserver(TS, 2e-3)
     obs, d = np.array([0.02, 0.01, 0.003, -0.02]), np.array([0.1, -0.2])
     y, u = np.array([0.0201, 0.0031]), [0.2, 1.5]
@@ -141,7 +155,9 @@ def test_estimator_reuses_the_high_gain_observer_and_its_poles(model):
     assert_allclose(np.asarray(d_next).ravel(), d)
     # With w_d = 30 rad/s: the observer pair stays near exp(-Ts/eps) = 0.905 (the slow loop moves
     # it by ~w_d eps = 6 %) and the third pole is the disturbance estimate's, near exp(-w_d Ts).
-    ev = np.sort(np.abs(np.linalg.eigvals(_Estimator(model, TS, 2e-3, 30.0, 5.0).error_dynamics())))
+    ev = np.sort(
+        np.abs(np.linalg.eigvals(ExtendedHighGainObserver(model, TS, 2e-3, 30.0, 5.0).error_dynamics()))
+    )
     assert np.all(ev < 1)
     assert_allclose(ev[:2], math.exp(-TS / 2e-3), rtol=0.06)
     assert_allclose(-math.log(ev[2]) / TS, 30.0, rtol=0.25)
@@ -152,7 +168,7 @@ def test_disturbance_estimate_is_unbiased_on_a_moving_stage(model):
     # to the model: the disturbance estimate must stay ~0. (The rectangle-rule integral of the
     # innovation reads the half-sample lag v Ts / 2 as 3.5 m/s^2; the exact integral leaves the
     # curvature term, below 1e-3 m/s^2.)
-    est = _estimator_function(_Estimator(model, TS, 2e-3, 30.0, 5.0))
+    est = _estimator_function(ExtendedHighGainObserver(model, TS, 2e-3, 30.0, 5.0))
     t = np.arange(0, 3, TS)
     w, amp = 1.5 * math.pi, 0.03
     obs = np.array([0.02, 0.0, 0.0, amp * w])
@@ -193,7 +209,8 @@ def test_nmpc_near_equilibrium_is_the_lqr(mpc, model):
     for scale in (1.0, 0.5):
         dx = scale * np.array([10e-6, 1e-3, 10e-6, 1e-3])
         mem, y, ref, op = _equilibrium_inputs(mpc, model, 20 * MM, dx)
-        u, _, diag = mpc.step_rti(mem, y, ref)
+        step = mpc.step_rti(mem, y, ref)
+        u, diag = step.u, step.diag
         assert _diag(diag, "solver_ok") == 1
         expected = -lqr.gain_first @ dx
         errors.append(np.max(np.abs((u - op.u) - expected)))
@@ -213,14 +230,38 @@ def test_unconstrained_shortcut_is_the_qp_solution(model):
     qp_only = NonlinearMPC(model, unconstrained_shortcut=False)
     for dx, constrained in (([50e-6, 0.0, 50e-6, 0.0], False), ([4e-3, 0.0, 15e-3, 0.0], True)):
         mem, y, ref, _ = _equilibrium_inputs(with_lq, model, 20 * MM, dx)
-        u1, m1, d1 = with_lq.step_rti(mem, y, ref)
-        u2, m2, d2 = qp_only.step_rti(mem, y, ref)
+        s1, s2 = with_lq.step_rti(mem, y, ref), qp_only.step_rti(mem, y, ref)
+        (u1, m1, d1), (u2, m2, d2) = (s1.u, s1.memory_next, s1.diag), (s2.u, s2.memory_next, s2.diag)
         assert _diag(d1, "solver_ok") == 1 and _diag(d2, "solver_ok") == 1
         assert (_diag(d1, "qp_iterations") != 0) == constrained  # 0: no QP was needed
         assert _diag(d1, "qp_status") == (0 if constrained else -1)
         assert (_diag(d1, "active_constraints") > 0) == constrained
         assert_allclose(u1, u2, atol=1e-6)
         assert_allclose(m1[6:], m2[6:], atol=1e-6)
+
+
+def test_step_result_says_what_the_update_did(mpc, model):
+    # The numeric diagnostics row of an RTI update in words (the result convention of
+    # maglev_oc.results): 50 um from the equilibrium needs no QP, 4 mm / 15 mm needs it (as in
+    # test_unconstrained_shortcut_is_the_qp_solution), a NaN reading gets the fallback.
+    for status, dx in (("unconstrained", [50e-6, 0.0, 50e-6, 0.0]), ("qp_solved", [4e-3, 0.0, 15e-3, 0.0])):
+        mem, y, ref, _ = _equilibrium_inputs(mpc, model, 20 * MM, dx)
+        step = mpc.step_rti(mem, y, ref)
+        check_result(step)
+        assert isinstance(step, NMPCStep)
+        assert step.success and step.status == status
+        assert (step.qp_iterations > 0) == (status == "qp_solved")
+        assert step.timings["step"] > 0
+        assert_allclose(step.disturbance.as_array(), mem[4:6])
+    failed = mpc.step_rti(mem, np.array([np.nan, 0.0]), ref)
+    check_result(failed)
+    assert not failed.success and failed.status == "fallback" and failed.active_constraints == -1
+    assert "fallback" in failed.report()
+    # rows the RTI step above does not produce: converged mode, statistics not available
+    assert step_status([1, 12, 0.1, 0, 0, 3, 0], mode="converged") == "converged"
+    assert step_status([0, 12, 0.1, 0, 0, -1, 1], mode="converged") == "fallback"
+    assert step_status([1, -1, 0.1, 0, 0, 3, np.nan]) == "qp_unreported"
+    assert step_status([1, 30, 0.1, 0, 0, 3, 1]) == "qp_accepted"
 
 
 @pytest.mark.parametrize("case", ["nan_measurement", "infeasible"])
@@ -245,7 +286,7 @@ def test_failed_qp_is_reported_not_raised(model, case):
     u, diag = ctrl.control(3, y, ref)
     assert _diag(diag, "solver_ok") == 0
     assert np.all(np.isfinite(u))
-    assert math.hypot(*u) <= 9.0 + 1e-9
+    assert math.hypot(*u) <= PEAK_CURRENT_LIMIT + 1e-9
     assert_allclose(u, plan_u, atol=1e-9)  # the shifted previous plan's first input
     assert np.all(np.isfinite(ctrl.memory[6:]))
     # and the loop goes on
@@ -265,7 +306,7 @@ def test_ideal_twin_small_step_settles_below_0_1_mm(model):
     assert np.max(np.abs(res.error[:, -1])) < 1e-6
     assert np.all(res.diagnostic("solver_ok") == 1)
     # the current command respects the 9 A octagon (its facets at 9 cos(pi/8) A)
-    assert np.max(np.hypot(res.u[0], res.u[1])) <= 9.0 + 1e-9
+    assert np.max(np.hypot(res.u[0], res.u[1])) <= PEAK_CURRENT_LIMIT + 1e-9
 
 
 # ------------------------------------------------------------------------------------------
@@ -325,7 +366,7 @@ def test_horizon_40_and_the_large_step(model):
     assert np.all(res.diagnostic("qp_iterations")[qp] > 0)  # its statistics were read
     assert np.all(res.diagnostic("qp_status")[qp] == 0)
     assert np.max(np.abs(res.error[:, res.t >= 0.6])) < 0.1 * MM
-    assert np.max(np.hypot(res.u[0], res.u[1])) <= 9.0 + 1e-9
+    assert np.max(np.hypot(res.u[0], res.u[1])) <= PEAK_CURRENT_LIMIT + 1e-9
 
 
 @pytest.mark.slow
@@ -336,12 +377,12 @@ def test_generated_c_matches_python(model, tmp_path, qp_solver):
     # samples). Same operations in the same order, IEEE arithmetic (no -ffast-math): the
     # difference is at round-off; tolerance 1e-9 absolute (A, m, m/s).
     codegen = pytest.importorskip("maglev_oc.control.codegen")
-    if codegen.c_compiler() is None:
+    if c_compiler() is None:
         pytest.skip("no C compiler (gcc/cc) available to compile the generated code")
 
     ctrl = NonlinearMPC(model, qp_solver=qp_solver)
     sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.3)
-    inst = codegen.record_instances(ctrl, RigTwin(model), sc, every=10)
+    inst = record_instances(ctrl, RigTwin(model), sc, every=10)
     assert len(inst) == 150
     code = codegen.generate_c(ctrl, tmp_path / "gen")
     lib = codegen.compile_shared(code)
@@ -355,5 +396,6 @@ def test_generated_c_matches_python(model, tmp_path, qp_solver):
     path = codegen.write_instances(tmp_path / "inst.bin", inst)
     timing = codegen.run_harness(exe, path, tmp_path / "out.bin", repeat=2)
     assert timing.instances == 150 and timing.failed_calls == 0 and timing.median > 0
+    check_result(timing)
     for a, b in zip(codegen.read_outputs(tmp_path / "out.bin"), expected, strict=True):
         assert_allclose(a, b, rtol=0, atol=1e-9)

@@ -26,9 +26,31 @@ from typing import Protocol, runtime_checkable
 import casadi as ca
 import numpy as np
 
+__all__ = ["N_MEASUREMENTS", "N_REFERENCE", "ExpressionController", "OnlineController"]
+
+N_MEASUREMENTS = 2
+"""Entries of ``y``: (gap, horizontal position) [m]."""
+N_REFERENCE = 6
+"""Rows of ``r``: (r_v, r_v', r_v'', r_h, r_h', r_h'') [m, m/s, m/s^2]."""
+
 
 @runtime_checkable
 class ExpressionController(Protocol):
+    """A controller whose whole update is one CasADi Function.
+
+    Attributes
+    ----------
+    name : str
+    sample_time : float
+        [s].
+    n_state : int
+        Entries of the controller state c.
+    diag_names : tuple of str
+        Rows of ``diag``.
+    step : casadi.Function
+        (c, y (2), r (6)) -> (u (2) [A], c_next, diag).
+    """
+
     name: str
     sample_time: float
     n_state: int
@@ -36,22 +58,71 @@ class ExpressionController(Protocol):
     step: ca.Function  # (c, y, r) -> (u, c_next, diag)
 
     def initial_state(self, y0: np.ndarray, r0: np.ndarray, u0: np.ndarray) -> np.ndarray:
-        """Controller state at start, given the first measurement, reference and the current
-        already flowing (for bumpless start)."""
+        """Controller state at start.
+
+        Parameters
+        ----------
+        y0 : (2,) array
+            First measurement [m].
+        r0 : (6,) array
+            First reference sample.
+        u0 : (2,) array
+            The current already flowing [A] (for a bumpless start).
+
+        Returns
+        -------
+        (n_state,) array
+        """
         ...
 
 
 @runtime_checkable
 class OnlineController(Protocol):
+    """A controller that solves something each sample, stepped from Python.
+
+    Attributes
+    ----------
+    name : str
+    sample_time : float
+        [s].
+    diag_names : tuple of str
+        Entries of the diagnostics :meth:`control` returns.
+    """
+
     name: str
     sample_time: float
     diag_names: tuple[str, ...]
 
     def reset(self, y0: np.ndarray, r0: np.ndarray, u0: np.ndarray) -> None:
-        """Prepare for a new run (observer, warm start)."""
+        """Prepare for a new run (observer, warm start).
+
+        Parameters
+        ----------
+        y0 : (2,) array
+            First measurement [m].
+        r0 : (6,) array
+            First reference sample.
+        u0 : (2,) array
+            The current already flowing [A].
+        """
         ...
 
     def control(self, k: int, y: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Current command (2,) and diagnostics (len(diag_names),) at sample k, given the
-        measurement y (2,) and the whole sampled reference (6, n) (for preview)."""
+        """One update.
+
+        Parameters
+        ----------
+        k : int
+            Sample index.
+        y : (2,) array
+            Measurement [m].
+        reference : (6, n) array
+            The whole sampled reference (for preview).
+
+        Returns
+        -------
+        u : (2,) array
+            Current command [A].
+        diag : (len(diag_names),) array
+        """
         ...

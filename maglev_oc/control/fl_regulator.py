@@ -17,12 +17,15 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, checked_gains
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.feedback import transformation_expressions
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
+
+__all__ = ["FeedbackLinearizingRegulator"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +50,12 @@ class FeedbackLinearizingRegulator:
         the plant with the effect still sees v. Evaluated at the measured positions and the
         observers' velocities.
     name : str
+
+    Attributes
+    ----------
+    step : casadi.Function
+        (c (10), y (2), r (6)) -> (u (2) [A], c_next (10), diag (4)); ``diag`` is
+        (margin [m/s^2], clipped, v1, v2 [m/s^2]).
     """
 
     model: StageModel
@@ -67,8 +76,8 @@ class FeedbackLinearizingRegulator:
         core = RegulatorCore(self.sample_time, self.omega0, self.observer_epsilon)
         object.__setattr__(self, "core", core)
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         sig = core.signals(c, y, r)
         v1 = ca.dot(ca.DM(self.K_h), sig.z_h)
         v2 = ca.dot(ca.DM(self.K_v), sig.z_v)
@@ -90,4 +99,6 @@ class FeedbackLinearizingRegulator:
         object.__setattr__(self, "step", step)
 
     def initial_state(self, y0, r0, u0=None) -> np.ndarray:
+        """The regulator state (10,) at start: observers at the first reading ``y0`` [m] at rest,
+        internal models empty (``r0`` and ``u0`` are not needed)."""
         return RegulatorCore.initial_state(y0, r0)

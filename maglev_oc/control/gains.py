@@ -16,16 +16,47 @@ their product). The closed loop z' = (A + B K) z has characteristic polynomial
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from maglev_oc.results import Result
+
+__all__ = [
+    "OMEGA0",
+    "PAPER_GAINS",
+    "PAPER_K_H",
+    "PAPER_K_V",
+    "GainCheck",
+    "PaperGains",
+    "augmented_axis",
+    "axis_poles",
+    "check_paper_gains",
+    "checked_gains",
+    "internal_model",
+    "place_axis",
+]
 
 OMEGA0 = 1.5 * math.pi
 """Exosystem frequency of the papers [rad/s] (001, 002: omega0 = 1.5 pi)."""
 
 
 def internal_model(omega0: float = OMEGA0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(phi, N, Gamma) of eqs. (21)-(22) of 002."""
+    """The internal model of eqs. (21)-(22) of 002.
+
+    Parameters
+    ----------
+    omega0 : float
+        Exosystem frequency [rad/s].
+
+    Returns
+    -------
+    phi : (3, 3) array
+        xi' = phi xi + N e.
+    N : (3, 1) array
+    Gamma : (1, 3) array
+    """
     phi = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -(omega0**2), 0.0]])
     n = np.array([[0.0], [0.0], [1.0]])
     gamma = np.array([[1.0, 0.0, 0.0]])
@@ -33,7 +64,24 @@ def internal_model(omega0: float = OMEGA0) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def checked_gains(value, label: str) -> np.ndarray:
-    """``value`` as five finite gains (5,), or ``ValueError`` naming ``label``."""
+    """``value`` as five finite gains.
+
+    Parameters
+    ----------
+    value : array_like
+        Gains on (e, e', xi1, xi2, xi3) [1/s^2, 1/s, 1/s^5, 1/s^4, 1/s^3].
+    label : str
+        Name used in the error message.
+
+    Returns
+    -------
+    (5,) array
+
+    Raises
+    ------
+    ValueError
+        Naming ``label`` and the value, unless there are five finite gains.
+    """
     k = np.asarray(value, dtype=float).ravel()
     if k.shape != (5,) or not np.all(np.isfinite(k)):
         raise ValueError(f"{label} must be 5 finite gains, got {value!r}")
@@ -49,6 +97,20 @@ def augmented_axis(
     stiffness = 0 and input_gain = 1 (w = v, the papers' design); for the linear regulator on
     the Jacobian linearization, stiffness = d x2'/d x1 and input_gain = d x2'/d u2 (vertical) or
     0 and -L1 (horizontal).
+
+    Parameters
+    ----------
+    omega0 : float
+        Internal-model frequency [rad/s].
+    stiffness : float
+        [1/s^2].
+    input_gain : float
+        [m/(s^2 A)], or 1 for w = v [m/s^2]; nonzero.
+
+    Returns
+    -------
+    A : (5, 5) array
+    B : (5, 1) array
     """
     if not (np.isfinite(input_gain) and input_gain != 0):
         raise ValueError(f"input_gain must be finite and nonzero, got {input_gain!r}")
@@ -64,10 +126,19 @@ def augmented_axis(
 
 
 def place_axis(poles, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0) -> np.ndarray:
-    """Gains K (5,) with eig(A + B K) = ``poles`` for the augmented axis (Ackermann's formula).
+    """Gains K with eig(A + B K) = ``poles`` for the augmented axis (Ackermann's formula).
 
-    ``poles`` must be five values closed under complex conjugation, in the open left half plane.
-    ``stiffness`` and ``input_gain`` describe the axis as in :func:`augmented_axis`.
+    Parameters
+    ----------
+    poles : array_like
+        Five values [1/s] closed under complex conjugation, in the open left half plane.
+    omega0, stiffness, input_gain : float
+        The axis, as in :func:`augmented_axis`.
+
+    Returns
+    -------
+    (5,) array
+        K on (e, e', xi1, xi2, xi3), w = K z.
     """
     poles = np.asarray(poles, dtype=complex).ravel()
     if poles.size != 5:
@@ -87,7 +158,20 @@ def place_axis(poles, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain
 
 
 def axis_poles(gains, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain: float = 1.0) -> np.ndarray:
-    """Closed-loop poles of the augmented axis under w = K z, sorted by real part, then imag."""
+    """Closed-loop poles of the augmented axis under w = K z.
+
+    Parameters
+    ----------
+    gains : array_like
+        K (5,).
+    omega0, stiffness, input_gain : float
+        The axis, as in :func:`augmented_axis`.
+
+    Returns
+    -------
+    (5,) complex array
+        Poles [1/s], sorted by real part (descending), then imaginary part.
+    """
     a, b = augmented_axis(omega0, stiffness, input_gain)
     k = np.asarray(gains, dtype=float).reshape(1, 5)
     ev = np.linalg.eigvals(a + b @ k)
@@ -96,7 +180,18 @@ def axis_poles(gains, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain
 
 @dataclass(frozen=True)
 class PaperGains:
-    """A gain vector printed in the papers with the poles it was placed at."""
+    """A gain vector printed in the papers with the poles it was placed at.
+
+    Attributes
+    ----------
+    name : str
+    poles : tuple of complex
+        Design poles [1/s].
+    printed : tuple of float
+        The printed gains on (e, e', xi1, xi2, xi3).
+    source : str
+        Paper and section.
+    """
 
     name: str
     poles: tuple[complex, ...]
@@ -131,26 +226,83 @@ PAPER_K_V = np.array(PAPER_GAINS["K_v"].printed, dtype=float)
 
 
 @dataclass(frozen=True)
-class GainCheck:
-    """Paper gains recomputed by pole placement, and the poles the printed integers give."""
+class GainCheck(Result):
+    """Paper gains recomputed by pole placement, and the poles the printed integers give.
 
+    Attributes
+    ----------
+    success : bool
+        The printed gains give a stable augmented axis (every pole in the open left half plane).
+    status : str
+        "stable" or "unstable".
+    message : str
+        How far the printed gains and their poles are from the design.
+    paper : PaperGains
+    computed : (5,) array
+        Gains placing ``paper.poles`` exactly.
+    abs_difference : (5,) array
+        |printed - computed|, per entry.
+    rel_difference : (5,) array
+        |printed - computed| / |computed|, per entry.
+    printed_poles : (5,) complex array
+        eig(A + B K_printed) [1/s], the k-th matched to the k-th design pole.
+    omega0 : float
+        [rad/s].
+    timings : mapping
+        Empty (nothing worth timing).
+    """
+
+    success: bool
+    status: str
+    message: str
     paper: PaperGains
-    computed: np.ndarray  # (5,) gains placing ``paper.poles`` exactly
-    abs_difference: np.ndarray  # |printed - computed|, per entry
-    rel_difference: np.ndarray  # |printed - computed| / |computed|, per entry
-    printed_poles: np.ndarray  # (5,) eig(A + B K_printed), k-th matched to the k-th design pole
+    computed: np.ndarray
+    abs_difference: np.ndarray
+    rel_difference: np.ndarray
+    printed_poles: np.ndarray
     omega0: float
+    timings: Mapping[str, float] = field(default_factory=dict)
 
 
 def check_paper_gains(omega0: float = OMEGA0) -> list[GainCheck]:
-    """Recompute every gain vector of :data:`PAPER_GAINS` and locate the printed gains' poles."""
+    """Recompute every gain vector of :data:`PAPER_GAINS` and locate the printed gains' poles.
+
+    Parameters
+    ----------
+    omega0 : float
+        Internal-model frequency [rad/s].
+
+    Returns
+    -------
+    list of GainCheck
+        In the order of :data:`PAPER_GAINS`.
+    """
     checks = []
     for g in PAPER_GAINS.values():
         computed = place_axis(g.poles, omega0)
         printed = np.asarray(g.printed, dtype=float)
         diff = np.abs(printed - computed)
-        moved = _match(np.asarray(g.poles, dtype=complex), axis_poles(printed, omega0))
-        checks.append(GainCheck(g, computed, diff, diff / np.abs(computed), moved, omega0))
+        design = np.asarray(g.poles, dtype=complex)
+        moved = _match(design, axis_poles(printed, omega0))
+        rel = diff / np.abs(computed)
+        stable = bool(np.all(moved.real < 0))
+        message = (
+            f"{g.name}: printed gains within {np.max(rel):.2%} of the placed ones; their poles "
+            f"lie up to {np.max(np.abs(moved - design)):.3g} 1/s from the design poles"
+        )
+        checks.append(
+            GainCheck(
+                success=stable,
+                status="stable" if stable else "unstable",
+                message=message,
+                paper=g,
+                computed=computed,
+                abs_difference=diff,
+                rel_difference=rel,
+                printed_poles=moved,
+                omega0=omega0,
+            )
+        )
     return checks
 
 

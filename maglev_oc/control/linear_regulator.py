@@ -26,12 +26,23 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from maglev_oc.control.gains import OMEGA0, PAPER_GAINS, axis_poles, place_axis
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
+from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, axis_poles, place_axis
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
+
+__all__ = [
+    "SCHEDULE_GAPS",
+    "AxisLinearization",
+    "GainDesign",
+    "ScheduledLinearRegulator",
+    "axis_linearizations",
+    "paper_linear_regulator",
+    "schedule_gains",
+]
 
 SCHEDULE_GAPS = np.linspace(8e-3, 32e-3, 49)
 """Gaps [m] at which scheduled gains are designed (0.5 mm apart; linear interpolation between)."""
@@ -39,16 +50,47 @@ SCHEDULE_GAPS = np.linspace(8e-3, 32e-3, 49)
 
 @dataclass(frozen=True)
 class AxisLinearization:
-    """Per-axis linearization at the equilibria of ``gap`` (arrays over the schedule)."""
+    """Per-axis linearization at the equilibria of ``gap`` (arrays over the schedule).
 
-    gap: np.ndarray  # [m]
-    u2_eq: np.ndarray  # [A] current added to the regulator's output (equilibrium, or zero)
-    stiffness_v: np.ndarray  # a21 [1/s^2]
-    gain_v: np.ndarray  # b22 [m/(s^2 A)]
-    gain_h: np.ndarray  # b41 = -L1 [m/(s^2 A)]
+    Attributes
+    ----------
+    gap : (n,) array
+        [m].
+    u2_eq : (n,) array
+        Current added to the regulator's output [A] (equilibrium, or zero).
+    stiffness_v : (n,) array
+        a21 = d x2'/d x1 [1/s^2].
+    gain_v : (n,) array
+        b22 = d x2'/d u2 [m/(s^2 A)].
+    gain_h : (n,) array
+        b41 = -L1 [m/(s^2 A)].
+    """
+
+    gap: np.ndarray
+    u2_eq: np.ndarray
+    stiffness_v: np.ndarray
+    gain_v: np.ndarray
+    gain_h: np.ndarray
 
 
 def axis_linearizations(model: StageModel, gaps=SCHEDULE_GAPS) -> AxisLinearization:
+    """The Jacobian linearization of each axis at the equilibria of ``gaps``.
+
+    Parameters
+    ----------
+    model : StageModel
+    gaps : array_like
+        Gaps [m]; every one must have an equilibrium.
+
+    Returns
+    -------
+    AxisLinearization
+
+    Raises
+    ------
+    ValueError
+        Naming the gaps [mm] without an equilibrium.
+    """
     gaps = np.asarray(gaps, dtype=float)
     curve = equilibrium_currents(model, gaps)
     if not np.all(curve.exists):
@@ -74,7 +116,29 @@ class ScheduledLinearRegulator:
     """u = (0, u2_eq(r_v)) + (K_h(r_v) z_h, K_v(r_v) z_v): an ExpressionController.
 
     Built by :func:`paper_linear_regulator` or :func:`maglev_oc.control.lqr.lqr_regulator`.
-    ``gains_h``/``gains_v`` are (5, n_gaps) tables over ``schedule.gap``.
+
+    Parameters
+    ----------
+    model : StageModel
+    schedule : AxisLinearization
+        The linearizations the gains were designed on.
+    gains_h, gains_v : (5, n_gaps) array
+        Gain tables over ``schedule.gap``.
+    name : str
+    sample_time : float
+        [s].
+    omega0 : float
+        Internal-model frequency [rad/s].
+    observer_epsilon : float
+        High-gain observer time constant [s].
+    design : dict
+        How the gains were designed (poles, weights), for the reports.
+
+    Attributes
+    ----------
+    step : casadi.Function
+        (c (10), y (2), r (6)) -> (u (2) [A], c_next (10), diag (3)); ``diag`` is
+        (clipped, du1, du2 [A]).
     """
 
     model: StageModel
@@ -110,8 +174,8 @@ class ScheduledLinearRegulator:
         )
         interp = ca.interpolant("schedule", "linear", grid, table.ravel(order="F"))
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         sig = core.signals(c, y, r)
         g_ref = ca.fmin(ca.fmax(r[0], grid[0][0]), grid[0][-1])
         row = interp(g_ref)
@@ -131,10 +195,22 @@ class ScheduledLinearRegulator:
         object.__setattr__(self, "step", step)
 
     def initial_state(self, y0, r0, u0=None) -> np.ndarray:
+        """The regulator state (10,) at start: observers at the first reading ``y0`` [m] at rest,
+        internal models empty."""
         return RegulatorCore.initial_state(y0, r0)
 
     def gains_at(self, gap: float) -> tuple[np.ndarray, np.ndarray]:
-        """(K_h, K_v) interpolated at ``gap`` [m]."""
+        """The gains at a gap, interpolated in the schedule.
+
+        Parameters
+        ----------
+        gap : float
+            [m].
+
+        Returns
+        -------
+        K_h, K_v : (5,) arrays
+        """
         g = self.schedule.gap
         kh = np.array([np.interp(gap, g, row) for row in self.gains_h])
         kv = np.array([np.interp(gap, g, row) for row in self.gains_v])
@@ -142,7 +218,18 @@ class ScheduledLinearRegulator:
 
 
 def schedule_gains(lin: AxisLinearization, design_h: GainDesign, design_v: GainDesign):
-    """Gain tables (5, n) per axis from a per-point design function."""
+    """Gain tables per axis from a per-point design function.
+
+    Parameters
+    ----------
+    lin : AxisLinearization
+    design_h, design_v : GainDesign
+        (stiffness, input_gain, gap) -> K (5,) for the horizontal and the vertical axis.
+
+    Returns
+    -------
+    gains_h, gains_v : (5, n) arrays
+    """
     kh = np.column_stack([design_h(0.0, b, g) for b, g in zip(lin.gain_h, lin.gap, strict=True)])
     kv = np.column_stack(
         [design_v(a, b, g) for a, b, g in zip(lin.stiffness_v, lin.gain_v, lin.gap, strict=True)]
@@ -152,8 +239,8 @@ def schedule_gains(lin: AxisLinearization, design_h: GainDesign, design_v: GainD
 
 def paper_linear_regulator(
     model: StageModel,
-    K_h=PAPER_GAINS["K_h"].printed,
-    K_v=PAPER_GAINS["K_v"].printed,
+    K_h=PAPER_K_H,
+    K_v=PAPER_K_V,
     *,
     feedforward: bool = True,
     omega0: float = OMEGA0,
@@ -167,6 +254,24 @@ def paper_linear_regulator(
     output; without it the internal model has to build that current up from zero, as a
     regulator "without the feedback transformation" in the papers' words may have done. The
     papers do not say which; the comparison report runs both.
+
+    Parameters
+    ----------
+    model : StageModel
+    K_h, K_v : array_like (5,)
+        Gains whose feedback-linearized poles are placed (default: the printed gains of 002).
+    feedforward : bool
+        Add the set-point's equilibrium current.
+    omega0 : float
+        Internal-model frequency [rad/s].
+    sample_time : float
+        [s].
+    gaps : array_like
+        Schedule [m].
+
+    Returns
+    -------
+    ScheduledLinearRegulator
     """
     poles_h = axis_poles(K_h, omega0)
     poles_v = axis_poles(K_v, omega0)

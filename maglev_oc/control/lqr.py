@@ -28,17 +28,32 @@ from maglev_oc.control.linear_regulator import (
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 
+__all__ = ["DEFAULT_WEIGHTS", "AxisWeights", "axis_lqr", "lqr_regulator"]
+
 
 @dataclass(frozen=True)
 class AxisWeights:
-    """Bryson maxima for one axis: error [m], error rate [m/s], internal-model states, input [A]."""
+    """Bryson maxima for one axis.
+
+    Parameters
+    ----------
+    error : float
+        [m].
+    error_rate : float
+        [m/s].
+    internal_model : (float, float, float)
+        xi1 [m s^3], xi2 [m s^2], xi3 [m s].
+    current : float
+        [A].
+    """
 
     error: float
     error_rate: float
-    internal_model: tuple[float, float, float]  # xi1 [m s^3], xi2 [m s^2], xi3 [m s]
+    internal_model: tuple[float, float, float]
     current: float
 
     def matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Q (5, 5), R (1, 1)): the inverse squared maxima on the diagonals."""
         scales = np.array([self.error, self.error_rate, *self.internal_model], dtype=float)
         if np.any(scales <= 0) or self.current <= 0:
             raise ValueError(f"Bryson maxima must be positive, got {self}")
@@ -59,7 +74,21 @@ DEFAULT_WEIGHTS = {
 
 
 def axis_lqr(weights: AxisWeights, stiffness: float, input_gain: float, omega0: float = OMEGA0) -> np.ndarray:
-    """Gain K (5,) for w = K z minimising the axis cost (continuous-time ARE)."""
+    """The LQR gain of one augmented axis (continuous-time ARE).
+
+    Parameters
+    ----------
+    weights : AxisWeights
+    stiffness, input_gain : float
+        The axis, as in :func:`~maglev_oc.control.gains.augmented_axis`.
+    omega0 : float
+        Internal-model frequency [rad/s].
+
+    Returns
+    -------
+    (5,) array
+        K for w = K z minimising the axis cost.
+    """
     a, b = augmented_axis(omega0, stiffness, input_gain)
     q, r = weights.matrices()
     p = solve_continuous_are(a, b, q, r)
@@ -74,7 +103,24 @@ def lqr_regulator(
     sample_time: float = RIG_SAMPLE_TIME,
     gaps=SCHEDULE_GAPS,
 ) -> ScheduledLinearRegulator:
-    """LQR + internal model on the Jacobian linearization at each set-point gap."""
+    """LQR + internal model on the Jacobian linearization at each set-point gap.
+
+    Parameters
+    ----------
+    model : StageModel
+    weights : dict, optional
+        {"horizontal": AxisWeights, "vertical": AxisWeights} (default :data:`DEFAULT_WEIGHTS`).
+    omega0 : float
+        Internal-model frequency [rad/s].
+    sample_time : float
+        [s].
+    gaps : array_like
+        Schedule [m].
+
+    Returns
+    -------
+    ScheduledLinearRegulator
+    """
     w = dict(DEFAULT_WEIGHTS if weights is None else weights)
     unknown = set(w) - {"horizontal", "vertical"}
     if unknown:

@@ -20,11 +20,28 @@ from scipy.linalg import expm
 from maglev_oc.control.gains import OMEGA0, internal_model
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 
+__all__ = ["N_REGULATOR_STATE", "RegulatorCore", "RegulatorSignals", "discrete_internal_model"]
+
 N_REGULATOR_STATE = 10
+"""Entries of the regulator state (module docstring)."""
 
 
 def discrete_internal_model(omega0: float, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi_d, Gamma_d): xi[k+1] = Phi_d xi[k] + Gamma_d e[k], the exact ZOH of (phi, N)."""
+    """The internal model sampled with a zero-order hold (exact).
+
+    Parameters
+    ----------
+    omega0 : float
+        [rad/s].
+    sample_time : float
+        [s].
+
+    Returns
+    -------
+    Phi_d : (3, 3) array
+    Gamma_d : (3, 1) array
+        xi[k+1] = Phi_d xi[k] + Gamma_d e[k].
+    """
     phi, n, _ = internal_model(omega0)
     m = np.zeros((4, 4))
     m[:3, :3] = phi
@@ -35,11 +52,21 @@ def discrete_internal_model(omega0: float, sample_time: float) -> tuple[np.ndarr
 
 @dataclass(frozen=True)
 class RegulatorSignals:
-    """Symbolic quantities of one regulator update (CasADi SX)."""
+    """Symbolic quantities of one regulator update (CasADi SX).
 
-    z_v: ca.SX  # (e1, e1', xi_v) (5)
-    z_h: ca.SX  # (e2, e2', xi_h) (5)
-    gap: ca.SX  # measured gap y1 [m]
+    Attributes
+    ----------
+    z_v : SX (5,)
+        (e1, e1', xi_v): vertical error [m], its rate [m/s], internal model.
+    z_h : SX (5,)
+        (e2, e2', xi_h): horizontal error [m], its rate [m/s], internal model.
+    gap : SX
+        Measured gap y1 [m].
+    """
+
+    z_v: ca.SX
+    z_h: ca.SX
+    gap: ca.SX
 
 
 class RegulatorCore:
@@ -67,6 +94,8 @@ class RegulatorCore:
         self.phi_d, self.gamma_d = discrete_internal_model(self.omega0, self.sample_time)
 
     def signals(self, c: ca.SX, y: ca.SX, r: ca.SX) -> RegulatorSignals:
+        """The fed-back vectors z_v, z_h and the measured gap, from the state c (10), the
+        reading y (2) [m] and the reference r (6)."""
         e1 = y[0] - r[0]
         e2 = y[1] - r[3]
         e1d = c[1] - r[1]

@@ -18,10 +18,13 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.linear_regulator import axis_linearizations
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
+
+__all__ = ["DEFAULT_POLES", "PidGains", "PidRegulator", "paper_pid", "place_pid"]
 
 DEFAULT_POLES = {"vertical": (-30.0, -30.0, -30.0), "horizontal": (-20.0, -20.0, -20.0)}
 """Triple poles [1/s]. The PID has no internal model of the omega0 sinusoid: the closed loop
@@ -33,13 +36,39 @@ pole at -25 doubles the vertical error; PID zeros on an unstable plant amplify t
 
 @dataclass(frozen=True)
 class PidGains:
-    kp: float  # [A/m]
-    ki: float  # [A/(m s)]
-    kd: float  # [A s/m]
+    """Gains of one PID, du = -(kp e + kd e' + ki int e).
+
+    Parameters
+    ----------
+    kp : float
+        [A/m].
+    ki : float
+        [A/(m s)].
+    kd : float
+        [A s/m].
+    """
+
+    kp: float
+    ki: float
+    kd: float
 
 
 def place_pid(poles, stiffness: float, input_gain: float) -> PidGains:
-    """PID gains placing the three closed-loop poles of e'' = a e + b du."""
+    """PID gains placing the three closed-loop poles of e'' = a e + b du.
+
+    Parameters
+    ----------
+    poles : array_like
+        Three poles [1/s].
+    stiffness : float
+        a [1/s^2].
+    input_gain : float
+        b [m/(s^2 A)].
+
+    Returns
+    -------
+    PidGains
+    """
     c = np.real(np.poly(np.asarray(poles, dtype=complex)))
     if c.size != 4:
         raise ValueError(f"need 3 poles, got {poles!r}")
@@ -50,7 +79,26 @@ def place_pid(poles, stiffness: float, input_gain: float) -> PidGains:
 
 @dataclass(frozen=True, eq=False)
 class PidRegulator:
-    """Two PIDs (ExpressionController). State: observers (4) and integrators (2)."""
+    """Two PIDs (an ExpressionController). State: observers (4) and integrators (2).
+
+    Parameters
+    ----------
+    model : StageModel
+    vertical, horizontal : PidGains
+        On the gap error (i_d) and the horizontal error (i_q).
+    sample_time : float
+        [s].
+    observer_epsilon : float
+        High-gain observer time constant [s].
+    name : str
+    design : dict
+        How the gains were designed, for the reports.
+
+    Attributes
+    ----------
+    step : casadi.Function
+        (c (6), y (2), r (6)) -> (u (2) [A], c_next (6), diag (1)).
+    """
 
     model: StageModel
     vertical: PidGains
@@ -67,8 +115,8 @@ class PidRegulator:
         obs = HighGainObserver(self.sample_time, self.observer_epsilon)
         ts = self.sample_time
         c = ca.SX.sym("c", self.n_state)
-        y = ca.SX.sym("y", 2)
-        r = ca.SX.sym("r", 6)
+        y = ca.SX.sym("y", N_MEASUREMENTS)
+        r = ca.SX.sym("r", N_REFERENCE)
         e1, e2 = y[0] - r[0], y[1] - r[3]
         e1d, e2d = c[1] - r[1], c[3] - r[4]
         gv, gh = self.vertical, self.horizontal
@@ -90,6 +138,8 @@ class PidRegulator:
         object.__setattr__(self, "step", step)
 
     def initial_state(self, y0, r0, u0=(0.0, 0.0)) -> np.ndarray:
+        """The state (6,) at start: observers at the first reading ``y0`` [m] at rest, the
+        integrators holding the current ``u0`` [A] already flowing (bumpless start)."""
         y0 = np.asarray(y0, dtype=float).ravel()
         u0 = np.asarray(u0, dtype=float).ravel()
         return np.array([y0[0], 0.0, y0[1], 0.0, u0[1], u0[0]])
@@ -102,7 +152,22 @@ def paper_pid(
     design_gap: float = 20e-3,
     sample_time: float = RIG_SAMPLE_TIME,
 ) -> PidRegulator:
-    """PIDs placed at ``poles`` on the linearization at ``design_gap`` [m]."""
+    """PIDs placed at ``poles`` on the linearization at ``design_gap``.
+
+    Parameters
+    ----------
+    model : StageModel
+    poles : dict, optional
+        {"vertical": 3 poles, "horizontal": 3 poles} [1/s] (default :data:`DEFAULT_POLES`).
+    design_gap : float
+        [m].
+    sample_time : float
+        [s].
+
+    Returns
+    -------
+    PidRegulator
+    """
     p = dict(DEFAULT_POLES if poles is None else poles)
     lin = axis_linearizations(model, [design_gap])
     vertical = place_pid(p["vertical"], float(lin.stiffness_v[0]), float(lin.gain_v[0]))

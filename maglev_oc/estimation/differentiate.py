@@ -70,6 +70,18 @@ from maglev_oc.data.logs import Log
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 
+__all__ = [
+    "DEFAULT_ACCELERATION_EPSILON",
+    "DEFAULT_BANDWIDTH",
+    "QUANTIZATION_STEP",
+    "Derivatives",
+    "HighGainDifferentiator",
+    "SavitzkyGolay",
+    "differentiate_log",
+    "savgol_gain_error",
+    "with_estimated_velocities",
+]
+
 DEFAULT_BANDWIDTH = 20.0
 """[Hz] Default band of the smoothing differentiator: 4x the highest frequency of the sum-of-sines
 excitation above (5 Hz) and 2x the fastest regulator pole of SPEC 4 (-57.9 rad/s = 9.2 Hz), so
@@ -132,6 +144,24 @@ def savgol_gain_error(window: int, polyorder: int, deriv: int, sample_time: floa
 
     Evaluated at 32 frequencies bandwidth/32 .. bandwidth; the SG filter is exact for
     polynomials, so the error grows from zero at f = 0.
+
+    Parameters
+    ----------
+    window : int
+        Window length [samples], odd.
+    polyorder : int
+        Degree of the local polynomial.
+    deriv : int
+        Order of the derivative (1 velocity, 2 acceleration).
+    sample_time : float
+        [s].
+    bandwidth : float
+        [Hz].
+
+    Returns
+    -------
+    float
+        The largest relative gain error [-].
     """
     h = savgol_coeffs(window, polyorder, deriv=deriv, use="dot")  # unit spacing
     offsets = np.arange(window) - (window - 1) // 2
@@ -349,9 +379,18 @@ class HighGainDifferentiator:
 
 # --- logs ---------------------------------------------------------------------------------------
 def differentiate_log(log: Log, estimator: SavitzkyGolay | HighGainDifferentiator) -> Derivatives:
-    """Derivatives of the measured positions (x1, x3) of ``log``: arrays of shape (2, n).
+    """Derivatives of the measured positions (x1, x3) of ``log``.
 
-    ``estimator.sample_time`` must match the log's median step within 1 %.
+    Parameters
+    ----------
+    log : Log
+    estimator : SavitzkyGolay or HighGainDifferentiator
+        Its ``sample_time`` must match the log's median step within 1 %.
+
+    Returns
+    -------
+    Derivatives
+        Arrays of shape (2, n): gap and horizontal position.
     """
     if abs(estimator.sample_time - log.sample_time) > 0.01 * log.sample_time:
         raise ValueError(
@@ -362,7 +401,19 @@ def differentiate_log(log: Log, estimator: SavitzkyGolay | HighGainDifferentiato
 
 
 def with_estimated_velocities(log: Log, estimator: SavitzkyGolay | HighGainDifferentiator) -> Log:
-    """The log with its unmeasured x2 / x4 rows filled from x1 / x3 (measured rows kept), and a note."""
+    """The log with its unmeasured x2 / x4 rows filled from x1 / x3.
+
+    Parameters
+    ----------
+    log : Log
+    estimator : SavitzkyGolay or HighGainDifferentiator
+
+    Returns
+    -------
+    Log
+        A copy with the velocities [m/s] estimated where they were not measured (measured rows
+        kept) and a note saying how; ``log`` itself when both were measured.
+    """
     missing = [row for row in (1, 3) if not log.states_measured[row]]
     if not missing:
         return log

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
+__all__ = ["DEFAULT_EPSILON", "HighGainObserver"]
+
 DEFAULT_EPSILON = 2e-3
 """Observer time constant [s]: poles at -1/eps = -500 rad/s, 25x the fastest regulator pole
 (-18.8 for the printed K_v) and 8x the fastest open-loop pole (64 1/s at 10 mm), while the
@@ -73,7 +75,21 @@ class HighGainObserver:
 
     def step(self, xhat, y, a=0.0):
         """One update; works on numpy arrays ((2,) or (2, 1), same shape back) and CasADi
-        column expressions alike."""
+        column expressions alike.
+
+        Parameters
+        ----------
+        xhat : (2,) or (2, 1) array, or CasADi column
+            (position [m], velocity [m/s]) estimate.
+        y : float or CasADi scalar
+            Measured position [m].
+        a : float or CasADi scalar
+            Known acceleration [m/s^2] over the sample.
+
+        Returns
+        -------
+        The estimate at the next sample, the shape of ``xhat``.
+        """
         if isinstance(xhat, np.ndarray) and xhat.ndim == 1:
             if xhat.shape != (2,):
                 raise ValueError(f"xhat must have 2 entries, got shape {xhat.shape}")
@@ -81,10 +97,23 @@ class HighGainObserver:
         return self.Ad @ xhat + self.By * y + self.Ba * a
 
     def filter(self, y: np.ndarray, a: np.ndarray | None = None, x0=None) -> np.ndarray:
-        """Run over a sampled position ``y`` (n,); returns (2, n) estimates (position, velocity).
+        """Run over a sampled position.
 
         The estimate at sample k uses y[0..k-1] (the same one-sample delay as online).
-        ``x0`` defaults to (y[0], 0).
+
+        Parameters
+        ----------
+        y : (n,) array
+            Positions [m].
+        a : (n,) array, optional
+            Known accelerations [m/s^2] (default zero).
+        x0 : (2,) array, optional
+            Start (default (y[0], 0)).
+
+        Returns
+        -------
+        (2, n) array
+            Position [m] and velocity [m/s] estimates.
         """
         y = np.asarray(y, dtype=float).ravel()
         acc = np.zeros_like(y) if a is None else np.asarray(a, dtype=float).ravel()

@@ -1,0 +1,116 @@
+"""The unconstrained shortcut of the RTI: the Riccati recursion of the equality-constrained QP.
+
+Most samples have no active inequality. The Riccati recursion of the QP without its
+inequalities (the LQ problem; its exact minimizer, ~10k flops) is computed first and, when it
+satisfies every bound and polytope row, it IS the QP's solution and the QP solver is not called.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from maglev_oc.control.nmpc.layout import N_POLYTOPE_ROWS, NU, NX, STAGE_ROWS, u_index, x_index
+
+__all__ = ["riccati_function"]
+
+
+def riccati_function(qp_data: ca.Function, horizon: int) -> ca.Function:
+    """The LQ step and whether it solves the QP.
+
+    Parameters
+    ----------
+    qp_data : casadi.Function
+        :meth:`Transcription.qp_data_function <.transcription.Transcription.qp_data_function>`
+        (for the sparsity of H and A).
+    horizon : int
+        N.
+
+    Returns
+    -------
+    casadi.Function
+        (H, g, A, lba, uba, lbx, ubx) -> (dz, feasible): the minimizer of the QP without its
+        inequalities and 1 if it satisfies every bound and polytope row (then it is the QP's
+        solution), else 0.
+    """
+    n = horizon
+    nz, na = qp_data.size1_out("g"), qp_data.size1_out("lba")
+    hess = ca.SX.sym("H", qp_data.sparsity_out("H"))
+    grad = ca.SX.sym("g", nz)
+    a = ca.SX.sym("A", qp_data.sparsity_out("A"))
+    lba = ca.SX.sym("lba", na)
+    uba = ca.SX.sym("uba", na)
+    lbx = ca.SX.sym("lbx", nz)
+    ubx = ca.SX.sym("ubx", nz)
+
+    bs, as_, cs = [], [], []
+    for j in range(n):
+        row = STAGE_ROWS * j
+        bs.append(_block(a, row, u_index(j), NX, NU))
+        as_.append(_block(a, row, x_index(j), NX, NX) if j > 0 else None)
+        cs.append(-lba[row : row + NX])
+    gains = _backward_pass(hess, grad, as_, bs, cs, n)
+    dz = _forward_pass(gains, as_, bs, cs, n)
+    adz = ca.mtimes(a, dz)
+    rows = [STAGE_ROWS * j + NX + i for j in range(n) for i in range(N_POLYTOPE_ROWS)]
+    slack = ca.vertcat(dz - lbx, ubx - dz, adz[rows] - lba[rows], uba[rows] - adz[rows])
+    feasible = ca.mmin(slack) >= 0
+    return ca.Function(
+        "nmpc_riccati",
+        [hess, grad, a, lba, uba, lbx, ubx],
+        [dz, feasible],
+        ["H", "g", "A", "lba", "uba", "lbx", "ubx"],
+        ["dz", "feasible"],
+    )
+
+
+def _block(m, r, c, nr, nc):
+    return ca.densify(m[r : r + nr, c : c + nc])
+
+
+def _inv2(m):
+    det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    return ca.vertcat(ca.horzcat(m[1, 1], -m[0, 1]), ca.horzcat(-m[1, 0], m[0, 0])) / det
+
+
+def _backward_pass(hess, grad, as_, bs, cs, n):
+    """Feedback and feedforward gains (K_j, k_j) of du_j = -K_j dx_j - k_j, j = 0..N-1 (K_0 is
+    None: x_0 is not a variable), from the cost-to-go recursion backwards from x_N."""
+    xn = x_index(n)
+    p_mat = _block(hess, xn, xn, NX, NX)
+    p_vec = grad[xn : xn + NX]
+    gains = []
+    for j in range(n - 1, -1, -1):
+        iu = u_index(j)
+        b, c = bs[j], cs[j]
+        pcp = ca.mtimes(p_mat, c) + p_vec
+        quu = _block(hess, iu, iu, NU, NU) + ca.mtimes(b.T, ca.mtimes(p_mat, b))
+        qu = grad[iu : iu + NU] + ca.mtimes(b.T, pcp)
+        quu_inv = _inv2(quu)
+        if j == 0:
+            gains.append((None, ca.mtimes(quu_inv, qu)))
+            break
+        am = as_[j]
+        ix = x_index(j)
+        pa = ca.mtimes(p_mat, am)  # shared by B' P A and A' P A
+        qux = ca.mtimes(b.T, pa)
+        k_mat = ca.mtimes(quu_inv, qux)
+        k_vec = ca.mtimes(quu_inv, qu)
+        gains.append((k_mat, k_vec))
+        p_new = _block(hess, ix, ix, NX, NX) + ca.mtimes(am.T, pa) - ca.mtimes(qux.T, k_mat)
+        p_vec = grad[ix : ix + NX] + ca.mtimes(am.T, pcp) - ca.mtimes(qux.T, k_vec)
+        p_mat = 0.5 * (p_new + p_new.T)
+    return gains[::-1]
+
+
+def _forward_pass(gains, as_, bs, cs, n):
+    """dz = (du_0, dx_1, du_1, ..., dx_N) by rolling the linear dynamics forward."""
+    parts = []
+    du = -gains[0][1]
+    dx = ca.mtimes(bs[0], du) + cs[0]
+    parts += [du, dx]
+    for j in range(1, n):
+        k_mat, k_vec = gains[j]
+        du = -ca.mtimes(k_mat, dx) - k_vec
+        dx = ca.mtimes(as_[j], dx) + ca.mtimes(bs[j], du) + cs[j]
+        parts += [du, dx]
+    return ca.vertcat(*parts)

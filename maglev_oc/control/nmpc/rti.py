@@ -1,0 +1,343 @@
+"""The real-time iteration: one Gauss-Newton SQP step per sample, as one CasADi Function.
+
+Real-time iteration (``mode="rti"``)
+    ONE Gauss-Newton SQP step per sample (Diehl et al.'s RTI): the cost is a linear least
+    squares in (x, u), so its Gauss-Newton Hessian is the exact, constant block-diagonal
+    2 diag(h_0 R, h_1 Q, h_1 R, ..., P); the dynamics are linearized by CasADi AD at the shifted
+    plan. The whole update -- observer, linearization and QP data (an SX Function), the sparse
+    QP (a ``ca.conic`` call), the check of its solution, the fallback, the shift and the observer
+    update (an SX Function) -- is ONE CasADi Function, ``NonlinearMPC.rti_step``, called
+    once per sample from Python and code-generated to C by :mod:`maglev_oc.control.codegen`.
+
+QP solver and the unconstrained shortcut
+    The QP variables are ordered (u_0, x_1, u_1, ..., x_N) and the constraints per stage
+    (dynamics, current polytope): the OCP structure HPIPM's Riccati-based interior point
+    method exploits (u_0 plays HPIPM's "x_0" since x_0 is not a variable). ``hpipm`` is the
+    default (mode "speed_abs", iteration limit 30) because its cost on a constrained sample is
+    bounded (4-10 interior point iterations of fixed cost) where QRQP's active-set iterations
+    each refactorize the KKT matrix, so that QRQP's cost grows with the number of constraints
+    that switch (the start of a large step). The QP is scaled (positions in mm) so that
+    HPIPM's absolute tolerances are reachable (in SI units its Hessian spans 1e-3..1e7 and the
+    first sample of a large step ran into the iteration limit). Measured by bench/nmpc_step.py
+    with the QP solved every sample (N = 20, CasADi VM, per call, two runs): HPIPM 0.42-0.47
+    ms, QRQP 0.42 ms, OSQP 0.75-0.83 ms (OSQP needs tight tolerances for the solution check,
+    hence many ADMM iterations); in the generated C the p99 over a large step, set by the
+    samples that need the QP, was 0.14 ms with HPIPM and 0.24 ms with QRQP. Most samples have no
+    active inequality: the Riccati recursion of the equality-constrained QP (:mod:`.riccati`)
+    is computed first and, when it satisfies every bound and polytope row, it IS the QP's
+    solution and the solver is not called (a CasADi Switch: only the selected branch runs, in
+    Python and in the generated C). The QP solver runs on the other samples (0.1-1 % of the
+    samples of the papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every
+    sample.
+
+A failed QP never raises: the solution is checked inside the Function (finite, dynamics
+residual and constraint violation below tolerance); when it fails the controller applies the
+shifted previous plan (or the feedforward current of the reference, projected on the current
+polytope), keeps the previous plan as the next linearization point and reports
+``solver_ok = 0`` (status ``"fallback"``, :mod:`.status`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
+from maglev_oc.control.nmpc.layout import N_POLYTOPE_ROWS, NU, NX, STAGE_ROWS, MemoryLayout
+from maglev_oc.control.nmpc.riccati import riccati_function
+from maglev_oc.control.nmpc.status import DIAG_NAMES
+from maglev_oc.control.nmpc.transcription import Transcription
+from maglev_oc.estimation.extended_high_gain import N_DISTURBANCE, N_OBSERVER_STATE, ExtendedHighGainObserver
+from maglev_oc.numerics import jit
+
+__all__ = [
+    "SOLUTION_TOLERANCE",
+    "RTIParts",
+    "python_entry",
+    "qp_solver_function",
+    "read_qp_statistics",
+    "rti_parts",
+    "rti_step_function",
+]
+
+SOLUTION_TOLERANCE = 1e-6
+"""Largest dynamics residual and constraint violation accepted in a QP solution, in the QP's
+scaled units (mm, m/s, A); the solvers reach 1e-8 or better on a good solve, a failed one is
+far off."""
+_QP_INPUTS = ("H", "g", "A", "lba", "uba", "lbx", "ubx")
+
+
+@dataclass(frozen=True)
+class RTIParts:
+    """The three SX Functions of the RTI step (the QP solver call joins them in MX).
+
+    Attributes
+    ----------
+    qp_data : casadi.Function
+        (z_bar, x0, d, ref) -> the QP (:meth:`Transcription.qp_data_function`).
+    riccati : casadi.Function
+        The unconstrained shortcut (:func:`~.riccati.riccati_function`).
+    post : casadi.Function
+        Check, fallback, shift and observer update (:func:`rti_parts`).
+    """
+
+    qp_data: ca.Function
+    riccati: ca.Function
+    post: ca.Function
+
+    def compiled(self) -> RTIParts:
+        """The same parts JIT-compiled with -O1 (unchanged where there is no C compiler)."""
+        return RTIParts(*(jit(f, flags=("-O1",)) for f in (self.qp_data, self.riccati, self.post)))
+
+
+def rti_parts(ocp: Transcription, observer: ExtendedHighGainObserver, shift: np.ndarray) -> RTIParts:
+    """Build the SX parts of the RTI step.
+
+    Parameters
+    ----------
+    ocp : Transcription
+    observer : ExtendedHighGainObserver
+    shift : (6N, 6N) array
+        The warm-start shift (:func:`~.grid.shift_matrix`).
+
+    Returns
+    -------
+    RTIParts
+    """
+    qp_data = ocp.qp_data_function()
+    return RTIParts(qp_data, riccati_function(qp_data, ocp.N), _post_function(ocp, observer, shift, qp_data))
+
+
+def _post_function(
+    ocp: Transcription, observer: ExtendedHighGainObserver, shift: np.ndarray, qp_data: ca.Function
+) -> ca.Function:
+    """Post-processing of a QP step: check, fallback, projection, shift and observer update."""
+    n, nz, na = ocp.N, ocp.nz, ocp.na
+    zb = ca.SX.sym("z_bar", nz)
+    dz = ca.SX.sym("dz", nz)
+    lam_x = ca.SX.sym("lam_x", nz)
+    lam_a = ca.SX.sym("lam_a", na)
+    a = ca.SX.sym("A", qp_data.sparsity_out("A"))
+    lba = ca.SX.sym("lba", na)
+    uba = ca.SX.sym("uba", na)
+    lbx = ca.SX.sym("lbx", nz)
+    ubx = ca.SX.sym("ubx", nz)
+    data_ok = ca.SX.sym("data_ok")
+    obs = ca.SX.sym("obs", N_OBSERVER_STATE)
+    d = ca.SX.sym("d", N_DISTURBANCE)
+    y = ca.SX.sym("y", N_MEASUREMENTS)
+    hess = ca.SX.sym("H", qp_data.sparsity_out("H"))
+    z_ref = ca.SX.sym("z_ref", nz)
+
+    adz = ca.mtimes(a, dz)
+    viol = ca.vertcat(lba - adz, adz - uba, lbx - dz, dz - ubx)
+    worst = ca.mmax(viol)
+    size = ca.sum1(ca.fabs(dz)) + ca.sum1(ca.fabs(lam_a))
+    ok = ca.logic_and(ca.logic_and(data_ok, size < 1e20), worst <= SOLUTION_TOLERANCE)
+    z_qp = zb + dz * ca.DM(ocp.z_scale)
+    plan_finite = ca.sum1(ca.fabs(zb)) < 1e20
+    ref_finite = ca.sum1(ca.fabs(z_ref)) < 1e20
+    # fallback: the shifted previous plan, else the reference plan (its first input is the
+    # feedforward current of the reference), else no current at all
+    z_keep = ca.if_else(plan_finite, zb, ca.if_else(ref_finite, z_ref, ca.DM.zeros(nz)))
+    z_new = ca.if_else(ok, z_qp, z_keep)
+    u = ocp.project_current(z_new[0:NU])
+    z_next = ca.mtimes(ca.DM(ca.sparsify(ca.DM(shift))), z_new)
+    e = (z_new - z_ref) / ca.DM(ocp.z_scale)
+    cost = 0.5 * ca.bilin(hess, e, e)
+    obs_next, d_next = observer.update(obs, d, y, u)
+    memory_next = ca.vertcat(obs_next, d_next, z_next)
+    # inequality rows of A (N_POLYTOPE_ROWS per stage) and bounds with a nonzero multiplier
+    ineq = [lam_a[STAGE_ROWS * j + NX + i] for j in range(n) for i in range(N_POLYTOPE_ROWS)]
+    active = ca.sum1(ca.fabs(ca.vertcat(*ineq, lam_x)) > 1e-9)
+    # DIAG_NAMES without qp_status; qp_iterations is filled in by the step
+    diag = ca.vertcat(ok, 0, cost, d, ca.if_else(ok, active, -1))
+    names = ["z_bar", "dz", "lam_x", "lam_a", "A", "lba", "uba", "lbx", "ubx", "data_ok", "H", "z_ref"]
+    return ca.Function(
+        "nmpc_post",
+        [zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y],
+        [u, memory_next, diag, z_new],
+        [*names, "obs", "d", "y"],
+        ["u", "memory_next", "diag", "plan"],
+    )
+
+
+def qp_solver_function(
+    qp_solver: str, qp_options: Mapping[str, Any], horizon: int, qp_data: ca.Function
+) -> ca.Function:
+    """The sparse QP solver (``ca.conic``) of the RTI.
+
+    Parameters
+    ----------
+    qp_solver : {"hpipm", "qrqp", "osqp"}
+    qp_options : mapping
+        Solver options merged into the defaults, one level deep.
+    horizon : int
+        N (HPIPM's stage structure).
+    qp_data : casadi.Function
+        For the sparsity of H and A.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    n = horizon
+    sp = {"h": qp_data.sparsity_out("H"), "a": qp_data.sparsity_out("A")}
+    opts: dict = {"error_on_fail": False}
+    if qp_solver == "hpipm":
+        opts.update(
+            N=n,
+            nx=[NU] + [NX] * n,
+            nu=[0] + [NU] * (n - 1) + [0],
+            ng=[N_POLYTOPE_ROWS] * n + [0],
+            hpipm={"mode": "speed_abs", "iter_max": 30},
+        )
+    elif qp_solver == "qrqp":
+        opts.update(print_iter=False, print_header=False, print_info=False, max_iter=200)
+    else:
+        opts.update(
+            osqp={"verbose": False, "eps_abs": 1e-9, "eps_rel": 1e-9, "max_iter": 20000, "polish": True}
+        )
+    for key, value in qp_options.items():  # solver-specific overrides, one level deep
+        if isinstance(value, Mapping) and isinstance(opts.get(key), dict):
+            opts[key] = {**opts[key], **value}
+        else:
+            opts[key] = value
+    return ca.conic("nmpc_qp", qp_solver, sp, opts)
+
+
+def _solve_qp_function(qp: ca.Function, qp_data: ca.Function, nz: int, na: int) -> tuple[list, ca.Function]:
+    """(the QP's symbolic inputs plus dz_lq, Function (H, ..., ubx, dz_lq) -> (dz, lam_x, lam_a))."""
+    sparsities = [qp_data.sparsity_out(i) for i in range(len(_QP_INPUTS))] + [ca.Sparsity.dense(nz, 1)]
+    qp_in = [ca.MX.sym(name, sp) for name, sp in zip((*_QP_INPUTS, "dz_lq"), sparsities, strict=True)]
+    # Cold start: QRQP warm-started with the previous multipliers was seen to return a wrong
+    # step (equality rows dropped from its initial active set) while reporting success, and
+    # an interior point method has no use for them. All of the conic's outputs are used:
+    # CasADi 3.8.2's HPIPM interface writes lam_a even when nobody asked for it (a NULL
+    # pointer inside an MX graph: segfault).
+    sol = qp(
+        h=qp_in[0],
+        g=qp_in[1],
+        a=qp_in[2],
+        lba=qp_in[3],
+        uba=qp_in[4],
+        lbx=qp_in[5],
+        ubx=qp_in[6],
+        x0=ca.DM.zeros(nz),
+        lam_x0=ca.DM.zeros(nz),
+        lam_a0=ca.DM.zeros(na),
+    )
+    return qp_in, ca.Function("nmpc_solve_qp", qp_in, [sol["x"], sol["lam_x"], sol["lam_a"]])
+
+
+def rti_step_function(
+    parts: RTIParts, qp: ca.Function, observer: ExtendedHighGainObserver, *, horizon: int, shortcut: bool
+) -> ca.Function:
+    """The whole RTI update as one Function.
+
+    Parameters
+    ----------
+    parts : RTIParts
+    qp : casadi.Function
+        The QP solver (:func:`qp_solver_function`), its own instance so that the statistics read
+        after a call are that call's.
+    observer : ExtendedHighGainObserver
+    horizon : int
+        N.
+    shortcut : bool
+        Take the Riccati step when it is feasible (else solve the QP every sample).
+
+    Returns
+    -------
+    casadi.Function
+        ``nmpc_rti_step``: (memory, y (2), ref (6, N + 1)) -> (u (2), memory_next, diag (7)).
+    """
+    qp_data = parts.qp_data
+    nz, na = qp_data.size1_out("g"), qp_data.size1_out("lba")
+    layout = MemoryLayout(nz)
+    mem = ca.MX.sym("memory", layout.size)
+    y = ca.MX.sym("y", N_MEASUREMENTS)
+    ref = ca.MX.sym("ref", N_REFERENCE, horizon + 1)
+    obs, d, zb = mem[layout.observer], mem[layout.disturbance], mem[layout.plan]
+    x0 = observer.state_estimate(obs, y)
+    data = qp_data(zb, x0, d, ref)
+    _, _, a, lba, uba, lbx, ubx, data_ok, _ = data
+    qp_in, solve_qp = _solve_qp_function(qp, qp_data, nz, na)
+    if shortcut:
+        take_lq = ca.Function("nmpc_take_lq", qp_in, [qp_in[7], ca.DM.zeros(nz), ca.DM.zeros(na)])
+        # only the selected branch runs (a CasADi Switch, also in the generated C)
+        step = ca.Function.if_else("nmpc_lq_or_qp", take_lq, solve_qp)
+        dz_lq, feasible = parts.riccati(*data[:7])
+        dz, lam_x, lam_a = step(feasible, *data[:7], dz_lq)
+    else:
+        feasible = ca.MX(0)
+        dz, lam_x, lam_a = solve_qp(*data[:7], ca.DM.zeros(nz))
+    hess, z_ref = data[0], data[8]
+    u, mem_next, diag, _ = parts.post(
+        zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y
+    )
+    # qp_iterations: 0 when the unconstrained step was taken, -1 (filled in from the solver's
+    # statistics in Python) when the QP was solved; qp_status: -1 no QP, NaN until filled in
+    diag = ca.vertcat(diag[0], ca.if_else(feasible, 0, -1), diag[2:], ca.if_else(feasible, -1, np.nan))
+    return ca.Function(
+        "nmpc_rti_step",
+        [mem, y, ref],
+        [u, mem_next, diag],
+        ["memory", "y", "ref"],
+        ["u", "memory_next", "diag"],
+    )
+
+
+def python_entry(step: ca.Function, n_memory: int, horizon: int) -> ca.Function:
+    """The RTI step with its inputs and outputs packed, for the Python loop.
+
+    Each numpy <-> CasADi conversion costs 10-25 us in Python while the memory can stay a DM
+    from one call to the next.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        :func:`rti_step_function`'s Function.
+    n_memory : int
+        Entries of the memory.
+    horizon : int
+        N.
+
+    Returns
+    -------
+    casadi.Function
+        (memory, [y; vec(ref)]) -> ([u; diag], memory_next).
+    """
+    mem = ca.MX.sym("memory", n_memory)
+    yr = ca.MX.sym("y_ref", N_MEASUREMENTS + N_REFERENCE * (horizon + 1))
+    u, mem_next, diag = step(
+        mem, yr[0:N_MEASUREMENTS], ca.reshape(yr[N_MEASUREMENTS:], N_REFERENCE, horizon + 1)
+    )
+    return ca.Function("nmpc_control", [mem, yr], [ca.vertcat(u, diag), mem_next])
+
+
+def read_qp_statistics(diag: np.ndarray, qp: ca.Function) -> None:
+    """Put the QP solver's iteration count and success into ``diag`` (in place).
+
+    A conic called inside an MX Function (here behind a Switch) keeps its statistics in the
+    memory the enclosing Function checked out for it, index 1 for a Function evaluated from one
+    thread; the enclosing Function's own stats() does not forward them through the Switch.
+    Diagnostics only: if they are not there, the entries stay -1 / NaN.
+
+    Parameters
+    ----------
+    diag : (7,) array
+        A row of :data:`~.status.DIAG_NAMES`, changed in place.
+    qp : casadi.Function
+        The QP solver inside the step that wrote ``diag``.
+    """
+    try:
+        stats = qp.stats(1)
+    except RuntimeError:
+        return
+    diag[DIAG_NAMES.index("qp_iterations")] = stats.get("iter_count", -1)
+    diag[DIAG_NAMES.index("qp_status")] = 0.0 if stats.get("success", False) else 1.0
