@@ -10,8 +10,8 @@ import math
 from pathlib import Path
 
 from maglev_oc.control.pid import paper_pid
-from maglev_oc.diagnose.diagnosis import diagnose
-from maglev_oc.diagnose.feedback import compensation_study
+from maglev_oc.diagnosis.feedback import compensation_study
+from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
 from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
@@ -20,13 +20,16 @@ from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
 from maglev_oc.sim.scenarios import excitation_scenario
 from maglev_oc.sim.twin import RigTwin
+from maglev_oc.units import M_TO_UM
+
+__all__ = ["ORDER", "REPORT", "build", "main"]
 
 REPORT = "closing_the_loop.pdf"
 ORDER = 60
 TRUE_CONSTANTS = "table3_eps0.05"  # the plant's constants differ from the papers' default
 
 
-def builtin_log(model: StageModel, duration: float = 60.0):
+def _builtin_log(model: StageModel, duration: float = 60.0):
     """60 s of the papers' PID sum-of-sines excitation on the rig twin, logged at 1 kHz. The log
     carries no description of the twin. Returns (log, twin)."""
     twin = RigTwin(model.with_constants(PAPER_CONSTANTS[TRUE_CONSTANTS]), TwinEffects.rig())
@@ -88,7 +91,7 @@ def truth_rows(diag, twin: RigTwin, model: StageModel) -> list[tuple[str, str, s
     rows.append(
         (
             f"guide waviness ({e.misalignment.waviness_period * 1e3:g} mm period)",
-            f"{e.misalignment.waviness * 1e6:.3g} µm",
+            f"{e.misalignment.waviness * M_TO_UM:.3g} µm",
             "not found"
             if "guide_misalignment" not in found
             or "waviness_amplitude" not in found["guide_misalignment"].parameters
@@ -108,7 +111,7 @@ def truth_rows(diag, twin: RigTwin, model: StageModel) -> list[tuple[str, str, s
 
 
 def build(out: Path, model: StageModel) -> Path:
-    log, twin = builtin_log(model)
+    log, twin = _builtin_log(model)
     diag = diagnose([log], model)
     study = compensation_study(diag, model, twin=twin)
     preamble = [
@@ -125,7 +128,9 @@ def build(out: Path, model: StageModel) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import analysis_parser, load_model
+    from maglev_oc.analyses import analysis_parser
+
+    from maglev_oc.model.loading import load_model
 
     parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)

@@ -19,6 +19,8 @@ from maglev_oc.sim.comparison import RIG_CONSTANTS, run_comparison, standard_twi
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.scenarios import paper_scenarios
 
+__all__ = ["ORDER", "REPORT", "build", "main"]
+
 REPORT = "controllers.pdf"
 ORDER = 20
 TITLE = "maglev_oc — controller comparison"
@@ -335,7 +337,9 @@ def _tuning(c) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import analysis_parser, load_model
+    from maglev_oc.analyses import analysis_parser
+
+    from maglev_oc.model.loading import load_model
 
     parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--no-nmpc", action="store_true", help="leave NMPC out (faster)")

@@ -12,16 +12,24 @@ from pathlib import Path
 
 import numpy as np
 
-from maglev_oc.identify.equation_error import DEFAULT_BANDWIDTH
-from maglev_oc.identify.experiments import FIXED_GAPS, TWIN_TRUTH
-from maglev_oc.identify.layout import CONSTANT_NAMES
-from maglev_oc.identify.npfsi import DEFAULT_Q0_SECONDS, PAPER_EPSILONS, PAPER_GAMMA
-from maglev_oc.identify.study import COMMAND_TO_CURRENT_DELAY, VERTICAL_GAP, IdentificationStudy, run_study
+from maglev_oc.identification.equation_error import DEFAULT_BANDWIDTH
+from maglev_oc.identification.experiments import FIXED_GAPS, TWIN_TRUTH
+from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.npfsi import DEFAULT_Q0_SECONDS, PAPER_EPSILONS, PAPER_GAMMA
+from maglev_oc.identification.study import (
+    COMMAND_TO_CURRENT_DELAY,
+    VERTICAL_GAP,
+    IdentificationStudy,
+    run_study,
+)
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
 from maglev_oc.reporting import identification_plots as plots
 from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.units import M_TO_UM
+
+__all__ = ["ORDER", "REPORT", "build", "main"]
 
 REPORT = "identification.pdf"
 ORDER = 30
@@ -163,8 +171,9 @@ def build(out: Path, model: StageModel) -> Path:
         "fit reports.",
         f"Equation error: {ee.n_samples} samples, residual RMS {ee.residual_rms['vertical']:.3g} / "
         f"{ee.residual_rms['horizontal']:.3g} m/s² (vertical/horizontal, filtered). Output error: "
-        f"{oe.settings['segments'][0]} segments, residual RMS {oe.residual_rms['vertical'] * 1e6:.2f} / "
-        f"{oe.residual_rms['horizontal'] * 1e6:.2f} µm (one encoder count is 10 µm; the quantization alone "
+        f"{oe.settings['segments'][0]} segments, residual RMS {oe.residual_rms['vertical'] * M_TO_UM:.2f} "
+        f"/ {oe.residual_rms['horizontal'] * M_TO_UM:.2f} µm (one encoder count is 10 µm; the quantization "
+        "alone "
         "gives 2.9 µm, with the 2 µm noise 3.5 µm).",
         f"Correlations (equation error): C2-C3 {ee.correlation[1, 2]:+.3f}, C3-C4 "
         f"{ee.correlation[2, 3]:+.3f}, C2-C4 {ee.correlation[1, 3]:+.3f}: C4 is the weakly determined "
@@ -491,7 +500,9 @@ def build(out: Path, model: StageModel) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import analysis_parser, load_model
+    from maglev_oc.analyses import analysis_parser
+
+    from maglev_oc.model.loading import load_model
 
     parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)

@@ -17,6 +17,8 @@ from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, certificat
 from maglev_oc.reporting import region_plots as plots
 from maglev_oc.reporting.pdf import PdfReport
 
+__all__ = ["ORDER", "REPORT", "build", "main"]
+
 REPORT = "operating_region.pdf"
 TITLE = "maglev_oc — operating region of the FL regulator"
 ORDER = 60
@@ -541,7 +543,9 @@ def _large_step_text(st: OperatingRegionStudy, model: StageModel) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from maglev_oc.cli import analysis_parser, load_model
+    from maglev_oc.analyses import analysis_parser
+
+    from maglev_oc.model.loading import load_model
 
     parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--quick", action="store_true", help="small sample counts (smoke test)")

@@ -11,8 +11,10 @@
     maglev-oc identify LOG... --json OUT.json [--report OUT.pdf]
                                                      C1..C4 by NLS (equation/output error) and NPFSI
 
-Errors in what the user hands in (files, values) are reported in one line on stderr with exit
-status 2; nothing is written in that case.
+Errors in what the user hands in (files, values: :class:`~maglev_oc.errors.MaglevError`) and
+in reading or writing files are reported in one line on stderr with exit status 2; nothing is
+written in that case. Anything else is a bug of maglev_oc: a short "internal error" line and
+exit status 1 (``--debug`` shows the traceback).
 """
 
 from __future__ import annotations
@@ -28,41 +30,16 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_oc.errors import InputError, MaglevError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
-from maglev_oc.model.parameters import (
-    DEFAULT_CONSTANTS,
-    StageParameters,
-    load_json,
-    paper_constants,
-)
-from maglev_oc.model.stage import StageModel
+from maglev_oc.model.loading import load_model
+
+__all__ = ["EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
 
 EXIT_USAGE = 2
-
-
-class UserError(Exception):
-    """A problem with the user's input, reported without a traceback."""
-
-
-def load_model(params_path: Path | None = None, constants: str | None = None) -> StageModel:
-    """The model from a JSON file (:func:`maglev_oc.model.parameters.save_json`) or the papers'."""
-    if params_path is not None:
-        if not Path(params_path).is_file():
-            raise UserError(f"{params_path}: no such file")
-        params, consts = load_json(params_path)
-    else:
-        params, consts = StageParameters(), DEFAULT_CONSTANTS
-    if constants is not None:
-        consts = paper_constants(constants)
-    return StageModel(params, consts)
-
-
-def analysis_parser(doc: str, report: str) -> argparse.ArgumentParser:
-    """The command line every analysis script shares: ``--out`` and ``--params``."""
-    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("reports") / report, help="PDF to write")
-    parser.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
-    return parser
+"""Exit status for errors in the user's input or files."""
+EXIT_INTERNAL = 1
+"""Exit status for anything else: a bug of maglev_oc."""
 
 
 def analysis_modules() -> dict[str, object]:
@@ -83,7 +60,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     names = args.only or list(modules)
     unknown = [n for n in names if n not in modules]
     if unknown:
-        raise UserError(f"unknown analysis {unknown}; available: {', '.join(modules)}")
+        raise InputError(f"unknown analysis {unknown}; available: {', '.join(modules)}")
     model = load_model(args.params)
     failed = []
     for name in names:
@@ -109,7 +86,7 @@ def cmd_model(args: argparse.Namespace) -> int:
     model = load_model(args.params, args.constants)
     gaps = TABLE_GAPS if not args.gaps else np.asarray(args.gaps, dtype=float) * 1e-3
     if np.any(gaps <= 0):
-        raise UserError(f"--gaps must be positive millimetres, got {args.gaps}")
+        raise InputError(f"--gaps must be positive millimetres, got {args.gaps}")
     s = summarize_model(model, table_gaps=gaps)
     print(
         f"constants: C1={model.constants.C1:g} C2={model.constants.C2:g} "
@@ -177,11 +154,11 @@ def cmd_region(args: argparse.Namespace) -> int:
     gaps = [float(g) for g in args.gaps]
     bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
     if bad:
-        raise UserError(f"--gaps are millimetres in [5, 40], got {bad}")
+        raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
     if args.current_limit is not None and not (0 < args.current_limit < 100):
-        raise UserError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
+        raise InputError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
     if args.samples < 0:
-        raise UserError(f"--samples must be >= 0, got {args.samples}")
+        raise InputError(f"--samples must be >= 0, got {args.samples}")
     limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
     loop = RegulatorLoop()
@@ -262,7 +239,7 @@ def _excited_axes(log, check_excitation) -> list[str]:
         try:
             check_excitation(log, axis=axis)
             excited.append(axis)
-        except ValueError:
+        except InputError:
             pass
     if not excited:
         check_excitation(log)  # raises, naming what is constant
@@ -273,14 +250,14 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     import json
 
     from maglev_oc.data.logs import check_excitation, read_log
-    from maglev_oc.diagnose.diagnosis import diagnose
+    from maglev_oc.diagnosis.pipeline import diagnose
     from maglev_oc.fileio import write_text_atomic
 
     model = load_model(args.params)
     logs = []
     for path in args.logs:
         if not Path(path).is_file():
-            raise UserError(f"{path}: no such file")
+            raise InputError(f"{path}: no such file")
         log = read_log(path, params=model.params)
         _excited_axes(log, check_excitation)
         logs.append(log)
@@ -298,7 +275,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  unexplained: {u.description}")
     print(f"  wrote {args.json} ({diag.timings['total']:.1f} s)")
     if args.report:
-        from maglev_oc.diagnose.feedback import compensation_study
+        from maglev_oc.diagnosis.feedback import compensation_study
         from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
 
         study = None if args.no_control else compensation_study(diag, model)
@@ -311,12 +288,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
     import json
 
     from maglev_oc.fileio import write_text_atomic
-    from maglev_oc.identify.pipeline import identify, load_logs
+    from maglev_oc.identification.pipeline import identify, load_logs
 
     model = load_model(args.params)
     for path in args.logs:
         if not Path(path).is_file():
-            raise UserError(f"{path}: no such file")
+            raise InputError(f"{path}: no such file")
     logs = load_logs(args.logs, params=model.params)
     outcome = identify(
         logs,
@@ -340,6 +317,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="maglev-oc", description=__doc__.splitlines()[0])
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("report", help="run every analysis script and write its PDF")
@@ -438,9 +416,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except (UserError, ValueError, OSError) as err:
+    except (MaglevError, OSError) as err:
         print(f"maglev-oc {args.command}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+    except Exception as err:  # a bug: say so, briefly, and never blame the user's input
+        if args.debug:
+            raise
+        print(
+            f"maglev-oc {args.command}: internal error ({type(err).__name__}: {err}); this is a bug of "
+            "maglev_oc: please report it with the command line; --debug shows the traceback",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

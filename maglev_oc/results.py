@@ -65,9 +65,13 @@ class Estimate:
         return {"value": jsonable(self.value), "stderr": jsonable(self.stderr), "unit": self.unit}
 
     def __str__(self) -> str:
-        if not math.isfinite(self.stderr) or self.stderr == 0:
+        """The value to the precision of its standard error (two significant digits of it)."""
+        if not (math.isfinite(self.stderr) and self.stderr > 0 and math.isfinite(self.value)):
             return f"{self.value:.4g} {self.unit}".strip()
-        return f"{self.value:.4g} ± {self.stderr:.2g} {self.unit}".strip()
+        decimals = max(0, 1 - math.floor(math.log10(self.stderr)))
+        if decimals > 12 or abs(self.value) >= 1e9:
+            return f"{self.value:.4g} ± {self.stderr:.2g} {self.unit}".strip()
+        return f"{self.value:.{decimals}f} ± {self.stderr:.2g} {self.unit}".strip()
 
 
 @dataclasses.dataclass(frozen=True)

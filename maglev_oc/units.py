@@ -4,7 +4,7 @@ SI units everywhere inside maglev_oc; millimetres and micrometres only at the ed
 command-line options, messages).
 """
 
-__all__ = ["MM_TO_M", "M_TO_MM", "M_TO_UM", "UM_TO_M"]
+__all__ = ["MM_TO_M", "M_TO_MM", "M_TO_UM"]
 
 M_TO_MM = 1e3
 """metres -> millimetres"""
@@ -12,5 +12,3 @@ MM_TO_M = 1e-3
 """millimetres -> metres"""
 M_TO_UM = 1e6
 """metres -> micrometres"""
-UM_TO_M = 1e-6
-"""micrometres -> metres"""

@@ -72,3 +72,26 @@ def test_simulate_writes_a_readable_log(tmp_path, capsys):
     assert log.n == 1000  # 1 s at the default 1 kHz logging rate
     assert abs(log.x[0, 0] - 0.026) < 1e-12  # starts at the scenario's 26 mm
     assert "twin_effects" not in log.metadata  # a log does not say what is in it
+
+
+def test_a_bug_is_not_reported_as_the_users_mistake(monkeypatch, capsys):
+    # Only MaglevError (bad input, solver failures named as such) and OSError mean exit 2; any
+    # other exception is a bug of maglev_oc: exit 1, one line saying so, no traceback.
+    import maglev_oc.cli as cli
+    from maglev_oc.errors import LogError
+
+    def broken(_args):
+        raise ValueError("an internal invariant failed")
+
+    def bad_input(_args):
+        raise LogError("run.csv", "line 3, column x1: not a number")
+
+    monkeypatch.setattr(cli, "cmd_model", broken)
+    assert main(["model"]) == 1
+    err = capsys.readouterr().err
+    assert "internal error" in err and "an internal invariant failed" in err and "Traceback" not in err
+
+    monkeypatch.setattr(cli, "cmd_model", bad_input)
+    assert main(["model"]) == 2
+    err = capsys.readouterr().err
+    assert "run.csv" in err and "line 3" in err and "internal" not in err

@@ -22,7 +22,7 @@ import pytest
 from maglev_oc.cli import main
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.data.logs import LogError, read_log
-from maglev_oc.diagnose.diagnosis import diagnose
+from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.sim.effects import Encoder, GuideFriction, TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log

@@ -13,8 +13,8 @@ from scipy.signal import savgol_filter
 
 from maglev_oc.data.logs import Log
 from maglev_oc.estimation.differentiate import SavitzkyGolay
-from maglev_oc.identify.equation_error import EquationError, fit_equation_error
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log, identification_effects
+from maglev_oc.identification.equation_error import EquationError, fit_equation_error
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log, identification_effects
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import CONSTANT_NAMES
 from maglev_oc.regression.data import matching_kernel

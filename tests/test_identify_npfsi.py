@@ -8,10 +8,10 @@ import pytest
 from numpy.testing import assert_allclose
 
 from maglev_oc.estimation.differentiate import SavitzkyGolay
-from maglev_oc.identify.equation_error import fit_equation_error
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
-from maglev_oc.identify.layout import CONSTANT_NAMES
-from maglev_oc.identify.npfsi import NpfsiEstimator, npfsi
+from maglev_oc.identification.equation_error import fit_equation_error
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
+from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.npfsi import NpfsiEstimator, npfsi
 from maglev_oc.results import check_result
 
 TRUTH = dict(zip(CONSTANT_NAMES, TWIN_TRUTH.as_array(), strict=True))

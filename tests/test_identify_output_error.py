@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from maglev_oc.data.logs import Log
-from maglev_oc.identify.equation_error import fit_equation_error
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
-from maglev_oc.identify.layout import CONSTANT_NAMES
-from maglev_oc.identify.output_error import MultipleShooting, fit_output_error, simulate_open_loop
+from maglev_oc.identification.equation_error import fit_equation_error
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
+from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.output_error import MultipleShooting, fit_output_error, simulate_open_loop
 from maglev_oc.model.stage import StageModel
 
 TRUTH = dict(zip(CONSTANT_NAMES, TWIN_TRUTH.as_array(), strict=True))

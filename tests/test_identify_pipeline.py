@@ -10,8 +10,8 @@ import pytest
 
 from maglev_oc.cli import main
 from maglev_oc.data.logs import Log, LogError, write_log
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
-from maglev_oc.identify.pipeline import MIN_DURATION, check_identifiable, identify, load_logs
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
+from maglev_oc.identification.pipeline import MIN_DURATION, check_identifiable, identify, load_logs
 
 
 @pytest.fixture(scope="module")

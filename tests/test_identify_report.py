@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from maglev_oc.identify.layout import CONSTANT_NAMES
+from maglev_oc.identification.layout import CONSTANT_NAMES
 
 
 @pytest.fixture(scope="module")
 def study(model):
-    from maglev_oc.identify.study import run_study
+    from maglev_oc.identification.study import run_study
 
     return run_study(model, coverage_seeds=4)
 

@@ -69,8 +69,8 @@ def test_frequency_count_and_correlation_helpers():
 def test_equation_error_standard_errors_cover_the_truth_over_seeds(model):
     # Eight 20 s twin runs: |z| <= 2 in most runs for every constant and std(z) near 1 (the
     # estimate of the long-run variance has ~10 degrees of freedom: std(z) ~ 1.1 expected).
-    from maglev_oc.identify.equation_error import fit_equation_error
-    from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
+    from maglev_oc.identification.equation_error import fit_equation_error
+    from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
 
     truth = dict(zip(("C1", "C2", "C3", "C4"), TWIN_TRUTH.as_array(), strict=True))
     tm = model.with_constants(TWIN_TRUTH)

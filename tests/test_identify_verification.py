@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from maglev_oc.data.logs import Log
-from maglev_oc.identify.experiments import (
+from maglev_oc.identification.experiments import (
     EQUILIBRIUM_GAPS,
     FIXED_GAPS,
     TWIN_TRUTH,
@@ -16,7 +16,7 @@ from maglev_oc.identify.experiments import (
     fixed_gap_logs,
     verification_effects,
 )
-from maglev_oc.identify.verification import (
+from maglev_oc.identification.verification import (
     cogging_from_c2,
     compare_equilibrium_currents,
     compare_parabola_npfsi,

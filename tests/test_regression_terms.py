@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from maglev_oc.identify.layout import ParameterLayout
+from maglev_oc.identification.layout import ParameterLayout
 from maglev_oc.regression.terms import (
     AccelerationTerm,
     cogging_term,

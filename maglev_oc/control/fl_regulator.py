@@ -20,6 +20,7 @@ import numpy as np
 from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, checked_gains
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.feedback import transformation_expressions
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
@@ -85,7 +86,7 @@ class FeedbackLinearizingRegulator:
         v_ask = v
         if self.compensation is not None:
             if self.compensation.size1_in(0) != 4 or self.compensation.size1_out(0) != 2:
-                raise ValueError("compensation must map x (4) -> (x2', x4') (2)")
+                raise InputError("compensation must map x (4) -> (x2', x4') (2)")
             x_hat = ca.vertcat(y[0], c[1], y[1], c[3])
             d = self.compensation(x_hat)
             v_ask = ca.vertcat(v1 - d[1], v2 - d[0])

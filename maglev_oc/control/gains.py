@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.results import Result
 
 __all__ = [
@@ -84,7 +85,7 @@ def checked_gains(value, label: str) -> np.ndarray:
     """
     k = np.asarray(value, dtype=float).ravel()
     if k.shape != (5,) or not np.all(np.isfinite(k)):
-        raise ValueError(f"{label} must be 5 finite gains, got {value!r}")
+        raise InputError(f"{label} must be 5 finite gains, got {value!r}")
     return k
 
 
@@ -113,7 +114,7 @@ def augmented_axis(
     B : (5, 1) array
     """
     if not (np.isfinite(input_gain) and input_gain != 0):
-        raise ValueError(f"input_gain must be finite and nonzero, got {input_gain!r}")
+        raise InputError(f"input_gain must be finite and nonzero, got {input_gain!r}")
     phi, n, _ = internal_model(omega0)
     a = np.zeros((5, 5))
     a[0, 1] = 1.0
@@ -142,12 +143,12 @@ def place_axis(poles, omega0: float = OMEGA0, stiffness: float = 0.0, input_gain
     """
     poles = np.asarray(poles, dtype=complex).ravel()
     if poles.size != 5:
-        raise ValueError(f"need 5 poles for the augmented axis, got {poles.size}")
+        raise InputError(f"need 5 poles for the augmented axis, got {poles.size}")
     if np.any(poles.real >= 0):
-        raise ValueError(f"poles must lie in the open left half plane, got {poles}")
+        raise InputError(f"poles must lie in the open left half plane, got {poles}")
     coeffs = np.poly(poles)
     if np.max(np.abs(coeffs.imag)) > 1e-9 * np.max(np.abs(coeffs)):
-        raise ValueError(f"poles must be closed under complex conjugation, got {poles}")
+        raise InputError(f"poles must be closed under complex conjugation, got {poles}")
     coeffs = coeffs.real
     a, b = augmented_axis(omega0, stiffness, input_gain)
     ctrb = np.hstack([np.linalg.matrix_power(a, k) @ b for k in range(5)])

@@ -29,6 +29,7 @@ import numpy as np
 from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, axis_poles, place_axis
 from maglev_oc.control.output_regulator import N_REGULATOR_STATE, RegulatorCore
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
@@ -95,7 +96,7 @@ def axis_linearizations(model: StageModel, gaps=SCHEDULE_GAPS) -> AxisLinearizat
     curve = equilibrium_currents(model, gaps)
     if not np.all(curve.exists):
         bad = gaps[~curve.exists]
-        raise ValueError(f"no equilibrium at gap(s) {bad * 1e3} mm; cannot schedule there")
+        raise InputError(f"no equilibrium at gap(s) {bad * 1e3} mm; cannot schedule there")
     n = gaps.size
     x = np.zeros((4, n))
     x[0] = gaps
@@ -159,7 +160,7 @@ class ScheduledLinearRegulator:
         for label in ("gains_h", "gains_v"):
             g = np.asarray(getattr(self, label), dtype=float)
             if g.shape != (5, n) or not np.all(np.isfinite(g)):
-                raise ValueError(f"{label} must be a finite (5, {n}) table, got shape {g.shape}")
+                raise InputError(f"{label} must be a finite (5, {n}) table, got shape {g.shape}")
         core = RegulatorCore(self.sample_time, self.omega0, self.observer_epsilon)
         grid = [self.schedule.gap.tolist()]
         table = np.vstack(

@@ -25,6 +25,7 @@ from maglev_oc.control.linear_regulator import (
     axis_linearizations,
     schedule_gains,
 )
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 
@@ -56,7 +57,7 @@ class AxisWeights:
         """(Q (5, 5), R (1, 1)): the inverse squared maxima on the diagonals."""
         scales = np.array([self.error, self.error_rate, *self.internal_model], dtype=float)
         if np.any(scales <= 0) or self.current <= 0:
-            raise ValueError(f"Bryson maxima must be positive, got {self}")
+            raise InputError(f"Bryson maxima must be positive, got {self}")
         return np.diag(1.0 / scales**2), np.array([[1.0 / self.current**2]])
 
 
@@ -124,7 +125,7 @@ def lqr_regulator(
     w = dict(DEFAULT_WEIGHTS if weights is None else weights)
     unknown = set(w) - {"horizontal", "vertical"}
     if unknown:
-        raise ValueError(f"weights keys must be 'horizontal' and 'vertical', got {sorted(unknown)}")
+        raise InputError(f"weights keys must be 'horizontal' and 'vertical', got {sorted(unknown)}")
     lin = axis_linearizations(model, gaps)
     kh, kv = schedule_gains(
         lin,

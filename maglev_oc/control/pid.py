@@ -20,6 +20,7 @@ import numpy as np
 
 from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.linear_regulator import axis_linearizations
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
@@ -71,7 +72,7 @@ def place_pid(poles, stiffness: float, input_gain: float) -> PidGains:
     """
     c = np.real(np.poly(np.asarray(poles, dtype=complex)))
     if c.size != 4:
-        raise ValueError(f"need 3 poles, got {poles!r}")
+        raise InputError(f"need 3 poles, got {poles!r}")
     _, c2, c1, c0 = c
     b = input_gain
     return PidGains(kp=(c1 + stiffness) / b, ki=c0 / b, kd=c2 / b)

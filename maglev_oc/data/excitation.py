@@ -11,7 +11,7 @@ from typing import Literal
 import numpy as np
 
 from maglev_oc.data.log import Log
-from maglev_oc.errors import LogError
+from maglev_oc.errors import InputError, LogError
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 
 __all__ = ["CURRENT_RESOLUTION", "Excitation", "check_excitation"]
@@ -75,13 +75,13 @@ def check_excitation(
     """
     needed = {"vertical": ("x1", "u2"), "horizontal": ("x3", "u1"), "both": ("x1", "x3", "u1", "u2")}
     if axis not in needed:
-        raise ValueError(f"axis must be 'vertical', 'horizontal' or 'both', got {axis!r}")
+        raise InputError(f"axis must be 'vertical', 'horizontal' or 'both', got {axis!r}")
     for name, value in (
         ("position_resolution", position_resolution),
         ("current_resolution", current_resolution),
     ):
         if not (value > 0 and math.isfinite(value)):
-            raise ValueError(f"{name} must be positive, got {value!r}")
+            raise InputError(f"{name} must be positive, got {value!r}")
     signals = {"x1": log.x[0], "x3": log.x[2], "u1": log.u[0], "u2": log.u[1]}
     resolution = {"x1": position_resolution, "x3": position_resolution}
     resolution |= {"u1": current_resolution, "u2": current_resolution}

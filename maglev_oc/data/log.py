@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maglev_oc.errors import InputError
+
 __all__ = [
     "INPUT_COLUMNS",
     "KNOWN_COLUMNS",
@@ -40,9 +42,9 @@ def _readonly(value: object, name: str, shape: tuple[int, ...] | None = None) ->
     try:
         arr = np.array(value, dtype=float, copy=True)
     except (TypeError, ValueError):
-        raise ValueError(f"Log.{name}: expected a numeric array, got {type(value).__name__}") from None
+        raise InputError(f"Log.{name}: expected a numeric array, got {type(value).__name__}") from None
     if shape is not None and arr.shape != shape:
-        raise ValueError(f"Log.{name}: expected shape {shape}, got {arr.shape}")
+        raise InputError(f"Log.{name}: expected shape {shape}, got {arr.shape}")
     arr.setflags(write=False)
     return arr
 
@@ -84,19 +86,19 @@ class Log:
     def __post_init__(self) -> None:
         t = _readonly(self.t, "t")
         if t.ndim != 1:
-            raise ValueError(f"Log.t: expected a 1-D array (n,), got shape {t.shape}")
+            raise InputError(f"Log.t: expected a 1-D array (n,), got shape {t.shape}")
         n = t.size
         if n < 2:
-            raise ValueError(f"Log.t: need at least 2 samples, got {n}")
+            raise InputError(f"Log.t: need at least 2 samples, got {n}")
         x = _readonly(self.x, "x", (4, n))
         u = _readonly(self.u, "u", (2, n))
         if not np.all(np.isfinite(t)):
             k = int(np.flatnonzero(~np.isfinite(t))[0])
-            raise ValueError(f"Log.t: sample {k} is {float(t[k])!r}; time must be finite")
+            raise InputError(f"Log.t: sample {k} is {float(t[k])!r}; time must be finite")
         steps = np.diff(t)
         if np.any(steps <= 0):
             k = int(np.flatnonzero(steps <= 0)[0]) + 1
-            raise ValueError(
+            raise InputError(
                 f"Log.t: time must increase strictly; t[{k}] = {float(t[k])!r} s after "
                 f"t[{k - 1}] = {float(t[k - 1])!r} s"
             )
@@ -106,22 +108,22 @@ class Log:
                 continue  # not measured
             if not np.all(finite):
                 k = int(np.flatnonzero(~finite)[0])
-                raise ValueError(
+                raise InputError(
                     f"Log.x: row {row} ({name}) has {float(x[row, k])!r} at sample {k}; x1, x3 must be "
                     "finite and x2, x4 either finite or all NaN"
                 )
         if not np.all(np.isfinite(u)):
             row, k = (int(i[0]) for i in np.nonzero(~np.isfinite(u)))
-            raise ValueError(f"Log.u: row {row} (u{row + 1}) has {float(u[row, k])!r} at sample {k}")
+            raise InputError(f"Log.u: row {row} (u{row + 1}) has {float(u[row, k])!r} at sample {k}")
         metadata = dict(self.metadata)
         for key, value in metadata.items():
             if not isinstance(key, str) or not isinstance(value, str):
-                raise ValueError(f"Log.metadata: keys and values must be str, got {key!r}: {value!r}")
+                raise InputError(f"Log.metadata: keys and values must be str, got {key!r}: {value!r}")
         notes = tuple(self.notes)
         if not all(isinstance(note, str) for note in notes):
-            raise ValueError(f"Log.notes: expected a tuple of str, got {self.notes!r}")
+            raise InputError(f"Log.notes: expected a tuple of str, got {self.notes!r}")
         if not isinstance(self.currents_measured, (bool, np.bool_)):
-            raise ValueError(f"Log.currents_measured: expected a bool, got {self.currents_measured!r}")
+            raise InputError(f"Log.currents_measured: expected a bool, got {self.currents_measured!r}")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "x", x)
         object.__setattr__(self, "u", u)
@@ -164,7 +166,7 @@ class Log:
         """
         rows = range(self.n)[slice(start, stop)]
         if len(rows) < 2:
-            raise ValueError(
+            raise InputError(
                 f"Log.index_slice: samples [{start}:{stop}] of a {self.n}-sample log leave "
                 f"{len(rows)} sample(s); need at least 2"
             )
@@ -187,11 +189,11 @@ class Log:
         Log
         """
         if not t_start < t_stop:
-            raise ValueError(f"Log.time_slice: need t_start < t_stop, got {t_start!r}, {t_stop!r}")
+            raise InputError(f"Log.time_slice: need t_start < t_stop, got {t_start!r}, {t_stop!r}")
         start = int(np.searchsorted(self.t, t_start, side="left"))
         stop = int(np.searchsorted(self.t, t_stop, side="left"))
         if stop - start < 2:
-            raise ValueError(
+            raise InputError(
                 f"Log.time_slice: [{t_start!r}, {t_stop!r}) s holds {stop - start} sample(s) of a log "
                 f"spanning [{float(self.t[0])!r}, {float(self.t[-1])!r}] s; need at least 2"
             )

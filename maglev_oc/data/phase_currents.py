@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from maglev_oc.errors import InputError
+
 __all__ = ["inputs_to_phase_currents", "phase_currents_to_inputs"]
 
 
@@ -65,7 +67,7 @@ def inputs_to_phase_currents(u: np.ndarray, x3: np.ndarray, pole_pitch: float) -
     """
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[0] != 2:
-        raise ValueError(f"u: expected shape (2, n) = (i_q, i_d), got {u.shape}")
+        raise InputError(f"u: expected shape (2, n) = (i_q, i_d), got {u.shape}")
     theta = np.pi * np.asarray(x3, dtype=float) / pole_pitch
     i_q, i_d = u
     shifts = (0.0, -2 * np.pi / 3, 2 * np.pi / 3)

@@ -11,6 +11,7 @@ from maglev_oc.data.csv_reader import read_csv
 from maglev_oc.data.log import Log
 from maglev_oc.data.mat_reader import read_mat
 from maglev_oc.data.validation import TRANSFORM_TOLERANCE, validated
+from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import StageParameters
 
 __all__ = ["read_log"]
@@ -52,11 +53,11 @@ def read_log(
         No such file.
     """
     if isinstance(min_samples, bool) or not isinstance(min_samples, int) or min_samples < 2:
-        raise ValueError(f"min_samples must be an integer >= 2, got {min_samples!r}")
+        raise InputError(f"min_samples must be an integer >= 2, got {min_samples!r}")
     if not (min_duration >= 0 and math.isfinite(min_duration)):
-        raise ValueError(f"min_duration must be >= 0 [s], got {min_duration!r}")
+        raise InputError(f"min_duration must be >= 0 [s], got {min_duration!r}")
     if not (transform_tolerance > 0):
-        raise ValueError(f"transform_tolerance must be positive [A], got {transform_tolerance!r}")
+        raise InputError(f"transform_tolerance must be positive [A], got {transform_tolerance!r}")
     params = StageParameters() if params is None else params
     path = Path(path)
     source = str(path)

@@ -11,6 +11,7 @@ import numpy as np
 import scipy.io
 
 from maglev_oc.data.log import Log
+from maglev_oc.errors import InputError
 from maglev_oc.fileio import atomic_path
 
 __all__ = ["write_log", "write_log_arrays"]
@@ -47,18 +48,18 @@ def write_log(path: str | os.PathLike, log: Log) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".txt", ".mat"):
-        raise ValueError(f"{path}: unknown log suffix {path.suffix!r}; use .csv, .txt or .mat")
+        raise InputError(f"{path}: unknown log suffix {path.suffix!r}; use .csv, .txt or .mat")
     meta = {"units": "SI", "sample_rate_hz": f"{1.0 / log.sample_time:.10g}"}
     meta["currents"] = "measured" if log.currents_measured else "commanded"
     meta |= {k: v for k, v in log.metadata.items() if k not in meta}
     for key, value in meta.items():
         if not key.strip() or ":" in key or "\n" in key or "\n" in value or key.strip() != key:
-            raise ValueError(f"{path}: metadata {key!r}: {value!r} cannot be written as '# key: value'")
+            raise InputError(f"{path}: metadata {key!r}: {value!r} cannot be written as '# key: value'")
     columns = log.columns()
     if suffix == ".mat":
         for key in meta:
             if not _MATLAB_NAME.fullmatch(key):
-                raise ValueError(f"{path}: metadata key {key!r} is not a MATLAB field name")
+                raise InputError(f"{path}: metadata key {key!r} is not a MATLAB field name")
         payload: dict[str, object] = {name: np.asarray(v) for name, v in columns.items()}
         payload["metadata"] = dict(meta)
         with atomic_path(path) as tmp, tmp.open("wb") as fh:

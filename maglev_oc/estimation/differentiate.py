@@ -67,6 +67,7 @@ from scipy.linalg import expm
 from scipy.signal import lfilter, savgol_coeffs, savgol_filter, ss2tf
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 
@@ -125,9 +126,9 @@ class Derivatives:
 def _as_rows(y: np.ndarray, name: str = "y") -> np.ndarray:
     y = np.asarray(y, dtype=float)
     if y.ndim not in (1, 2) or y.shape[-1] < 2:
-        raise ValueError(f"{name}: expected shape (n,) or (m, n) with n >= 2 samples, got {y.shape}")
+        raise InputError(f"{name}: expected shape (n,) or (m, n) with n >= 2 samples, got {y.shape}")
     if not np.all(np.isfinite(y)):
-        raise ValueError(
+        raise InputError(
             f"{name}: positions must be finite (NaN or inf at index {np.argwhere(~np.isfinite(y))[0]})"
         )
     return y
@@ -135,7 +136,7 @@ def _as_rows(y: np.ndarray, name: str = "y") -> np.ndarray:
 
 def _check_sample_time(sample_time: float) -> None:
     if not (sample_time > 0 and math.isfinite(sample_time)):
-        raise ValueError(f"sample_time must be positive [s], got {sample_time!r}")
+        raise InputError(f"sample_time must be positive [s], got {sample_time!r}")
 
 
 # --- Savitzky-Golay ---------------------------------------------------------------------------
@@ -180,7 +181,7 @@ def _longest_window(
         return savgol_gain_error(w, polyorder, deriv, sample_time, bandwidth) <= tolerance
 
     if not ok(shortest):
-        raise ValueError(
+        raise InputError(
             f"bandwidth {bandwidth:g} Hz is too close to the Nyquist frequency {0.5 / sample_time:g} Hz: "
             f"even a {shortest}-sample window misses the derivative by more than {tolerance:g}"
         )
@@ -188,7 +189,7 @@ def _longest_window(
     while ok(upper):
         upper = 2 * upper + 1
         if upper > 10_000_000:
-            raise ValueError(f"no window limit found for bandwidth {bandwidth:g} Hz")
+            raise InputError(f"no window limit found for bandwidth {bandwidth:g} Hz")
     lo, hi = (shortest - 1) // 2, (upper - 1) // 2  # half-widths: lo passes, hi fails
     while hi - lo > 1:
         mid = (lo + hi) // 2
@@ -235,11 +236,11 @@ class SavitzkyGolay:
     def __post_init__(self) -> None:
         _check_sample_time(self.sample_time)
         if not (self.bandwidth > 0 and math.isfinite(self.bandwidth)):
-            raise ValueError(f"bandwidth must be positive [Hz], got {self.bandwidth!r}")
+            raise InputError(f"bandwidth must be positive [Hz], got {self.bandwidth!r}")
         if isinstance(self.polyorder, bool) or self.polyorder not in (2, 3, 4, 5):
-            raise ValueError(f"polyorder must be 2, 3, 4 or 5, got {self.polyorder!r}")
+            raise InputError(f"polyorder must be 2, 3, 4 or 5, got {self.polyorder!r}")
         if not (0 < self.tolerance < 1):
-            raise ValueError(f"tolerance must be in (0, 1), got {self.tolerance!r}")
+            raise InputError(f"tolerance must be in (0, 1), got {self.tolerance!r}")
         args = (self.sample_time, self.bandwidth, self.polyorder)
         wv = _longest_window(*args, deriv=1, tolerance=self.tolerance)
         wa = _longest_window(*args, deriv=2, tolerance=self.tolerance)
@@ -258,7 +259,7 @@ class SavitzkyGolay:
         n = y.shape[-1]
         longest = max(self.velocity_window, self.acceleration_window)
         if n < longest:
-            raise ValueError(
+            raise InputError(
                 f"y has {n} samples but the {self.bandwidth:g} Hz bandwidth needs windows of "
                 f"{self.velocity_window} and {self.acceleration_window}; raise the bandwidth or use "
                 "a longer log"
@@ -346,7 +347,7 @@ class HighGainDifferentiator:
     def __post_init__(self) -> None:
         _check_sample_time(self.sample_time)
         if not (self.acceleration_epsilon > 0 and math.isfinite(self.acceleration_epsilon)):
-            raise ValueError(f"acceleration_epsilon must be positive [s], got {self.acceleration_epsilon!r}")
+            raise InputError(f"acceleration_epsilon must be positive [s], got {self.acceleration_epsilon!r}")
         object.__setattr__(self, "observer", HighGainObserver(self.sample_time, self.epsilon))
         object.__setattr__(self, "_third", _third_order_observer(self.sample_time, self.acceleration_epsilon))
 
@@ -393,7 +394,7 @@ def differentiate_log(log: Log, estimator: SavitzkyGolay | HighGainDifferentiato
         Arrays of shape (2, n): gap and horizontal position.
     """
     if abs(estimator.sample_time - log.sample_time) > 0.01 * log.sample_time:
-        raise ValueError(
+        raise InputError(
             f"{log.source}: estimator sample_time {estimator.sample_time!r} s does not match the log's "
             f"median step {log.sample_time!r} s"
         )

@@ -27,6 +27,7 @@ import casadi as ca
 import numpy as np
 from scipy.linalg import expm
 
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.stage import StageModel
 
@@ -90,9 +91,9 @@ class ExtendedHighGainObserver:
         limit: float = DEFAULT_DISTURBANCE_LIMIT,
     ) -> None:
         if not (bandwidth >= 0 and math.isfinite(bandwidth)):
-            raise ValueError(f"bandwidth must be >= 0 [rad/s], got {bandwidth!r}")
+            raise InputError(f"bandwidth must be >= 0 [rad/s], got {bandwidth!r}")
         if not (limit > 0 and math.isfinite(limit)):
-            raise ValueError(f"limit must be positive [m/s^2], got {limit!r}")
+            raise InputError(f"limit must be positive [m/s^2], got {limit!r}")
         self.observer = HighGainObserver(sample_time, epsilon)
         self.model = model
         self.limit = limit

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
+from maglev_oc.errors import InputError
+
 __all__ = ["DEFAULT_EPSILON", "HighGainObserver"]
 
 DEFAULT_EPSILON = 2e-3
@@ -55,12 +57,12 @@ class HighGainObserver:
 
     def __post_init__(self) -> None:
         if not (self.sample_time > 0 and np.isfinite(self.sample_time)):
-            raise ValueError(f"sample_time must be positive [s], got {self.sample_time!r}")
+            raise InputError(f"sample_time must be positive [s], got {self.sample_time!r}")
         if not (self.epsilon > 0 and np.isfinite(self.epsilon)):
-            raise ValueError(f"epsilon must be positive [s], got {self.epsilon!r}")
+            raise InputError(f"epsilon must be positive [s], got {self.epsilon!r}")
         a1, a2 = self.alpha
         if not (a1 > 0 and a2 > 0):
-            raise ValueError(f"alpha must be positive, got {self.alpha!r}")
+            raise InputError(f"alpha must be positive, got {self.alpha!r}")
         eps = self.epsilon
         a = np.array([[-a1 / eps, 1.0], [-a2 / eps**2, 0.0]])
         b = np.array([[a1 / eps, 0.0], [a2 / eps**2, 1.0]])
@@ -92,7 +94,7 @@ class HighGainObserver:
         """
         if isinstance(xhat, np.ndarray) and xhat.ndim == 1:
             if xhat.shape != (2,):
-                raise ValueError(f"xhat must have 2 entries, got shape {xhat.shape}")
+                raise InputError(f"xhat must have 2 entries, got shape {xhat.shape}")
             return self.Ad @ xhat + self.By[:, 0] * y + self.Ba[:, 0] * a
         return self.Ad @ xhat + self.By * y + self.Ba * a
 

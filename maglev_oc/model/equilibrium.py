@@ -16,11 +16,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import CONTINUOUS_CURRENT_LIMIT, PEAK_CURRENT_LIMIT
 from maglev_oc.model.stage import StageModel
 
+__all__ = [
+    "EquilibriumCurve",
+    "NoEquilibriumError",
+    "OperatingPoint",
+    "equilibrium",
+    "equilibrium_currents",
+    "gap_for_current",
+]
 
-class NoEquilibriumError(ValueError):
+
+class NoEquilibriumError(InputError):
     """No equilibrium exists at the requested gap, or it needs more current than allowed."""
 
 
@@ -59,7 +69,7 @@ def equilibrium_currents(model: StageModel, gaps) -> EquilibriumCurve:
     """Equilibrium current u2 [A] at each gap [m] (u1 = 0), vectorised; never raises for a gap."""
     gaps = np.atleast_1d(np.asarray(gaps, dtype=float))
     if np.any(~np.isfinite(gaps)) or np.any(gaps <= 0):
-        raise ValueError(f"gaps must be positive and finite [m], got {gaps[~(gaps > 0)][:3]}")
+        raise InputError(f"gaps must be positive and finite [m], got {gaps[~(gaps > 0)][:3]}")
     _, L2, L3, L4 = model.coefficients(gaps)
     disc = L3**2 - 4 * L4 * (L2 - model.params.gravity)
     exists = disc >= 0
@@ -90,9 +100,9 @@ def equilibrium(
     gap = float(gap)
     position = float(position)
     if not np.isfinite(position):
-        raise ValueError(f"position must be finite [m], got {position!r}")
+        raise InputError(f"position must be finite [m], got {position!r}")
     if gap > 1.0:
-        raise ValueError(f"gap = {gap!r} looks like millimetres; the gap is in metres")
+        raise InputError(f"gap = {gap!r} looks like millimetres; the gap is in metres")
     curve = equilibrium_currents(model, [gap])
     if not curve.exists[0]:
         raise NoEquilibriumError(

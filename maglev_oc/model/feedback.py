@@ -24,6 +24,8 @@ import numpy as np
 
 from maglev_oc.model.stage import StageModel
 
+__all__ = ["FeedbackTransformation", "transformation_expressions"]
+
 
 @dataclass(frozen=True, eq=False)
 class FeedbackTransformation:

@@ -1,5 +1,14 @@
 """Hardware constants of the Quanser 2-DOF rig that every layer agrees on (002 Sec. 4, 000 Sec. II)."""
 
+__all__ = [
+    "CONTINUOUS_CURRENT_LIMIT",
+    "ENCODER_RESOLUTION",
+    "PEAK_CURRENT_LIMIT",
+    "RIG_SAMPLE_TIME",
+    "STOPPER_GAP",
+    "STOPPER_POSITION",
+]
+
 RIG_SAMPLE_TIME = 2e-4
 """Control period [s]: the Q8 board runs the loop at 5 kHz."""
 ENCODER_RESOLUTION = 10e-6

@@ -9,6 +9,8 @@ import numpy as np
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.stage import N_INPUTS, N_STATES, StageModel
 
+__all__ = ["OUTPUT_MATRIX", "LinearModel", "OpenLoopPoles", "linearize", "open_loop_poles"]
+
 OUTPUT_MATRIX = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
 """Outputs y = (x1, x3): air gap and horizontal position (eq. (4) of 002)."""
 

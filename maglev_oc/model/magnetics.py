@@ -12,7 +12,18 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import MU0, StageParameters
+
+__all__ = [
+    "FIELD_FIT_DEGREE",
+    "FIELD_FIT_RANGE",
+    "FieldPolynomial",
+    "carter_coefficient",
+    "field_closed_form",
+    "fit_field_polynomial",
+    "slot_factor",
+]
 
 FIELD_FIT_RANGE = (5e-3, 35e-3)
 """Gap range [m] over which the papers' 12th-degree polynomial field fit is valid."""
@@ -77,7 +88,7 @@ def fit_field_polynomial(
     """Least-squares fit of B(y) on Chebyshev nodes over ``fit_range`` (papers: 12th degree, 5-35 mm)."""
     lo, hi = fit_range
     if not 0 < lo < hi:
-        raise ValueError(f"fit_range must satisfy 0 < lo < hi, got {fit_range!r}")
+        raise InputError(f"fit_range must satisfy 0 < lo < hi, got {fit_range!r}")
     center, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     y_sym = ca.SX.sym("y")
     closed = ca.Function("B", [y_sym], [field_closed_form(p, y_sym)])

@@ -14,7 +14,19 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from maglev_oc.errors import InputError
 from maglev_oc.fileio import write_text_atomic
+
+__all__ = [
+    "DEFAULT_CONSTANTS",
+    "MU0",
+    "PAPER_CONSTANTS",
+    "LumpedConstants",
+    "StageParameters",
+    "load_json",
+    "paper_constants",
+    "save_json",
+]
 
 MU0 = 4e-7 * math.pi
 """Free-space permeability [N/A^2]."""
@@ -78,31 +90,31 @@ class StageParameters:
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"StageParameters.{f.name}: expected a number, got {value!r}")
+                raise InputError(f"StageParameters.{f.name}: expected a number, got {value!r}")
             if not math.isfinite(value) or value <= 0:
-                raise ValueError(
+                raise InputError(
                     f"StageParameters.{f.name}: must be positive and finite "
                     f"[{f.metadata['unit']}], got {value!r}"
                 )
         for name in self._LENGTHS:
             value = getattr(self, name)
             if value > _MAX_LENGTH_M:
-                raise ValueError(
+                raise InputError(
                     f"StageParameters.{name} = {value!r} m looks like millimetres; "
                     f"lengths are in metres (e.g. {value / 1000:g})"
                 )
         for name in self._COUNTS:
             value = getattr(self, name)
             if float(value) != int(value):
-                raise ValueError(f"StageParameters.{name}: must be a whole number, got {value!r}")
+                raise InputError(f"StageParameters.{name}: must be a whole number, got {value!r}")
             object.__setattr__(self, name, int(value))
         if self.magnet_width > self.pole_pitch:
-            raise ValueError(
+            raise InputError(
                 f"StageParameters.magnet_width = {self.magnet_width} m exceeds "
                 f"pole_pitch = {self.pole_pitch} m"
             )
         if self.slot_width >= self.slot_pitch:
-            raise ValueError(
+            raise InputError(
                 f"StageParameters.slot_width = {self.slot_width} m must be smaller than "
                 f"slot_pitch = {self.slot_pitch} m"
             )
@@ -181,9 +193,9 @@ class LumpedConstants:
         for name in ("C1", "C2", "C3", "C4"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"LumpedConstants.{name}: expected a number, got {value!r}")
+                raise InputError(f"LumpedConstants.{name}: expected a number, got {value!r}")
             if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"LumpedConstants.{name}: must be positive, got {value!r}")
+                raise InputError(f"LumpedConstants.{name}: must be positive, got {value!r}")
             object.__setattr__(self, name, float(value))
 
     def as_array(self) -> list[float]:
@@ -246,7 +258,7 @@ def paper_constants(name: str) -> LumpedConstants:
     try:
         return PAPER_CONSTANTS[name]
     except KeyError:
-        raise ValueError(
+        raise InputError(
             f"unknown constant set {name!r}; known: {', '.join(sorted(PAPER_CONSTANTS))}"
         ) from None
 
@@ -254,11 +266,11 @@ def paper_constants(name: str) -> LumpedConstants:
 # --- JSON ---------------------------------------------------------------------------------
 def _checked_keys(cls: type, data: Any, where: str) -> dict[str, Any]:
     if not isinstance(data, dict):
-        raise ValueError(f"{where}: expected a JSON object, got {type(data).__name__}")
+        raise InputError(f"{where}: expected a JSON object, got {type(data).__name__}")
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}; known keys: {sorted(known)}")
+        raise InputError(f"{where}: unknown key(s) {unknown}; known keys: {sorted(known)}")
     return dict(data)
 
 
@@ -274,7 +286,7 @@ def load_json(path: str | os.PathLike) -> tuple[StageParameters, LumpedConstants
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as err:
-        raise ValueError(f"{path}: not valid JSON (line {err.lineno}: {err.msg})") from None
+        raise InputError(f"{path}: not valid JSON (line {err.lineno}: {err.msg})") from None
     data = _checked_keys(_Sections, data, str(path))
     params = StageParameters.from_dict(data.get("stage", {}), where=f"{path}: stage")
     if "constants" in data:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.magnetics import (
     FieldPolynomial,
     carter_coefficient,
@@ -32,12 +33,14 @@ from maglev_oc.model.magnetics import (
 )
 from maglev_oc.model.parameters import DEFAULT_CONSTANTS, LumpedConstants, StageParameters
 
+__all__ = ["FIELD_MODELS", "N_INPUTS", "N_STATES", "StageModel"]
+
 N_STATES = 4
 N_INPUTS = 2
 FIELD_MODELS = ("closed_form", "polynomial")
 
 
-def shape_expressions(params: StageParameters, y, field_fn) -> list:
+def _shape_expressions(params: StageParameters, y, field_fn) -> list:
     """The four shape functions l1..l4 of eqs. (5)-(8) of 002 at gap ``y`` (L_i = C_i l_i).
 
     l1 = lam / (Kc sinh(a (h_m + y)))           [1/1]   (L1 = C1 l1, m/(s^2 A))
@@ -104,7 +107,7 @@ class StageModel:
         if not isinstance(self.constants, LumpedConstants):
             raise TypeError(f"constants must be LumpedConstants, got {type(self.constants).__name__}")
         if self.field_model not in FIELD_MODELS:
-            raise ValueError(f"field_model must be one of {FIELD_MODELS}, got {self.field_model!r}")
+            raise InputError(f"field_model must be one of {FIELD_MODELS}, got {self.field_model!r}")
         self._build()
 
     # ------------------------------------------------------------------------------------
@@ -124,7 +127,7 @@ class StageModel:
 
         y = ca.SX.sym("y")
         theta = ca.SX.sym("C", 4)
-        shapes = ca.vertcat(*shape_expressions(p, y, field_fn))
+        shapes = ca.vertcat(*_shape_expressions(p, y, field_fn))
         set_(self, "pm_field", ca.Function("B", [y], [field_fn(y)], ["y"], ["B"]))
         set_(self, "shape", ca.Function("shape", [y], [shapes], ["y"], ["l"]))
         c_nom = ca.DM(self.constants.as_array())

@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maglev_oc.control.gains import OMEGA0, GainCheck, check_paper_gains
 from maglev_oc.model.equilibrium import (
     EquilibriumCurve,
     NoEquilibriumError,
@@ -18,6 +17,8 @@ from maglev_oc.model.linearization import OpenLoopPoles, open_loop_poles
 from maglev_oc.model.magnetics import FieldPolynomial, fit_field_polynomial
 from maglev_oc.model.parameters import PAPER_CONSTANTS, LumpedConstants
 from maglev_oc.model.stage import StageModel
+
+__all__ = ["TABLE_GAPS", "ModelSummary", "equilibrium_table_rows", "summarize_model"]
 
 TABLE_GAPS = np.array([8.0, 10.0, 12.5, 15.0, 17.5, 20.0, 22.5, 25.0, 27.5, 30.0]) * 1e-3
 """Gaps [m] of the printed equilibrium table."""
@@ -40,14 +41,11 @@ class ModelSummary:
     zero_current_gap: float | None  # [m] where i_d = 0 holds the gap
     physical_constants: LumpedConstants
     winding_factor: float
-    gain_checks: list[GainCheck]
     table: EquilibriumCurve  # at TABLE_GAPS
     table_poles: OpenLoopPoles  # at TABLE_GAPS
 
 
-def summarize_model(
-    model: StageModel, gaps=None, *, table_gaps=TABLE_GAPS, omega0: float = OMEGA0
-) -> ModelSummary:
+def summarize_model(model: StageModel, gaps=None, *, table_gaps=TABLE_GAPS) -> ModelSummary:
     """Compute the model summary over ``gaps`` [m] (default 5-35 mm, 301 points); the table
     rows are at ``table_gaps`` [m]."""
     gap = np.linspace(5e-3, 35e-3, 301) if gaps is None else np.asarray(gaps, dtype=float)
@@ -76,7 +74,6 @@ def summarize_model(
         zero_current_gap=zero_gap,
         physical_constants=model.params.physical_constants(),
         winding_factor=model.params.winding_factor,
-        gain_checks=check_paper_gains(omega0),
         table=equilibrium_currents(model, table_gaps),
         table_poles=open_loop_poles(model, table_gaps),
     )

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import checked_p, ellipsoid_image
 from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet
@@ -109,7 +110,7 @@ class BoundaryMinimizer:
         """
         t0 = time.perf_counter()
         if constraint not in self._solvers:
-            raise ValueError(f"constraint must be one of {list(self._solvers)}, got {constraint!r}")
+            raise InputError(f"constraint must be one of {list(self._solvers)}, got {constraint!r}")
         P = checked_p(P)
         solver, ng = self._solvers[constraint]
         F = self.loop.offset_coefficients(reference)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import ellipsoid_image
 from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, transformation_constraints
@@ -79,7 +80,7 @@ class LevelCertifier:
 
     def __init__(self, feasible: FeasibleSet, loop: RegulatorLoop, *, max_boxes: int = 400_000) -> None:
         if max_boxes < 100:
-            raise ValueError(f"max_boxes must be >= 100, got {max_boxes!r}")
+            raise InputError(f"max_boxes must be >= 100, got {max_boxes!r}")
         self.feasible = feasible
         self.loop = loop
         self.max_boxes = int(max_boxes)
@@ -115,7 +116,7 @@ class LevelCertifier:
         """
         t0 = time.perf_counter()
         if not (level > 0 and math.isfinite(level)):
-            raise ValueError(f"level must be positive and finite, got {level!r}")
+            raise InputError(f"level must be positive and finite, got {level!r}")
         img = ellipsoid_image(self.loop, P)
         lmat = math.sqrt(level) * img.chol
         par_l = lmat.ravel(order="F")[:, None]

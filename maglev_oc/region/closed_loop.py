@@ -35,6 +35,7 @@ import numpy as np
 from scipy.linalg import block_diag, solve_continuous_lyapunov, solve_sylvester
 
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, augmented_axis, checked_gains
+from maglev_oc.errors import InputError
 
 __all__ = [
     "DE1",
@@ -86,19 +87,19 @@ class Reference:
             self.omega,
         )
         if not all(math.isfinite(float(v)) for v in values):
-            raise ValueError(f"reference values must be finite, got {self!r}")
+            raise InputError(f"reference values must be finite, got {self!r}")
         if not (0 < self.gap < 0.1):
-            raise ValueError(f"gap must be in metres, in (0, 0.1), got {self.gap!r}")
+            raise InputError(f"gap must be in metres, in (0, 0.1), got {self.gap!r}")
         if abs(self.position) > 0.5:
-            raise ValueError(f"position must be in metres, got {self.position!r}")
+            raise InputError(f"position must be in metres, got {self.position!r}")
         if self.gap_amplitude < 0 or self.position_amplitude < 0:
-            raise ValueError(
+            raise InputError(
                 f"amplitudes must be >= 0 [m], got {self.gap_amplitude!r}, {self.position_amplitude!r}"
             )
         if self.gap_amplitude >= self.gap:
-            raise ValueError(f"gap_amplitude {self.gap_amplitude!r} must be below the gap {self.gap!r}")
+            raise InputError(f"gap_amplitude {self.gap_amplitude!r} must be below the gap {self.gap!r}")
         if self.omega <= 0:
-            raise ValueError(f"omega must be positive [rad/s], got {self.omega!r}")
+            raise InputError(f"omega must be positive [rad/s], got {self.omega!r}")
 
     @classmethod
     def setpoint(cls, gap: float, position: float = 0.0) -> Reference:
@@ -180,7 +181,7 @@ class RegulatorLoop:
         a_h = a + b @ self.K_h[None, :]
         A = block_diag(a_v, a_h)
         if np.max(np.linalg.eigvals(A).real) >= 0:
-            raise ValueError("the gains do not stabilise the augmented axes (A_cl is not Hurwitz)")
+            raise InputError("the gains do not stabilise the augmented axes (A_cl is not Hurwitz)")
         b_v = np.zeros(N_ERROR)
         b_v[DE1] = 1.0
         b_h = np.zeros(N_ERROR)
@@ -289,7 +290,7 @@ class RegulatorLoop:
             Q = np.diag(1.0 / self.state_scale() ** 2)
         Q = np.asarray(Q, dtype=float)
         if Q.shape != (N_ERROR, N_ERROR):
-            raise ValueError(f"Q must be 10 x 10, got {Q.shape}")
+            raise InputError(f"Q must be 10 x 10, got {Q.shape}")
         P = solve_continuous_lyapunov(self.A.T, -Q)
         return 0.5 * (P + P.T)
 

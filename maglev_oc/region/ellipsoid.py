@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, RegulatorLoop
 from maglev_oc.results import PerAxis
 
@@ -66,9 +67,9 @@ def checked_p(P) -> np.ndarray:
     """``P`` as a finite, symmetric 10 x 10 float array (symmetrised); ValueError otherwise."""
     P = np.asarray(P, dtype=float)
     if P.shape != (N_ERROR, N_ERROR) or not np.all(np.isfinite(P)):
-        raise ValueError(f"P must be a finite 10 x 10 matrix, got shape {P.shape}")
+        raise InputError(f"P must be a finite 10 x 10 matrix, got shape {P.shape}")
     if not np.allclose(P, P.T, rtol=1e-10, atol=0):
-        raise ValueError("P must be symmetric")
+        raise InputError("P must be symmetric")
     return 0.5 * (P + P.T)
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
@@ -165,17 +166,17 @@ class FeasibleSet:
         if not isinstance(self.model, StageModel):
             raise TypeError(f"model must be a StageModel, got {type(self.model).__name__}")
         if self.current_limit is not None and not (0 < self.current_limit < 100):
-            raise ValueError(f"current_limit must be in (0, 100) A or None, got {self.current_limit!r}")
+            raise InputError(f"current_limit must be in (0, 100) A or None, got {self.current_limit!r}")
         for name in ("gap_range", "position_range"):
             rng = getattr(self, name)
             if rng is None:
                 continue
             lo, hi = (float(v) for v in rng)
             if not (lo < hi) or max(abs(lo), abs(hi)) > 0.5:
-                raise ValueError(f"{name} must be (low, high) in metres, got {rng!r}")
+                raise InputError(f"{name} must be (low, high) in metres, got {rng!r}")
             object.__setattr__(self, name, (lo, hi))
         if self.gap_range is not None and self.gap_range[0] <= 0:
-            raise ValueError(f"gap_range must be positive [m], got {self.gap_range!r}")
+            raise InputError(f"gap_range must be positive [m], got {self.gap_range!r}")
         x1 = ca.SX.sym("x1")
         v = ca.SX.sym("v", 2)
         margin, headroom = transformation_constraints(self.model, x1, v, self.current_limit)
@@ -324,11 +325,11 @@ def feasibility_map(
     t0 = time.perf_counter()
     for a in axes:
         if a not in SLICE_VARIABLES:
-            raise ValueError(f"unknown slice variable {a!r}; known: {', '.join(SLICE_VARIABLES)}")
+            raise InputError(f"unknown slice variable {a!r}; known: {', '.join(SLICE_VARIABLES)}")
     if axes[0] == axes[1]:
-        raise ValueError(f"the two slice axes must differ, got {axes!r}")
+        raise InputError(f"the two slice axes must differ, got {axes!r}")
     if n < 3:
-        raise ValueError(f"n must be >= 3, got {n!r}")
+        raise InputError(f"n must be >= 3, got {n!r}")
     fn = feasible.loop_function(loop, reference)
     base = np.zeros(N_ERROR + 1)
     base[N_ERROR] = phase

@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
+
 __all__ = ["IntervalFunction"]
 
 _EPS = np.finfo(float).eps
@@ -226,14 +228,14 @@ class IntervalFunction:
         lo = [np.atleast_2d(np.asarray(a, dtype=float)) for a in lo]
         hi = [np.atleast_2d(np.asarray(a, dtype=float)) for a in hi]
         if len(lo) != f.n_in() or len(hi) != f.n_in():
-            raise ValueError(f"{f.name()} takes {f.n_in()} inputs, got {len(lo)} and {len(hi)}")
+            raise InputError(f"{f.name()} takes {f.n_in()} inputs, got {len(lo)} and {len(hi)}")
         n = max(a.shape[1] for a in lo + hi)
         for k in range(f.n_in()):
             shape = (f.nnz_in(k), n)
             lo[k] = np.broadcast_to(lo[k], shape)
             hi[k] = np.broadcast_to(hi[k], shape)
             if np.any(lo[k] > hi[k]):
-                raise ValueError(f"{f.name()}: input {k} has lo > hi")
+                raise InputError(f"{f.name()}: input {k} has lo > hi")
         return lo, hi, n
 
 

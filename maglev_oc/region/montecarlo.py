@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.numerics import jit
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
@@ -126,9 +127,9 @@ class BatchSimulator:
 
     def __init__(self, twin: RigTwin, controller, *, duration: float, threads: int = 2, compile: bool = True):
         if not (duration > 0 and math.isfinite(duration)):
-            raise ValueError(f"duration must be positive [s], got {duration!r}")
+            raise InputError(f"duration must be positive [s], got {duration!r}")
         if threads < 1:
-            raise ValueError(f"threads must be >= 1, got {threads!r}")
+            raise InputError(f"threads must be >= 1, got {threads!r}")
         self.twin = twin
         self.controller = controller
         self.loop = ClosedLoop(twin, controller)
@@ -193,15 +194,15 @@ class BatchSimulator:
         x0 = np.asarray(x0, dtype=float)
         c0 = np.asarray(c0, dtype=float)
         if x0.ndim != 2 or x0.shape[0] != 4:
-            raise ValueError(f"x0 must have shape (4, n), got {x0.shape}")
+            raise InputError(f"x0 must have shape (4, n), got {x0.shape}")
         n = x0.shape[1]
         if c0.shape != (self.controller.n_state, n):
-            raise ValueError(f"c0 must have shape ({self.controller.n_state}, {n}), got {c0.shape}")
+            raise InputError(f"c0 must have shape ({self.controller.n_state}, {n}), got {c0.shape}")
         ref = np.asarray(reference, dtype=float)
         if ref.ndim == 1:
             ref = np.repeat(ref.reshape(6, 1), self.n_steps, axis=1)
         if ref.shape != (6, self.n_steps):
-            raise ValueError(f"reference must have shape (6, {self.n_steps}) or (6,), got {ref.shape}")
+            raise InputError(f"reference must have shape (6, {self.n_steps}) or (6,), got {ref.shape}")
         s0 = np.column_stack([self.twin.initial_state(x0[:, k]) for k in range(n)])
         ext0 = np.tile(np.array([[np.inf], [0.0], [0.0], [np.inf], [-np.inf], [0.0]]), (1, n))
         z0 = np.vstack([s0, c0, ext0])
@@ -211,7 +212,7 @@ class BatchSimulator:
             self._maps = {n: fmap}
         w = np.zeros((2, self.n_steps)) if noise is None else np.asarray(noise, dtype=float)
         if w.shape != (2, self.n_steps):
-            raise ValueError(f"noise must have shape (2, {self.n_steps}), got {w.shape}")
+            raise InputError(f"noise must have shape (2, {self.n_steps}), got {w.shape}")
         zf = np.asarray(fmap(z0, ref, w))
         ns = self.twin.n_state
         ext = zf[self._nz :]
@@ -528,7 +529,7 @@ _SLICE_INDEX = {"e1": 0, "e1_rate": 1, "e2": 5, "e2_rate": 6}
 def _grid(axes, x_range, y_range, n):
     for a in axes:
         if a not in _SLICE_INDEX:
-            raise ValueError(f"slice axes must be among {list(_SLICE_INDEX)}, got {a!r}")
+            raise InputError(f"slice axes must be among {list(_SLICE_INDEX)}, got {a!r}")
     xs = np.linspace(*x_range, n)
     ys = np.linspace(*y_range, n)
     X, Y = np.meshgrid(xs, ys)

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.region.boundary import BoundaryMinimizer, BoundaryMinimum
 from maglev_oc.region.branch_and_bound import BoxSearch, LevelCertifier
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
@@ -58,7 +59,7 @@ from maglev_oc.region.ellipsoid import (
 from maglev_oc.region.feasibility import CONSTRAINT_NAMES, NONLINEAR, FeasibleSet
 from maglev_oc.results import Result
 
-__all__ = ["LADDER", "MAX_ATTEMPTS", "Procedure2", "Procedure2Result", "travel_levels"]
+__all__ = ["LADDER", "MAX_ATTEMPTS", "Procedure2", "Procedure2Result"]
 
 LADDER = (0.995, 0.98, 0.95, 0.9, 0.8, 0.65, 0.5, 0.3, 0.15, 0.05, 0.01)
 """Fractions of the best upper bound at which a certificate is attempted, in this order."""
@@ -66,7 +67,7 @@ MAX_ATTEMPTS = 24
 """Branch-and-bound runs per reference and P before giving up."""
 
 
-def travel_levels(feasible: FeasibleSet, loop: RegulatorLoop, reference: Reference, P) -> dict[str, float]:
+def _travel_levels(feasible: FeasibleSet, loop: RegulatorLoop, reference: Reference, P) -> dict[str, float]:
     """Exact min of V over each violated stopper half-space {x1 < g_lo}, ... (closed form).
 
     Parameters
@@ -170,7 +171,7 @@ class Procedure2:
         self, feasible: FeasibleSet, loop: RegulatorLoop, *, starts: int = 12, max_boxes: int = 400_000
     ) -> None:
         if starts < 1:
-            raise ValueError(f"starts must be >= 1, got {starts!r}")
+            raise InputError(f"starts must be >= 1, got {starts!r}")
         self.feasible = feasible
         self.loop = loop
         self.starts = int(starts)
@@ -198,9 +199,9 @@ class Procedure2:
         t0 = time.perf_counter()
         P = self.loop.lyapunov_matrix() if P is None else checked_p(P)
         if not self.loop.is_lyapunov(P):
-            raise ValueError("P is not a Lyapunov matrix of the loop (A' P + P A must be <= 0, P > 0)")
+            raise InputError("P is not a Lyapunov matrix of the loop (A' P + P A must be <= 0, P > 0)")
         timings: dict[str, float] = {}
-        travel = travel_levels(self.feasible, self.loop, reference, P)  # exact, closed form
+        travel = _travel_levels(self.feasible, self.loop, reference, P)  # exact, closed form
         t1 = time.perf_counter()
         minima = tuple(
             self.minimizer.minimize(reference, P, name, starts=self.starts, seed=seed)

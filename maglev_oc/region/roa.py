@@ -48,6 +48,7 @@ from scipy.linalg import block_diag, solve_continuous_lyapunov
 
 from maglev_oc.control.gains import augmented_axis, axis_poles
 from maglev_oc.control.linear_regulator import ScheduledLinearRegulator, axis_linearizations
+from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference
@@ -91,11 +92,11 @@ class LinearizedLoop:
                 f"controller must be a ScheduledLinearRegulator, got {type(self.controller).__name__}"
             )
         if not self.reference.is_setpoint:
-            raise ValueError("the linear regulators' regions are computed for set-points")
+            raise InputError("the linear regulators' regions are computed for set-points")
         r = self.reference.gap
         sched = self.controller.schedule
         if not (sched.gap[0] <= r <= sched.gap[-1]):
-            raise ValueError(f"set-point gap {r!r} m outside the regulator's schedule")
+            raise InputError(f"set-point gap {r!r} m outside the regulator's schedule")
         kh, kv = self.controller.gains_at(r)
         u2_ff = float(np.interp(r, sched.gap, sched.u2_eq))
         op = equilibrium(self.model, r, self.reference.position, current_limit=math.inf)
@@ -200,7 +201,7 @@ class RoaCertifier:
 
     def __init__(self, loop: LinearizedLoop, *, cover: int = 14) -> None:
         if cover < 2:
-            raise ValueError(f"cover must be >= 2, got {cover!r}")
+            raise InputError(f"cover must be >= 2, got {cover!r}")
         self.loop = loop
         self.cover = int(cover)
         zeta = ca.SX.sym("zeta", 3)

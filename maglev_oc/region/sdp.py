@@ -39,6 +39,7 @@ import cvxpy as cp
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.region.closed_loop import E1, E2, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import max_rectangle
@@ -145,7 +146,7 @@ class PolygonBuilder:
         """
         t0 = time.perf_counter()
         if not (halfwidth > 0):
-            raise ValueError(f"halfwidth must be positive [m], got {halfwidth!r}")
+            raise InputError(f"halfwidth must be positive [m], got {halfwidth!r}")
         F = self.loop.offset_coefficients(reference)
         amp = math.hypot(F[0, 1], F[0, 2])
         gap_lo, gap_hi = F[0, 0] - amp - halfwidth, F[0, 0] + amp + halfwidth
@@ -496,7 +497,7 @@ def enlarge(
     """
     t0 = time.perf_counter()
     if decay < 0:
-        raise ValueError(f"decay must be >= 0 [1/s], got {decay!r}")
+        raise InputError(f"decay must be >= 0 [1/s], got {decay!r}")
     feasible, loop = procedure.feasible, procedure.loop
     builder = builder or PolygonBuilder(feasible, loop)
     room = _gap_room(feasible, loop, reference)

@@ -25,6 +25,7 @@ import numpy as np
 from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.control.lqr import lqr_regulator
+from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import E1, E2, Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibilityMap, FeasibleSet, feasibility_map
@@ -92,12 +93,12 @@ class StudyConfig:
 
     def __post_init__(self) -> None:
         if not self.setpoints_mm:
-            raise ValueError("setpoints_mm must not be empty")
+            raise InputError("setpoints_mm must not be empty")
         for g in (*self.setpoints_mm, *self.slice_setpoints_mm):
             if not (5 <= g <= 40):
-                raise ValueError(f"set-point gaps are in millimetres in [5, 40], got {g!r}")
+                raise InputError(f"set-point gaps are in millimetres in [5, 40], got {g!r}")
         if self.samples < 0 or self.slice_points < 0 or self.quantization_samples < 0:
-            raise ValueError("sample counts must be >= 0")
+            raise InputError("sample counts must be >= 0")
 
 
 @dataclass(frozen=True)

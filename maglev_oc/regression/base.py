@@ -19,7 +19,6 @@ __all__ = [
     "GAP_OFFSET_BOUND",
     "GAP_OFFSET_SCALE",
     "UNITS",
-    "axis_of",
 ]
 
 AXIS_INDEX = {name: k for k, name in enumerate(AXES)}
@@ -33,8 +32,3 @@ GAP_OFFSET_SCALE = 1e-4
 GAP_OFFSET_BOUND = 5e-3
 """[m] An offset beyond 5 mm is a wrong setup, not a parameter."""
 UNITS = {"C1": "m/(s^2 A)", "C2": "m/(s^2 T^2)", "C3": "m/(s^2 A T)", "C4": "m/(s^2 A^2)", GAP_OFFSET: "m"}
-
-
-def axis_of(name: str) -> str:
-    """The axis a base parameter acts on (the gap offset acts on both)."""
-    return CONSTANT_AXIS.get(name, "both")

@@ -35,6 +35,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.errors import InputError
+
+__all__ = [
+    "DEFAULT_BAND",
+    "MIN_FREQUENCIES",
+    "LongRunCovariance",
+    "bartlett_long_run",
+    "correlation_from",
+    "frequencies_for",
+    "long_run_covariance",
+    "periodogram_long_run",
+]
+
 DEFAULT_BAND = 0.25
 """[Hz] Width of the spectral window at zero frequency."""
 MIN_FREQUENCIES = 4
@@ -99,7 +112,7 @@ def long_run_covariance(
         [Hz] Spectral window width at zero frequency (default 0.25 Hz).
     """
     if not (band > 0 and math.isfinite(band)):
-        raise ValueError(f"band must be positive [Hz], got {band!r}")
+        raise InputError(f"band must be positive [Hz], got {band!r}")
     p = np.asarray(naive).shape[0]
     cov = np.zeros((p, p))
     total_m = 0

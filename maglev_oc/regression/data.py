@@ -39,6 +39,7 @@ import numpy as np
 from scipy.signal import fftconvolve, savgol_coeffs, welch
 
 from maglev_oc.data.logs import Log, LogError
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 
@@ -70,7 +71,7 @@ def as_log_list(logs: Log | Sequence[Log]) -> list[Log]:
         return [logs]
     out = list(logs)
     if not out:
-        raise ValueError("no logs given")
+        raise InputError("no logs given")
     for log in out:
         if not isinstance(log, Log):
             raise TypeError(f"expected Log objects, got {type(log).__name__}")
@@ -237,7 +238,7 @@ class PreparedLogs:
         mask of the samples a fit may use (default all); held-out samples are never fitted.
         """
         if not 0.0 <= holdout_fraction <= 0.5:
-            raise ValueError(f"holdout_fraction must be in [0, 0.5], got {holdout_fraction!r}")
+            raise InputError(f"holdout_fraction must be in [0, 0.5], got {holdout_fraction!r}")
         fit = np.zeros(self.n, dtype=bool)
         hold = np.zeros(self.n, dtype=bool)
         guard = self.edge
@@ -246,7 +247,7 @@ class PreparedLogs:
             n = idx.size
             use = np.ones(n, dtype=bool) if samples is None else np.asarray(samples[s], dtype=bool)
             if use.shape != (n,):
-                raise ValueError(f"samples[{s}]: expected a boolean mask of shape ({n},), got {use.shape}")
+                raise InputError(f"samples[{s}]: expected a boolean mask of shape ({n},), got {use.shape}")
             valid = self.valid[idx]
             if holdout_fraction > 0:
                 split = round(n * (1 - holdout_fraction))
@@ -288,7 +289,7 @@ def prepare(
     """
     logs = as_log_list(logs)
     if (bandwidth is None) == (differentiator is None):
-        raise ValueError("give exactly one of bandwidth and differentiator")
+        raise InputError("give exactly one of bandwidth and differentiator")
     if differentiator is not None and not isinstance(differentiator, SavitzkyGolay):
         raise TypeError(
             "differentiator must be a SavitzkyGolay (zero phase; a lagging estimate biases an "
@@ -313,7 +314,7 @@ def prepare(
     else:
         sg = differentiator
         if abs(sg.sample_time - ts) > 0.01 * ts:
-            raise ValueError(
+            raise InputError(
                 f"differentiator sample_time {sg.sample_time!r} s does not match the logs' {ts!r} s"
             )
     bandwidth = sg.bandwidth

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
 from maglev_oc.regression.data import PreparedLogs
@@ -214,13 +215,13 @@ def build_design(
     estimate = tuple(estimate)
     unknown = [e for e in estimate if e not in ESTIMABLE]
     if unknown:
-        raise ValueError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
+        raise InputError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
     if len(set(estimate)) != len(estimate):
-        raise ValueError(f"estimate: duplicate names in {estimate!r}")
+        raise InputError(f"estimate: duplicate names in {estimate!r}")
     terms = tuple(terms)
     tnames = [t.name for t in terms]
     if len(set(tnames)) != len(tnames):
-        raise ValueError(f"terms: duplicate names {tnames}")
+        raise InputError(f"terms: duplicate names {tnames}")
     base = [c for c in CONSTANT_NAMES if c in estimate] + ([GAP_OFFSET] if GAP_OFFSET in estimate else [])
     names = tuple(base) + tuple(q for t in terms for q in t.qualified_names)
     defaults = [getattr(model.constants, c) for c in base if c != GAP_OFFSET]
@@ -232,7 +233,7 @@ def build_design(
     else:
         at_vec = np.asarray(at, dtype=float).ravel()
         if at_vec.size != len(names):
-            raise ValueError(f"at: expected {len(names)} values {names}, got {at_vec.size}")
+            raise InputError(f"at: expected {len(names)} values {names}, got {at_vec.size}")
     groups = {"base": np.arange(len(base))}
     k = len(base)
     for t in terms:

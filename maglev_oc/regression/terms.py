@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.results import Estimate
 
@@ -78,7 +79,7 @@ def _as_four_inputs(fn: ca.Function, n_p: int, name: str) -> ca.Function:
     """Accept (x, u, p) Functions too (no dependence on the current rates)."""
     shapes = [(fn.size1_in(k), fn.size2_in(k)) for k in range(fn.n_in())]
     if fn.n_out() != 1 or (fn.size1_out(0), fn.size2_out(0)) != (2, 1):
-        raise ValueError(
+        raise InputError(
             f"AccelerationTerm {name}: function must return acc (2) = (x2', x4'); it returns "
             f"{fn.n_out()} output(s) of shape {(fn.size1_out(0), fn.size2_out(0)) if fn.n_out() else None}"
         )
@@ -87,7 +88,7 @@ def _as_four_inputs(fn: ca.Function, n_p: int, name: str) -> ca.Function:
         return ca.Function(fn.name(), [x, u, du, p], [fn(x, u, p)], ["x", "u", "du", "p"], ["acc"])
     if shapes == [(4, 1), (2, 1), (2, 1), (n_p, 1)]:
         return fn
-    raise ValueError(
+    raise InputError(
         f"AccelerationTerm {name}: function must map (x (4), u (2), p ({n_p})) or (x (4), u (2), du (2), "
         f"p ({n_p})) -> acc (2); its inputs are {shapes}"
     )
@@ -152,15 +153,15 @@ class AccelerationTerm:
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"AccelerationTerm.name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"AccelerationTerm.name must be a non-empty string, got {self.name!r}")
         if self.axis not in AXES:
-            raise ValueError(f"AccelerationTerm {self.name}: axis must be one of {AXES}, got {self.axis!r}")
+            raise InputError(f"AccelerationTerm {self.name}: axis must be one of {AXES}, got {self.axis!r}")
         names = tuple(self.parameter_names)
         n_p = len(names)
         if n_p == 0:
-            raise ValueError(f"AccelerationTerm {self.name}: needs at least one parameter")
+            raise InputError(f"AccelerationTerm {self.name}: needs at least one parameter")
         if len(set(names)) != n_p or not all(isinstance(p, str) and p.strip() for p in names):
-            raise ValueError(
+            raise InputError(
                 f"AccelerationTerm {self.name}: parameter_names must be distinct non-empty strings, "
                 f"got {names!r}"
             )
@@ -169,24 +170,24 @@ class AccelerationTerm:
         for field_name, default in defaults.items():
             values = tuple(float(v) for v in getattr(self, field_name)) or (default,) * n_p
             if len(values) != n_p:
-                raise ValueError(
+                raise InputError(
                     f"AccelerationTerm {self.name}: {field_name} has {len(values)} values for {n_p} "
                     f"parameters {names}"
                 )
             set_(self, field_name, values)
         for p, x0, s, lo, hi in zip(names, self.initial, self.scale, self.lower, self.upper, strict=True):
             if not (math.isfinite(x0) and math.isfinite(s) and s > 0):
-                raise ValueError(
+                raise InputError(
                     f"AccelerationTerm {self.name}.{p}: initial must be finite and scale positive, got "
                     f"initial={x0!r}, scale={s!r}"
                 )
             if not (lo <= x0 <= hi) or lo == hi:
-                raise ValueError(
+                raise InputError(
                     f"AccelerationTerm {self.name}.{p}: need lower <= initial <= upper and lower < upper, "
                     f"got {lo!r} <= {x0!r} <= {hi!r}"
                 )
         if not isinstance(self.function, ca.Function):
-            raise ValueError(f"AccelerationTerm {self.name}: function must be a casadi.Function")
+            raise InputError(f"AccelerationTerm {self.name}: function must be a casadi.Function")
         fn = _as_four_inputs(self.function, n_p, self.name)
         set_(self, "function", fn)
         set_(self, "variants", tuple(_as_four_inputs(v, n_p, self.name) for v in self.variants))
@@ -360,10 +361,10 @@ def guide_friction(
     current) pull the motor constants towards zero.
     """
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     stick_speed = reversal_speed if stick_speed is None else stick_speed
     if not (reversal_speed > 0 and stick_speed > 0):
-        raise ValueError(
+        raise InputError(
             f"reversal_speed and stick_speed must be positive [m/s], got {reversal_speed!r}, {stick_speed!r}"
         )
     vi = 1 if axis == "vertical" else 3
@@ -407,7 +408,7 @@ def constant_force(
     """A constant force F [N] on one axis, positive along +x3 (horizontal) or towards the stator
     (vertical: it closes the gap, acc x2' -= F / M_v)."""
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     m = _mass(params, axis)
     sign = -1.0 if axis == "vertical" else 1.0
     return AccelerationTerm(
@@ -439,9 +440,9 @@ def periodic_force(
     positive F pulls towards the stator (x2' -= F / M_v), on the horizontal axis it pushes along +x3.
     """
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     if not (period > 0 and reference_gap > 0 and gap_exponent >= 0):
-        raise ValueError(
+        raise InputError(
             f"need period > 0, reference_gap > 0, gap_exponent >= 0, got {period!r}, "
             f"{reference_gap!r}, {gap_exponent!r}"
         )
@@ -497,9 +498,9 @@ def cogging_force(
     the stator. Variants: decay lengths scaled by ``scale_variants``.
     """
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     if not (period > 0 and reference_gap > 0 and decay_scale > 0 and harmonics >= 1):
-        raise ValueError("need period > 0, reference_gap > 0, decay_scale > 0, harmonics >= 1")
+        raise InputError("need period > 0, reference_gap > 0, decay_scale > 0, harmonics >= 1")
     m = _mass(params, axis)
     sign = -1.0 if axis == "vertical" else 1.0
 
@@ -552,7 +553,7 @@ def cogging_term(
     """
     p = StageParameters() if params is None else params
     if not (reference_gap > 0 and exponent >= 0):
-        raise ValueError(f"need reference_gap > 0 and exponent >= 0, got {reference_gap!r}, {exponent!r}")
+        raise InputError(f"need reference_gap > 0 and exponent >= 0, got {reference_gap!r}, {exponent!r}")
     term = periodic_force(
         p,
         "vertical",
@@ -574,7 +575,7 @@ def constant_acceleration(axis: str) -> AccelerationTerm:
     """A constant acceleration [m/s^2] on one axis: a level error of the guides (horizontal,
     G sin(tilt), 001's Delta_1) or a weight error (vertical)."""
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     what = "a weight or gravity error" if axis == "vertical" else "guides that are not level"
     return AccelerationTerm(
         name=f"bias_{axis}",
@@ -589,7 +590,7 @@ def constant_acceleration(axis: str) -> AccelerationTerm:
 def viscous_friction(axis: str) -> AccelerationTerm:
     """Viscous guide friction on one axis: acc += -c v, c [1/s] (force / mass / speed)."""
     if axis not in ("vertical", "horizontal"):
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+        raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
     vi = 1 if axis == "vertical" else 3
     return AccelerationTerm(
         name=f"viscous_{axis}",

@@ -12,6 +12,8 @@ from maglev_oc.sim.engine import SimulationResult
 from maglev_oc.sim.metrics import BANDS
 from maglev_oc.units import M_TO_MM
 
+__all__ = ["COLORS", "MAX_POINTS", "color", "scenario_figure", "sweep_figure"]
+
 MAX_POINTS = 2500
 COLORS = {
     "FL regulator": "tab:blue",

@@ -5,11 +5,20 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from maglev_oc.diagnose.diagnosis import Diagnosis, Effect
-from maglev_oc.diagnose.feedback import CompensationStudy
+from maglev_oc.diagnosis.feedback import CompensationStudy
+from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.reporting.pdf import new_figure
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM
+
+__all__ = [
+    "before_after_figure",
+    "compensation_figure",
+    "dependence_figure",
+    "plain",
+    "spectrum_figure",
+    "timeseries_figure",
+]
 
 _VARIABLE = {
     "gap": ("gap x1 [mm]", lambda d: d.x[0] * M_TO_MM),

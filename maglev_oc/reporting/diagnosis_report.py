@@ -14,11 +14,14 @@ import os
 import textwrap
 from collections.abc import Sequence
 
-from maglev_oc.diagnose.diagnosis import ERROR_METRIC, Diagnosis
-from maglev_oc.diagnose.feedback import CompensationStudy, improvement
+from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
+from maglev_oc.diagnosis.pipeline import ERROR_METRIC, Diagnosis
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting.diagnosis_plots import plain
 from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.units import M_TO_UM
+
+__all__ = ["write_diagnosis_report"]
 
 
 def _fmt(value: float, err: float) -> str:
@@ -27,7 +30,7 @@ def _fmt(value: float, err: float) -> str:
     return f"{value:.4g} ± {err:.2g}"
 
 
-def summary_paragraphs(diag: Diagnosis) -> list[str]:
+def _summary_paragraphs(diag: Diagnosis) -> list[str]:
     """The conclusions, in plain words (page 1)."""
     eb, ea = diag.error_before, diag.error_after
     out = []
@@ -62,7 +65,9 @@ def summary_paragraphs(diag: Diagnosis) -> list[str]:
     out.append(
         "Position error of the model simulated over 50 ms from the estimated state (held out), "
         "before → after:  "
-        + ";  ".join(f"{a} {b * 1e6:.1f} → {oa[a] * 1e6:.1f} µm" for a, b in ob.items() if math.isfinite(b))
+        + ";  ".join(
+            f"{a} {b * M_TO_UM:.1f} → {oa[a] * M_TO_UM:.1f} µm" for a, b in ob.items() if math.isfinite(b)
+        )
         + "."
     )
     return out
@@ -83,7 +88,7 @@ def write_diagnosis_report(
     ``truth_rows``: for a log whose truth is known, rows (true effect, true size, found as, found
     size) for the found-against-true table.
     """
-    summary = [*preamble, *summary_paragraphs(diag)]
+    summary = [*preamble, *_summary_paragraphs(diag)]
     if study is not None:
         imp = improvement(study)
         summary.append(

@@ -1,5 +1,5 @@
 """Figures and pages of the identification reports. Each figure function takes computed results
-(:mod:`maglev_oc.identify`) and returns a Figure; nothing here computes a model.
+(:mod:`maglev_oc.identification`) and returns a Figure; nothing here computes a model.
 
 :func:`write_outcome_report` is the PDF of ``maglev-oc identify --report``.
 """
@@ -14,11 +14,25 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from maglev_oc.data.logs import Log
-from maglev_oc.identify.layout import CONSTANT_NAMES, UNITS
-from maglev_oc.identify.result import FitResult, NpfsiResult
-from maglev_oc.identify.verification import EquilibriumComparison, ParabolaComparison, ParabolaFit
+from maglev_oc.identification.layout import CONSTANT_NAMES, UNITS
+from maglev_oc.identification.result import FitResult, NpfsiResult
+from maglev_oc.identification.verification import EquilibriumComparison, ParabolaComparison, ParabolaFit
 from maglev_oc.reporting.pdf import PdfReport, new_figure
-from maglev_oc.units import M_TO_MM
+from maglev_oc.units import M_TO_MM, M_TO_UM
+
+__all__ = [
+    "EPS_COLORS",
+    "cogging_figure",
+    "coverage_figure",
+    "equilibrium_figure",
+    "l1_comparison_figure",
+    "npfsi_convergence_figure",
+    "parabola_figure",
+    "residuals_figure",
+    "single_shooting_figure",
+    "text_figure",
+    "write_outcome_report",
+]
 
 EPS_COLORS = {0.001: "tab:blue", 0.01: "tab:green", 0.05: "tab:red"}
 
@@ -53,7 +67,7 @@ def residuals_figure(fit: FitResult, log: Log, *, window: tuple[float, float] = 
     r = fit.residuals[0]
     t = log.t - log.t[0]
     sel = (t >= window[0]) & (t < window[1])
-    scale, unit = (1e6, "µm") if fit.residual_unit == "m" else (1.0, "m/s²")
+    scale, unit = (M_TO_UM, "µm") if fit.residual_unit == "m" else (1.0, "m/s²")
     for row, (axis_name, color) in enumerate((("vertical", "tab:blue"), ("horizontal", "tab:orange"))):
         ax = axes[row, 0]
         ax.plot(t[sel], r[row, sel] * scale, color=color, lw=0.6)
@@ -105,8 +119,8 @@ def single_shooting_figure(log: Log, open_loop: np.ndarray, output_error: FitRes
     r = output_error.residuals[0]
     n = min(r.shape[1], 1000)
     tt = log.t[:n] - log.t[0]
-    ax2.plot(tt, r[0, :n] * 1e6, lw=0.7, label="vertical")
-    ax2.plot(tt, r[1, :n] * 1e6, lw=0.7, label="horizontal")
+    ax2.plot(tt, r[0, :n] * M_TO_UM, lw=0.7, label="vertical")
+    ax2.plot(tt, r[1, :n] * M_TO_UM, lw=0.7, label="horizontal")
     seg = output_error.settings.get("segment_duration_s", 0.05)
     for s in np.arange(0, tt[-1], seg):
         ax2.axvline(s, color="0.85", lw=0.5, zorder=0)
@@ -220,7 +234,7 @@ def parabola_figure(fits: Sequence[ParabolaFit]) -> Figure:
             lw=0.9,
             label=f"{f.gap * M_TO_MM:g} mm: L1 = {f.L1:.3f}",
         )
-        ax2.plot(f.t, (f.x3 - f.position(f.t)) * 1e6, color=c, lw=0.5)
+        ax2.plot(f.t, (f.x3 - f.position(f.t)) * M_TO_UM, color=c, lw=0.5)
     ax1.set_ylabel("horizontal position x3 [mm]")
     ax1.set_title(
         "Parabolas fitted to x3 at fixed gaps (u1 = -0.5 A from x3 = -50 mm; 000 Fig. 3)", fontsize=9

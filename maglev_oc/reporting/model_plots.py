@@ -11,6 +11,15 @@ from maglev_oc.model.summary import ModelSummary
 from maglev_oc.reporting.pdf import new_figure
 from maglev_oc.units import M_TO_MM
 
+__all__ = [
+    "coefficients_figure",
+    "equilibrium_figure",
+    "feasible_acceleration_figure",
+    "field_fit_figure",
+    "gain_poles_figure",
+    "open_loop_figure",
+]
+
 
 def equilibrium_figure(s: ModelSummary) -> Figure:
     fig = new_figure()

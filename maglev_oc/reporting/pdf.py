@@ -17,6 +17,8 @@ from matplotlib.figure import Figure
 
 from maglev_oc.fileio import atomic_path
 
+__all__ = ["FIGURE_SIZE", "PAGE_SIZE", "PdfReport", "new_figure"]
+
 PAGE_SIZE = (8.27, 11.69)  # A4 portrait [in]
 FIGURE_SIZE = (8.27, 5.8)  # half page landscape-ish [in]
 

@@ -11,9 +11,20 @@ from matplotlib.patches import Patch
 
 from maglev_oc.region.feasibility import CONSTRAINT_LABELS, CONSTRAINT_NAMES, SLICE_VARIABLES, FeasibilityMap
 from maglev_oc.region.montecarlo import SliceCheck
-from maglev_oc.region.study import LargeStepStudy, OperatingRegionStudy, ReferenceStudy
+from maglev_oc.region.study import LargeStepStudy, OperatingRegionStudy
 from maglev_oc.reporting.pdf import new_figure
 from maglev_oc.units import M_TO_MM
+
+__all__ = [
+    "CERT_STYLE",
+    "COLORS",
+    "certified_sets_figure",
+    "feasibility_maps_figure",
+    "large_step_figure",
+    "montecarlo_figure",
+    "slices_figure",
+    "sweep_figure",
+]
 
 COLORS = {
     "margin": "tab:purple",
@@ -416,23 +427,3 @@ def sweep_figure(ls: LargeStepStudy, stoppers=None) -> Figure:
     ax_i.grid(alpha=0.25)
     fig.suptitle("Step from the papers' start to other targets, sampled ideal twin", fontsize=10.5)
     return fig
-
-
-def reference_rows(rs: ReferenceStudy) -> list[tuple]:
-    """Monte Carlo rows for one reference: (reference, set, runs, violations, max V_end/level,
-    least margin, largest |u|)."""
-    rows = []
-    name = f"{rs.reference.gap * M_TO_MM:g} mm" if rs.reference.is_setpoint else "sinusoid"
-    for label, chk in rs.checks.items():
-        rows.append(
-            (
-                name,
-                label,
-                chk.n,
-                chk.violations,
-                float(np.max(chk.final_ratio)),
-                chk.min_margin,
-                chk.max_current,
-            )
-        )
-    return rows

@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import (
     CONTINUOUS_CURRENT_LIMIT,
     ENCODER_RESOLUTION,
@@ -45,7 +46,7 @@ def _positive(obj: Any, *names: str, allow_zero: bool = True) -> None:
         ok = value >= 0 if allow_zero else value > 0
         if not (isinstance(value, (int, float)) and math.isfinite(value) and ok):
             kind = "non-negative" if allow_zero else "positive"
-            raise ValueError(f"{type(obj).__name__}.{name} must be {kind} and finite, got {value!r}")
+            raise InputError(f"{type(obj).__name__}.{name} must be {kind} and finite, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,7 @@ class GuideMisalignment:
         for name in ("tilt", "level_tilt"):
             value = getattr(self, name)
             if not (math.isfinite(value) and abs(value) < 0.05):
-                raise ValueError(f"GuideMisalignment.{name} must be a small angle [rad], got {value!r}")
+                raise InputError(f"GuideMisalignment.{name} must be a small angle [rad], got {value!r}")
         _positive(self, "waviness", "binding")
         _positive(self, "waviness_period", allow_zero=False)
 
@@ -150,7 +151,7 @@ class CurrentAmplifier:
     def __post_init__(self) -> None:
         _positive(self, "bandwidth_hz", "peak", "continuous", "thermal_time_constant", allow_zero=False)
         if self.continuous > self.peak:
-            raise ValueError(
+            raise InputError(
                 f"CurrentAmplifier.continuous = {self.continuous} A exceeds peak = {self.peak} A"
             )
 
@@ -188,7 +189,7 @@ class CommutationOffset:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.angle) and abs(self.angle) < 0.5):
-            raise ValueError(f"CommutationOffset.angle must be a small angle [rad], got {self.angle!r}")
+            raise InputError(f"CommutationOffset.angle must be a small angle [rad], got {self.angle!r}")
 
 
 @dataclass(frozen=True)
@@ -203,7 +204,7 @@ class ForceRipple:
 
     def __post_init__(self) -> None:
         if not (0 <= self.amplitude < 0.5):
-            raise ValueError(f"ForceRipple.amplitude must be a fraction in [0, 0.5), got {self.amplitude!r}")
+            raise InputError(f"ForceRipple.amplitude must be a fraction in [0, 0.5), got {self.amplitude!r}")
         _positive(self, "period", allow_zero=False)
 
 
@@ -260,15 +261,15 @@ class TwinEffects:
             f = self.extra
             ok = hasattr(f, "n_in") and f.n_in() == 2 and f.size1_in(0) == 4 and f.size1_in(1) == 2
             if not ok or f.size1_out(0) != 2:
-                raise ValueError("TwinEffects.extra must be a casadi.Function (x (4), i (2)) -> acc (2)")
+                raise InputError("TwinEffects.extra must be a casadi.Function (x (4), i (2)) -> acc (2)")
         if self.locked_gap is not None and not (0 < self.locked_gap < 0.1):
-            raise ValueError(f"TwinEffects.locked_gap must be a gap in metres, got {self.locked_gap!r}")
+            raise InputError(f"TwinEffects.locked_gap must be a gap in metres, got {self.locked_gap!r}")
         if self.locked_position is not None and not abs(self.locked_position) < 0.5:
-            raise ValueError(
+            raise InputError(
                 f"TwinEffects.locked_position must be a position in metres, got {self.locked_position!r}"
             )
         if not (isinstance(self.input_delay_samples, int) and 0 <= self.input_delay_samples <= 10):
-            raise ValueError(
+            raise InputError(
                 f"TwinEffects.input_delay_samples must be an integer in 0..10, got "
                 f"{self.input_delay_samples!r}"
             )

@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.control.base import ExpressionController, OnlineController
+from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.numerics import jit
 from maglev_oc.results import Result
@@ -102,7 +103,7 @@ class ClosedLoop:
         backend: str = "vm",
     ) -> None:
         if abs(controller.sample_time - twin.sample_time) > 1e-12:
-            raise ValueError(
+            raise InputError(
                 f"controller sample time {controller.sample_time} s differs from the twin's "
                 f"{twin.sample_time} s"
             )
@@ -112,7 +113,7 @@ class ClosedLoop:
         if not self.expression and not isinstance(controller, OnlineController):
             raise TypeError(f"{type(controller).__name__} is not a controller (see control.base)")
         if backend not in self.BACKENDS:
-            raise ValueError(f"backend must be one of {self.BACKENDS}, got {backend!r}")
+            raise InputError(f"backend must be one of {self.BACKENDS}, got {backend!r}")
         self.backend = backend
         self._chunk: ca.Function | None = None
         self._native = None

@@ -17,7 +17,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from maglev_oc.errors import SolverError
+from maglev_oc.errors import InputError, SolverError
 from maglev_oc.numerics import c_compiler
 
 __all__ = ["NativeLoop"]
@@ -70,10 +70,10 @@ class NativeLoop:
 
     def __init__(self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",)) -> None:
         if step.n_in() != 3 or step.n_out() != 2:
-            raise ValueError("step must map (z, r, w) -> (z_next, out)")
+            raise InputError("step must map (z, r, w) -> (z_next, out)")
         for k in range(3):
             if not step.sparsity_in(k).is_dense() or step.size2_in(k) != 1:
-                raise ValueError(f"input {k} of step must be a dense column")
+                raise InputError(f"input {k} of step must be a dense column")
         self.nz, self.nr, self.nw = (step.size1_in(k) for k in range(3))
         self.nout = step.size1_out(1)
         cc = c_compiler()

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.sim.engine import SimulationResult
 
 __all__ = ["result_to_log"]
@@ -46,7 +47,7 @@ def result_to_log(
         ratio = fs / rate_hz
         step = round(ratio)
         if step < 1 or abs(ratio - step) > 1e-9:
-            raise ValueError(f"rate_hz = {rate_hz} must divide the controller rate {fs:g} Hz")
+            raise InputError(f"rate_hz = {rate_hz} must divide the controller rate {fs:g} Hz")
     k = np.arange(0, result.t.size, step)
     finite = np.all(np.isfinite(result.y[:, k]), axis=0) & np.all(np.isfinite(result.u[:, k]), axis=0)
     if not np.all(finite):  # a run that blew up: keep the part before it

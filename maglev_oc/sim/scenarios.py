@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from maglev_oc.control.gains import OMEGA0
+from maglev_oc.errors import InputError
 from maglev_oc.units import MM_TO_M
 
 __all__ = ["Scenario", "SetpointSequence", "Sinusoids", "excitation_scenario", "paper_scenarios"]
@@ -31,11 +32,11 @@ class SetpointSequence:
         t = np.asarray(self.times, dtype=float)
         sp = np.asarray(self.setpoints, dtype=float)
         if t.ndim != 1 or t.size == 0 or t[0] != 0 or np.any(np.diff(t) <= 0):
-            raise ValueError(f"times must start at 0 and increase, got {self.times!r}")
+            raise InputError(f"times must start at 0 and increase, got {self.times!r}")
         if sp.shape != (t.size, 2):
-            raise ValueError(f"setpoints must have shape ({t.size}, 2), got {sp.shape}")
+            raise InputError(f"setpoints must have shape ({t.size}, 2), got {sp.shape}")
         if np.any(sp[:, 0] <= 0) or np.any(sp[:, 0] > 0.1):
-            raise ValueError(f"gap set-points must be in metres (0, 0.1], got {sp[:, 0]}")
+            raise InputError(f"gap set-points must be in metres (0, 0.1], got {sp[:, 0]}")
 
     def sample(self, t: np.ndarray) -> np.ndarray:
         idx = np.searchsorted(np.asarray(self.times), t, side="right") - 1

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
@@ -70,9 +71,9 @@ class RigTwin:
 
     def __post_init__(self) -> None:
         if not (self.sample_time > 0 and math.isfinite(self.sample_time)):
-            raise ValueError(f"sample_time must be positive [s], got {self.sample_time!r}")
+            raise InputError(f"sample_time must be positive [s], got {self.sample_time!r}")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
-            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
+            raise InputError(f"substeps must be a positive integer, got {self.substeps!r}")
         object.__setattr__(self, "n_state", 9 + 2 * self.effects.input_delay_samples)
         self._build()
 

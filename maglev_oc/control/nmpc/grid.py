@@ -41,6 +41,7 @@ import numpy as np
 
 from maglev_oc.control.base import N_REFERENCE
 from maglev_oc.control.nmpc.layout import NU, NX, STAGE_SIZE, u_index, x_index
+from maglev_oc.errors import InputError
 
 __all__ = ["ShootingGrid", "node_references", "shift_matrix"]
 
@@ -78,11 +79,11 @@ class ShootingGrid:
 
     def __post_init__(self) -> None:
         if not (self.sample_time > 0 and math.isfinite(self.sample_time)):
-            raise ValueError(f"sample_time must be positive [s], got {self.sample_time!r}")
+            raise InputError(f"sample_time must be positive [s], got {self.sample_time!r}")
         if not (isinstance(self.interval_samples, int) and self.interval_samples >= 1):
-            raise ValueError(f"interval_samples must be a positive integer, got {self.interval_samples!r}")
+            raise InputError(f"interval_samples must be a positive integer, got {self.interval_samples!r}")
         if not (isinstance(self.horizon, int) and self.horizon >= 2):
-            raise ValueError(f"horizon must be an integer >= 2, got {self.horizon!r}")
+            raise InputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
         offsets = np.concatenate([[0], 1 + self.interval_samples * np.arange(self.horizon)])
         h = np.full(self.horizon, self.interval_samples * self.sample_time)
         h[0] = self.sample_time

@@ -16,11 +16,11 @@ pipeline         checks and all methods on log files (``maglev-oc identify``)
 study            the whole twin study behind reports/identification.pdf
 """
 
-from maglev_oc.identify.equation_error import EquationError, fit_equation_error
-from maglev_oc.identify.npfsi import NpfsiEstimator, npfsi
-from maglev_oc.identify.output_error import MultipleShooting, fit_output_error
-from maglev_oc.identify.pipeline import IdentificationOutcome, identify, load_logs
-from maglev_oc.identify.result import FitResult, NpfsiResult
+from maglev_oc.identification.equation_error import EquationError, fit_equation_error
+from maglev_oc.identification.npfsi import NpfsiEstimator, npfsi
+from maglev_oc.identification.output_error import MultipleShooting, fit_output_error
+from maglev_oc.identification.pipeline import IdentificationOutcome, identify, load_logs
+from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.regression.terms import AccelerationTerm
 
 __all__ = [

@@ -14,7 +14,7 @@
   positive xi pulls the mover towards the stator (more attraction than at x3 = 0).
 
 Every function here computes; the twin runs that produce the logs are in
-:mod:`~maglev_oc.identify.experiments`, the figures in :mod:`maglev_oc.reporting.identification_plots`.
+:mod:`~maglev_oc.identification.experiments`, the figures in :mod:`maglev_oc.reporting.identification_plots`.
 """
 
 from __future__ import annotations
@@ -25,11 +25,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import HighGainDifferentiator, differentiate_log
-from maglev_oc.identify.npfsi import PAPER_GAMMA, NpfsiEstimator
-from maglev_oc.identify.result import NpfsiResult
+from maglev_oc.identification.npfsi import PAPER_GAMMA, NpfsiEstimator
+from maglev_oc.identification.result import NpfsiResult
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.stage import StageModel
+
+__all__ = [
+    "EquilibriumComparison",
+    "ParabolaComparison",
+    "ParabolaFit",
+    "cogging_from_c2",
+    "compare_equilibrium_currents",
+    "compare_parabola_npfsi",
+    "fit_parabola",
+    "npfsi_fixed_gap",
+]
 
 
 # --- horizontal: parabolas vs NPFSI ------------------------------------------------------------
@@ -72,11 +84,11 @@ def fit_parabola(log: Log, gap: float) -> ParabolaFit:
     x3 = log.x[2]
     u1 = float(np.mean(log.u[0]))
     if abs(u1) < 1e-3:
-        raise ValueError(
+        raise InputError(
             f"{log.source}: u1 is {u1:.3g} A; the parabola experiment needs a constant u1 (e.g. -0.5 A)"
         )
     if np.ptp(log.u[0]) > 0.01 * abs(u1):
-        raise ValueError(
+        raise InputError(
             f"{log.source}: u1 varies by {np.ptp(log.u[0]):.3g} A; the experiment needs it constant"
         )
     X = np.column_stack([np.ones_like(t), t, t**2])
@@ -159,10 +171,10 @@ def compare_parabola_npfsi(
 ) -> ParabolaComparison:
     """The papers' comparison of the two L1 estimates (same gaps, same order)."""
     if len(parabolas) != len(npfsi_runs) or not parabolas:
-        raise ValueError(f"need one NPFSI run per parabola, got {len(parabolas)} and {len(npfsi_runs)}")
+        raise InputError(f"need one NPFSI run per parabola, got {len(parabolas)} and {len(npfsi_runs)}")
     eps = {r.eps for r in npfsi_runs}
     if len(eps) != 1:
-        raise ValueError(f"the NPFSI runs use different eps {sorted(eps)}")
+        raise InputError(f"the NPFSI runs use different eps {sorted(eps)}")
     par = np.array([p.L1 for p in parabolas])
     est = np.array([r.values["L1"] for r in npfsi_runs])
     return ParabolaComparison(
@@ -192,11 +204,6 @@ class EquilibriumComparison:
         sel = (self.gap >= lo - 1e-9) & (self.gap <= hi + 1e-9) & np.isfinite(self.error_pct)
         return float(np.max(self.error_pct[sel])) if np.any(sel) else float("nan")
 
-    def max_abs(self, lo: float, hi: float) -> float:
-        """Largest |error| [A] over gaps lo..hi [m]."""
-        sel = (self.gap >= lo - 1e-9) & (self.gap <= hi + 1e-9)
-        return float(np.max(np.abs(self.error[sel])))
-
 
 def compare_equilibrium_currents(
     model: StageModel, gaps: np.ndarray, measured: np.ndarray, *, small_current: float = 0.3
@@ -206,7 +213,7 @@ def compare_equilibrium_currents(
     gaps = np.asarray(gaps, dtype=float)
     measured = np.asarray(measured, dtype=float)
     if gaps.shape != measured.shape:
-        raise ValueError(f"gaps {gaps.shape} and measured {measured.shape} differ in shape")
+        raise InputError(f"gaps {gaps.shape} and measured {measured.shape} differ in shape")
     predicted = equilibrium_currents(model, gaps).current
     error = predicted - measured
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -22,17 +22,29 @@ from typing import Any
 import numpy as np
 
 from maglev_oc.data.logs import CURRENT_RESOLUTION, Log, LogError, read_log
-from maglev_oc.identify.equation_error import EquationError
-from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET
-from maglev_oc.identify.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
-from maglev_oc.identify.output_error import DEFAULT_SEGMENT, DEFAULT_WINDOW, MultipleShooting
-from maglev_oc.identify.result import FitResult, NpfsiResult
+from maglev_oc.errors import InputError
+from maglev_oc.identification.equation_error import EquationError
+from maglev_oc.identification.layout import CONSTANT_NAMES, GAP_OFFSET
+from maglev_oc.identification.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
+from maglev_oc.identification.output_error import DEFAULT_SEGMENT, DEFAULT_WINDOW, MultipleShooting
+from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import as_log_list
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Result
+
+__all__ = [
+    "HORIZONTAL",
+    "METHODS",
+    "MIN_DURATION",
+    "VERTICAL",
+    "IdentificationOutcome",
+    "check_identifiable",
+    "identify",
+    "load_logs",
+]
 
 METHODS = ("equation_error", "output_error", "npfsi")
 MIN_DURATION = 5.0
@@ -46,7 +58,7 @@ HORIZONTAL = ("C1",)
 def load_logs(paths: Sequence[str | os.PathLike], *, params: StageParameters | None = None) -> list[Log]:
     """Read and validate every file (``LogError`` names the file, line and column at fault)."""
     if not paths:
-        raise ValueError("no log files given")
+        raise InputError("no log files given")
     return [read_log(p, params=params) for p in paths]
 
 
@@ -247,7 +259,7 @@ def identify(
     methods = tuple(methods)
     unknown = [m for m in methods if m not in METHODS]
     if unknown or not methods:
-        raise ValueError(f"methods: choose among {METHODS}, got {methods!r}")
+        raise InputError(f"methods: choose among {METHODS}, got {methods!r}")
     estimate = tuple(estimate)
     check_identifiable(logs, estimate, min_duration=min_duration)
     times: dict[str, float] = {}

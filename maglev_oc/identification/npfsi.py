@@ -45,10 +45,13 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import HighGainDifferentiator, SavitzkyGolay, differentiate_log
-from maglev_oc.identify.layout import CONSTANT_NAMES
-from maglev_oc.identify.result import NpfsiResult
+from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.result import NpfsiResult
 from maglev_oc.model.stage import StageModel
+
+__all__ = ["CHUNK", "DEFAULT_Q0_SECONDS", "PAPER_EPSILONS", "PAPER_GAMMA", "NpfsiEstimator", "npfsi"]
 
 PAPER_EPSILONS = (0.001, 0.01, 0.05)
 """The eps values of Tables II and III of 000."""
@@ -84,9 +87,9 @@ class NpfsiEstimator:
         Q0: np.ndarray | None = None,
     ) -> None:
         if not (math.isfinite(eps) and eps > 0):
-            raise ValueError(f"eps must be positive [s], got {eps!r}")
+            raise InputError(f"eps must be positive [s], got {eps!r}")
         if not (math.isfinite(gamma) and gamma > 1):
-            raise ValueError(f"gamma must be > 1, got {gamma!r}")
+            raise InputError(f"gamma must be > 1, got {gamma!r}")
         self.eps = float(eps)
         self.gamma = float(gamma)
         self.Q = None if Q is None else self._matrix(Q, "Q", definite=False)
@@ -97,11 +100,11 @@ class NpfsiEstimator:
     def _matrix(value, name: str, *, definite: bool) -> np.ndarray:
         a = np.atleast_2d(np.asarray(value, dtype=float))
         if a.ndim != 2 or a.shape[0] != a.shape[1] or not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be a finite square matrix, got shape {a.shape}")
+            raise InputError(f"{name} must be a finite square matrix, got shape {a.shape}")
         if not np.allclose(a, a.T, rtol=1e-10, atol=0):
-            raise ValueError(f"{name} must be symmetric")
+            raise InputError(f"{name} must be symmetric")
         if definite and np.min(np.linalg.eigvalsh(a)) <= 0:
-            raise ValueError(f"{name} must be positive definite (eigenvalues {np.linalg.eigvalsh(a)})")
+            raise InputError(f"{name} must be positive definite (eigenvalues {np.linalg.eigvalsh(a)})")
         return a
 
     def _step(self, m: int, p: int, h: float) -> ca.Function:
@@ -150,30 +153,30 @@ class NpfsiEstimator:
         t0 = time.perf_counter()
         A = np.asarray(regressor, dtype=float)
         if A.ndim != 3:
-            raise ValueError(f"regressor must have shape (n, m, p), got {A.shape}")
+            raise InputError(f"regressor must have shape (n, m, p), got {A.shape}")
         n, m, p = A.shape
         b = np.asarray(offset, dtype=float).reshape(n, m)
         y = np.asarray(velocity, dtype=float).reshape(n, m)
         theta = np.asarray(theta0, dtype=float).ravel()
         if theta.size != p:
-            raise ValueError(f"theta0 has {theta.size} values for {p} parameters")
+            raise InputError(f"theta0 has {theta.size} values for {p} parameters")
         if n < 3:
-            raise ValueError(f"need at least 3 samples, got {n}")
+            raise InputError(f"need at least 3 samples, got {n}")
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b)) and np.all(np.isfinite(y))):
-            raise ValueError("regressor, offset and velocity must be finite")
+            raise InputError("regressor, offset and velocity must be finite")
         names = tuple(names) if names is not None else tuple(f"theta{k + 1}" for k in range(p))
         if len(names) != p:
-            raise ValueError(f"names: {len(names)} for {p} parameters")
+            raise InputError(f"names: {len(names)} for {p} parameters")
         for mat, label in ((self.Q, "Q"), (self.Q0, "Q0")):
             if mat is not None and mat.shape != (p, p):
-                raise ValueError(f"{label} must be ({p}, {p}) for {p} parameters, got {mat.shape}")
+                raise InputError(f"{label} must be ({p}, {p}) for {p} parameters, got {mat.shape}")
         h = float(sample_time)
         mean_info = np.einsum("nij,nik->jk", A, A) / n
         if self.Q0 is None:
             diag = np.diag(mean_info).copy()
             if np.any(diag <= 0):
                 bad = [names[k] for k in np.flatnonzero(diag <= 0)]
-                raise ValueError(f"the data carry no information on {bad} (zero regressor)")
+                raise InputError(f"the data carry no information on {bad} (zero regressor)")
             q0 = DEFAULT_Q0_SECONDS * np.diag(diag)
         else:
             q0 = self.Q0
@@ -237,7 +240,7 @@ class NpfsiEstimator:
         )
 
 
-def stage_regression(
+def _stage_regression(
     log: Log,
     model: StageModel,
     estimate: Sequence[str],
@@ -248,7 +251,7 @@ def stage_regression(
     estimate = tuple(estimate)
     unknown = [e for e in estimate if e not in CONSTANT_NAMES]
     if unknown or not estimate:
-        raise ValueError(f"estimate: choose among {CONSTANT_NAMES}, got {estimate!r}")
+        raise InputError(f"estimate: choose among {CONSTANT_NAMES}, got {estimate!r}")
     der = differentiate_log(log, differentiator)
     n = log.n
     positions = log.x[[0, 2]]
@@ -296,12 +299,12 @@ def npfsi(
         velocities.
     """
     diff = HighGainDifferentiator(log.sample_time) if differentiator is None else differentiator
-    A, b, y, method = stage_regression(log, model, estimate, diff)
+    A, b, y, method = _stage_regression(log, model, estimate, diff)
     consts = dict(zip(CONSTANT_NAMES, model.constants.as_array(), strict=True))
     init = {k: consts[k] for k in estimate}
     for key, value in (theta0 or {}).items():
         if key not in init:
-            raise ValueError(f"theta0: {key!r} is not estimated ({tuple(estimate)})")
+            raise InputError(f"theta0: {key!r} is not estimated ({tuple(estimate)})")
         init[key] = float(value)
     est = NpfsiEstimator(eps, gamma, Q, Q0)
     return est.run(

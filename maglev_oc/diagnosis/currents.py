@@ -6,7 +6,7 @@ import math
 
 import casadi as ca
 
-from maglev_oc.diagnose.candidate import (
+from maglev_oc.diagnosis.candidate import (
     Candidate,
     LibraryContext,
     all_of,

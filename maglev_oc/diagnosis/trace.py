@@ -25,6 +25,8 @@ import numpy as np
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.results import AXES
 
+__all__ = ["Binned", "Trace", "motor_periods", "trace", "unexplained_periods"]
+
 
 @dataclass(frozen=True)
 class Binned:
@@ -54,7 +56,7 @@ def motor_periods(params: StageParameters) -> dict[str, float]:
     return {"slot_pitch": t1, "twice_slot_pitch": 2 * t1, "pole_pitch": tau, "twice_pole_pitch": 2 * tau}
 
 
-def spatial_periodogram(x3: np.ndarray, residual: np.ndarray, periods: np.ndarray) -> np.ndarray:
+def _spatial_periodogram(x3: np.ndarray, residual: np.ndarray, periods: np.ndarray) -> np.ndarray:
     """Share of each row of ``residual`` (2, n) explained by a sinusoid in ``x3`` per period."""
     r = residual - residual.mean(axis=1, keepdims=True)
     total = np.sum(r**2, axis=1)
@@ -101,7 +103,7 @@ def trace(
     span = float(np.ptp(x[2]))
     hi = max(min(1.5 * span, 0.15), 0.01)
     periods = np.geomspace(4e-3, hi, 300)
-    spec = spatial_periodogram(x[2], residual, periods)
+    spec = _spatial_periodogram(x[2], residual, periods)
     mp = motor_periods(params)
     peaks = []
     for a in range(2):

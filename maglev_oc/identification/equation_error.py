@@ -11,7 +11,7 @@ All of it — data preparation, the filter, the logged currents' errors (errors 
 removed from the normal equations), the block Gram matrices, the solver and the covariance — is
 the project's one regression layer, :mod:`maglev_oc.regression`, which the diagnosis uses too.
 This module is the identification's front end to it: which parameters, which samples, and a
-:class:`~maglev_oc.identify.result.FitResult`.
+:class:`~maglev_oc.identification.result.FitResult`.
 
 When the accelerations are affine in the estimated parameters (constants and linear terms, no
 gap offset) the fit is one linear solve (exact). Otherwise Gauss-Newton iterates on the exact
@@ -36,8 +36,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
-from maglev_oc.identify.result import FitResult
+from maglev_oc.identification.result import FitResult
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import (
     CONSTANT_NAMES,
@@ -52,7 +53,7 @@ from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES
 
-__all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error", "sample_masks"]
+__all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error"]
 
 DEFAULT_BANDWIDTH = 8.0
 """[Hz] Band of the Savitzky-Golay differentiator for identification (see the module doc)."""
@@ -60,7 +61,7 @@ DEFAULT_BANDWIDTH = 8.0
 SampleSpec = slice | tuple[int, int] | np.ndarray | None
 
 
-def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]) -> list[np.ndarray]:
+def _sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]) -> list[np.ndarray]:
     """Boolean masks, one per log, from None / a slice / (start, stop) / a boolean array.
 
     With several logs, ``samples`` is None or a sequence with one entry per log.
@@ -74,7 +75,7 @@ def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]
     )
     if single:
         if len(logs) != 1:
-            raise ValueError(
+            raise InputError(
                 f"samples: {len(logs)} logs need one entry per log (a list), got a single "
                 f"{type(samples).__name__}"
             )
@@ -82,7 +83,7 @@ def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]
     else:
         specs = list(samples)
         if len(specs) != len(logs):
-            raise ValueError(f"samples: {len(specs)} entries for {len(logs)} logs")
+            raise InputError(f"samples: {len(specs)} entries for {len(logs)} logs")
     masks = []
     for spec, log in zip(specs, logs, strict=True):
         mask = np.zeros(log.n, dtype=bool)
@@ -93,12 +94,12 @@ def sample_masks(samples: SampleSpec | Sequence[SampleSpec], logs: Sequence[Log]
         elif isinstance(spec, tuple):
             start, stop = (int(v) for v in spec)
             if not 0 <= start < stop <= log.n:
-                raise ValueError(f"samples: index range ({start}, {stop}) outside 0..{log.n} of {log.source}")
+                raise InputError(f"samples: index range ({start}, {stop}) outside 0..{log.n} of {log.source}")
             mask[start:stop] = True
         else:
             arr = np.asarray(spec)
             if arr.dtype != bool or arr.shape != (log.n,):
-                raise ValueError(
+                raise InputError(
                     f"samples: a mask must be a boolean array of shape ({log.n},) for {log.source}, got "
                     f"dtype {arr.dtype} shape {arr.shape}"
                 )
@@ -147,7 +148,7 @@ class EquationError:
         self.logs = as_log_list(logs)
         self.model = model
         if not (math.isfinite(input_delay) and 0 <= input_delay < 0.01):
-            raise ValueError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
+            raise InputError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
         self.input_delay = float(input_delay)
         self.estimate = (estimate,) if isinstance(estimate, str) else tuple(estimate)
         self.terms = tuple(terms)
@@ -155,11 +156,11 @@ class EquationError:
             if not isinstance(term, AccelerationTerm):
                 raise TypeError(f"terms must be AccelerationTerm, got {type(term).__name__}")
         if not self.estimate and not self.terms:
-            raise ValueError("nothing to estimate: give constants in estimate or at least one term")
+            raise InputError("nothing to estimate: give constants in estimate or at least one term")
         dt = self.logs[0].sample_time
         for log in self.logs[1:]:
             if abs(log.sample_time - dt) > 0.01 * dt:
-                raise ValueError(
+                raise InputError(
                     f"logs at different rates: {self.logs[0].source} at {1 / dt:g} Hz, {log.source} at "
                     f"{1 / log.sample_time:g} Hz"
                 )
@@ -209,11 +210,11 @@ class EquationError:
         if isinstance(values, dict):
             missing = [k for k in self.names if k not in values]
             if missing:
-                raise ValueError(f"values: missing {missing}")
+                raise InputError(f"values: missing {missing}")
             return np.array([values[k] for k in self.names], dtype=float)
         theta = np.asarray(values, dtype=float).ravel()
         if theta.size != len(self.names):
-            raise ValueError(f"values: expected {len(self.names)} numbers {self.names}, got {theta.size}")
+            raise InputError(f"values: expected {len(self.names)} numbers {self.names}, got {theta.size}")
         return theta
 
     def _per_log(self, rows: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
@@ -257,7 +258,7 @@ class EquationError:
         """
         t0 = time.perf_counter()
         prep = self.prepared
-        masks = sample_masks(samples, self.logs)
+        masks = _sample_masks(samples, self.logs)
         masks = [
             _reduced_mask(m, round(self.sample_time / log.sample_time))
             for m, log in zip(masks, self.logs, strict=True)
@@ -267,7 +268,7 @@ class EquationError:
         p = len(self.names)
         min_samples = 2 * self.kernel.size
         if n_used < 10 * p + min_samples:
-            raise ValueError(
+            raise InputError(
                 f"only {n_used} usable samples (after leaving out {prep.edge} at each edge of each log); "
                 f"need at least {10 * p + min_samples} for {p} parameters"
             )
@@ -275,7 +276,7 @@ class EquationError:
         if initial:
             for key, value in initial.items():
                 if key not in self.names:
-                    raise ValueError(f"initial: {key!r} is not estimated; estimated: {self.names}")
+                    raise InputError(f"initial: {key!r} is not estimated; estimated: {self.names}")
                 init[self.names.index(key)] = float(value)
         solve_t0 = time.perf_counter()
         first = build_design(

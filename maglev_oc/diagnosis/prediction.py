@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from maglev_oc.diagnose.candidate import Candidate
+from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
 from maglev_oc.regression.data import PreparedLogs

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from maglev_oc.diagnose.library import PROBE_VARIABLES, Candidate, smooth_probes
-from maglev_oc.diagnose.selection import SelectionSettings, _holdout_residual, holdout_significance
+from maglev_oc.diagnosis.library import PROBE_VARIABLES, Candidate, smooth_probes
+from maglev_oc.diagnosis.selection import SelectionSettings, _holdout_residual, holdout_significance
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design

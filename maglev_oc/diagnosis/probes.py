@@ -2,7 +2,7 @@
 
 They are the rivals a named effect has to beat (it must explain the held-out data better than a
 generic function of its variable with as many coefficients) and the probes of what nothing named
-explains (:mod:`~maglev_oc.diagnose.unexplained`).
+explains (:mod:`~maglev_oc.diagnosis.unexplained`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from maglev_oc.diagnose.candidate import legendre
+from maglev_oc.diagnosis.candidate import legendre
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.terms import AccelerationTerm, term_function
 

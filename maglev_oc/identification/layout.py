@@ -1,7 +1,7 @@
 """The vector of parameters a fit estimates, and the model's accelerations as a function of it.
 
 Both fits estimate theta = (chosen constants among C1..C4, optionally ``gap_offset``, then the
-parameters of every :class:`~maglev_oc.identify.terms.AccelerationTerm`), in that order. The
+parameters of every :class:`~maglev_oc.identification.terms.AccelerationTerm`), in that order. The
 constants not chosen are held at the model's values.
 
 ``gap_offset`` [m] is a mounting offset of the gap encoder: the true gap is the reading plus
@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import (
     CONSTANT_NAMES,
@@ -26,6 +27,8 @@ from maglev_oc.regression.base import (
     UNITS,
 )
 from maglev_oc.regression.terms import AccelerationTerm
+
+__all__ = ["ParameterLayout"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,18 +71,18 @@ class ParameterLayout:
         estimate = (self.estimate,) if isinstance(self.estimate, str) else tuple(self.estimate)
         unknown = [e for e in estimate if e not in ESTIMABLE]
         if unknown:
-            raise ValueError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
+            raise InputError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
         if len(set(estimate)) != len(estimate):
-            raise ValueError(f"estimate: duplicate names in {estimate!r}")
+            raise InputError(f"estimate: duplicate names in {estimate!r}")
         terms = tuple(self.terms)
         for term in terms:
             if not isinstance(term, AccelerationTerm):
                 raise TypeError(f"terms must be AccelerationTerm, got {type(term).__name__}")
         term_names = [t.name for t in terms]
         if len(set(term_names)) != len(term_names):
-            raise ValueError(f"terms: duplicate names {term_names}")
+            raise InputError(f"terms: duplicate names {term_names}")
         if not estimate and not terms:
-            raise ValueError("nothing to estimate: give constants in estimate or at least one term")
+            raise InputError("nothing to estimate: give constants in estimate or at least one term")
         object.__setattr__(self, "estimate", estimate)
         object.__setattr__(self, "terms", terms)
 
@@ -161,7 +164,7 @@ class ParameterLayout:
         theta = np.array(self.initial, dtype=float)
         for key, value in (initial or {}).items():
             if key not in self.names:
-                raise ValueError(f"initial: {key!r} is not estimated; estimated: {self.names}")
+                raise InputError(f"initial: {key!r} is not estimated; estimated: {self.names}")
             theta[self.names.index(key)] = float(value)
         return theta
 

@@ -8,9 +8,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from maglev_oc.diagnose.candidate import Candidate
-from maglev_oc.diagnose.library import candidate_library
-from maglev_oc.diagnose.selection import fitted_constants
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.selection import fitted_constants
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES, UNITS

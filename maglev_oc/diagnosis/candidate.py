@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
@@ -79,9 +80,9 @@ class Candidate:
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
-            raise ValueError(f"Candidate {self.term.name}: family must be one of {FAMILIES}")
+            raise InputError(f"Candidate {self.term.name}: family must be one of {FAMILIES}")
         if self.variable not in VARIABLES:
-            raise ValueError(f"Candidate {self.term.name}: variable must be one of {VARIABLES}")
+            raise InputError(f"Candidate {self.term.name}: variable must be one of {VARIABLES}")
 
     @property
     def name(self) -> str:
@@ -172,7 +173,7 @@ def legendre(xi, orders):
         elif k == 4:
             out.append((35 * xi**4 - 30 * xi**2 + 3) / 8)
         else:
-            raise ValueError(f"Legendre order {k} not provided")
+            raise InputError(f"Legendre order {k} not provided")
     return out
 
 

@@ -46,15 +46,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay, differentiate_log
-from maglev_oc.identify.constrained_gn import (
+from maglev_oc.identification.constrained_gn import (
     GaussNewtonOutcome,
     constrained_gauss_newton,
     constrained_inverse_rows,
 )
-from maglev_oc.identify.equation_error import fit_equation_error
-from maglev_oc.identify.layout import CONSTANT_NAMES, GAP_OFFSET, ParameterLayout
-from maglev_oc.identify.result import FitResult
+from maglev_oc.identification.equation_error import fit_equation_error
+from maglev_oc.identification.layout import CONSTANT_NAMES, GAP_OFFSET, ParameterLayout
+from maglev_oc.identification.result import FitResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
@@ -62,6 +63,16 @@ from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from, long
 from maglev_oc.regression.data import as_log_list, delayed_inputs
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES
+
+__all__ = [
+    "DEFAULT_SEGMENT",
+    "DEFAULT_WINDOW",
+    "OUTPUT_SCALE",
+    "STATE_SCALE",
+    "MultipleShooting",
+    "fit_output_error",
+    "simulate_open_loop",
+]
 
 DEFAULT_SEGMENT = 0.05
 """[s] Shooting segment: the fastest open-loop pole (64 1/s at 10 mm) grows e^3.2-fold over it."""
@@ -121,19 +132,19 @@ class MultipleShooting:
         self.terms = tuple(terms)
         self.layout = ParameterLayout(model, self.estimate, self.terms)
         if not (math.isfinite(segment_duration) and segment_duration > 0):
-            raise ValueError(f"segment_duration must be positive [s], got {segment_duration!r}")
+            raise InputError(f"segment_duration must be positive [s], got {segment_duration!r}")
         if not (math.isfinite(input_delay) and 0 <= input_delay < 0.01):
-            raise ValueError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
+            raise InputError(f"input_delay must be in [0, 0.01) s, got {input_delay!r}")
         self.input_delay = float(input_delay)
         dt = self.logs[0].sample_time
         for log in self.logs[1:]:
             if abs(log.sample_time - dt) > 0.01 * dt:
-                raise ValueError(f"logs at different rates: {self.logs[0].source}, {log.source}")
+                raise InputError(f"logs at different rates: {self.logs[0].source}, {log.source}")
         self.sample_time = dt
         self.M = max(2, round(segment_duration / dt))
         self.segment_duration = self.M * dt
         if not (math.isfinite(window_duration) and window_duration >= self.segment_duration * (1 - 1e-9)):
-            raise ValueError(
+            raise InputError(
                 f"window_duration must be at least the segment ({self.segment_duration:g} s), got "
                 f"{window_duration!r}"
             )
@@ -147,7 +158,7 @@ class MultipleShooting:
         M = self.M
         J = (log.n - 1) // M
         if J < 2:
-            raise ValueError(
+            raise InputError(
                 f"{log.source}: {log.n} samples make {J} segment(s) of {M}; need at least 2 (a log of "
                 f"{2 * M * log.sample_time:g} s or more)"
             )

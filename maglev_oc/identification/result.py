@@ -18,10 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from maglev_oc.identify.layout import CONSTANT_NAMES, UNITS
+from maglev_oc.errors import InputError
+from maglev_oc.identification.layout import CONSTANT_NAMES, UNITS
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
 from maglev_oc.results import AXES, Estimate, Result, jsonable
+
+__all__ = ["METHOD_TITLES", "FitResult", "NpfsiResult"]
 
 METHOD_TITLES = {
     "equation_error": "equation error (filtered accelerations, linear in C)",
@@ -145,7 +148,7 @@ class FitResult(Result):
         prefix = f"{term_name}."
         out = {k[len(prefix) :]: v for k, v in self.values.items() if k.startswith(prefix)}
         if not out:
-            raise ValueError(f"no term {term_name!r} in this fit; parameters: {self.names}")
+            raise InputError(f"no term {term_name!r} in this fit; parameters: {self.names}")
         return out
 
     def relative_errors(self, truth: Mapping[str, float]) -> dict[str, float]:

@@ -4,7 +4,7 @@ the true constants known (what ``analyses/identification.py`` reports).
 :func:`run_study` does the computing; the figures and the PDF are made from the returned
 :class:`IdentificationStudy` by :mod:`maglev_oc.reporting.identification_plots`.
 
-Experiments (all on the rig twin with :data:`~maglev_oc.identify.experiments.TWIN_TRUTH`,
+Experiments (all on the rig twin with :data:`~maglev_oc.identification.experiments.TWIN_TRUTH`,
 the papers' constants perturbed, encoders 10 um + 2 um noise, amplifiers with their lag;
 PIDs designed on the nominal model, logged at 1 kHz):
 
@@ -29,8 +29,8 @@ import numpy as np
 
 from maglev_oc.data.logs import Log
 from maglev_oc.estimation.differentiate import SavitzkyGolay
-from maglev_oc.identify.equation_error import EquationError
-from maglev_oc.identify.experiments import (
+from maglev_oc.identification.equation_error import EquationError
+from maglev_oc.identification.experiments import (
     EQUILIBRIUM_GAPS,
     FIXED_GAPS,
     TWIN_TRUTH,
@@ -40,11 +40,11 @@ from maglev_oc.identify.experiments import (
     fixed_gap_logs,
     verification_effects,
 )
-from maglev_oc.identify.layout import CONSTANT_NAMES
-from maglev_oc.identify.npfsi import PAPER_EPSILONS, npfsi
-from maglev_oc.identify.output_error import MultipleShooting, simulate_open_loop
-from maglev_oc.identify.result import FitResult, NpfsiResult
-from maglev_oc.identify.verification import (
+from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.npfsi import PAPER_EPSILONS, npfsi
+from maglev_oc.identification.output_error import MultipleShooting, simulate_open_loop
+from maglev_oc.identification.result import FitResult, NpfsiResult
+from maglev_oc.identification.verification import (
     EquilibriumComparison,
     ParabolaComparison,
     ParabolaFit,
@@ -56,6 +56,15 @@ from maglev_oc.identify.verification import (
 )
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
+
+__all__ = [
+    "COMMAND_TO_CURRENT_DELAY",
+    "PARTIAL",
+    "VERTICAL_GAP",
+    "Coverage",
+    "IdentificationStudy",
+    "run_study",
+]
 
 VERTICAL_GAP = 16e-3
 """[m] Centre of the vertical-only excitation: the sines span about 12-20 mm, where the

@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from maglev_oc.diagnose.candidate import Candidate
-from maglev_oc.diagnose.selection import Judgement, Selection
-from maglev_oc.diagnose.trace import Trace
-from maglev_oc.diagnose.unexplained import Unexplained
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.selection import Judgement, Selection
+from maglev_oc.diagnosis.trace import Trace
+from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.results import AXES, Estimate, PerAxis, Result, jsonable
+from maglev_oc.results import Estimate, PerAxis, Result, jsonable
 
 __all__ = ["ERROR_METRIC", "Diagnosis", "Effect", "NotSeparable"]
 
@@ -41,8 +41,8 @@ class Effect:
     confidence: float  # bootstrap share choosing it at its step
     gain: float  # relative drop of the held-out error on its axes when it was added
     z: float
-    contribution_rms: tuple[float, float]  # held-out RMS of its acceleration per axis [m/s^2]
-    force_rms: tuple[float, float]  # the same in N
+    contribution_rms: PerAxis  # held-out RMS of its acceleration per axis [m/s^2]
+    force_rms: PerAxis  # the same in N
     runner_up: str
     signature: str
     coefficients: np.ndarray
@@ -124,8 +124,8 @@ class Diagnosis(Result):
                     "confidence": _num(e.confidence),
                     "holdout_gain": _num(e.gain),
                     "z": _num(e.z),
-                    "contribution_rms": dict(zip(AXES, map(_num, e.contribution_rms), strict=True)),
-                    "force_rms_N": dict(zip(AXES, map(_num, e.force_rms), strict=True)),
+                    "contribution_rms": e.contribution_rms.to_dict(),
+                    "force_rms_N": e.force_rms.to_dict(),
                     "runner_up": e.runner_up,
                     "evidence": e.signature,
                 }

@@ -3,16 +3,16 @@
 What the library holds (papers 000/002 name the first four; the rest are what real slotted
 PMLSM stages on linear guides are known for), module by module:
 
-* :mod:`~maglev_oc.diagnose.guides` — guide friction on each axis (Coulomb + viscous, holding
+* :mod:`~maglev_oc.diagnosis.guides` — guide friction on each axis (Coulomb + viscous, holding
   the axis while it sticks); a constant horizontal force (guides not level) and a constant
   vertical force; a cable carrier's spring; guide misalignment (the gap changes along the
   travel, unseen by the gap encoder) and waviness at periods the residual points to; a
   gap-encoder offset;
-* :mod:`~maglev_oc.diagnose.magnetics` — cogging (normal) and detent (longitudinal) forces at the
+* :mod:`~maglev_oc.diagnosis.magnetics` — cogging (normal) and detent (longitudinal) forces at the
   slot pitch t1 (with its second harmonic), 2 t1 (000 eq. (9)) and the pole pitch tau, decaying
   with the gap as field harmonics do; end effects (thrust and attraction falling towards the
   ends of the travel); the attraction's dependence on the gap differing from the field model;
-* :mod:`~maglev_oc.diagnose.currents` — thrust ripple along the track, commutation-angle offset,
+* :mod:`~maglev_oc.diagnosis.currents` — thrust ripple along the track, commutation-angle offset,
   current-amplifier lag.
 
 Hyper-parameters that would make a term nonlinear (spatial periods, decay lengths, the reversal
@@ -25,9 +25,9 @@ fit they come from, so a joint refit stays consistent.
 
 from __future__ import annotations
 
-from maglev_oc.diagnose.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
-from maglev_oc.diagnose.currents import commutation_candidate, lag_candidate, ripple_candidate
-from maglev_oc.diagnose.guides import (
+from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
+from maglev_oc.diagnosis.currents import commutation_candidate, lag_candidate, ripple_candidate
+from maglev_oc.diagnosis.guides import (
     cable_candidate,
     friction_candidates,
     gap_offset_candidate,
@@ -36,8 +36,8 @@ from maglev_oc.diagnose.guides import (
     refine_waviness_period,
     waviness_candidate,
 )
-from maglev_oc.diagnose.magnetics import cogging_candidates, end_effects_candidate, gap_dependence_candidate
-from maglev_oc.diagnose.probes import PROBE_VARIABLES, smooth_probes
+from maglev_oc.diagnosis.magnetics import cogging_candidates, end_effects_candidate, gap_dependence_candidate
+from maglev_oc.diagnosis.probes import PROBE_VARIABLES, smooth_probes
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 

@@ -8,16 +8,16 @@ Steps:
    end of each log;
 2. base fit — C1..C4 by bias-compensated, filtered equation-error least squares
    (:mod:`maglev_oc.regression`), the same fit ``identify`` runs;
-3. :mod:`~maglev_oc.diagnose.trace` — the residual against x3 (spatial spectrum), the gap, the
+3. :mod:`~maglev_oc.diagnosis.trace` — the residual against x3 (spatial spectrum), the gap, the
    velocities, the position and the current rates;
-4. :mod:`~maglev_oc.diagnose.library` — the candidate effects;
-5. :mod:`~maglev_oc.diagnose.selection` — each candidate judged in a joint fit with the base
+4. :mod:`~maglev_oc.diagnosis.library` — the candidate effects;
+5. :mod:`~maglev_oc.diagnosis.selection` — each candidate judged in a joint fit with the base
    constants: held-out gain and its long-run significance, Wald test, physical size,
    separability, plausibility; forward selection with a bootstrap confidence. The candidates'
    magnetic references are the base fit's constants; when the selected effects move the
    constants by more than 2 %, the library is rebuilt on the refitted ones and the selection
    repeated once;
-6. :mod:`~maglev_oc.diagnose.unexplained` — structure left in the residual that no candidate
+6. :mod:`~maglev_oc.diagnosis.unexplained` — structure left in the residual that no candidate
    explains, reported with its signature;
 7. the refit of base constants and effects together; held-out error per axis before and after,
    and the short-horizon output error (the model simulated over 50 ms windows).
@@ -33,15 +33,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from maglev_oc.data.logs import Log, LogError
-from maglev_oc.diagnose.candidate import Candidate
-from maglev_oc.diagnose.library import (
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.library import (
     candidate_library,
     refine_waviness_period,
     smooth_probes,
     waviness_candidate,
 )
-from maglev_oc.diagnose.prediction import output_error
-from maglev_oc.diagnose.refit import (
+from maglev_oc.diagnosis.prediction import output_error
+from maglev_oc.diagnosis.refit import (
     REFIT_TOLERANCE,
     constants_of,
     converged_references,
@@ -49,8 +49,8 @@ from maglev_oc.diagnose.refit import (
     moved,
     with_model_form_spread,
 )
-from maglev_oc.diagnose.result import ERROR_METRIC, Diagnosis, Effect, NotSeparable
-from maglev_oc.diagnose.selection import (
+from maglev_oc.diagnosis.result import ERROR_METRIC, Diagnosis, Effect, NotSeparable
+from maglev_oc.diagnosis.selection import (
     Judgement,
     Selection,
     SelectionSettings,
@@ -58,8 +58,9 @@ from maglev_oc.diagnose.selection import (
     judge,
     select,
 )
-from maglev_oc.diagnose.trace import trace, unexplained_periods
-from maglev_oc.diagnose.unexplained import Unexplained, find_unexplained
+from maglev_oc.diagnosis.trace import trace, unexplained_periods
+from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
+from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design
@@ -204,7 +205,7 @@ def _per_axis(values, moving) -> PerAxis:
 def _prepare(logs: list[Log], holdout_fraction: float, bandwidth: float, min_duration: float):
     """Step 1: the shared data preparation and the held-out block."""
     if not 0.05 <= holdout_fraction <= 0.5:
-        raise ValueError(f"holdout_fraction must be in [0.05, 0.5], got {holdout_fraction!r}")
+        raise InputError(f"holdout_fraction must be in [0.05, 0.5], got {holdout_fraction!r}")
     for log in logs:
         if log.duration < min_duration:
             raise LogError(
@@ -239,7 +240,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         full = candidate_library(fitted, session.data)
         unknown = sorted(set(exclude) - {c.name for c in full})
         if unknown:
-            raise ValueError(
+            raise InputError(
                 f"exclude: unknown candidate(s) {unknown}; the library has {[c.name for c in full]}"
             )
         library = [c for c in full if c.name not in exclude]
@@ -350,8 +351,8 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
                 confidence=step.confidence,
                 gain=step.judgements[name].gain,
                 z=step.judgements[name].z,
-                contribution_rms=tuple(float(v) for v in contrib),
-                force_rms=force,
+                contribution_rms=PerAxis.of(contrib),
+                force_rms=PerAxis.of(force),
                 runner_up=others[0].name if others else "",
                 signature=cand.term.signature,
                 coefficients=coef,
@@ -453,9 +454,11 @@ def _merged_guide_geometry(effects: list[Effect]) -> list[Effect]:
         slope,
         parameters=params,
         finding=" ".join(findings),
-        contribution_rms=tuple(
-            float(np.hypot(a, *(w.contribution_rms[i] for w in wavy)))
-            for i, a in enumerate(slope.contribution_rms)
+        contribution_rms=PerAxis.of(
+            [
+                np.hypot(a, *(w.contribution_rms[i] for w in wavy))
+                for i, a in enumerate(slope.contribution_rms)
+            ]
         ),
     )
     return [merged if e is slope else e for e in effects if e not in wavy]

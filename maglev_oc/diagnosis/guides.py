@@ -9,7 +9,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from maglev_oc.diagnose.candidate import (
+from maglev_oc.diagnosis.candidate import (
     MAX_FORCE_SHARE,
     Candidate,
     LibraryContext,

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
-from maglev_oc.diagnose.diagnosis import Diagnosis, Effect
+from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
 from maglev_oc.sim.effects import Encoder, TwinEffects
@@ -23,6 +23,8 @@ from maglev_oc.sim.engine import ClosedLoop, SimulationResult
 from maglev_oc.sim.metrics import RunMetrics, evaluate
 from maglev_oc.sim.scenarios import Scenario, paper_scenarios
 from maglev_oc.sim.twin import RigTwin
+
+__all__ = ["CompensationStudy", "compensation_study", "improvement"]
 
 
 def _compensable_coefficients(effect: Effect) -> np.ndarray:
@@ -37,7 +39,7 @@ def _compensable_coefficients(effect: Effect) -> np.ndarray:
     )
 
 
-def state_only(effect: Effect) -> bool:
+def _state_only(effect: Effect) -> bool:
     """Whether an effect's compensable part depends on the state alone (not on the currents or
     their rates)."""
     x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
@@ -45,7 +47,7 @@ def state_only(effect: Effect) -> bool:
     return not (ca.depends_on(out, u) or ca.depends_on(out, du))
 
 
-def effects_acceleration(effects: list[Effect], *, with_inputs: bool) -> ca.Function:
+def _effects_acceleration(effects: list[Effect], *, with_inputs: bool) -> ca.Function:
     """Sum of the effects' accelerations: (x) -> acc (their compensable parts), or (x, i) -> acc
     with ``with_inputs`` (the whole effects, current rates taken as zero: a twin of the plant)."""
     x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
@@ -86,11 +88,11 @@ def compensation_study(
     effects compensated). ``twin``: the plant; default a twin of the identified plant (fitted
     constants and every found effect, 10 um encoders)."""
     scenario = paper_scenarios()["sinusoid"] if scenario is None else scenario
-    fx = [e for e in diagnosis.effects if state_only(e)]
-    fu = [e for e in diagnosis.effects if not state_only(e)]
+    fx = [e for e in diagnosis.effects if _state_only(e)]
+    fu = [e for e in diagnosis.effects if not _state_only(e)]
     if twin is None:
         plant = model.with_constants(_constants(diagnosis.constants_final))
-        extra = effects_acceleration(diagnosis.effects, with_inputs=True) if diagnosis.effects else None
+        extra = _effects_acceleration(diagnosis.effects, with_inputs=True) if diagnosis.effects else None
         twin = RigTwin(plant, TwinEffects(encoder=Encoder(), extra=extra))
         plant_name = "twin of the identified plant (refitted constants + the found effects)"
     else:
@@ -98,7 +100,7 @@ def compensation_study(
     base = FeedbackLinearizingRegulator(
         model.with_constants(_constants(diagnosis.constants_base)), name="FL, base model fitted"
     )
-    comp = effects_acceleration(fx, with_inputs=False) if fx else None
+    comp = _effects_acceleration(fx, with_inputs=False) if fx else None
     after = FeedbackLinearizingRegulator(
         model.with_constants(_constants(diagnosis.constants_final)),
         compensation=comp,

@@ -29,6 +29,7 @@ import numpy as np
 
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.data.logs import Log
+from maglev_oc.errors import SolverError
 from maglev_oc.model.parameters import DEFAULT_CONSTANTS, LumpedConstants
 from maglev_oc.model.stage import StageModel
 from maglev_oc.sim.effects import Cogging, CurrentAmplifier, Encoder, TwinEffects
@@ -37,6 +38,20 @@ from maglev_oc.sim.recording import result_to_log
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence, Sinusoids, excitation_scenario
 from maglev_oc.sim.twin import RigTwin
 from maglev_oc.units import MM_TO_M
+
+__all__ = [
+    "EQUILIBRIUM_GAPS",
+    "FIXED_GAPS",
+    "LOG_RATE_HZ",
+    "TWIN_TRUTH",
+    "ConstantCurrent",
+    "EquilibriumMeasurement",
+    "equilibrium_current_runs",
+    "excitation_log",
+    "fixed_gap_logs",
+    "identification_effects",
+    "verification_effects",
+]
 
 LOG_RATE_HZ = 1000.0
 """Logging rate of the twin experiments [Hz] (the loop runs at 5 kHz)."""
@@ -71,7 +86,7 @@ def verification_effects() -> TwinEffects:
 def _run(twin: RigTwin, controller, scenario: Scenario, seed: int):
     result = ClosedLoop(twin, controller).run(scenario, seed=seed)
     if not result.success:
-        raise RuntimeError(f"twin experiment {scenario.name!r} failed: {result.message}")
+        raise SolverError(f"twin experiment {scenario.name!r} failed: {result.message}")
     return result
 
 

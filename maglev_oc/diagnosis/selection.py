@@ -24,10 +24,10 @@ effects already chosen (bias-compensated least squares on the training blocks,
    confounded with; it is never claimed (a constant vertical force, for example, is nearly
    collinear with a common scale of the vertical magnetic force, which near equilibrium always
    carries the weight).
-5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnose.library`).
+5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
-   (:func:`~maglev_oc.diagnose.library.smooth_probes`: a constant and Legendre polynomials of the
+   (:func:`~maglev_oc.diagnosis.library.smooth_probes`: a constant and Legendre polynomials of the
    gap, the position or a velocity): a rival that explains more by more than ``rival_margin``
    means the data show a dependence on that variable, not this effect's shape, and the residual
    goes to ``unexplained`` instead of to the nearest candidate.
@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from maglev_oc.diagnose.library import Candidate
+from maglev_oc.diagnosis.library import Candidate
 from maglev_oc.regression.base import AXIS_INDEX, CONSTANT_NAMES
 from maglev_oc.regression.covariance import DEFAULT_BAND, frequencies_for, periodogram_long_run
 from maglev_oc.regression.design import Design
@@ -55,16 +55,6 @@ from maglev_oc.regression.solve import SubsetFit, fit_subset
 from maglev_oc.regression.terms import Estimate
 
 __all__ = ["Judgement", "Selection", "SelectionSettings", "fitted_constants", "judge", "select"]
-
-VERDICTS = (
-    "accepted",
-    "passes",
-    "not significant",
-    "too small",
-    "not separable",
-    "implausible",
-    "not specific",
-)
 
 
 @dataclass(frozen=True)

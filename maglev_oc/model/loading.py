@@ -1,0 +1,39 @@
+"""The model a user names: a stage file (JSON, :func:`~maglev_oc.model.parameters.save_json`) or
+the papers' parameters, optionally with one of the papers' constant sets."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from maglev_oc.errors import InputError
+from maglev_oc.model.parameters import DEFAULT_CONSTANTS, StageParameters, load_json, paper_constants
+from maglev_oc.model.stage import StageModel
+
+__all__ = ["load_model"]
+
+
+def load_model(params_path: str | os.PathLike | None = None, constants: str | None = None) -> StageModel:
+    """The model from a stage file, or Table I with the default constants.
+
+    Parameters
+    ----------
+    params_path : path, optional
+        JSON with optional sections ``stage`` (fields of StageParameters, SI) and ``constants``.
+    constants : str, optional
+        One of the papers' constant sets by name (replaces the file's constants).
+
+    Raises
+    ------
+    InputError
+        The file does not exist, or it or the set name is invalid (the message names which).
+    """
+    if params_path is not None:
+        if not Path(params_path).is_file():
+            raise InputError(f"{params_path}: no such file")
+        params, consts = load_json(params_path)
+    else:
+        params, consts = StageParameters(), DEFAULT_CONSTANTS
+    if constants is not None:
+        consts = paper_constants(constants)
+    return StageModel(params, consts)
