@@ -18,7 +18,7 @@ from pathlib import Path
 from common import machine
 
 from maglev_oc.data.logs import read_log
-from maglev_oc.diagnose.diagnosis import diagnose
+from maglev_oc.diagnosis.pipeline import diagnose
 
 LOGS = {
     "eleven_04": "clean",

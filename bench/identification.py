@@ -11,10 +11,10 @@ from __future__ import annotations
 import casadi as ca
 from common import best_of, fmt, machine
 
-from maglev_oc.identify.equation_error import EquationError, fit_equation_error
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
-from maglev_oc.identify.npfsi import npfsi
-from maglev_oc.identify.output_error import MultipleShooting
+from maglev_oc.identification.equation_error import EquationError, fit_equation_error
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
+from maglev_oc.identification.npfsi import npfsi
+from maglev_oc.identification.output_error import MultipleShooting
 from maglev_oc.model.stage import StageModel
 
 

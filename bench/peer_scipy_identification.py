@@ -51,9 +51,9 @@ from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 from scipy.sparse.linalg import splu
 
-from maglev_oc.identify.equation_error import fit_equation_error
-from maglev_oc.identify.experiments import TWIN_TRUTH, excitation_log
-from maglev_oc.identify.output_error import MultipleShooting
+from maglev_oc.identification.equation_error import fit_equation_error
+from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
+from maglev_oc.identification.output_error import MultipleShooting
 from maglev_oc.model.stage import StageModel
 
 NAMES = ("C1", "C2", "C3", "C4")
