@@ -14,7 +14,8 @@
 Errors in what the user hands in (files, values: :class:`~maglev_oc.errors.MaglevError`) and
 in reading or writing files are reported in one line on stderr with exit status 2; nothing is
 written in that case. Anything else is a bug of maglev_oc: a short "internal error" line and
-exit status 1 (``--debug`` shows the traceback).
+exit status 1 (``--debug`` shows the traceback). ``region`` exits with 3 when a certificate fails
+or a Monte Carlo run leaves the feasible set.
 """
 
 from __future__ import annotations
@@ -33,13 +34,16 @@ import numpy as np
 from maglev_oc.errors import InputError, MaglevError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.loading import load_model
+from maglev_oc.units import M_TO_MM, MM_TO_M
 
-__all__ = ["EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
+__all__ = ["EXIT_INTERNAL", "EXIT_NOT_CERTIFIED", "EXIT_USAGE", "build_parser", "main"]
 
 EXIT_USAGE = 2
 """Exit status for errors in the user's input or files."""
 EXIT_INTERNAL = 1
 """Exit status for anything else: a bug of maglev_oc."""
+EXIT_NOT_CERTIFIED = 3
+"""Exit status of ``region`` when a certificate fails or a Monte Carlo run leaves the feasible set."""
 
 
 def analysis_modules() -> dict[str, object]:
@@ -84,7 +88,7 @@ def cmd_model(args: argparse.Namespace) -> int:
     from maglev_oc.model.summary import TABLE_GAPS, equilibrium_table_rows, summarize_model
 
     model = load_model(args.params, args.constants)
-    gaps = TABLE_GAPS if not args.gaps else np.asarray(args.gaps, dtype=float) * 1e-3
+    gaps = TABLE_GAPS if not args.gaps else np.asarray(args.gaps, dtype=float) * MM_TO_M
     if np.any(gaps <= 0):
         raise InputError(f"--gaps must be positive millimetres, got {args.gaps}")
     s = summarize_model(model, table_gaps=gaps)
@@ -96,7 +100,7 @@ def cmd_model(args: argparse.Namespace) -> int:
     for gap_mm, current, status, pole in equilibrium_table_rows(s):
         print(f"{gap_mm:9.2f} {current:9.3f}  {status:<18s} {pole:20.2f}")
     if s.zero_current_gap is not None:
-        print(f"zero-current gap: {s.zero_current_gap * 1e3:.3f} mm")
+        print(f"zero-current gap: {s.zero_current_gap * M_TO_MM:.3f} mm")
     return 0
 
 
@@ -129,7 +133,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     metrics = evaluate(result, scenario)
     log = result_to_log(result, rate_hz=args.rate, describe_twin=args.describe_twin)
     write_log(args.out, log)
-    mean = [f"{1e3 * e:.3f}" for e in metrics.mean_error]
+    mean = [f"{M_TO_MM * e:.3f}" for e in metrics.mean_error]
     print(
         f"{controller.name} on {scenario.name} ({args.twin} twin): "
         f"{'ok' if result.success else 'FAILED: ' + result.message}"
@@ -161,51 +165,21 @@ def cmd_region(args: argparse.Namespace) -> int:
         raise InputError(f"--samples must be >= 0, got {args.samples}")
     limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
-    loop = RegulatorLoop()
-    proc = Procedure2(feasible, loop)
-    refs = [Reference.setpoint(g * 1e-3, args.position * 1e-3) for g in gaps]
+    proc = Procedure2(feasible, RegulatorLoop())
+    refs = [Reference.setpoint(g * MM_TO_M, args.position * MM_TO_M) for g in gaps]
     if args.sinusoid:
         refs.append(Reference.paper_sinusoid())
-    sim = None
-    if args.samples:
-        from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
-        from maglev_oc.region.montecarlo import BatchSimulator
-        from maglev_oc.sim.twin import RigTwin
-
-        sim = BatchSimulator(RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0)
     print(f"feasible set: {feasible.label}; gains: printed K_h, K_v (001/002)")
     print(
         f"{'reference':>10s} {'P':>9s} {'level':>10s} {'c/upper':>8s} {'binding':>13s} "
         f"{'e1 [mm]':>8s} {'e1dot [mm/s]':>12s} {'e2 [mm]':>8s} {'e2dot [mm/s]':>12s} {'runs/viol.':>11s}"
     )
+    check = _region_checker(model, proc.loop, args.samples, limit)
     records = []
-    n_bad = 0
     for ref in refs:
-        certs = [("Lyapunov", proc.run(ref))]
-        if args.sdp:
-            from maglev_oc.region.sdp import enlarge
-
-            sdp = enlarge(proc, ref)
-            if sdp.certified is not None:
-                certs.append(("SDP", sdp.certified))
-        for label, cert in certs:
-            s = cert.initial_conditions.semi_axes
-            runs = viol = 0
-            if sim is not None and cert.success:
-                import numpy as np
-
-                from maglev_oc.region.montecarlo import check_error_states, uniform_in_ellipsoid
-
-                z = uniform_in_ellipsoid(cert.P, cert.level, args.samples, np.random.default_rng(0))
-                chk = check_error_states(sim, loop, ref, cert.P, cert.level, z, current_limit=limit)
-                runs, viol = chk.n, chk.violations
-                n_bad += viol
-            name = f"{ref.gap * 1e3:g} mm" if ref.is_setpoint else "sinusoid"
-            print(
-                f"{name:>10s} {label:>9s} {cert.level:10.4g} {cert.tightness:8.3f} {cert.binding:>13s} "
-                f"{s['e1'] * 1e3:8.2f} {s['e1_rate'] * 1e3:12.0f} {s['e2'] * 1e3:8.2f} "
-                f"{s['e2_rate'] * 1e3:12.0f} {f'{runs}/{viol}' if runs else '-':>11s}"
-            )
+        for label, cert in _certificates(proc, ref, sdp=args.sdp):
+            runs, viol = check(ref, cert) if cert.success else (0, 0)
+            _print_certificate(ref, label, cert, runs, viol)
             records.append(
                 {
                     "reference": ref.label,
@@ -228,7 +202,49 @@ def cmd_region(args: argparse.Namespace) -> int:
         }
         write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"wrote {args.json}")
-    return 0 if n_bad == 0 and all(r["certified"] for r in records) else 1
+    ok = all(r["certified"] and r["monte_carlo"]["violations"] == 0 for r in records)
+    return 0 if ok else EXIT_NOT_CERTIFIED
+
+
+def _certificates(proc, ref, *, sdp: bool) -> list[tuple[str, object]]:
+    """("Lyapunov", Procedure 2's certificate) and, with ``sdp``, ("SDP", the enlarged one)."""
+    certs = [("Lyapunov", proc.run(ref))]
+    if sdp:
+        from maglev_oc.region.sdp import enlarge
+
+        result = enlarge(proc, ref)
+        if result.certified is not None:
+            certs.append(("SDP", result.certified))
+    return certs
+
+
+def _region_checker(model, loop, samples: int, limit):
+    """(ref, cert) -> (runs, violations) of a Monte Carlo check inside the certified ellipsoid
+    on the rig twin (no runs when ``samples`` is 0)."""
+    if not samples:
+        return lambda ref, cert: (0, 0)
+    from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+    from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
+    from maglev_oc.sim.twin import RigTwin
+
+    sim = BatchSimulator(RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0)
+
+    def check(ref, cert) -> tuple[int, int]:
+        z = uniform_in_ellipsoid(cert.P, cert.level, samples, np.random.default_rng(0))
+        chk = check_error_states(sim, loop, ref, cert.P, cert.level, z, current_limit=limit)
+        return chk.n, chk.violations
+
+    return check
+
+
+def _print_certificate(ref, label: str, cert, runs: int, viol: int) -> None:
+    s = cert.initial_conditions.semi_axes
+    name = f"{ref.gap * M_TO_MM:g} mm" if ref.is_setpoint else "sinusoid"
+    print(
+        f"{name:>10s} {label:>9s} {cert.level:10.4g} {cert.tightness:8.3f} {cert.binding:>13s} "
+        f"{s['e1'] * M_TO_MM:8.2f} {s['e1_rate'] * M_TO_MM:12.0f} {s['e2'] * M_TO_MM:8.2f} "
+        f"{s['e2_rate'] * M_TO_MM:12.0f} {f'{runs}/{viol}' if runs else '-':>11s}"
+    )
 
 
 def _excited_axes(log, check_excitation) -> list[str]:

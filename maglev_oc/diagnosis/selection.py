@@ -214,67 +214,68 @@ def judge(
     contrib = np.sqrt(np.mean((r0 - r1) ** 2, axis=1))
     # separability from the normal matrix of the joint fit
     vif, partners = _separability(design, cand, fit, settings)
-    constants = fitted_constants(fit)
-    physical = cand.term.physical_parameters(coef, cov, constants)
-    verdict, reason = "passes", ""
-    if fit.compensation < cur_fit.compensation:
-        verdict = "not significant"
-        reason = (
-            "its columns are dominated by the errors of the logged currents (not identifiable from this log)"
-        )
-    elif not (
-        gain >= settings.min_gain
-        and (z >= settings.min_z or (z >= settings.min_z_strong and wald >= settings.strong_wald * threshold))
-    ):
-        verdict = "not significant"
-        reason = (
-            f"held-out error falls by {gain:.1%} (z = {z:.1f}; needs {settings.min_gain:.1%} and "
-            f"z >= {settings.min_z:g})"
-        )
-    elif wald < threshold:
-        verdict, reason = (
-            "not significant",
-            f"Wald {wald:.3g} below {threshold:.3g} (alpha {settings.alpha:g})",
-        )
-    elif axes.size == 0 or np.max(contrib[axes]) < settings.min_effect:
-        verdict = "too small"
-        reason = (
-            f"its acceleration is {np.max(contrib):.2g} m/s^2 RMS, below the {settings.min_effect:g} m/s^2 "
-            "that the regulated stage would turn into one encoder count"
-        )
-    elif vif > settings.max_vif or partners:
-        verdict = "not separable"
-        what = ", ".join(partners) if partners else "the base constants"
-        reason = f"confounded with {what} on this log (variance inflation {vif:.3g})"
-    else:
-        why = cand.plausible(physical)
-        if why:
-            verdict, reason = "implausible", why
-        elif rivals and (cand.axis, _reported(cand)) in rivals:
-            best_gain, best_var = rivals[(cand.axis, _reported(cand))]
-            if best_gain > gain + settings.rival_margin:
-                verdict = "not specific"
-                reason = (
-                    f"a smooth function of the {best_var.replace('_', ' ')} explains more of the "
-                    "held-out error "
-                    f"({best_gain:.1%} against {gain:.1%}): the data show a dependence on that variable, not "
-                    "this effect's shape"
-                )
-    return Judgement(
+    measured = Judgement(
         cand.name,
-        verdict,
-        reason,
+        "passes",
+        "",
         gain,
         gain_axes,
         z,
         wald,
         threshold,
         vif,
-        partners or (("C1..C4",) if verdict == "not separable" else ()),
+        partners,
         contrib,
-        physical,
+        cand.term.physical_parameters(coef, cov, fitted_constants(fit)),
         fit,
     )
+    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals)
+    confounded = partners or (("C1..C4",) if verdict == "not separable" else ())
+    return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
+
+
+def _verdict(
+    j: Judgement,
+    cand: Candidate,
+    axes: np.ndarray,
+    cur_fit: SubsetFit,
+    settings: SelectionSettings,
+    rivals: dict[tuple[str, int], tuple[float, str]] | None,
+) -> tuple[str, str]:
+    """(verdict, reason) from the measured evidence, the tests in the module doc's order."""
+    gain, z, wald, threshold, contrib = j.gain, j.z, j.wald, j.wald_threshold, j.contribution_rms
+    if j.fit.compensation < cur_fit.compensation:
+        return "not significant", (
+            "its columns are dominated by the errors of the logged currents (not identifiable from this log)"
+        )
+    strong = z >= settings.min_z_strong and wald >= settings.strong_wald * threshold
+    if not (gain >= settings.min_gain and (z >= settings.min_z or strong)):
+        return "not significant", (
+            f"held-out error falls by {gain:.1%} (z = {z:.1f}; needs {settings.min_gain:.1%} and "
+            f"z >= {settings.min_z:g})"
+        )
+    if wald < threshold:
+        return "not significant", f"Wald {wald:.3g} below {threshold:.3g} (alpha {settings.alpha:g})"
+    if axes.size == 0 or np.max(contrib[axes]) < settings.min_effect:
+        return "too small", (
+            f"its acceleration is {np.max(contrib):.2g} m/s^2 RMS, below the {settings.min_effect:g} m/s^2 "
+            "that the regulated stage would turn into one encoder count"
+        )
+    if j.vif > settings.max_vif or j.confounded_with:
+        what = ", ".join(j.confounded_with) if j.confounded_with else "the base constants"
+        return "not separable", f"confounded with {what} on this log (variance inflation {j.vif:.3g})"
+    why = cand.plausible(j.physical)
+    if why:
+        return "implausible", why
+    if rivals and (cand.axis, _reported(cand)) in rivals:
+        best_gain, best_var = rivals[(cand.axis, _reported(cand))]
+        if best_gain > gain + settings.rival_margin:
+            return "not specific", (
+                f"a smooth function of the {best_var.replace('_', ' ')} explains more of the held-out error "
+                f"({best_gain:.1%} against {gain:.1%}): the data show a dependence on that variable, not "
+                "this effect's shape"
+            )
+    return "passes", ""
 
 
 def _separability(

@@ -32,6 +32,7 @@ from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
 from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import AXES
+from maglev_oc.units import M_TO_MM, M_TO_UM
 
 __all__ = ["Unexplained", "find_unexplained"]
 
@@ -96,23 +97,10 @@ def find_unexplained(
     *,
     max_per_axis: int = 2,
 ) -> list[Unexplained]:
-    """Probe the residual of (base + ``explained``) for structure nothing named explains."""
-    p = model.params
-    probes: list[tuple[AccelerationTerm, str, str, float | None]] = []
-    for (axis, var), term in smooth_probes(data).items():
-        if data.moving[AXES.index(axis)]:
-            probes.append((term, var, PROBE_VARIABLES[var][1], None))
-    for axis, period in periods:
-        a = AXES.index(axis)
-        if data.moving[a]:
-            probes.append(
-                (
-                    _sine_probe(f"probe_{axis}_period_{period * 1e6:.0f}um", a, period),
-                    f"position (period {period * 1e3:.1f} mm)",
-                    f"the horizontal position, periodically over {period * 1e3:.1f} mm",
-                    period,
-                )
-            )
+    """Probe the residual of (base + ``explained``) for structure nothing named explains: the
+    best probe is added while it passes the selection's significance and size tests, at most
+    ``max_per_axis`` per axis."""
+    probes = _probes(data, periods)
     if not probes:
         return []
     terms = [c.term for c in explained] + [t for t, *_ in probes]
@@ -125,45 +113,72 @@ def find_unexplained(
         cur_fit = fit_subset(design, current, covariance=False)
         r0 = _holdout_residual(design, cur_fit)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        best = None
-        for entry in remaining:
-            term, key, words, period = entry
-            a = AXES.index(term.axis)
-            if found[term.axis] >= max_per_axis:
-                continue
-            fit = fit_subset(design, [*current, term.name], covariance=False)
-            r1 = _holdout_residual(design, fit)
-            gain = 1.0 - float(np.mean(r1[a] ** 2)) / mse0[a]
-            if best is None or gain > best[0]:
-                best = (gain, entry, fit, r1)
-        if best is None:
+        open_probes = [e for e in remaining if found[e[0].axis] < max_per_axis]
+        if not open_probes:
             break
-        gain, entry, fit, r1 = best
-        term, key, words, period = entry
+        entry, r1 = _best_probe(design, current, open_probes, mse0)
+        term = entry[0]
         a = AXES.index(term.axis)
         gain, z = holdout_significance(design, r0, r1, np.array([a]))
         size = float(np.sqrt(np.mean((r0[a] - r1[a]) ** 2)))  # net change of the prediction
         if gain < settings.min_gain or z < settings.min_z or size < settings.min_effect:
             break
-        mass = p.mass_vertical if a == 0 else p.mass_horizontal
-        out.append(
-            Unexplained(
-                axis=term.axis,
-                depends_on=key,
-                size=size,
-                force_rms=size * mass,
-                gain=gain,
-                z=z,
-                description=(
-                    f"A {term.axis} residual of {size:.3g} m/s² RMS ({size * mass:.3g} N) that varies with "
-                    f"{words}; no effect of the library explains it (it lowers the held-out error by "
-                    f"{gain:.1%}, z = {z:.1f})."
-                ),
-                period=period,
-                term=term,
-            )
-        )
+        out.append(_unexplained(model, entry, size, gain, z))
         found[term.axis] += 1
         current.append(term.name)
         remaining.remove(entry)
     return out
+
+
+def _probes(data: PreparedLogs, periods: Sequence[tuple[str, float]]) -> list[tuple]:
+    """(term, variable, words, period or None) of every probe on a moving axis."""
+    probes: list[tuple[AccelerationTerm, str, str, float | None]] = []
+    for (axis, var), term in smooth_probes(data).items():
+        if data.moving[AXES.index(axis)]:
+            probes.append((term, var, PROBE_VARIABLES[var][1], None))
+    for axis, period in periods:
+        a = AXES.index(axis)
+        if data.moving[a]:
+            probes.append(
+                (
+                    _sine_probe(f"probe_{axis}_period_{period * M_TO_UM:.0f}um", a, period),
+                    f"position (period {period * M_TO_MM:.1f} mm)",
+                    f"the horizontal position, periodically over {period * M_TO_MM:.1f} mm",
+                    period,
+                )
+            )
+    return probes
+
+
+def _best_probe(design, current: list[str], probes: list[tuple], mse0: np.ndarray):
+    """(probe, its held-out residual) that lowers the held-out error of its axis the most."""
+    best = None
+    for entry in probes:
+        a = AXES.index(entry[0].axis)
+        fit = fit_subset(design, [*current, entry[0].name], covariance=False)
+        r1 = _holdout_residual(design, fit)
+        gain = 1.0 - float(np.mean(r1[a] ** 2)) / mse0[a]
+        if best is None or gain > best[0]:
+            best = (gain, entry, r1)
+    return best[1], best[2]
+
+
+def _unexplained(model: StageModel, entry: tuple, size: float, gain: float, z: float) -> Unexplained:
+    term, key, words, period = entry
+    p = model.params
+    mass = p.mass_vertical if term.axis == "vertical" else p.mass_horizontal
+    return Unexplained(
+        axis=term.axis,
+        depends_on=key,
+        size=size,
+        force_rms=size * mass,
+        gain=gain,
+        z=z,
+        description=(
+            f"A {term.axis} residual of {size:.3g} m/s² RMS ({size * mass:.3g} N) that varies with "
+            f"{words}; no effect of the library explains it (it lowers the held-out error by "
+            f"{gain:.1%}, z = {z:.1f})."
+        ),
+        period=period,
+        term=term,
+    )

@@ -257,84 +257,35 @@ class EquationError:
             [Hz] Spectral window of the long-run covariance (default 0.25 Hz).
         """
         t0 = time.perf_counter()
-        prep = self.prepared
-        masks = _sample_masks(samples, self.logs)
-        masks = [
-            _reduced_mask(m, round(self.sample_time / log.sample_time))
-            for m, log in zip(masks, self.logs, strict=True)
-        ]
-        fit_mask, _ = prep.masks(0.0, masks)
-        n_used = int(fit_mask.sum())
-        p = len(self.names)
-        min_samples = 2 * self.kernel.size
-        if n_used < 10 * p + min_samples:
-            raise InputError(
-                f"only {n_used} usable samples (after leaving out {prep.edge} at each edge of each log); "
-                f"need at least {10 * p + min_samples} for {p} parameters"
-            )
-        init, lower, upper, scale = self._bounds()
-        if initial:
-            for key, value in initial.items():
-                if key not in self.names:
-                    raise InputError(f"initial: {key!r} is not estimated; estimated: {self.names}")
-                init[self.names.index(key)] = float(value)
+        fit_mask = self._fit_mask(samples)
+        init = self._initial(initial)
         solve_t0 = time.perf_counter()
-        first = build_design(
-            prep, self.model, estimate=self.estimate, terms=self.terms, fit=fit_mask, at=init
-        )
-        weights = first.weights
-        if self.linear:
-            design = first
-            sub = fit_subset(design, list(design.groups), band=hac_band)
-            status, message, iterations = (
-                "converged",
-                "linear least squares (exact: the accelerations are affine in theta)",
-                1,
-            )
-        else:
-
-            def build(at: np.ndarray) -> Design:
-                return build_design(
-                    prep,
-                    self.model,
-                    estimate=self.estimate,
-                    terms=self.terms,
-                    fit=fit_mask,
-                    at=at,
-                    weights=weights,
-                )
-
-            design, sub, status, message, iterations = fit_nonlinear(build, init, lower, upper, scale)
-            design = build(sub.coef) if status == "converged" else design
-            sub = fit_subset(design, list(design.groups), band=hac_band)
+        design, sub, status, message, iterations = self._solve(fit_mask, init, hac_band)
+        solve_time = time.perf_counter() - solve_t0
         if sub.message:
             message = f"{message}; {sub.message}"
-        solve_time = time.perf_counter() - solve_t0
         cov = sub.covariance
         success = status == "converged" and bool(np.all(np.isfinite(cov)))
         if status == "converged" and not success:
             status, message = "singular", "singular normal matrix"
-        theta = sub.coef
         res = residuals(design, sub)
-        res_list = self._per_log(res, fit_mask)
-        rms = {a: float(np.sqrt(np.mean(res[k, fit_mask] ** 2))) for k, a in enumerate(AXES)}
+        n_used = int(fit_mask.sum())
         with np.errstate(divide="ignore", invalid="ignore"):
             inflation = np.where(np.diag(sub.naive) > 0, np.diag(cov) / np.diag(sub.naive), np.nan)
         names = self.names
-        fixed = {k: getattr(self.model.constants, k) for k in CONSTANT_NAMES if k not in names}
         return FitResult(
             method="equation_error",
             names=names,
-            values=dict(zip(names, theta, strict=True)),
+            values=dict(zip(names, sub.coef, strict=True)),
             stderr=dict(zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)), strict=True)),
             stderr_naive=dict(zip(names, np.sqrt(np.clip(np.diag(sub.naive), 0, None)), strict=True)),
             initial=dict(zip(names, init, strict=True)),
-            fixed=fixed,
+            fixed={k: getattr(self.model.constants, k) for k in CONSTANT_NAMES if k not in names},
             covariance=cov,
             correlation=correlation_from(cov) if success else np.full_like(cov, np.nan),
-            residual_rms=rms,
+            residual_rms={a: float(np.sqrt(np.mean(res[k, fit_mask] ** 2))) for k, a in enumerate(AXES)},
             residual_unit="m/s^2",
-            residuals=tuple(res_list),
+            residuals=tuple(self._per_log(res, fit_mask)),
             n_samples=n_used,
             n_residuals=n_used * int(np.sum(design.weights > 0)),
             chi_square=sub.chi_square,
@@ -352,22 +303,85 @@ class EquationError:
                 "total": time.perf_counter() - t0 + self.prepare_time,
             },
             sources=tuple(log.source for log in self.logs),
-            settings={
-                "differentiator": "savitzky_golay",
-                "bandwidth_hz": self.differentiator.bandwidth,
-                "hac_band_hz": hac_band,
-                "polyorder": self.differentiator.polyorder,
-                "velocity_window": self.differentiator.velocity_window,
-                "acceleration_window": self.differentiator.acceleration_window,
-                "edge_samples": prep.edge,
-                "input_delay_s": self.input_delay,
-                "axis_weights": dict(zip(AXES, weights.tolist(), strict=True)),
-                "linear": self.linear,
-                "terms": [t.name for t in self.terms],
-                "logging_error_variance_A2": prep.current_noise.tolist(),
-                "errors_in_variables_compensated": sub.compensated,
-            },
+            settings=self._settings(hac_band, design.weights, sub.compensated),
         )
+
+    # ------------------------------------------------------------------------------------
+    def _fit_mask(self, samples) -> np.ndarray:
+        """The fitted samples of the prepared (rate-reduced) data; refuses too few."""
+        prep = self.prepared
+        masks = [
+            _reduced_mask(m, round(self.sample_time / log.sample_time))
+            for m, log in zip(_sample_masks(samples, self.logs), self.logs, strict=True)
+        ]
+        fit_mask, _ = prep.masks(0.0, masks)
+        n_used, p = int(fit_mask.sum()), len(self.names)
+        min_samples = 2 * self.kernel.size
+        if n_used < 10 * p + min_samples:
+            raise InputError(
+                f"only {n_used} usable samples (after leaving out {prep.edge} at each edge of each log); "
+                f"need at least {10 * p + min_samples} for {p} parameters"
+            )
+        return fit_mask
+
+    def _initial(self, initial: dict[str, float] | None) -> np.ndarray:
+        init = self._bounds()[0]
+        for key, value in (initial or {}).items():
+            if key not in self.names:
+                raise InputError(f"initial: {key!r} is not estimated; estimated: {self.names}")
+            init[self.names.index(key)] = float(value)
+        return init
+
+    def _solve(self, fit_mask: np.ndarray, init: np.ndarray, hac_band: float):
+        """(design, fit, status, message, iterations): one linear solve, or Gauss-Newton with the
+        exact Jacobian when a parameter enters nonlinearly (axis weights of the first design)."""
+
+        def build(at: np.ndarray, weights=None) -> Design:
+            return build_design(
+                self.prepared,
+                self.model,
+                estimate=self.estimate,
+                terms=self.terms,
+                fit=fit_mask,
+                at=at,
+                weights=weights,
+            )
+
+        first = build(init)
+        if self.linear:
+            sub = fit_subset(first, list(first.groups), band=hac_band)
+            return (
+                first,
+                sub,
+                "converged",
+                "linear least squares (exact: the accelerations are affine in theta)",
+                1,
+            )
+        _, lower, upper, scale = self._bounds()
+        design, sub, status, message, iterations = fit_nonlinear(
+            lambda at: build(at, first.weights), init, lower, upper, scale
+        )
+        design = build(sub.coef, first.weights) if status == "converged" else design
+        sub = fit_subset(design, list(design.groups), band=hac_band)
+        return design, sub, status, message, iterations
+
+    def _settings(self, hac_band: float, weights: np.ndarray, compensated: bool) -> dict:
+        sg = self.differentiator
+        return {
+            "differentiator": "savitzky_golay",
+            "bandwidth_hz": sg.bandwidth,
+            "hac_band_hz": hac_band,
+            "polyorder": sg.polyorder,
+            "velocity_window": sg.velocity_window,
+            "acceleration_window": sg.acceleration_window,
+            "edge_samples": self.prepared.edge,
+            "input_delay_s": self.input_delay,
+            "axis_weights": dict(zip(AXES, weights.tolist(), strict=True)),
+            "linear": self.linear,
+            "terms": [t.name for t in self.terms],
+            "logging_error_variance_A2": self.prepared.current_noise.tolist(),
+            "errors_in_variables_compensated": compensated,
+        }
 
 
 def _reduced_mask(mask: np.ndarray, q: int) -> np.ndarray:

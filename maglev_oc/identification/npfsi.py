@@ -151,59 +151,15 @@ class NpfsiEstimator:
         The acceleration model is velocity' = A theta + b; returns the trajectory of theta.
         """
         t0 = time.perf_counter()
-        A = np.asarray(regressor, dtype=float)
-        if A.ndim != 3:
-            raise InputError(f"regressor must have shape (n, m, p), got {A.shape}")
+        A, b, y, theta, names = self._checked(regressor, offset, velocity, theta0, names)
         n, m, p = A.shape
-        b = np.asarray(offset, dtype=float).reshape(n, m)
-        y = np.asarray(velocity, dtype=float).reshape(n, m)
-        theta = np.asarray(theta0, dtype=float).ravel()
-        if theta.size != p:
-            raise InputError(f"theta0 has {theta.size} values for {p} parameters")
-        if n < 3:
-            raise InputError(f"need at least 3 samples, got {n}")
-        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b)) and np.all(np.isfinite(y))):
-            raise InputError("regressor, offset and velocity must be finite")
-        names = tuple(names) if names is not None else tuple(f"theta{k + 1}" for k in range(p))
-        if len(names) != p:
-            raise InputError(f"names: {len(names)} for {p} parameters")
-        for mat, label in ((self.Q, "Q"), (self.Q0, "Q0")):
-            if mat is not None and mat.shape != (p, p):
-                raise InputError(f"{label} must be ({p}, {p}) for {p} parameters, got {mat.shape}")
         h = float(sample_time)
-        mean_info = np.einsum("nij,nik->jk", A, A) / n
-        if self.Q0 is None:
-            diag = np.diag(mean_info).copy()
-            if np.any(diag <= 0):
-                bad = [names[k] for k in np.flatnonzero(diag <= 0)]
-                raise InputError(f"the data carry no information on {bad} (zero regressor)")
-            q0 = DEFAULT_Q0_SECONDS * np.diag(diag)
-        else:
-            q0 = self.Q0
-        step = self._step(m, p, h)
+        q0 = self._initial_sigma(A, names)
         dy = np.zeros((n, m))
         dy[:-1] = np.diff(y, axis=0) / h
         data = np.concatenate([A.transpose(0, 2, 1).reshape(n, m * p), b, dy], axis=1).T  # (nd, n)
-        z = np.concatenate([theta, np.zeros(m), q0.ravel(order="F")])
-        traj = np.empty((p, n))
-        traj[:, 0] = theta
-        k = 0
-        steps = n - 1
-        chunk_fn: dict[int, ca.Function] = {}
-        status, message = "completed", "completed"
-        while k < steps:
-            size = min(CHUNK, steps - k)
-            if size not in chunk_fn:
-                chunk_fn[size] = step.mapaccum("npfsi_chunk", size)
-            zs, th = chunk_fn[size](z, data[:, k : k + size])
-            zs = np.asarray(zs)
-            traj[:, k + 1 : k + 1 + size] = np.asarray(th)
-            z = zs[:, -1]
-            k += size
-            if not np.all(np.isfinite(z)):
-                status, message = "diverged", f"diverged (non-finite estimate) before t = {k * h:.3f} s"
-                traj[:, k + 1 :] = np.nan
-                break
+        z0 = np.concatenate([theta, np.zeros(m), q0.ravel(order="F")])
+        traj, z, status, message = self._integrate(self._step(m, p, h), z0, data, h)
         sigma = z[p + m :].reshape(p, p, order="F")
         success = status == "completed"
         if success:
@@ -238,6 +194,61 @@ class NpfsiEstimator:
                 "Q0_default_seconds": DEFAULT_Q0_SECONDS if self.Q0 is None else None,
             },
         )
+
+    def _checked(self, regressor, offset, velocity, theta0, names):
+        """The data as float arrays (A (n, m, p), b, y (n, m), theta (p,)) and the names; refuses
+        inconsistent shapes and non-finite data."""
+        A = np.asarray(regressor, dtype=float)
+        if A.ndim != 3:
+            raise InputError(f"regressor must have shape (n, m, p), got {A.shape}")
+        n, m, p = A.shape
+        b = np.asarray(offset, dtype=float).reshape(n, m)
+        y = np.asarray(velocity, dtype=float).reshape(n, m)
+        theta = np.asarray(theta0, dtype=float).ravel()
+        if theta.size != p:
+            raise InputError(f"theta0 has {theta.size} values for {p} parameters")
+        if n < 3:
+            raise InputError(f"need at least 3 samples, got {n}")
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b)) and np.all(np.isfinite(y))):
+            raise InputError("regressor, offset and velocity must be finite")
+        names = tuple(names) if names is not None else tuple(f"theta{k + 1}" for k in range(p))
+        if len(names) != p:
+            raise InputError(f"names: {len(names)} for {p} parameters")
+        for mat, label in ((self.Q, "Q"), (self.Q0, "Q0")):
+            if mat is not None and mat.shape != (p, p):
+                raise InputError(f"{label} must be ({p}, {p}) for {p} parameters, got {mat.shape}")
+        return A, b, y, theta, names
+
+    def _initial_sigma(self, A: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+        """Sigma(0): the given Q0, else DEFAULT_Q0_SECONDS times the mean information's diagonal."""
+        if self.Q0 is not None:
+            return self.Q0
+        diag = np.diag(np.einsum("nij,nik->jk", A, A) / A.shape[0]).copy()
+        if np.any(diag <= 0):
+            bad = [names[k] for k in np.flatnonzero(diag <= 0)]
+            raise InputError(f"the data carry no information on {bad} (zero regressor)")
+        return DEFAULT_Q0_SECONDS * np.diag(diag)
+
+    def _integrate(self, step: ca.Function, z: np.ndarray, data: np.ndarray, h: float):
+        """(trajectory (p, n), final state, status, message): ``step`` mapped over chunks of
+        CHUNK samples; stops at the first non-finite state."""
+        n, p = data.shape[1], step.size1_out(1)
+        traj = np.empty((p, n))
+        traj[:, 0] = z[:p]
+        k, steps = 0, n - 1
+        chunk_fn: dict[int, ca.Function] = {}
+        while k < steps:
+            size = min(CHUNK, steps - k)
+            if size not in chunk_fn:
+                chunk_fn[size] = step.mapaccum("npfsi_chunk", size)
+            zs, th = chunk_fn[size](z, data[:, k : k + size])
+            traj[:, k + 1 : k + 1 + size] = np.asarray(th)
+            z = np.asarray(zs)[:, -1]
+            k += size
+            if not np.all(np.isfinite(z)):
+                traj[:, k + 1 :] = np.nan
+                return traj, z, "diverged", f"diverged (non-finite estimate) before t = {k * h:.3f} s"
+        return traj, z, "completed", "completed"
 
 
 def _stage_regression(

@@ -144,82 +144,124 @@ def run_study(
     coverage_duration: float = 20.0,
     vertical_duration: float = 40.0,
 ) -> IdentificationStudy:
-    """Run the twin experiments and every identification/verification on them."""
-    times: dict[str, float] = {}
-    truth = nominal.with_constants(truth_constants)
+    """Run the twin experiments and every identification/verification on them.
 
-    def timed(key: str, fn):
+    Parameters
+    ----------
+    nominal : StageModel
+        The model the controllers and the fits start from.
+    truth_constants : LumpedConstants
+        The twin's constants (what the fits should find).
+    duration, coverage_duration, vertical_duration : float
+        [s] Lengths of the excitation log, of each coverage log and of the vertical runs.
+    seed, coverage_seeds : int
+        Seed of the main logs; number of coverage logs (seeds 100, 101, ...).
+
+    Returns
+    -------
+    IdentificationStudy
+        Every result, with ``timings`` [s] by step.
+    """
+    clock = _Clock()
+    truth = nominal.with_constants(truth_constants)
+    fields = _excitation_fits(clock, nominal, truth, duration, seed)
+    fields["coverage"] = _coverage(clock, nominal, truth, coverage_seeds, coverage_duration)
+    veff = verification_effects()
+    fields |= _vertical_runs(clock, nominal, truth, veff, vertical_duration, seed)
+    fields |= _fixed_gaps(clock, nominal, truth, veff, seed)
+    fields |= _equilibrium(clock, nominal, truth, veff, fields["table2_model"], fields["cogging_npfsi"])
+    return IdentificationStudy(nominal=nominal, truth=truth, timings=clock.times, **fields)
+
+
+class _Clock:
+    """Wall times by step name (repeated steps add up)."""
+
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+
+    def __call__(self, key: str, fn):
         t0 = time.perf_counter()
         out = fn()
-        times[key] = times.get(key, 0.0) + time.perf_counter() - t0
+        self.add(key, time.perf_counter() - t0)
         return out
 
-    log = timed(
+    def add(self, key: str, seconds: float) -> None:
+        self.times[key] = self.times.get(key, 0.0) + seconds
+
+
+def _excitation_fits(
+    clock: _Clock, nominal: StageModel, truth: StageModel, duration: float, seed: int
+) -> dict:
+    """The 60 s excitation log and every method on it (000 Sec. IV)."""
+    log = clock(
         "simulate: 60 s excitation",
         lambda: excitation_log(truth, duration=duration, seed=seed, controller_model=nominal),
     )
-    ee = timed("equation error (60 s)", lambda: EquationError(log, nominal).fit())
+    ee = clock("equation error (60 s)", lambda: EquationError(log, nominal).fit())
     ee_delayed = EquationError(log, nominal, input_delay=COMMAND_TO_CURRENT_DELAY).fit()
-    oe = timed("output error (60 s)", lambda: MultipleShooting(log, nominal).fit(initial=ee))
+    oe = clock("output error (60 s)", lambda: MultipleShooting(log, nominal).fit(initial=ee))
     obs = tuple(
-        timed("NPFSI x3 eps (observer velocities)", lambda e=e: npfsi(log, nominal, eps=e))
+        clock("NPFSI x3 eps (observer velocities)", lambda e=e: npfsi(log, nominal, eps=e))
         for e in PAPER_EPSILONS
     )
     sg = SavitzkyGolay(log.sample_time)
     zero = tuple(
-        timed(
+        clock(
             "NPFSI x3 eps (zero-phase velocities)", lambda e=e: npfsi(log, nominal, eps=e, differentiator=sg)
         )
         for e in PAPER_EPSILONS
     )
-    open_loop = simulate_open_loop(log, truth, 1.0)
+    return {
+        "log": log,
+        "equation_error": ee,
+        "equation_error_delayed": ee_delayed,
+        "output_error": oe,
+        "npfsi_observer": obs,
+        "npfsi_zero_phase": zero,
+        "open_loop": simulate_open_loop(log, truth, 1.0),
+    }
 
-    # --- coverage of the standard errors ----------------------------------------------
+
+def _coverage(
+    clock: _Clock, nominal: StageModel, truth: StageModel, n_seeds: int, duration: float
+) -> Coverage:
+    """Equation-error fits on ``n_seeds`` independent logs: do the standard errors cover the truth?"""
     t0 = time.perf_counter()
     z, zn, err, se = [], [], [], []
-    seeds = tuple(100 + k for k in range(coverage_seeds))
-    tv = dict(zip(CONSTANT_NAMES, truth_constants.as_array(), strict=True))
+    seeds = tuple(100 + k for k in range(n_seeds))
+    tv = dict(zip(CONSTANT_NAMES, truth.constants.as_array(), strict=True))
     for s in seeds:
-        lg = excitation_log(truth, duration=coverage_duration, seed=s, controller_model=nominal)
+        lg = excitation_log(truth, duration=duration, seed=s, controller_model=nominal)
         fit = EquationError(lg, nominal).fit()
         z.append([fit.z_scores(tv)[k] for k in CONSTANT_NAMES])
         zn.append([(fit.values[k] - tv[k]) / fit.stderr_naive[k] for k in CONSTANT_NAMES])
         err.append([100 * fit.relative_errors(tv)[k] for k in CONSTANT_NAMES])
         se.append([100 * fit.stderr[k] / tv[k] for k in CONSTANT_NAMES])
-    coverage = Coverage(
-        CONSTANT_NAMES, seeds, coverage_duration, np.array(z), np.array(zn), np.array(err), np.array(se)
-    )
-    times["coverage runs (simulate + fit)"] = time.perf_counter() - t0
+    clock.add("coverage runs (simulate + fit)", time.perf_counter() - t0)
+    return Coverage(CONSTANT_NAMES, seeds, duration, np.array(z), np.array(zn), np.array(err), np.array(se))
 
-    # --- vertical-only runs: Table II and the cogging procedure --------------------------
-    veff = verification_effects()
+
+def _vertical_runs(
+    clock: _Clock, nominal: StageModel, truth: StageModel, veff, duration: float, seed: int
+) -> dict:
+    """Vertical-only runs: Table II (x3 = 0) and the cogging procedure (x3 = 1.5 slot pitches)."""
     pos = 1.5 * nominal.params.slot_pitch
-    vlog = timed(
-        "simulate: vertical runs",
-        lambda: excitation_log(
+
+    def vertical_log(offset: int, position: float):
+        return excitation_log(
             truth,
-            duration=vertical_duration,
-            seed=seed + 1,
+            duration=duration,
+            seed=seed + offset,
             controller_model=nominal,
             effects=veff,
             gap_offset=VERTICAL_GAP,
-            locked_position=0.0,
-        ),
-    )
-    clog = timed(
-        "simulate: vertical runs",
-        lambda: excitation_log(
-            truth,
-            duration=vertical_duration,
-            seed=seed + 2,
-            controller_model=nominal,
-            effects=veff,
-            gap_offset=VERTICAL_GAP,
-            locked_position=pos,
-        ),
-    )
+            locked_position=position,
+        )
+
+    vlog = clock("simulate: vertical runs", lambda: vertical_log(1, 0.0))
+    clog = clock("simulate: vertical runs", lambda: vertical_log(2, pos))
     table2 = tuple(
-        timed("NPFSI (vertical runs)", lambda e=e: npfsi(vlog, nominal, estimate=PARTIAL, eps=e))
+        clock("NPFSI (vertical runs)", lambda e=e: npfsi(vlog, nominal, estimate=PARTIAL, eps=e))
         for e in PAPER_EPSILONS
     )
     t2 = table2[PAPER_EPSILONS.index(0.01)]
@@ -228,29 +270,41 @@ def run_study(
             **{k: t2.values[k] for k in PARTIAL}, source="Table II style: NPFSI eps = 0.01, x3 = 0"
         )
     )
-    t2_ee = timed(
+    t2_ee = clock(
         "equation error (vertical runs)", lambda: EquationError(vlog, nominal, estimate=PARTIAL).fit()
     )
-    cog = timed(
+    cog = clock(
         "NPFSI (vertical runs)",
         lambda: npfsi(clog, table2_model, estimate=("C2",), eps=0.01, theta0={"C2": t2.values["C2"]}),
     )
-    cog_ee = timed(
+    cog_ee = clock(
         "equation error (vertical runs)",
         lambda: EquationError(clog, t2_ee.model(nominal), estimate=("C2",)).fit(),
     )
     gaps = np.linspace(10e-3, 25e-3, 61)
-    xi_npfsi = cogging_from_c2(nominal, t2.values["C2"], cog.values["C2"], gaps)
-    xi_ee = cogging_from_c2(nominal, t2_ee.values["C2"], cog_ee.values["C2"], gaps)
     c = veff.cogging
     assert c is not None
     # the twin adds -F sin(pi x3 / t1 + phase) / M_v to x2' with F = peak (ref / x1)^exponent,
     # i.e. K2 -> K2 + F sin(...): at x3 = 3 t1 / 2 that is K2 - F (less attraction)
     angle = np.pi * pos / nominal.params.slot_pitch + c.phase
-    xi_true = c.peak_at_reference * (c.reference_gap / gaps) ** c.exponent * np.sin(angle)
+    return {
+        "vertical_log": vlog,
+        "table2": table2,
+        "table2_equation_error": t2_ee,
+        "table2_model": table2_model,
+        "cogging_log": clog,
+        "cogging_npfsi": cog,
+        "cogging_equation_error": cog_ee,
+        "cogging_gaps": gaps,
+        "cogging_xi_npfsi": cogging_from_c2(nominal, t2.values["C2"], cog.values["C2"], gaps),
+        "cogging_xi_equation_error": cogging_from_c2(nominal, t2_ee.values["C2"], cog_ee.values["C2"], gaps),
+        "cogging_xi_true": c.peak_at_reference * (c.reference_gap / gaps) ** c.exponent * np.sin(angle),
+    }
 
-    # --- fixed gaps: parabolas vs NPFSI ------------------------------------------------
-    fg_logs = timed(
+
+def _fixed_gaps(clock: _Clock, nominal: StageModel, truth: StageModel, veff, seed: int) -> dict:
+    """Fixed-gap runs: the parabola fit of L1 against NPFSI at each eps (000 Sec. V)."""
+    fg_logs = clock(
         "simulate: fixed-gap runs", lambda: fixed_gap_logs(truth, FIXED_GAPS, effects=veff, seed=seed)
     )
     parabolas = tuple(fit_parabola(lg, g) for lg, g in zip(fg_logs, FIXED_GAPS, strict=True))
@@ -264,54 +318,28 @@ def run_study(
         )
         fg_npfsi[e] = runs
         comparisons[e] = compare_parabola_npfsi(parabolas, runs)
-    times["NPFSI (fixed-gap runs)"] = time.perf_counter() - t0
+    clock.add("NPFSI (fixed-gap runs)", time.perf_counter() - t0)
+    return {"parabolas": parabolas, "fixed_gap_npfsi": fg_npfsi, "parabola_comparisons": comparisons}
 
-    # --- equilibrium currents ------------------------------------------------------------
-    eq0 = timed(
-        "simulate: equilibrium currents",
-        lambda: equilibrium_current_runs(
-            truth, EQUILIBRIUM_GAPS, position=0.0, effects=veff, controller_model=nominal
-        ),
-    )
-    eq1 = timed(
-        "simulate: equilibrium currents",
-        lambda: equilibrium_current_runs(
-            truth, EQUILIBRIUM_GAPS, position=pos, effects=veff, controller_model=nominal
-        ),
-    )
+
+def _equilibrium(
+    clock: _Clock, nominal: StageModel, truth: StageModel, veff, table2_model: StageModel, cog: NpfsiResult
+) -> dict:
+    """Equilibrium currents measured at x3 = 0 and on the cogging position, against predictions."""
+    pos = 1.5 * nominal.params.slot_pitch
+
+    def runs(position: float):
+        return equilibrium_current_runs(
+            truth, EQUILIBRIUM_GAPS, position=position, effects=veff, controller_model=nominal
+        )
+
+    eq0 = clock("simulate: equilibrium currents", lambda: runs(0.0))
+    eq1 = clock("simulate: equilibrium currents", lambda: runs(pos))
     cog_model = table2_model.with_constants(table2_model.constants.replace(C2=cog.values["C2"]))
-    pred0 = compare_equilibrium_currents(table2_model, eq0.gap, eq0.current)
-    pred1 = compare_equilibrium_currents(table2_model, eq1.gap, eq1.current)
-    pred1c = compare_equilibrium_currents(cog_model, eq1.gap, eq1.current)
-    return IdentificationStudy(
-        nominal=nominal,
-        truth=truth,
-        log=log,
-        equation_error=ee,
-        equation_error_delayed=ee_delayed,
-        output_error=oe,
-        npfsi_observer=obs,
-        npfsi_zero_phase=zero,
-        open_loop=open_loop,
-        coverage=coverage,
-        vertical_log=vlog,
-        table2=table2,
-        table2_equation_error=t2_ee,
-        cogging_log=clog,
-        cogging_npfsi=cog,
-        cogging_equation_error=cog_ee,
-        cogging_gaps=gaps,
-        cogging_xi_npfsi=xi_npfsi,
-        cogging_xi_equation_error=xi_ee,
-        cogging_xi_true=xi_true,
-        parabolas=parabolas,
-        fixed_gap_npfsi=fg_npfsi,
-        parabola_comparisons=comparisons,
-        equilibrium_x0=eq0,
-        equilibrium_cogging=eq1,
-        prediction_x0=pred0,
-        prediction_cogging=pred1,
-        prediction_cogging_corrected=pred1c,
-        table2_model=table2_model,
-        timings=times,
-    )
+    return {
+        "equilibrium_x0": eq0,
+        "equilibrium_cogging": eq1,
+        "prediction_x0": compare_equilibrium_currents(table2_model, eq0.gap, eq0.current),
+        "prediction_cogging": compare_equilibrium_currents(table2_model, eq1.gap, eq1.current),
+        "prediction_cogging_corrected": compare_equilibrium_currents(cog_model, eq1.gap, eq1.current),
+    }

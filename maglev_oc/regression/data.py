@@ -262,6 +262,44 @@ class PreparedLogs:
         return fit, hold
 
 
+def _reduced(logs: list[Log], max_rate: float, control_rate: float | None, logging_error: bool):
+    """The logs reduced to at most ``max_rate`` and each one's share of the white current floor
+    that is logging error (a mean of q samples carries 1/q of it); refuses mixed rates."""
+    shares, reduced = [], []
+    for log in logs:
+        share = logging_error_share(log, control_rate) if logging_error else 0.0
+        r, q = reduce_rate(log, max_rate)
+        shares.append(share / q)
+        reduced.append(r)
+    ts = reduced[0].sample_time
+    for log in reduced[1:]:
+        if abs(log.sample_time - ts) > 0.01 * ts:
+            raise LogError(
+                log.source,
+                f"sample time {log.sample_time:g} s differs from {reduced[0].source}'s {ts:g} s; "
+                "fit logs of one rate together",
+            )
+    return reduced, shares
+
+
+def _differentiated(k: int, log: Log, sg: SavitzkyGolay, edge: int) -> tuple:
+    """(t, segment, x, u, du, acceleration, valid) of one log; its first and last ``edge``
+    samples, where the filters run off the data, are not valid."""
+    ts = sg.sample_time
+    if log.n < 2 * edge + 10:
+        raise LogError(
+            log.source,
+            f"{log.n} samples at {1 / ts:g} Hz; the {sg.bandwidth:g} Hz differentiator needs at least "
+            f"{2 * edge + 10} ({(2 * edge + 10) * ts:.2f} s)",
+        )
+    d = sg(np.vstack([log.x[0], log.x[2]]))
+    u = np.asarray(log.u, dtype=float)
+    x = np.vstack([d.position[0], d.velocity[0], d.position[1], d.velocity[1]])
+    valid = np.zeros(log.n, dtype=bool)
+    valid[edge : log.n - edge] = True
+    return log.t - log.t[0], np.full(log.n, k), x, u, sg(u).velocity, np.asarray(d.acceleration), valid
+
+
 def prepare(
     logs: Log | Sequence[Log],
     *,
@@ -295,50 +333,20 @@ def prepare(
             "differentiator must be a SavitzkyGolay (zero phase; a lagging estimate biases an "
             f"equation-error fit), got {type(differentiator).__name__}"
         )
-    shares, reduced = [], []
-    for log in logs:
-        share = logging_error_share(log, control_rate) if logging_error else 0.0
-        r, q = reduce_rate(log, max_rate)
-        shares.append(share / q)  # a mean of q samples carries 1/q of the sample's error
-        reduced.append(r)
+    reduced, shares = _reduced(logs, max_rate, control_rate, logging_error)
     ts = reduced[0].sample_time
-    for log in reduced[1:]:
-        if abs(log.sample_time - ts) > 0.01 * ts:
-            raise LogError(
-                log.source,
-                f"sample time {log.sample_time:g} s differs from {reduced[0].source}'s {ts:g} s; "
-                "fit logs of one rate together",
-            )
-    if differentiator is None:
-        sg = SavitzkyGolay(ts, bandwidth=bandwidth)
-    else:
-        sg = differentiator
-        if abs(sg.sample_time - ts) > 0.01 * ts:
-            raise InputError(
-                f"differentiator sample_time {sg.sample_time!r} s does not match the logs' {ts!r} s"
-            )
+    sg = SavitzkyGolay(ts, bandwidth=bandwidth) if differentiator is None else differentiator
+    if abs(sg.sample_time - ts) > 0.01 * ts:
+        raise InputError(f"differentiator sample_time {sg.sample_time!r} s does not match the logs' {ts!r} s")
     bandwidth = sg.bandwidth
     kernel = matching_kernel(sg)
     edge = max(sg.velocity_window, sg.acceleration_window) // 2 + kernel.size // 2
-    parts = []
-    noise = np.zeros(2)
-    weight = 0
-    for k, (log, share) in enumerate(zip(reduced, shares, strict=True)):
-        if log.n < 2 * edge + 10:
-            raise LogError(
-                log.source,
-                f"{log.n} samples at {1 / ts:g} Hz; the {bandwidth:g} Hz differentiator needs at least "
-                f"{2 * edge + 10} ({(2 * edge + 10) * ts:.2f} s)",
-            )
-        d = sg(np.vstack([log.x[0], log.x[2]]))
-        u = np.asarray(log.u, dtype=float)
-        du = sg(u).velocity
-        x = np.vstack([d.position[0], d.velocity[0], d.position[1], d.velocity[1]])
-        valid = np.zeros(log.n, dtype=bool)
-        valid[edge : log.n - edge] = True
-        noise += share * _white_floor(u, ts) * log.n
-        weight += log.n
-        parts.append((log.t - log.t[0], np.full(log.n, k), x, u, du, np.asarray(d.acceleration), valid))
+    parts = [_differentiated(k, log, sg, edge) for k, log in enumerate(reduced)]
+    weight = sum(log.n for log in reduced)
+    noise = sum(
+        share * _white_floor(np.asarray(log.u, dtype=float), ts) * log.n
+        for log, share in zip(reduced, shares, strict=True)
+    )
     cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
     notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
@@ -353,7 +361,7 @@ def prepare(
         sample_time=ts,
         differentiator=sg,
         kernel=kernel,
-        current_noise=noise / max(weight, 1),
+        current_noise=np.asarray(noise, dtype=float) / max(weight, 1),
         moving=moving,
         sources=tuple(log.source for log in logs),
         notes=notes,

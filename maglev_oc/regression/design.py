@@ -212,13 +212,53 @@ def build_design(
     block_seconds : float
         [s] Length of the blocks of fitted samples.
     """
-    estimate = tuple(estimate)
+    estimate, terms = tuple(estimate), tuple(terms)
+    names, groups, at_vec = _parameters(model, estimate, terms, at)
+    prep = prepared
+    n, P = prep.n, len(names)
+    fn, where = _symbolic(model, estimate, terms, at_vec)
+    cols, known, sens = (np.asarray(v) for v in fn.map(n)(prep.x, prep.u, prep.du))
+    # mapped outputs are concatenated sample by sample: cols (2, n P) -> (P, 2, n)
+    cols = np.ascontiguousarray(cols.reshape(2, n, P).transpose(2, 0, 1)) if P else np.zeros((0, 2, n))
+    columns = prep.filter(cols)
+    target = prep.acc - prep.filter(known)
+
+    fit = prep.valid.copy() if fit is None else np.asarray(fit, dtype=bool) & prep.valid
+    holdout = np.zeros(n, dtype=bool) if holdout is None else np.asarray(holdout, dtype=bool)
+    if weights is None:
+        weights = _axis_weights(columns, target, fit, prep.moving)
+    weights = np.where(prep.moving, np.asarray(weights, dtype=float), 0.0)
+    size = max(1, round(block_seconds / prep.sample_time))
+    noise = _NoiseSensitivities.of(prep, sens, where, weights, P)
+    acc = _accumulate(columns, target, weights, _blocks(fit, prep.segment, size), prep.segment, noise)
+    held = [np.ascontiguousarray(columns[:, a, holdout]) for a in range(2)]
+    return Design(
+        names=names,
+        groups=groups,
+        terms=terms,
+        columns=columns,
+        target=target,
+        weights=weights,
+        fit=fit,
+        holdout=holdout,
+        **acc,
+        block_seconds=size * prep.sample_time,
+        hold_gram=np.stack([h @ h.T for h in held]),
+        hold_rhs=np.stack([h @ target[a, holdout] for a, h in enumerate(held)]),
+        hold_yy=np.array([float(target[a, holdout] @ target[a, holdout]) for a in range(2)]),
+        hold_n=int(holdout.sum()),
+        at=at_vec,
+        prepared=prep,
+    )
+
+
+def _parameters(model: StageModel, estimate: tuple[str, ...], terms: tuple[AccelerationTerm, ...], at):
+    """(names, groups, linearization point) of a design; checks the names."""
     unknown = [e for e in estimate if e not in ESTIMABLE]
     if unknown:
         raise InputError(f"estimate: unknown name(s) {unknown}; choose among {ESTIMABLE}")
     if len(set(estimate)) != len(estimate):
         raise InputError(f"estimate: duplicate names in {estimate!r}")
-    terms = tuple(terms)
     tnames = [t.name for t in terms]
     if len(set(tnames)) != len(tnames):
         raise InputError(f"terms: duplicate names {tnames}")
@@ -239,42 +279,43 @@ def build_design(
     for t in terms:
         groups[t.name] = np.arange(k, k + t.n_parameters)
         k += t.n_parameters
+    return names, groups, at_vec
 
-    prep = prepared
-    n, P = prep.n, len(names)
-    fn, where = _symbolic(model, estimate, terms, at_vec)
-    cols, known, sens = (np.asarray(v) for v in fn.map(n)(prep.x, prep.u, prep.du))
-    # mapped outputs are concatenated sample by sample: cols (2, n P) -> (P, 2, n)
-    cols = np.ascontiguousarray(cols.reshape(2, n, P).transpose(2, 0, 1)) if P else np.zeros((0, 2, n))
-    columns = prep.filter(cols)
-    target = prep.acc - prep.filter(known)
 
-    fit = prep.valid.copy() if fit is None else np.asarray(fit, dtype=bool) & prep.valid
-    holdout = np.zeros(n, dtype=bool) if holdout is None else np.asarray(holdout, dtype=bool)
-    if weights is None:
-        weights = _axis_weights(columns, target, fit, prep.moving)
-    weights = np.where(prep.moving, np.asarray(weights, dtype=float), 0.0)
+@dataclass(frozen=True)
+class _NoiseSensitivities:
+    """Errors in variables: sensitivity e of column p on axis a to input I carries, after the
+    filter, variance s2_I |K|^2 per unit; each is scaled by sqrt(w_a^2 s2_I |K|^2) so that the
+    block Gram of the scaled sensitivities, summed over pairs on the same (axis, input, kind) and
+    scattered to their columns, is the block's noise Gram N_b."""
 
-    size = max(1, round(block_seconds / prep.sample_time))
-    blocks = _blocks(fit, prep.segment, size)
-    # errors in variables: sensitivity e of column p on axis a to input I carries, after the
-    # filter, variance s2_I |K|^2 per unit; scale each by sqrt(w_a^2 s2_I |K|^2) so that the block
-    # Gram of the scaled sensitivities, summed over pairs on the same (axis, input, kind),
-    # scattered to their columns, is N_b
-    kf = float(np.sum(prep.kernel**2))
-    kfd = float(np.sum(np.convolve(prep.kernel, _velocity_kernel(prep)) ** 2))
-    if sens.size and np.any(prep.current_noise > 0):
-        sens = sens.reshape(-1, n)  # (m, n): one column per sample
+    scaled: np.ndarray  # (m, n) one row per structural sensitivity
+    same: np.ndarray  # (m, m) pairs on the same (axis, input, kind)
+    scatter: np.ndarray  # (P, m) sensitivity -> its column
+
+    @classmethod
+    def of(cls, prep: PreparedLogs, sens: np.ndarray, where: np.ndarray, weights: np.ndarray, P: int):
+        if not (sens.size and np.any(prep.current_noise > 0)):
+            return None
+        kf = float(np.sum(prep.kernel**2))
+        kfd = float(np.sum(np.convolve(prep.kernel, _velocity_kernel(prep)) ** 2))
         gain = np.array(
             [weights[a] ** 2 * prep.current_noise[i] * (kf if k == 0 else kfd) for _, a, i, k in where]
         )
-        sens = sens * np.sqrt(gain)[:, None]
         group = where[:, 1] * 4 + where[:, 2] * 2 + where[:, 3]
-        same = group[:, None] == group[None, :]
         scatter = np.zeros((P, len(where)))
         scatter[where[:, 0], np.arange(len(where))] = 1.0
-    else:
-        sens = None
+        scaled = sens.reshape(-1, prep.n) * np.sqrt(gain)[:, None]
+        return cls(scaled, group[:, None] == group[None, :], scatter)
+
+    def gram(self, part: slice) -> np.ndarray:
+        e = self.scaled[:, part]
+        return self.scatter @ ((e @ e.T) * self.same) @ self.scatter.T
+
+
+def _accumulate(columns, target, weights, blocks, segment, noise: _NoiseSensitivities | None) -> dict:
+    """Per-block weighted Grams, right-hand sides, target energies and noise Grams (Design fields)."""
+    P, n = columns.shape[0], columns.shape[2]
     grams, noises, rhss, yys, logs = [], [], [], [], []
     block_of = np.full(n, -1)
     xw_all = columns * weights[None, :, None]
@@ -287,41 +328,17 @@ def build_design(
         grams.append(xw @ xw.T)
         rhss.append(xw @ yw)
         yys.append(float(yw @ yw))
-        logs.append(int(prep.segment[sel[0]]))
-        if sens is not None:
-            e = sens[:, part]
-            noises.append(scatter @ ((e @ e.T) * same) @ scatter.T)
-        else:
-            noises.append(np.zeros((P, P)))
-    ho = holdout
-    held = [np.ascontiguousarray(columns[:, a, ho]) for a in range(2)]
-    hg = np.stack([h @ h.T for h in held])
-    hr = np.stack([h @ target[a, ho] for a, h in enumerate(held)])
-    hy = np.array([float(target[a, ho] @ target[a, ho]) for a in range(2)])
+        logs.append(int(segment[sel[0]]))
+        noises.append(noise.gram(part) if noise is not None else np.zeros((P, P)))
     empty = np.zeros((0, P, P))
-    return Design(
-        names=names,
-        groups=groups,
-        terms=terms,
-        columns=columns,
-        target=target,
-        weights=weights,
-        fit=fit,
-        holdout=holdout,
-        gram=np.array(grams) if grams else empty,
-        noise=np.array(noises) if noises else empty,
-        rhs=np.array(rhss) if rhss else np.zeros((0, P)),
-        yy=np.array(yys),
-        block_log=np.array(logs, dtype=int),
-        block_of=block_of,
-        block_seconds=size * prep.sample_time,
-        hold_gram=hg,
-        hold_rhs=hr,
-        hold_yy=hy,
-        hold_n=int(ho.sum()),
-        at=at_vec,
-        prepared=prep,
-    )
+    return {
+        "gram": np.array(grams) if grams else empty,
+        "noise": np.array(noises) if noises else empty,
+        "rhs": np.array(rhss) if rhss else np.zeros((0, P)),
+        "yy": np.array(yys),
+        "block_log": np.array(logs, dtype=int),
+        "block_of": block_of,
+    }
 
 
 def _velocity_kernel(prep: PreparedLogs) -> np.ndarray:
