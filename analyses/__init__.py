@@ -2,6 +2,9 @@
 
 Each script has ``REPORT`` (its PDF's file name), ``ORDER`` (its place in ``maglev-oc report``),
 ``build(out, model)`` and a ``main()`` that parses :func:`analysis_parser`'s command line.
+``build`` computes, then lays out named pages, and returns what the PDF says
+(:class:`maglev_oc.reporting.pdf.ReportContents`); where the computation is long, the layout is
+a separate ``write_report(out, study)`` that tests call on a study they already have.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
 from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
+from maglev_oc.reporting.pdf import ReportContents
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
@@ -110,7 +111,8 @@ def truth_rows(diag, twin: RigTwin, model: StageModel) -> list[tuple[str, str, s
     return rows
 
 
-def build(out: Path, model: StageModel) -> Path:
+def build(out: Path, model: StageModel) -> ReportContents:
+    """Diagnose the built-in log, compensate what was found, and write the report to ``out``."""
     log, twin = _builtin_log(model)
     diag = diagnose([log], model)
     study = compensation_study(diag, model, twin=twin)
@@ -121,10 +123,9 @@ def build(out: Path, model: StageModel) -> Path:
         "table after this page compares what it found with what the twin had. (The diagnosis's acceptance "
         "tests use logs of an independent simulator instead: tests/test_diagnose.py, bench/peer_pysindy.py.)",
     ]
-    write_diagnosis_report(
+    return write_diagnosis_report(
         out, diag, study=study, preamble=preamble, truth_rows=truth_rows(diag, twin, model)
     )
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)
-    print(f"wrote {build(args.out, load_model(args.params))}")
+    print(f"wrote {build(args.out, load_model(args.params)).path}")
     return 0
 
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from maglev_oc.control.gains import check_paper_gains
+from maglev_oc.control.gains import GainCheck, check_paper_gains
 from maglev_oc.model.stage import StageModel
-from maglev_oc.model.summary import equilibrium_table_rows, summarize_model
+from maglev_oc.model.summary import ModelSummary, equilibrium_table_rows, summarize_model
 from maglev_oc.reporting import model_plots as plots
-from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.reporting.pdf import PdfReport, ReportContents
 
 __all__ = ["ORDER", "REPORT", "build", "main"]
 
@@ -20,12 +20,28 @@ ORDER = 10
 TITLE = "maglev_oc — stage model"
 
 
-def build(out: Path, model: StageModel) -> Path:
-    s = summarize_model(model)
+def build(out: Path, model: StageModel) -> ReportContents:
+    """Summarize ``model``, check the papers' gains, and write the report to ``out``."""
+    summary = summarize_model(model)
     gain_checks = check_paper_gains()
+    with PdfReport(out, TITLE, subtitle="reports/model.pdf from analyses/model.py") as pdf:
+        pdf.add_text("Model and constants", _intro(model, summary), first_page=True)
+        _equilibrium_page(pdf, summary)
+        pdf.add_figure(plots.equilibrium_figure(summary))
+        pdf.add_figure(plots.coefficients_figure(summary))
+        pdf.add_figure(plots.open_loop_figure(summary))
+        pdf.add_figure(plots.field_fit_figure(summary))
+        pdf.add_figure(plots.feasible_acceleration_figure(summary))
+        _gains_page(pdf, gain_checks)
+        pdf.add_figure(plots.gain_poles_figure(gain_checks))
+    return pdf.contents
+
+
+def _intro(model: StageModel, s: ModelSummary) -> list[str]:
+    """The first page: state and input, the constants identified and from physics, the field fit."""
     c, phys = model.constants, s.physical_constants
     ratios = [a / b for a, b in zip(c.as_array(), phys.as_array(), strict=True)]
-    intro = [
+    return [
         "State x = (air gap [m], gap rate [m/s], horizontal position [m], its rate [m/s]); input "
         "u = (i_q, i_d) [A]. Model of SPEC 1 (eq. (2) of 000, eq. (3) of 002) with Carter's "
         f"coefficient, the closed-form PM field and lumped constants from: {c.source}.",
@@ -52,10 +68,27 @@ def build(out: Path, model: StageModel) -> Path:
         f"the closed form: max error {s.field_fit.max_error * 1e6:.3g} µT "
         f"({s.field_fit.max_relative_error * 100:.2g} %).",
     ]
-    gain_rows = []
+
+
+def _equilibrium_page(pdf: PdfReport, s: ModelSummary) -> None:
+    pdf.add_table(
+        "Equilibrium currents (u1 = 0)",
+        ["gap [mm]", "i_d [A]", "amplifier", "vertical open-loop pole [1/s]"],
+        equilibrium_table_rows(s),
+        notes=[
+            "SPEC 1 expects about +5.3 A at 10 mm, +3.3 A at 15 mm, +1.5 A at 20 mm and "
+            "-0.2 A at 25 mm (tests hold these to 0.05 A).",
+            "Amplifier: LCAM limits 7 A continuous, 9 A peak (002 Sec. 4).",
+        ],
+    )
+
+
+def _gain_rows(gain_checks: list[GainCheck]) -> list[tuple[str, ...]]:
+    """Five rows per gain vector: computed and printed entry, their difference, the poles."""
+    rows = []
     for chk in gain_checks:
         for k in range(5):
-            gain_rows.append(
+            rows.append(
                 (
                     chk.paper.name if k == 0 else "",
                     f"k{k + 1}",
@@ -67,49 +100,34 @@ def build(out: Path, model: StageModel) -> Path:
                     f"{chk.printed_poles[k]:.4g}".strip("()"),
                 )
             )
-    with PdfReport(out, TITLE, subtitle="reports/model.pdf from analyses/model.py") as pdf:
-        pdf.add_text("Model and constants", intro, first_page=True)
-        pdf.add_table(
-            "Equilibrium currents (u1 = 0)",
-            ["gap [mm]", "i_d [A]", "amplifier", "vertical open-loop pole [1/s]"],
-            equilibrium_table_rows(s),
-            notes=[
-                "SPEC 1 expects about +5.3 A at 10 mm, +3.3 A at 15 mm, +1.5 A at 20 mm and "
-                "-0.2 A at 25 mm (tests hold these to 0.05 A).",
-                "Amplifier: LCAM limits 7 A continuous, 9 A peak (002 Sec. 4).",
-            ],
-        )
-        pdf.add_figure(plots.equilibrium_figure(s))
-        pdf.add_figure(plots.coefficients_figure(s))
-        pdf.add_figure(plots.open_loop_figure(s))
-        pdf.add_figure(plots.field_fit_figure(s))
-        pdf.add_figure(plots.feasible_acceleration_figure(s))
-        pdf.add_table(
-            "Output-regulator gains by pole placement (omega0 = 1.5 pi)",
-            [
-                "gains",
-                "entry",
-                "computed",
-                "printed",
-                "|diff|",
-                "rel. diff",
-                "design pole",
-                "pole of printed K",
-            ],
-            gain_rows,
-            notes=[
-                "Augmented axis z = (e, e', xi1, xi2, xi3), v = K z (002 eqs. (21)-(25)).",
-                "The printed integers are the computed gains truncated; with five poles "
-                "clustered within a few 1/s the characteristic polynomial is sensitive to "
-                "k1 and k4, so truncating moves the poles by several 1/s (right column): "
-                "K_h's real poles -9..-13 become two complex pairs.",
-                "K_v_retuned: its poles are printed to one decimal in 002, so the recomputed "
-                "gains differ from the printed ones by up to a few percent.",
-            ],
-            col_widths=[0.1, 0.07, 0.13, 0.11, 0.1, 0.1, 0.17, 0.2],
-        )
-        pdf.add_figure(plots.gain_poles_figure(gain_checks))
-    return out
+    return rows
+
+
+def _gains_page(pdf: PdfReport, gain_checks: list[GainCheck]) -> None:
+    pdf.add_table(
+        "Output-regulator gains by pole placement (omega0 = 1.5 pi)",
+        [
+            "gains",
+            "entry",
+            "computed",
+            "printed",
+            "|diff|",
+            "rel. diff",
+            "design pole",
+            "pole of printed K",
+        ],
+        _gain_rows(gain_checks),
+        notes=[
+            "Augmented axis z = (e, e', xi1, xi2, xi3), v = K z (002 eqs. (21)-(25)).",
+            "The printed integers are the computed gains truncated; with five poles "
+            "clustered within a few 1/s the characteristic polynomial is sensitive to "
+            "k1 and k4, so truncating moves the poles by several 1/s (right column): "
+            "K_h's real poles -9..-13 become two complex pairs.",
+            "K_v_retuned: its poles are printed to one decimal in 002, so the recomputed "
+            "gains differ from the printed ones by up to a few percent.",
+        ],
+        col_widths=[0.1, 0.07, 0.13, 0.11, 0.1, 0.1, 0.17, 0.2],
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = analysis_parser(__doc__, REPORT)
     args = parser.parse_args(argv)
-    print(f"wrote {build(args.out, load_model(args.params))}")
+    print(f"wrote {build(args.out, load_model(args.params)).path}")
     return 0
 
 

@@ -15,9 +15,9 @@ from maglev_oc.control.linear_regulator import axis_linearizations
 from maglev_oc.model.stage import StageModel
 from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, certificate_rows, operating_region_study
 from maglev_oc.reporting import region_plots as plots
-from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.reporting.pdf import PdfReport, ReportContents
 
-__all__ = ["ORDER", "REPORT", "build", "main"]
+__all__ = ["ORDER", "QUICK", "REPORT", "build", "main", "write_report"]
 
 REPORT = "operating_region.pdf"
 TITLE = "maglev_oc — operating region of the FL regulator"
@@ -36,6 +36,30 @@ QUICK = StudyConfig(
 """A small configuration for smoke tests (coarse figures, few runs)."""
 
 
+def build(out: Path, model: StageModel, config: StudyConfig | None = None) -> ReportContents:
+    """Run the operating-region study (the full one unless ``config``) and write its report."""
+    return write_report(out, operating_region_study(model, config or StudyConfig()), model)
+
+
+def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> ReportContents:
+    """Write the report of a finished study (``model``: the one it was run on)."""
+    with PdfReport(
+        out, TITLE, subtitle="reports/operating_region.pdf from analyses/operating_region.py"
+    ) as pdf:
+        pdf.add_text(
+            "Feasible operating region: question, method, what is certified", _method(st), first_page=True
+        )
+        pdf.add_text("Results in brief", _results(st))
+        _feasibility_map_pages(pdf, st)
+        _certificate_pages(pdf, st)
+        _montecarlo_pages(pdf, st)
+        _slice_pages(pdf, st)
+        if st.large_step is not None:
+            _large_step_pages(pdf, st, model)
+        _timing_page(pdf, st)
+    return pdf.contents
+
+
 def _fmt(x, digits: int = 3) -> str:
     if x is None or not math.isfinite(float(x)):
         return "inf"
@@ -50,16 +74,11 @@ def _sizes(cert) -> str:
     )
 
 
-def _summary(st: OperatingRegionStudy) -> tuple[list[str], list[str]]:
-    """The two text pages: method and what is certified; the results in words."""
+def _method(st: OperatingRegionStudy) -> list[str]:
+    """The first page: the question, the adapted Procedure 2 and what 'certified' means."""
     f = st.feasible
-    sps = [r for r in st.references if r.reference.is_setpoint]
-    mid = min(sps, key=lambda r: abs(r.reference.gap - 0.02))
-    enl = [r.enlargement for r in sps if r.enlargement is not None]
-    tot = st.inside_totals()
-    unsafe = sum(s.unsafe_certified for v in st.slices.values() for s in v)
     pos = f.position_range or (-math.inf, math.inf)
-    method = [
+    return [
         "Question (001 Sec. V, 002 Sec. 6): the feedback transformation exists only where R(x1, v1, v2) >= "
         "0, and "
         "the amplifiers deliver |u| = sqrt(i_q^2 + i_d^2) <= 9 A. Which initial conditions keep (x(t), v(t)) "
@@ -98,26 +117,68 @@ def _summary(st: OperatingRegionStudy) -> tuple[list[str], list[str]]:
         "without ramp-in); the printed gains K_h, K_v of 001/002. Not covered: the 5 kHz sampling, the "
         "high-gain observer and the encoder's quantisation; the Monte Carlo on the sampled twin checks them.",
     ]
-    results = [
+
+
+def _results(st: OperatingRegionStudy) -> list[str]:
+    """The second page: the results in words, one paragraph per part of the study."""
+    out = [_certified_sizes_paragraph(st)]
+    enlargement = _enlargement_paragraph(st)
+    if enlargement:
+        out.append(enlargement)
+    out.append(_montecarlo_paragraph(st))
+    if st.quantization is not None:
+        q = st.quantization
+        out.append(
+            f"With the 10 um encoder and 2 um noise in the loop ({q.n} runs inside the SDP set at "
+            f"{q.reference.gap * 1e3:g} mm): {q.violations} violations, largest |u| {q.max_current:.2f} A."
+        )
+    if st.large_step is not None:
+        out.append(_large_step_paragraph(st.large_step))
+    return out
+
+
+def _setpoint_studies(st: OperatingRegionStudy) -> list:
+    return [r for r in st.references if r.reference.is_setpoint]
+
+
+def _middle(st: OperatingRegionStudy):
+    """The set-point study nearest 20 mm."""
+    return min(_setpoint_studies(st), key=lambda r: abs(r.reference.gap - 0.02))
+
+
+def _certified_sizes_paragraph(st: OperatingRegionStudy) -> str:
+    mid = _middle(st)
+    return (
         f"Set-points 15-25 mm (horizontal 0). Certified initial errors (each alone, at rest, internal models "
         f"empty) at {mid.reference.gap * 1e3:g} mm with the Lyapunov equation's P (Q = identity in "
         f"acceleration-scaled coordinates): {_sizes(mid.lyapunov)}; with the SDP's P: {_sizes(mid.best)}. "
-        "The other set-points are in the table; at 15 and 25 mm the stoppers bind.",
-    ]
-    if enl:
-        results.append(
-            f"SDP enlargement of the certified rectangle |e1| <= a1, |e2| <= a2 (at rest): area "
-            f"x{min(e.area for e in enl):.3g} to x{max(e.area for e in enl):.3g} over the set-points; "
-            f"e1 half-side x{min(e.e1 for e in enl):.2f} to x{max(e.e1 for e in enl):.2f}, e2 half-side "
-            f"x{min(e.e2 for e in enl):.2f} to x{max(e.e2 for e in enl):.2f}. The SDP trades rate directions "
-            "for position directions (see the semi-axes in the table)."
-        )
+        "The other set-points are in the table; at 15 and 25 mm the stoppers bind."
+    )
+
+
+def _enlargement_paragraph(st: OperatingRegionStudy) -> str:
+    """The SDP's gain over the Lyapunov equation ("" without an SDP)."""
+    enl = [r.enlargement for r in _setpoint_studies(st) if r.enlargement is not None]
+    if not enl:
+        return ""
+    return (
+        f"SDP enlargement of the certified rectangle |e1| <= a1, |e2| <= a2 (at rest): area "
+        f"x{min(e.area for e in enl):.3g} to x{max(e.area for e in enl):.3g} over the set-points; "
+        f"e1 half-side x{min(e.e1 for e in enl):.2f} to x{max(e.e1 for e in enl):.2f}, e2 half-side "
+        f"x{min(e.e2 for e in enl):.2f} to x{max(e.e2 for e in enl):.2f}. The SDP trades rate directions "
+        "for position directions (see the semi-axes in the table)."
+    )
+
+
+def _montecarlo_paragraph(st: OperatingRegionStudy) -> str:
+    tot = st.inside_totals()
+    unsafe = sum(s.unsafe_certified for v in st.slices.values() for s in v)
     cov_txt = "; ".join(
         f"{s.reference.gap * 1e3:g} mm ({s.axes[0]}, {s.axes[1]}): "
         + " / ".join(f"{100 * sl[k].coverage:.0f} %" for sl in st.slices.values() if k < len(sl))
         for k, s in enumerate(st.slices.get("Lyapunov P", ()))
     )
-    results.append(
+    return (
         f"Monte Carlo on the sampled ideal twin (5 kHz, high-gain observers started at the true velocities, "
         f"discrete internal models at the start's value): {tot['runs']} runs started inside certified sets, "
         f"{tot['violations']} violations (R < 0, |u| > 9 A, or a stopper). Conservativeness, the share of "
@@ -125,95 +186,83 @@ def _summary(st: OperatingRegionStudy) -> tuple[list[str], list[str]]:
         f"empirically safe starts on a slice that the certificate covers (Lyapunov P / SDP P): {cov_txt}. "
         f"Certified but unsafe grid starts: {unsafe}."
     )
-    if st.quantization is not None:
-        q = st.quantization
-        results.append(
-            f"With the 10 um encoder and 2 um noise in the loop ({q.n} runs inside the SDP set at "
-            f"{q.reference.gap * 1e3:g} mm): {q.violations} violations, largest |u| {q.max_current:.2f} A."
-        )
-    ls = st.large_step
-    if ls is not None:
-        reach = (
-            ls.fl_direction.best.reach if ls.fl_direction is not None and ls.fl_direction.best else math.nan
-        )
-        lin = "; ".join(f"{x.controller}: V(start)/c = {_fmt(x.large_step_ratio)}" for x in ls.linear)
-        results.append(
-            "The papers' large step (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0). FL regulator: V(start)/c = "
-            f"{ls.fl_ratio_lyapunov:.3g} with the Lyapunov equation's P and {ls.fl_ratio_sdp:.3g} with the "
-            "SDP's P "
-            f"for the rectangle (both outside), but an SDP aimed at this start certifies {reach:.3g} times "
-            "its "
-            f"initial error: the step is {'inside' if reach >= 1 else 'outside'} a certified set. On the "
-            "sampled "
-            f"twin it stays feasible (largest |u| {ls.fl_run.max_current:.2f} A). Linear regulators, "
-            "certified "
-            f"regions of attraction: {lin} — far outside: a few tenths of a millimetre are certified, which "
-            "neither predicts nor rules out the failure; the sampled estimate and the frozen-gain analysis "
-            "on the "
-            "last pages do explain it."
-        )
-    return method, results
 
 
-def build(out: Path, model: StageModel, config: StudyConfig | None = None) -> Path:
-    st = operating_region_study(model, config or StudyConfig())
-    sps = [r for r in st.references if r.reference.is_setpoint]
+def _reach(ls) -> float:
+    """How far (in multiples of its initial error) the SDP aimed at the large step certifies it."""
+    return ls.fl_direction.best.reach if ls.fl_direction is not None and ls.fl_direction.best else math.nan
+
+
+def _large_step_paragraph(ls) -> str:
+    reach = _reach(ls)
+    lin = "; ".join(f"{x.controller}: V(start)/c = {_fmt(x.large_step_ratio)}" for x in ls.linear)
+    return (
+        "The papers' large step (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0). FL regulator: V(start)/c = "
+        f"{ls.fl_ratio_lyapunov:.3g} with the Lyapunov equation's P and {ls.fl_ratio_sdp:.3g} with the "
+        "SDP's P "
+        f"for the rectangle (both outside), but an SDP aimed at this start certifies {reach:.3g} times "
+        "its "
+        f"initial error: the step is {'inside' if reach >= 1 else 'outside'} a certified set. On the "
+        "sampled "
+        f"twin it stays feasible (largest |u| {ls.fl_run.max_current:.2f} A). Linear regulators, "
+        "certified "
+        f"regions of attraction: {lin} — far outside: a few tenths of a millimetre are certified, which "
+        "neither predicts nor rules out the failure; the sampled estimate and the frozen-gain analysis "
+        "on the "
+        "last pages do explain it."
+    )
+
+
+def _certified(rs) -> dict[str, tuple[np.ndarray, float]]:
+    """(P, level) of a reference's certified sets by name: the Lyapunov one and, if certified, the SDP's."""
+    certs = {"Lyapunov P": (rs.lyapunov.P, rs.lyapunov.level)}
+    if rs.sdp is not None and rs.sdp.certified is not None:
+        certs["SDP P"] = (rs.best.P, rs.best.level)
+    return certs
+
+
+def _feasibility_map_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    """F on slices through the middle set-point and along the sinusoid, with the certified sets."""
+    mid = _middle(st)
     sin = next((r for r in st.references if not r.reference.is_setpoint), None)
-    mid = min(sps, key=lambda r: abs(r.reference.gap - 0.02))
-    method, results = _summary(st)
-    with PdfReport(
-        out, TITLE, subtitle="reports/operating_region.pdf from analyses/operating_region.py"
-    ) as pdf:
-        pdf.add_text(
-            "Feasible operating region: question, method, what is certified", method, first_page=True
-        )
-        pdf.add_text("Results in brief", results)
-        certs = {"Lyapunov P": (mid.lyapunov.P, mid.lyapunov.level)}
-        if mid.sdp is not None and mid.sdp.certified is not None:
-            certs["SDP P"] = (mid.best.P, mid.best.level)
-        setpoint_maps = [m for m in st.maps if m.reference.is_setpoint]
-        if setpoint_maps:
-            pdf.add_figure(
-                plots.feasibility_maps_figure(
-                    setpoint_maps[:4],
-                    certs,
-                    f"F on slices through the set-point {mid.reference.gap * 1e3:g} mm (other states at "
-                    "rest, "
-                    "internal models empty),\nwith the certified sets' slices",
-                )
+    setpoint_maps = [m for m in st.maps if m.reference.is_setpoint]
+    if setpoint_maps:
+        pdf.add_figure(
+            plots.feasibility_maps_figure(
+                setpoint_maps[:4],
+                _certified(mid),
+                f"F on slices through the set-point {mid.reference.gap * 1e3:g} mm (other states at "
+                "rest, "
+                "internal models empty),\nwith the certified sets' slices",
             )
-        sin_maps = [m for m in st.maps if not m.reference.is_setpoint]
-        if sin_maps and sin is not None:
-            certs_s = {"Lyapunov P": (sin.lyapunov.P, sin.lyapunov.level)}
-            if sin.sdp is not None and sin.sdp.certified is not None:
-                certs_s["SDP P"] = (sin.best.P, sin.best.level)
-            pdf.add_figure(
-                plots.feasibility_maps_figure(
-                    sin_maps,
-                    certs_s,
-                    "Sinusoid r_v = 20 + 5 cos(w0 t) mm, r_h = 30 sin(w0 t) mm: F over the exosystem's "
-                    "phase,\n"
-                    "deviations from the steady-state orbit",
-                )
-            )
-        _certificate_pages(pdf, st)
-        _montecarlo_pages(pdf, st, sps)
-        if st.large_step is not None:
-            _large_step_pages(pdf, st, model)
-        pdf.add_table(
-            "Compute times (this run)",
-            ["step", "wall time [s]"],
-            [(k, f"{v:.2f}") for k, v in st.timings.items()],
-            notes=[
-                "On the machine that wrote this report (2 cores, possibly shared). Monte Carlo runs are one "
-                "CasADi "
-                "Function per horizon (mapaccum of the fused twin + controller step, JIT-compiled) mapped "
-                "over "
-                "the starts on 2 threads. bench/region.py times each step on its own.",
-            ],
-            col_widths=[0.6, 0.2],
         )
-    return out
+    sin_maps = [m for m in st.maps if not m.reference.is_setpoint]
+    if sin_maps and sin is not None:
+        pdf.add_figure(
+            plots.feasibility_maps_figure(
+                sin_maps,
+                _certified(sin),
+                "Sinusoid r_v = 20 + 5 cos(w0 t) mm, r_h = 30 sin(w0 t) mm: F over the exosystem's "
+                "phase,\n"
+                "deviations from the steady-state orbit",
+            )
+        )
+
+
+def _timing_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    pdf.add_table(
+        "Compute times (this run)",
+        ["step", "wall time [s]"],
+        [(k, f"{v:.2f}") for k, v in st.timings.items()],
+        notes=[
+            "On the machine that wrote this report (2 cores, possibly shared). Monte Carlo runs are one "
+            "CasADi "
+            "Function per horizon (mapaccum of the fused twin + controller step, JIT-compiled) mapped "
+            "over "
+            "the starts on 2 threads. bench/region.py times each step on its own.",
+        ],
+        col_widths=[0.6, 0.2],
+    )
 
 
 def _certificate_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
@@ -272,8 +321,8 @@ def _certificate_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
     pdf.add_figure(plots.certified_sets_figure(st))
 
 
-def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
-    f = st.feasible
+def _montecarlo_rows(st: OperatingRegionStudy) -> list[tuple]:
+    """One row per reference and certified set (runs inside it), and the encoder row."""
     rows = []
     for rs in st.references:
         name = f"{rs.reference.gap * 1e3:g} mm" if rs.reference.is_setpoint else "sinusoid"
@@ -281,7 +330,7 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
             chks = [c for k, c in rs.checks.items() if k.startswith(label)]
             if not chks:
                 continue
-            room = min(float(np.min(plots._stopper_room(c, st))) for c in chks)
+            room = min(float(np.min(plots.stopper_room(c, st))) for c in chks)
             worst = rs.worst_start.get(label)
             rows.append(
                 (
@@ -295,7 +344,7 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
                     "—"
                     if worst is None
                     else f"{worst.max_current:.2f} / "
-                    f"{float(np.min(plots._stopper_room(worst, st))) * 1e3:.2f}",
+                    f"{float(np.min(plots.stopper_room(worst, st))) * 1e3:.2f}",
                 )
             )
     if st.quantization is not None:
@@ -308,10 +357,15 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
                 q.violations,
                 "—",
                 f"{q.max_current:.2f}",
-                f"{np.min(plots._stopper_room(q, st)) * 1e3:.2f}",
+                f"{np.min(plots.stopper_room(q, st)) * 1e3:.2f}",
                 "—",
             )
         )
+    return rows
+
+
+def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    """Runs started inside the certified sets: table and figure."""
     pdf.add_table(
         "Monte Carlo inside the certified sets (sampled ideal twin)",
         [
@@ -324,7 +378,7 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
             "room [mm]",
             "worst start: |u| / room",
         ],
-        rows,
+        _montecarlo_rows(st),
         notes=[
             f"Each run: {st.config.horizon:g} s at 5 kHz with the FL regulator as implemented (high-gain "
             "observers "
@@ -349,59 +403,61 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy, sps) -> None:
         font_size=8,
     )
     pdf.add_figure(plots.montecarlo_figure(st))
-    slice_rows = []
-    for label, sl in st.slices.items():
-        for s in sl:
-            slice_rows.append(
-                (
-                    f"{s.reference.gap * 1e3:g} mm",
-                    f"{s.axes[0]} x {s.axes[1]}",
-                    label,
-                    s.n,
-                    int(s.safe.sum()),
-                    int(s.certified.sum()),
-                    s.unsafe_certified,
-                    f"{100 * s.coverage:.1f} %",
-                )
-            )
-    if slice_rows:
-        g = f.gap_range or (0, 0)
-        pdf.add_table(
-            "Conservativeness on slices: empirically safe starts vs the certificate",
-            ["set-point", "slice", "P", "starts", "safe", "certified", "certified & unsafe", "coverage"],
-            slice_rows,
-            notes=[
-                "A grid of starts on the slice (other states at rest, internal models empty), each simulated "
-                "on "
-                "the sampled ideal twin; safe = never left F. coverage = |certified and safe| / |safe|: the "
-                "share "
-                "of the empirically safe part of the slice that the certificate covers (the rest is the "
-                "price of "
-                "one quadratic Lyapunov function and of the invariance argument).",
-                f"Slice ranges: e1 over the stoppers ({g[0] * 1e3:g}-{g[1] * 1e3:g} mm gap), e2 over the "
-                "horizontal stoppers, e1' over +-0.8 m/s.",
-            ],
-            col_widths=[0.1, 0.16, 0.12, 0.08, 0.08, 0.1, 0.16, 0.12],
+
+
+def _slice_rows(st: OperatingRegionStudy) -> list[tuple]:
+    return [
+        (
+            f"{s.reference.gap * 1e3:g} mm",
+            f"{s.axes[0]} x {s.axes[1]}",
+            label,
+            s.n,
+            int(s.safe.sum()),
+            int(s.certified.sum()),
+            s.unsafe_certified,
+            f"{100 * s.coverage:.1f} %",
         )
-        certs = {}
-        for rs in sps:
-            c = {"Lyapunov P": (rs.lyapunov.P, rs.lyapunov.level)}
-            if rs.sdp is not None and rs.sdp.certified is not None:
-                c["SDP P"] = (rs.best.P, rs.best.level)
-            certs[rs.reference.gap] = c
-        pdf.add_figure(
-            plots.slices_figure(
-                st.slices["Lyapunov P"],
-                st.slices.get("SDP P", ()),
-                "Empirically safe starts vs certified sets (conservativeness)",
-                certs,
-            )
+        for label, sl in st.slices.items()
+        for s in sl
+    ]
+
+
+def _slice_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    """Conservativeness: grids of simulated starts on slices against the certified sets."""
+    rows = _slice_rows(st)
+    if not rows:
+        return
+    g = st.feasible.gap_range or (0, 0)
+    pdf.add_table(
+        "Conservativeness on slices: empirically safe starts vs the certificate",
+        ["set-point", "slice", "P", "starts", "safe", "certified", "certified & unsafe", "coverage"],
+        rows,
+        notes=[
+            "A grid of starts on the slice (other states at rest, internal models empty), each simulated "
+            "on "
+            "the sampled ideal twin; safe = never left F. coverage = |certified and safe| / |safe|: the "
+            "share "
+            "of the empirically safe part of the slice that the certificate covers (the rest is the "
+            "price of "
+            "one quadratic Lyapunov function and of the invariance argument).",
+            f"Slice ranges: e1 over the stoppers ({g[0] * 1e3:g}-{g[1] * 1e3:g} mm gap), e2 over the "
+            "horizontal stoppers, e1' over +-0.8 m/s.",
+        ],
+        col_widths=[0.1, 0.16, 0.12, 0.08, 0.08, 0.1, 0.16, 0.12],
+    )
+    pdf.add_figure(
+        plots.slices_figure(
+            st.slices["Lyapunov P"],
+            st.slices.get("SDP P", ()),
+            "Empirically safe starts vs certified sets (conservativeness)",
+            {rs.reference.gap: _certified(rs) for rs in _setpoint_studies(st)},
         )
+    )
 
 
 def _large_step_pages(pdf: PdfReport, st: OperatingRegionStudy, model: StageModel) -> None:
     ls = st.large_step
-    reach = ls.fl_direction.best.reach if ls.fl_direction is not None and ls.fl_direction.best else math.nan
+    reach = _reach(ls)
     rows = []
     for x in ls.linear:
         r = x.roa
@@ -550,7 +606,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--quick", action="store_true", help="small sample counts (smoke test)")
     args = parser.parse_args(argv)
-    print(f"wrote {build(args.out, load_model(args.params), QUICK if args.quick else None)}")
+    print(f"wrote {build(args.out, load_model(args.params), QUICK if args.quick else None).path}")
     return 0
 
 

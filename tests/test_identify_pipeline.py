@@ -162,9 +162,21 @@ def test_report_pdf(tmp_path, good_log, model):
     from maglev_oc.reporting.identification_plots import write_outcome_report
 
     outcome = identify(good_log, model, methods=("equation_error", "npfsi"), npfsi_eps=(0.01,))
-    pdf = write_outcome_report(tmp_path / "ident.pdf", outcome, [good_log])
-    assert pdf.read_bytes()[:5] == b"%PDF-"
+    report = write_outcome_report(tmp_path / "ident.pdf", outcome, [good_log])
+    assert report.path.read_bytes()[:5] == b"%PDF-"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    # the table prints the fit's values to 6 digits and its standard errors to 3
+    table = report.section("Least-squares estimates")
+    fit = outcome.equation_error
+    assert table.column("parameter") == fit.names
+    for k in fit.names:
+        row = table.row(k)
+        assert float(row[2]) == pytest.approx(fit.values[k], rel=1e-5)
+        assert float(row[3]) == pytest.approx(fit.stderr[k], rel=1e-2)
+    assert table.column("output error") == ("—",) * len(fit.names)  # not run
+    npfsi = report.section("NPFSI (000")
+    assert npfsi.column("eps") == ("0.01",)
+    assert "Fit report: equation_error" in report.headings
 
 
 def test_methods_are_validated(good_log, model):

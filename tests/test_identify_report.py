@@ -23,7 +23,6 @@ def test_nls_meets_the_requirement_and_covers_the_truth(study):
         assert max(abs(err[k]) for k in ("C1", "C2", "C3")) < 0.01
         assert abs(err["C4"]) < 0.10
         assert max(abs(z) for z in fit.z_scores(truth).values()) < 3.0
-    assert study.equation_error.timings["total"] < 2.0
     assert np.all(np.abs(study.coverage.z) < 4.0)
 
 
@@ -59,9 +58,18 @@ def test_verification_in_the_papers_form(study):
 
 
 @pytest.mark.slow
-def test_report_builds(tmp_path, model):
-    from maglev_oc.cli import main
+def test_report_prints_the_study(tmp_path, study):
+    from maglev_oc.analyses.identification import write_report
 
-    assert main(["report", "--out", str(tmp_path), "--only", "identification"]) == 0
-    assert (tmp_path / "identification.pdf").read_bytes()[:5] == b"%PDF-"
-    assert set(CONSTANT_NAMES) <= {"C1", "C2", "C3", "C4"}
+    report = write_report(tmp_path / "identification.pdf", study)
+    assert report.path.read_bytes()[:5] == b"%PDF-"
+    table = report.section("Nonlinear least squares")
+    assert table.column("") == CONSTANT_NAMES
+    truth = study.truth_values
+    for k in CONSTANT_NAMES:
+        row = table.row(k)
+        assert float(row[1]) == pytest.approx(truth[k], rel=1e-4)  # printed to 5 digits
+        for first, fit in ((3, study.equation_error), (7, study.output_error)):
+            assert float(row[first]) == pytest.approx(fit.values[k], rel=1e-5)
+            z = (fit.values[k] - truth[k]) / fit.stderr[k]
+            assert float(row[first + 3]) == pytest.approx(z, abs=0.006)  # printed to 0.01

@@ -10,19 +10,32 @@ from maglev_oc.region.study import StudyConfig, operating_region_study
 from maglev_oc.results import check_result
 
 
-@pytest.mark.slow
-def test_quick_report(tmp_path, model):
-    from maglev_oc.analyses import operating_region
-
-    out = operating_region.build(tmp_path / "operating_region.pdf", model, operating_region.QUICK)
-    assert out.is_file() and out.stat().st_size > 50_000
-
-
-@pytest.mark.slow
-def test_quick_study_numbers(model):
+@pytest.fixture(scope="module")
+def quick(model):
     from maglev_oc.analyses.operating_region import QUICK
 
-    st = operating_region_study(model, QUICK)
+    return operating_region_study(model, QUICK)
+
+
+@pytest.mark.slow
+def test_quick_report_prints_the_study(tmp_path, model, quick):
+    from maglev_oc.analyses import operating_region
+
+    report = operating_region.write_report(tmp_path / "operating_region.pdf", quick, model)
+    assert report.path.read_bytes()[:5] == b"%PDF-"
+    table = report.section("Certified sets per reference")
+    lyapunov = [r for r in table.rows if r[1] == "Lyapunov eq."]
+    assert len(lyapunov) == len(quick.references)
+    for row, rs in zip(lyapunov, quick.references, strict=True):
+        c = rs.lyapunov
+        assert float(row[2]) == pytest.approx(c.level, rel=1e-3)  # printed to 4 digits
+        assert float(row[4]) == pytest.approx(c.tightness, abs=1e-3)  # printed to 0.001
+        assert row[5] == c.binding
+
+
+@pytest.mark.slow
+def test_quick_study_numbers(quick):
+    st = quick
     assert st.inside_totals()["violations"] == 0
     assert all(s.unsafe_certified == 0 for v in st.slices.values() for s in v)
     ls = st.large_step

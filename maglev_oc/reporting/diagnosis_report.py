@@ -18,7 +18,7 @@ from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.pipeline import ERROR_METRIC, Diagnosis
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting.diagnosis_plots import plain
-from maglev_oc.reporting.pdf import PdfReport
+from maglev_oc.reporting.pdf import PdfReport, ReportContents
 from maglev_oc.units import M_TO_UM
 
 __all__ = ["write_diagnosis_report"]
@@ -82,57 +82,36 @@ def write_diagnosis_report(
     title: str = "maglev_oc — closing the loop with measured data",
     preamble: Sequence[str] = (),
     epilogue: Sequence[str] = (),
-) -> None:
+) -> ReportContents:
     """Write the PDF (atomically).
 
-    ``truth_rows``: for a log whose truth is known, rows (true effect, true size, found as, found
-    size) for the found-against-true table.
+    Parameters
+    ----------
+    path : path-like
+        Where the PDF goes.
+    diag : Diagnosis
+        The diagnosis to report.
+    study : CompensationStudy, optional
+        The FL regulator before and after compensating the found effects.
+    truth_rows : sequence of rows
+        For a log whose truth is known, rows (true effect, true size, found as, found size) for
+        the found-against-true table.
+    title, preamble, epilogue
+        The report's title; paragraphs before and after the conclusions on page 1.
+
+    Returns
+    -------
+    ReportContents
+        What the report says, section by section.
     """
     summary = [*preamble, *_summary_paragraphs(diag)]
     if study is not None:
-        imp = improvement(study)
-        summary.append(
-            f"In control ({study.scenario}, FL regulator, plant: {study.plant}): mean tracking error "
-            f"vertical {study.before.mean_error[0] * 1e3:.3f} → {study.after.mean_error[0] * 1e3:.3f} mm "
-            f"(÷ {imp[0]:.2f}), horizontal {study.before.mean_error[1] * 1e3:.3f} → "
-            f"{study.after.mean_error[1] * 1e3:.3f} mm (÷ {imp[1]:.2f}); compensated: "
-            f"{', '.join(plain(n) for n in study.compensated) or 'none'}"
-            + (
-                f"; left in the plant, not compensated (they depend on the currents): "
-                f"{', '.join(plain(n) for n in study.not_compensated)}"
-                if study.not_compensated
-                else ""
-            )
-            + "."
-        )
+        summary.append(_control_paragraph(study))
     summary.extend(epilogue)
     summary.append(
         f"Logs: {', '.join(diag.sources)}; the last {diag.settings['holdout_fraction']:.0%} of each is held "
         f"out ({int(diag.holdout.sum())} samples; {int(diag.train.sum())} fitted)."
     )
-
-    effect_rows = []
-    for e in diag.effects:
-        for k, v in e.parameters.items():
-            if k.startswith("rms_force") or (
-                v.unit == "m" and k in ("at_gap", "period", "low_end_position", "high_end_position", "width")
-            ):
-                continue
-            effect_rows.append((plain(e.name), k.replace("_", " "), _fmt(v.value, v.stderr), v.unit))
-    verdicts = []
-    first = diag.selection.steps[0].judgements if diag.selection.steps else diag.selection.last
-    for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
-        reason = "\n".join(textwrap.wrap(j.reason or "—", 62))
-        verdicts.append((plain(j.name), j.verdict, f"{first.get(j.name, j).gain * 100:.1f}", reason))
-    consts = [
-        (
-            k,
-            _fmt(diag.constants_base[k].value, diag.constants_base[k].stderr),
-            _fmt(v.value, v.stderr),
-            v.unit,
-        )
-        for k, v in diag.constants_final.items()
-    ]
     with PdfReport(path, title, subtitle="maglev-oc diagnose") as pdf:
         pdf.add_text("What the log shows", summary, first_page=True)
         if truth_rows:
@@ -142,40 +121,12 @@ def write_diagnosis_report(
                 list(truth_rows),
                 col_widths=[0.42, 0.14, 0.26, 0.18],
             )
-        if effect_rows:
-            pdf.add_table(
-                "The effects' parameters",
-                ["effect", "parameter", "value ± standard error", "unit"],
-                effect_rows,
-                notes=[
-                    "Standard errors: long-run covariance of the joint fit with the base constants, "
-                    "plus half "
-                    "the spread over the effect's model-form variants and 1 % for the differentiator's "
-                    "calibration, in quadrature."
-                ],
-                col_widths=[0.28, 0.3, 0.27, 0.15],
-            )
-        pdf.add_table(
-            "Every candidate and its verdict",
-            ["candidate", "verdict", "first-step\nheld-out gain [%]", "reason"],
-            verdicts,
-            notes=[
-                "Each candidate is fitted jointly with C1..C4 and the effects chosen before it. It "
-                "is claimed "
-                "only if it lowers the held-out error significantly (z >= 3 on 0.5 s blocks with a long-run "
-                "standard error), its coefficients pass a Wald test (p < 1e-4), it changes the prediction by "
-                "more than the 2.25e-3 m/s² a 15 rad/s loop turns into one encoder count, it is "
-                "separable from "
-                "the constants and the other effects (variance inflation <= 100) and it is physically "
-                "plausible."
-            ],
-            col_widths=[0.27, 0.13, 0.12, 0.48],
-            font_size=7,
-        )
+        _effects_page(pdf, diag)
+        _verdicts_page(pdf, diag)
         pdf.add_table(
             "Lumped constants",
             ["constant", "base model alone", "refitted with the effects", "unit"],
-            consts,
+            _constant_rows(diag),
             col_widths=[0.12, 0.3, 0.3, 0.2],
         )
         pdf.add_figure(plots.spectrum_figure(diag))
@@ -189,3 +140,98 @@ def write_diagnosis_report(
             "Timings",
             ["Wall time of each step [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in diag.timings.items())],
         )
+    return pdf.contents
+
+
+def _control_paragraph(study: CompensationStudy) -> str:
+    """The FL regulator's tracking error before and after compensating the found effects."""
+    imp = improvement(study)
+    return (
+        f"In control ({study.scenario}, FL regulator, plant: {study.plant}): mean tracking error "
+        f"vertical {study.before.mean_error[0] * 1e3:.3f} → {study.after.mean_error[0] * 1e3:.3f} mm "
+        f"(÷ {imp[0]:.2f}), horizontal {study.before.mean_error[1] * 1e3:.3f} → "
+        f"{study.after.mean_error[1] * 1e3:.3f} mm (÷ {imp[1]:.2f}); compensated: "
+        f"{', '.join(plain(n) for n in study.compensated) or 'none'}"
+        + (
+            f"; left in the plant, not compensated (they depend on the currents): "
+            f"{', '.join(plain(n) for n in study.not_compensated)}"
+            if study.not_compensated
+            else ""
+        )
+        + "."
+    )
+
+
+_POSITION_PARAMETERS = ("at_gap", "period", "low_end_position", "high_end_position", "width")
+"""Parameters [m] that say where an effect acts, not how large it is (left out of the table)."""
+
+
+def _effect_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
+    """(effect, parameter, value ± standard error, unit) of every found effect's size parameters."""
+    rows = []
+    for e in diag.effects:
+        for k, v in e.parameters.items():
+            if k.startswith("rms_force") or (v.unit == "m" and k in _POSITION_PARAMETERS):
+                continue
+            rows.append((plain(e.name), k.replace("_", " "), _fmt(v.value, v.stderr), v.unit))
+    return rows
+
+
+def _effects_page(pdf: PdfReport, diag: Diagnosis) -> None:
+    rows = _effect_rows(diag)
+    if not rows:
+        return
+    pdf.add_table(
+        "The effects' parameters",
+        ["effect", "parameter", "value ± standard error", "unit"],
+        rows,
+        notes=[
+            "Standard errors: long-run covariance of the joint fit with the base constants, "
+            "plus half "
+            "the spread over the effect's model-form variants and 1 % for the differentiator's "
+            "calibration, in quadrature."
+        ],
+        col_widths=[0.28, 0.3, 0.27, 0.15],
+    )
+
+
+def _verdict_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
+    """(candidate, verdict, first-step held-out gain [%], reason), largest first-step gain first."""
+    first = diag.selection.steps[0].judgements if diag.selection.steps else diag.selection.last
+    rows = []
+    for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
+        reason = "\n".join(textwrap.wrap(j.reason or "—", 62))
+        rows.append((plain(j.name), j.verdict, f"{first.get(j.name, j).gain * 100:.1f}", reason))
+    return rows
+
+
+def _verdicts_page(pdf: PdfReport, diag: Diagnosis) -> None:
+    pdf.add_table(
+        "Every candidate and its verdict",
+        ["candidate", "verdict", "first-step\nheld-out gain [%]", "reason"],
+        _verdict_rows(diag),
+        notes=[
+            "Each candidate is fitted jointly with C1..C4 and the effects chosen before it. It "
+            "is claimed "
+            "only if it lowers the held-out error significantly (z >= 3 on 0.5 s blocks with a long-run "
+            "standard error), its coefficients pass a Wald test (p < 1e-4), it changes the prediction by "
+            "more than the 2.25e-3 m/s² a 15 rad/s loop turns into one encoder count, it is "
+            "separable from "
+            "the constants and the other effects (variance inflation <= 100) and it is physically "
+            "plausible."
+        ],
+        col_widths=[0.27, 0.13, 0.12, 0.48],
+        font_size=7,
+    )
+
+
+def _constant_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
+    return [
+        (
+            k,
+            _fmt(diag.constants_base[k].value, diag.constants_base[k].stderr),
+            _fmt(v.value, v.stderr),
+            v.unit,
+        )
+        for k, v in diag.constants_final.items()
+    ]

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -17,7 +16,7 @@ from maglev_oc.data.logs import Log
 from maglev_oc.identification.layout import CONSTANT_NAMES, UNITS
 from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.identification.verification import EquilibriumComparison, ParabolaComparison, ParabolaFit
-from maglev_oc.reporting.pdf import PdfReport, new_figure
+from maglev_oc.reporting.pdf import PdfReport, ReportContents, new_figure
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
 __all__ = [
@@ -349,9 +348,11 @@ def cogging_figure(
 
 
 # --- the CLI's report -----------------------------------------------------------------------------
-def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) -> Path:
-    """PDF for ``maglev-oc identify --report``: summary, tables, residuals, NPFSI convergence."""
-    path = Path(path)
+def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) -> ReportContents:
+    """PDF for ``maglev-oc identify --report``: summary, tables, residuals, NPFSI convergence.
+
+    Returns what the report says, section by section (:class:`~maglev_oc.reporting.pdf.ReportContents`).
+    """
     rows = []
     ee, oe = outcome.equation_error, outcome.output_error
     names = ee.names if ee is not None else (oe.names if oe is not None else ())
@@ -403,4 +404,4 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
                 pdf.add_figure(residuals_figure(fit, logs[0], window=(1.0, min(3.0, logs[0].duration))))
         if outcome.npfsi:
             pdf.add_figure(npfsi_convergence_figure(outcome.npfsi, None))
-    return path
+    return pdf.contents

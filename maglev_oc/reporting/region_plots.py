@@ -23,6 +23,7 @@ __all__ = [
     "large_step_figure",
     "montecarlo_figure",
     "slices_figure",
+    "stopper_room",
     "sweep_figure",
 ]
 
@@ -293,7 +294,7 @@ def slices_figure(
     return fig
 
 
-def _stopper_room(chk, study) -> np.ndarray:
+def stopper_room(chk, study) -> np.ndarray:
     """Least distance [m] of each run to the gap or position stoppers."""
     f = study.feasible
     room = np.full(chk.n, np.inf)
@@ -317,12 +318,12 @@ def montecarlo_figure(study: OperatingRegionStudy) -> Figure:
             marker = "." if "full" in name else "x"
             ax_i.plot(chk.start_ratio, chk.outcome.max_current, marker, color=color, ms=2, alpha=0.35)
             ax_m.plot(
-                chk.start_ratio, _stopper_room(chk, study) * M_TO_MM, marker, color=color, ms=2, alpha=0.35
+                chk.start_ratio, stopper_room(chk, study) * M_TO_MM, marker, color=color, ms=2, alpha=0.35
             )
         for name, chk in rs.worst_start.items():
             color = CERT_STYLE[name][0]
             ax_i.plot(chk.start_ratio, chk.outcome.max_current, "*", color=color, ms=9, mec="k")
-            ax_m.plot(chk.start_ratio, _stopper_room(chk, study) * M_TO_MM, "*", color=color, ms=9, mec="k")
+            ax_m.plot(chk.start_ratio, stopper_room(chk, study) * M_TO_MM, "*", color=color, ms=9, mec="k")
     if lim is not None:
         ax_i.axhline(lim, color="tab:red", lw=1.2)
         ax_i.text(0.01, lim, f" current limit {lim:g} A", color="tab:red", va="bottom", fontsize=8)
