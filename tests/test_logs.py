@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -476,14 +475,11 @@ def test_quantization_alone_is_no_excitation():
 
 
 @pytest.mark.slow
-def test_a_60s_5khz_log_reads_fast(tmp_path: Path):
+def test_a_60s_5khz_log_reads_whole(tmp_path: Path):
     n = 300_000
     sig = _signals(n, 2e-4)
     x = np.vstack([sig["x1"], sig["x2"], sig["x3"], sig["x2"]])
     path = write_log_arrays(tmp_path / "big.csv", sig["t"], x, np.vstack([sig["u1"], sig["u2"]]))
-    start = time.perf_counter()
-    log = read_log(path)
-    elapsed = time.perf_counter() - start
+    log = read_log(path)  # its speed: bench/log_io.py
     assert log.n == n
-    # about 1 s for full-precision values on a 2-core CI box (0.4 s for 5-6 digit values)
-    assert elapsed < 4.0, elapsed
+    assert np.array_equal(log.x[2], sig["x3"]) and np.array_equal(log.u[1], sig["u2"])  # %.17g round-trips
