@@ -110,3 +110,22 @@ def test_top_level_api():
     assert callable(mo.diagnose) and callable(mo.identify)
     with pytest.raises(AttributeError, match="no attribute"):
         mo.no_such_name  # noqa: B018
+
+
+def test_top_level_functions_document_parameters_and_returns():
+    """numpydoc sections for every function of ``import maglev_oc as mo``: what each argument is
+    (units included) and what comes back."""
+    import inspect
+
+    import maglev_oc as mo
+
+    undocumented = []
+    for name in mo.__all__:
+        obj = getattr(mo, name)
+        if not inspect.isfunction(obj):
+            continue
+        doc = inspect.getdoc(obj) or ""
+        has_arguments = "Parameters\n----------" in doc or not inspect.signature(obj).parameters
+        if not (has_arguments and "Returns\n-------" in doc):
+            undocumented.append(name)
+    assert not undocumented, undocumented

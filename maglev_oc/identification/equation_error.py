@@ -409,9 +409,29 @@ def fit_equation_error(
     initial: dict[str, float] | None = None,
     hac_band: float = DEFAULT_BAND,
 ) -> FitResult:
-    """Equation-error fit of ``estimate`` (and the terms' parameters) on ``logs``; see
-    :class:`EquationError` for the parameters. One-off use; for several fits on the same logs
-    (held-out blocks, cross-validation) build the :class:`EquationError` once."""
+    """Equation-error fit of ``estimate`` (and the terms' parameters) on ``logs``.
+
+    One-off use; for several fits on the same logs (held-out blocks, cross-validation) build the
+    :class:`EquationError` once.
+
+    Parameters
+    ----------
+    logs, model, estimate, terms, differentiator, input_delay
+        As for :class:`EquationError`.
+    samples, initial, hac_band
+        As for :meth:`EquationError.fit`.
+
+    Returns
+    -------
+    FitResult
+        Estimates with HAC standard errors; ``success``/``status`` say whether the solve
+        converged (a failed solve is returned, not raised).
+
+    Raises
+    ------
+    InputError
+        Unknown names in ``estimate``, an invalid delay, or logs at different rates.
+    """
     problem = EquationError(
         logs, model, estimate=estimate, terms=terms, differentiator=differentiator, input_delay=input_delay
     )

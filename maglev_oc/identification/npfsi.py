@@ -308,6 +308,12 @@ def npfsi(
         How the velocities are estimated. Default: the papers' high-gain observer
         (``HighGainDifferentiator``, eps_obs = 2 ms); pass a ``SavitzkyGolay`` for zero-phase
         velocities.
+
+    Returns
+    -------
+    NpfsiResult
+        The estimate's trajectory and final values; ``status`` ``"diverged"`` or ``"ill_posed"``
+        when the run did not give an estimate.
     """
     diff = HighGainDifferentiator(log.sample_time) if differentiator is None else differentiator
     A, b, y, method = _stage_regression(log, model, estimate, diff)

@@ -439,7 +439,24 @@ def fit_output_error(
     max_iterations: int = 30,
     hac_band: float = DEFAULT_BAND,
 ) -> FitResult:
-    """Multiple-shooting output-error fit (one-off use; see :class:`MultipleShooting`)."""
+    """Multiple-shooting output-error fit (one-off use; see :class:`MultipleShooting`).
+
+    Parameters
+    ----------
+    logs, model, estimate, terms, segment_duration, input_delay
+        As for :class:`MultipleShooting`.
+    initial : FitResult or dict, optional
+        Starting values (default: the model's constants; an equation-error fit is a good start).
+    max_iterations : int
+        Constrained Gauss-Newton iterations at most.
+    hac_band : float
+        Share of the Fourier band the long-run covariance averages.
+
+    Returns
+    -------
+    FitResult
+        ``residual_unit`` is ``"m"`` (positions); ``status`` says why a solve stopped.
+    """
     problem = MultipleShooting(
         logs,
         model,

@@ -250,6 +250,12 @@ def identify(
     min_duration : float
         [s] Shortest log accepted.
 
+    Returns
+    -------
+    IdentificationOutcome
+        Each method's result (None or empty when not run), the best fit and its constants
+        (:meth:`~IdentificationOutcome.constants`), timings per method.
+
     Raises
     ------
     LogError

@@ -66,7 +66,19 @@ class EquilibriumCurve:
 
 
 def equilibrium_currents(model: StageModel, gaps) -> EquilibriumCurve:
-    """Equilibrium current u2 [A] at each gap [m] (u1 = 0), vectorised; never raises for a gap."""
+    """Equilibrium current u2 [A] at each gap [m] (u1 = 0), vectorised; never raises for a gap.
+
+    Parameters
+    ----------
+    model : StageModel
+    gaps : array_like
+        [m] Gaps, any shape.
+
+    Returns
+    -------
+    EquilibriumCurve
+        Current, discriminant, existence and the amplifier checks, each of the shape of ``gaps``
+        (NaN current where no equilibrium exists)."""
     gaps = np.atleast_1d(np.asarray(gaps, dtype=float))
     if np.any(~np.isfinite(gaps)) or np.any(gaps <= 0):
         raise InputError(f"gaps must be positive and finite [m], got {gaps[~(gaps > 0)][:3]}")
@@ -89,6 +101,22 @@ def equilibrium(
     current_limit: float = CONTINUOUS_CURRENT_LIMIT,
 ) -> OperatingPoint:
     """The equilibrium holding ``gap`` [m] at horizontal ``position`` [m].
+
+    Parameters
+    ----------
+    model : StageModel
+    gap : float
+        [m] Air gap to hold (SPEC 1: x1, larger is further from the stator).
+    position : float
+        [m] Horizontal position; the papers' model does not depend on it (cogging aside).
+    current_limit : float
+        [A] Largest |i_d| accepted.
+
+    Returns
+    -------
+    OperatingPoint
+        x = (gap, 0, position, 0), u = (0, i_d) with i_d = (-L3 - sqrt(R0)) / (2 L4), the
+        root the papers' feedback law uses.
 
     Raises
     ------

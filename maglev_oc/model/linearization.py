@@ -38,6 +38,19 @@ def linearize(model: StageModel, x, u) -> LinearModel:
     """A = df/dx, B = df/du at (x, u) (exact, by CasADi AD), C, D for the outputs (x1, x3).
 
     Any (x, u) is accepted; at a non-equilibrium point ``drift`` is nonzero.
+
+    Parameters
+    ----------
+    model : StageModel
+    x : array_like, (4,)
+        State (gap [m], gap rate [m/s], position [m], velocity [m/s]).
+    u : array_like, (2,)
+        Currents (i_q, i_d) [A].
+
+    Returns
+    -------
+    LinearModel
+        A (4x4), B (4x2), C (2x4), D (2x2), the point and f(x, u) as ``drift``.
     """
     x = np.asarray(x, dtype=float).reshape(N_STATES)
     u = np.asarray(u, dtype=float).reshape(N_INPUTS)
@@ -60,7 +73,19 @@ class OpenLoopPoles:
 
 
 def open_loop_poles(model: StageModel, gaps) -> OpenLoopPoles:
-    """Open-loop poles of the linearization at the equilibrium of each gap, vectorised."""
+    """Open-loop poles of the linearization at the equilibrium of each gap, vectorised.
+
+    Parameters
+    ----------
+    model : StageModel
+    gaps : array_like
+        [m] Gaps, one dimension.
+
+    Returns
+    -------
+    OpenLoopPoles
+        The vertical pair +-sqrt(a21) (NaN where no equilibrium exists), the horizontal double
+        integrator and the stiffness a21 [1/s^2], per gap."""
     curve = equilibrium_currents(model, gaps)
     n = curve.gap.size
     x = np.zeros((N_STATES, n))

@@ -23,6 +23,10 @@ def load_model(params_path: str | os.PathLike | None = None, constants: str | No
     constants : str, optional
         One of the papers' constant sets by name (replaces the file's constants).
 
+    Returns
+    -------
+    StageModel
+
     Raises
     ------
     InputError

@@ -254,7 +254,22 @@ DEFAULT_CONSTANTS = PAPER_CONSTANTS["table3_eps0.01"]
 
 
 def paper_constants(name: str) -> LumpedConstants:
-    """Look up a named set of the papers' constants; raises ``ValueError`` listing the names."""
+    """Look up a named set of the papers' constants (:data:`PAPER_CONSTANTS`).
+
+    Parameters
+    ----------
+    name : str
+        For example ``"table3_eps0.01"`` (the default constants).
+
+    Returns
+    -------
+    LumpedConstants
+
+    Raises
+    ------
+    InputError
+        Unknown name; the message lists the known ones.
+    """
     try:
         return PAPER_CONSTANTS[name]
     except KeyError:

@@ -91,6 +91,15 @@ class ClosedLoop:
       virtual machine when no C compiler is found, :func:`maglev_oc.numerics.jit`);
     * ``"c"``: the step generated as C with a C loop around it (:mod:`maglev_oc.sim.native`;
       about 1 s of gcc once, then several times faster again: no per-step bookkeeping).
+
+    Parameters
+    ----------
+    twin : RigTwin
+        The plant: model, effects, sample time, encoders and amplifiers.
+    controller : ExpressionController or OnlineController
+        A symbolic control law (fused into the step) or one that runs in Python per sample
+        (NMPC); the latter always runs in the virtual machine's loop.
+    backend : {"vm", "jit", "c"}
     """
 
     BACKENDS = ("vm", "jit", "c")
