@@ -129,3 +129,13 @@ def test_top_level_functions_document_parameters_and_returns():
         if not (has_arguments and "Returns\n-------" in doc):
             undocumented.append(name)
     assert not undocumented, undocumented
+
+
+@pytest.mark.parametrize("module_name", ["maglev_oc.model.equilibrium", "maglev_oc.model.linearization"])
+def test_docstring_examples_run(module_name):
+    import doctest
+    import importlib
+
+    module = importlib.import_module(module_name)
+    result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0 and result.failed == 0

@@ -124,6 +124,15 @@ def equilibrium(
         If the quadratic for u2 has no real root at this gap (the magnets' pull cannot be
         balanced), or if the current exceeds ``current_limit`` [A] (default: the amplifiers'
         7 A continuous rating, since an equilibrium is held indefinitely).
+
+    Examples
+    --------
+    The current that holds a 20 mm gap (SPEC 1: about 1.5 A):
+
+    >>> import maglev_oc as mo
+    >>> op = mo.equilibrium(mo.StageModel(), 0.020)
+    >>> print(f"{op.u[1]:.3f} A")
+    1.497 A
     """
     gap = float(gap)
     position = float(position)

@@ -51,6 +51,18 @@ def linearize(model: StageModel, x, u) -> LinearModel:
     -------
     LinearModel
         A (4x4), B (4x2), C (2x4), D (2x2), the point and f(x, u) as ``drift``.
+
+    Examples
+    --------
+    At 20 mm the vertical axis is open-loop unstable, the horizontal one a double integrator:
+
+    >>> import numpy as np
+    >>> import maglev_oc as mo
+    >>> model = mo.StageModel()
+    >>> op = mo.equilibrium(model, 0.020)
+    >>> lin = mo.linearize(model, op.x, op.u)
+    >>> np.sort(np.linalg.eigvals(lin.A).real).round(2)
+    array([-39.25,   0.  ,   0.  ,  39.25])
     """
     x = np.asarray(x, dtype=float).reshape(N_STATES)
     u = np.asarray(u, dtype=float).reshape(N_INPUTS)
