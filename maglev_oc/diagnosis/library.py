@@ -36,7 +36,12 @@ from maglev_oc.diagnosis.guides import (
     refine_waviness_period,
     waviness_candidate,
 )
-from maglev_oc.diagnosis.magnetics import cogging_candidates, end_effects_candidate, gap_dependence_candidate
+from maglev_oc.diagnosis.magnetics import (
+    cogging_candidates,
+    end_effects_candidate,
+    field_shape_candidate,
+    gap_dependence_candidate,
+)
 from maglev_oc.diagnosis.probes import PROBE_VARIABLES, smooth_probes
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
@@ -63,6 +68,7 @@ def candidate_library(model: StageModel, data: PreparedLogs) -> list[Candidate]:
         *cogging_candidates(ctx),
         end_effects_candidate(ctx),
         gap_dependence_candidate(ctx),
+        field_shape_candidate(ctx),
         ripple_candidate(ctx),
         commutation_candidate(ctx),
         lag_candidate(ctx),

@@ -30,6 +30,7 @@ thrust_ripple       ``thrust_ripple``                      ripple amplitude at t
 commutation_offset  ``commutation_offset``                 angle [rad]
 amplifier_dynamics  ``current_amplifier_lag``              first-order time constant + delay [s]
 field_shape         ``attraction_gap_dependence``          attraction change at the smallest gap [1]
+                    or ``magnet_field_gap_dependence``
 tilted_base         ``horizontal_guides_not_level``        force along the track [N]
 =================== ====================================== =========================================
 """
@@ -56,7 +57,7 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "thrust_ripple": ("thrust_ripple",),
         "commutation_offset": ("commutation_offset",),
         "amplifier_dynamics": ("current_amplifier_lag",),
-        "field_shape": ("attraction_gap_dependence",),
+        "field_shape": ("attraction_gap_dependence", "magnet_field_gap_dependence"),
         "tilted_base": ("horizontal_guides_not_level",),
     }.get(kind, (kind,))
 
