@@ -24,6 +24,7 @@ import argparse
 import dataclasses
 import importlib
 import math
+import os
 import pkgutil
 import sys
 import time
@@ -31,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from maglev_oc.errors import InputError, MaglevError
+from maglev_oc.errors import InputError, MaglevError, OutputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.loading import load_model
 from maglev_oc.units import M_TO_MM, MM_TO_M
 
-__all__ = ["EXIT_INTERNAL", "EXIT_NOT_CERTIFIED", "EXIT_USAGE", "build_parser", "main"]
+__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_NOT_CERTIFIED", "EXIT_USAGE", "build_parser", "main"]
 
 EXIT_USAGE = 2
 """Exit status for errors in the user's input or files."""
@@ -44,6 +45,8 @@ EXIT_INTERNAL = 1
 """Exit status for anything else: a bug of maglev_oc."""
 EXIT_NOT_CERTIFIED = 3
 """Exit status of ``region`` when a certificate fails or a Monte Carlo run leaves the feasible set."""
+EXIT_INTERRUPTED = 130
+"""Exit status after Ctrl-C (128 + SIGINT, as shells report it)."""
 
 
 def analysis_modules() -> dict[str, object]:
@@ -166,6 +169,8 @@ def cmd_region(args: argparse.Namespace) -> int:
     limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
     proc = Procedure2(feasible, RegulatorLoop())
+    for g in gaps:
+        feasible.check_setpoint(g * MM_TO_M, args.position * MM_TO_M)
     refs = [Reference.setpoint(g * MM_TO_M, args.position * MM_TO_M) for g in gaps]
     if args.sinusoid:
         refs.append(Reference.paper_sinusoid())
@@ -427,14 +432,33 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse unusable output paths before any work (the writes check again, atomically)."""
+    files = [getattr(args, k, None) for k in ("json", "report")]
+    if args.command == "simulate":
+        files.append(args.out)
+    for path in (Path(f) for f in files if f is not None):
+        if path.is_dir():
+            raise OutputError(f"{path}: is a directory; give a file name inside it")
+        parent = next((q for q in path.absolute().parents if q.exists()), None)
+        if parent is None or not parent.is_dir() or not os.access(parent, os.W_OK):
+            raise OutputError(f"{path}: cannot write there ({parent} is not a writable folder)")
+    if args.command == "report" and args.out.exists() and not args.out.is_dir():
+        raise OutputError(f"{args.out}: is a file; --out takes the folder for the reports")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        _check_outputs(args)
         return int(args.func(args))
     except (MaglevError, OSError) as err:
         print(f"maglev-oc {args.command}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:  # outputs are written whole or not at all: nothing half-written
+        print(f"maglev-oc {args.command}: interrupted (no output is left half-written)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except Exception as err:  # a bug: say so, briefly, and never blame the user's input
         if args.debug:
             raise

@@ -12,7 +12,7 @@ code that catches those keeps working.
 
 from __future__ import annotations
 
-__all__ = ["InputError", "LogError", "MaglevError", "ParameterError", "SolverError"]
+__all__ = ["InputError", "LogError", "MaglevError", "OutputError", "ParameterError", "SolverError"]
 
 
 class MaglevError(Exception):
@@ -25,6 +25,11 @@ class InputError(MaglevError, ValueError):
 
 class ParameterError(InputError):
     """A parameter file or field is invalid; the message names the file and the key."""
+
+
+class OutputError(MaglevError, OSError):
+    """An output cannot be written where the user asked (a directory, no permission, a full
+    disk); the message names the path the user gave, never a temporary file."""
 
 
 class SolverError(MaglevError, RuntimeError):

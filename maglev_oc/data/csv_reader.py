@@ -137,8 +137,20 @@ def _header_names(pre: _Preamble, source: str) -> list[str]:
     """The column names of the header line, after checking they are names, distinct and complete."""
     header, header_line = pre.header, pre.header_line
     assert header is not None  # _read_preamble raises otherwise
-    names = [name.strip() for name in header.split(",")]
     hdr = f"line {header_line}"
+    if "," not in header:
+        for delimiter, word in ((";", "';'"), ("\t", "tabs"), ("|", "'|'")):
+            if header.count(delimiter) >= 2:
+                raise LogError(
+                    source,
+                    f"the file uses {word} as delimiter; logs are comma-separated (header "
+                    f"{header.strip()[:60]!r}): replace {word} by ',' (and any decimal commas by points)",
+                    where=hdr,
+                    line=header_line,
+                )
+    # names are matched without regard to case or surrounding spaces ("T, X1, X3, U1, U2")
+    names = [name.strip() for name in header.split(",")]
+    names = [name.lower() if name.lower() in KNOWN_COLUMNS else name for name in names]
     if all(_NUMBER.fullmatch(name) for name in names):
         hint = (
             f"; line {pre.commented_header} looks like the header written as a comment: remove its '#'"

@@ -35,6 +35,7 @@ from maglev_oc.model.parameters import StageParameters
 
 __all__ = [
     "GAP_FACTOR",
+    "JITTER_TOLERANCE",
     "MAX_AIR_GAP",
     "MAX_CURRENT",
     "MAX_HORIZONTAL_POSITION",
@@ -61,6 +62,8 @@ GAP_FACTOR = 1.5
 """A time step larger than this multiple of the median step is a gap (samples missing)."""
 SAMPLE_RATE_TOLERANCE = 0.01
 """Relative disagreement allowed between ``sample_rate_hz`` in the metadata and the data."""
+JITTER_TOLERANCE = 0.1
+"""Largest distance of a sample's time from the best uniform grid, in steps."""
 TRANSFORM_TOLERANCE = 0.01
 """[A] Logged u1, u2 differing from the transform of ia, ib, ic by more than this get a note:
 10x the current resolution, so rounding never triggers it, while a wrong pole pitch, phase
@@ -253,6 +256,22 @@ def _check_sampling(raw: RawLog, t: np.ndarray) -> float:
             f"{float(t[k])!r} s, {steps[k - 1] / median:.3g} x the median step {median:.6g} s "
             f"(more than {GAP_FACTOR:g} x means samples are missing; {gaps.size} such gap(s) in all)",
         )
+    # jitter: the derivative filters assume a uniform grid; the best-fitting one (rate and offset)
+    # must hold every sample to JITTER_TOLERANCE of a step (rounding t to a digit below a fifth of
+    # the step passes; timestamps from a non-real-time logger do not)
+    k = np.arange(t.size, dtype=float)
+    slope, offset = np.polyfit(k, t - t[0], 1)
+    deviation = np.abs(t - t[0] - (offset + slope * k))
+    worst = int(np.argmax(deviation))
+    if deviation[worst] > JITTER_TOLERANCE * median:
+        raise raw.error(
+            worst,
+            "t",
+            f"irregular sampling: t = {float(t[worst])!r} s is {deviation[worst]:.3g} s "
+            f"({deviation[worst] / median:.0%} of the {median:.6g} s step) off a uniform grid "
+            f"(tolerance {JITTER_TOLERANCE:.0%}); the tools need uniformly sampled logs: log on the "
+            "real-time target, or resample",
+        )
     return median
 
 
@@ -277,16 +296,34 @@ def _check_metadata(raw: RawLog, median: float) -> str:
                 f"{median:.6g} s is {measured:.6g} Hz (tolerance {SAMPLE_RATE_TOLERANCE:.0%})",
                 column="t",
             )
-    if "units" in meta and meta["units"].strip().lower() != "si":
-        raise raw.metadata_error(
-            "units", f"units {meta['units']!r}: only SI logs are read (m, m/s, A, s); convert the file"
-        )
+    if "units" in meta:
+        problem = _units_problem(meta["units"])
+        if problem:
+            raise raw.metadata_error("units", f"units {meta['units']!r}: {problem}")
     currents = meta.get("currents", "commanded").strip().lower()
     if currents not in ("measured", "commanded"):
         raise raw.metadata_error(
             "currents", f"currents {meta['currents']!r}: expected 'measured' or 'commanded'"
         )
     return currents
+
+
+_SI_UNITS = ("m", "m/s", "A", "s")
+"""The units of a log's columns (gap and position, their rates, currents, time)."""
+
+
+def _units_problem(stated: str) -> str | None:
+    """None if a ``units`` line says SI, with or without a list of units that are ours
+    (``SI``, ``SI (m, A, s)``, ``si [m, m/s, A, s]``); else what is wrong."""
+    expected = f"expected 'SI' or 'SI ({', '.join(_SI_UNITS)})'"
+    match = re.fullmatch(r"\s*SI\s*(?:[(\[]([^)\]]*)[)\]])?\s*", stated, flags=re.IGNORECASE)
+    if not match:
+        return f"only SI logs are read; {expected}, the values in metres, amperes and seconds"
+    listed = [u.strip() for u in re.split(r"[,;]", match.group(1) or "") if u.strip()]
+    foreign = [u for u in listed if u not in _SI_UNITS]
+    if foreign:
+        return f"{', '.join(foreign)} not among the log's SI units ({', '.join(_SI_UNITS)}); {expected}"
+    return None
 
 
 def _check_si_units(raw: RawLog) -> None:

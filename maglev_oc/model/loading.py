@@ -33,6 +33,8 @@ def load_model(params_path: str | os.PathLike | None = None, constants: str | No
         The file does not exist, or it or the set name is invalid (the message names which).
     """
     if params_path is not None:
+        if Path(params_path).is_dir():
+            raise InputError(f"{params_path}: is a directory; --params takes a stage file (JSON)")
         if not Path(params_path).is_file():
             raise InputError(f"{params_path}: no such file")
         params, consts = load_json(params_path)

@@ -167,7 +167,9 @@ class StageParameters:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], *, where: str = "StageParameters") -> StageParameters:
-        return cls(**_checked_keys(cls, data, where))
+        """From a JSON object; absent fields keep Table I's values. Errors name ``where`` and
+        the field."""
+        return _from_checked(cls, _checked_keys(cls, data, where), where)
 
     @classmethod
     def describe(cls) -> list[tuple[str, str, str]]:
@@ -208,8 +210,25 @@ class LumpedConstants:
         return {"C1": self.C1, "C2": self.C2, "C3": self.C3, "C4": self.C4, "source": self.source}
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], *, where: str = "LumpedConstants") -> LumpedConstants:
-        return cls(**_checked_keys(cls, data, where))
+    def from_dict(
+        cls, data: dict[str, Any], *, where: str = "LumpedConstants", defaults: LumpedConstants | None = None
+    ) -> LumpedConstants:
+        """From a JSON object. With ``defaults``, absent constants are taken from it (and
+        ``source`` says which); without, all four are required. Errors name ``where`` and the key."""
+        values = _checked_keys(cls, data, where)
+        if defaults is not None:
+            given = [k for k in ("C1", "C2", "C3", "C4") if k in values]
+            missing = [k for k in ("C1", "C2", "C3", "C4") if k not in values]
+            if missing and "source" not in values:
+                values["source"] = f"{where} ({', '.join(given) or 'none'}); {', '.join(missing)} from " + (
+                    defaults.source or "the defaults"
+                )
+            values = {**{k: getattr(defaults, k) for k in missing}, **values}
+        else:
+            missing = [k for k in ("C1", "C2", "C3", "C4") if k not in values]
+            if missing:
+                raise InputError(f"{where}: missing {', '.join(missing)}")
+        return _from_checked(cls, values, where)
 
 
 # Tables II and III of paper 000 (reduced-order NPFSI estimates at three values of eps).
@@ -289,6 +308,17 @@ def _checked_keys(cls: type, data: Any, where: str) -> dict[str, Any]:
     return dict(data)
 
 
+_MAX_STAGE_FILE = 1_000_000  # [bytes] a stage file is a few kB; refuse to parse anything huge
+
+
+def _from_checked(cls: type, values: dict[str, Any], where: str):
+    """``cls(**values)``, its validation errors prefixed with ``where`` (the file and section)."""
+    try:
+        return cls(**values)
+    except InputError as err:
+        raise InputError(f"{where}.{str(err).removeprefix(cls.__name__ + '.')}") from None
+
+
 def save_json(path: str | os.PathLike, params: StageParameters, constants: LumpedConstants) -> Path:
     """Write parameters and constants to ``path`` atomically (whole file or nothing)."""
     payload = {"stage": params.to_dict(), "constants": constants.to_dict()}
@@ -296,16 +326,27 @@ def save_json(path: str | os.PathLike, params: StageParameters, constants: Lumpe
 
 
 def load_json(path: str | os.PathLike) -> tuple[StageParameters, LumpedConstants]:
-    """Read a file written by :func:`save_json`. Either section may be omitted (defaults)."""
+    """Read a file written by :func:`save_json`. Either section, and any key in it, may be
+    omitted: the rest comes from Table I and the default constants."""
     path = Path(path)
+    if path.stat().st_size > _MAX_STAGE_FILE:
+        raise InputError(f"{path}: {path.stat().st_size} bytes is not a stage file (they are a few kB)")
     try:
-        data = json.loads(path.read_text())
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError(f"{path}: not a text file (byte {err.start} is not UTF-8)") from None
+    if not text.strip():
+        raise InputError(f"{path}: empty file; expected a JSON object with 'stage' and/or 'constants'")
+    try:
+        data = json.loads(text)
     except json.JSONDecodeError as err:
         raise InputError(f"{path}: not valid JSON (line {err.lineno}: {err.msg})") from None
     data = _checked_keys(_Sections, data, str(path))
     params = StageParameters.from_dict(data.get("stage", {}), where=f"{path}: stage")
     if "constants" in data:
-        constants = LumpedConstants.from_dict(data["constants"], where=f"{path}: constants")
+        constants = LumpedConstants.from_dict(
+            data["constants"], where=f"{path}: constants", defaults=DEFAULT_CONSTANTS
+        )
     else:
         constants = DEFAULT_CONSTANTS
     return params, constants

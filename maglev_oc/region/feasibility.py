@@ -194,6 +194,32 @@ class FeasibleSet:
         )
         return f"R >= 0, {cur}, {gap}"
 
+    def check_setpoint(self, gap: float, position: float = 0.0) -> None:
+        """Raise :class:`InputError` unless the stage at rest at (``gap``, ``position``) [m] lies
+        strictly inside F; the message says which constraint fails and the range allowed."""
+        mm = 1e3
+        where = f"set-point {gap * mm:g} mm gap, {position * mm:g} mm position"
+        for name, value, rng in (("gap", gap, self.gap_range), ("position", position, self.position_range)):
+            if rng is not None and not (rng[0] < value < rng[1]):
+                raise InputError(
+                    f"{where}: the {name} must lie strictly between the stoppers at "
+                    f"{rng[0] * mm:g} and {rng[1] * mm:g} mm"
+                )
+        margin, headroom = self.evaluate(gap, 0.0, 0.0)
+        if margin > 0 and headroom > 0:
+            return
+        lo, hi = self.gap_range or (1e-3, 40e-3)
+        grid = np.linspace(lo, hi, 401)[1:-1]
+        h = self.evaluate(grid, 0.0, 0.0)
+        ok = grid[(h[0] > 0) & (h[1] > 0)]
+        allowed = f"({ok.min() * mm:.1f}, {ok.max() * mm:.1f}) mm" if ok.size else "none"
+        why = (
+            "no equilibrium (R < 0)"
+            if margin <= 0
+            else f"its equilibrium needs |u| > {self.current_limit:g} A"
+        )
+        raise InputError(f"{where}: {why}; gaps held at rest within the limits: {allowed}")
+
     def evaluate(self, x1, v1, v2) -> np.ndarray:
         """The constraints of F at given gaps and accelerations.
 
