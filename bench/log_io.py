@@ -1,16 +1,22 @@
-"""Benchmark: reading logs, and the independent generator's speed (timings out of the tests).
+"""Benchmark: reading logs, and the independent generator's speed (timings out of the tests);
+with ``--memory``, the peak memory of reading and diagnosing a long log at the rig's rate.
 
-    python bench/log_io.py
+    python bench/log_io.py [--memory]
 
 Reads a 60 s log at the rig's 5 kHz (300 000 rows, full-precision values) with ``read_log``, and
 simulates one 60 s scenario with the independent generator (tests/independent: a 5 kHz FL loop
-in its own C code, logged at 1 kHz).
+in its own C code, logged at 1 kHz). ``--memory``: a 10-minute closed-loop log logged at the
+loop's 5 kHz (3 M rows) by the same generator; ``read_log`` and ``maglev-oc diagnose`` each run in
+a fresh process whose peak resident memory (``ru_maxrss``) is printed, also per million rows.
 """
 
 from __future__ import annotations
 
+import argparse
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -34,9 +40,48 @@ def _log_file(path: Path, n: int, dt: float) -> Path:
     return write_log_arrays(path, t, x, u)
 
 
+def _peak_memory(code: str) -> tuple[float, float]:
+    """(peak resident memory [MB], wall time [s]) of running ``code`` in a fresh Python."""
+    report = "\nimport resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", code + report], check=True, capture_output=True, text=True)
+    return int(out.stdout.split()[-1]) / 1024, time.perf_counter() - t0
+
+
+def memory() -> None:
+    from tests.independent.logio import write_log
+    from tests.independent.simulate import Rig, Scenario, simulate
+
+    with tempfile.TemporaryDirectory() as tmp:
+        run = simulate(Scenario(name="long", seed=7, duration=600.0, rig=Rig(log_every=1)))
+        csv, _ = write_log(run, tmp)
+        rows = run.t.size
+        print(f"10-minute log at 5 kHz: {rows} rows, {csv.stat().st_size / 1e6:.0f} MB CSV")
+        out = str(Path(tmp) / "d.json")
+        runs = {
+            "imports alone": "import maglev_oc.diagnosis.pipeline",
+            "read_log": f"from maglev_oc.data.reading import read_log; read_log({str(csv)!r})",
+            "diagnose": "from maglev_oc.cli import main; "
+            f"main(['diagnose', {str(csv)!r}, '--json', {out!r}])",
+        }
+        base = None
+        for label, code in runs.items():
+            peak, wall = _peak_memory(code)
+            base = peak if base is None else base
+            per_million = (peak - base) * 1e6 / rows
+            above = f"{per_million:4.0f} MB per million rows above the imports"
+            print(f"  {label:14s} peak {peak:6.0f} MB ({above}), {wall:.1f} s")
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--memory", action="store_true", help="peak memory on a 10-minute 5 kHz log")
+    args = parser.parse_args()
     root = Path(__file__).resolve().parents[1]
     sys.path.insert(0, str(root))
+    if args.memory:
+        memory()
+        return
     from tests.independent.simulate import Scenario, simulate
 
     print(f"machine: {machine()}")

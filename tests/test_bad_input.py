@@ -306,7 +306,7 @@ def test_output_paths_that_cannot_be_written(tmp_path, good_text, capsys):
 
 
 def test_interrupt_ends_with_one_line_and_130(tmp_path):
-    log = write_log_arrays(tmp_path / "long.csv", *_signals(40_000, 1e-3))
+    log = write_log_arrays(tmp_path / "long.csv", *_signals(150_000, 1e-3))  # diagnosed in ~10 s
     out = tmp_path / "d.json"
     # SIGINT restored to its default in the child (a non-interactive parent may ignore it)
     proc = subprocess.Popen(

@@ -133,3 +133,32 @@ def test_logging_error_share_follows_the_logging(model):
     with pytest.raises(ValueError, match="control_rate_hz"):
         logging_error_share(log(1000.0, control_rate_hz="fast"))
     assert math.isfinite(logging_error_share(log(1000.0, control_rate_hz=1000)))
+
+
+def test_design_does_not_depend_on_how_it_is_evaluated(model, monkeypatch):
+    # The columns are evaluated in chunks of samples and filtered a few rows at a time (bounded
+    # memory); chunk boundaries inside the log, and held-out normal equations summed run by run,
+    # must give the same design as one pass over every sample.
+    import maglev_oc.regression.data as data_module
+    import maglev_oc.regression.design as design_module
+    from maglev_oc.regression.terms import guide_friction
+
+    log = _synthetic(model, seconds=12.0, position_noise=3e-6, current_noise=0.01, seed=4)
+    data = prepare([log], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    terms = (guide_friction(model.params, "horizontal"),)
+
+    def design():
+        return build_design(data, model, terms=terms, fit=fit, holdout=hold)
+
+    one = design()
+    monkeypatch.setattr(design_module, "_CHUNK", 997)  # not a divisor of n
+    monkeypatch.setattr(data_module, "_FILTER_ROWS", 3)
+    chunked = design()
+    assert_allclose(chunked.columns, one.columns, rtol=1e-12, atol=1e-15)
+    assert_allclose(chunked.gram, one.gram, rtol=1e-12)
+    assert_allclose(chunked.noise, one.noise, rtol=1e-12, atol=1e-30)
+    held = one.columns[:, :, hold]
+    for a in range(2):
+        assert_allclose(one.hold_gram[a], held[:, a] @ held[:, a].T, rtol=1e-12, atol=1e-30)
+        assert_allclose(one.hold_rhs[a], held[:, a] @ one.target[a, hold], rtol=1e-12, atol=1e-30)

@@ -3,12 +3,12 @@
 The format: any number of metadata lines ``# key: value``, then one header line of
 comma-separated column names, then one numeric row per sample. Blank lines are skipped; line
 numbers in messages are the editor's (1-based, counting the metadata lines). The rows are read by
-numpy in one pass; only when that fails does a slow pass find the first bad cell to name it.
+numpy straight from the file, in one pass and without holding the text (a 3 M-row log needs the
+array, not ten copies of its text); only when that fails does a slow pass find the bad cell.
 """
 
 from __future__ import annotations
 
-import io
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -55,8 +55,7 @@ def read_csv(path: Path, source: str) -> RawLog:
     -------
     RawLog
     """
-    text = _decode(path.read_bytes(), source)
-    pre = _read_preamble(text, source)
+    pre = _read_preamble(path, source)
     names = _header_names(pre, source)
     index = {name: j for j, name in enumerate(names)}
 
@@ -68,13 +67,11 @@ def read_csv(path: Path, source: str) -> RawLog:
     notes = pre.notes
     if ignored:
         notes.append("ignored column(s) " + ", ".join(label(name) for name in ignored) + ": not in SPEC 2")
-    body = _data_body(text[pre.body_start :], source, pre.header_line)
-    first_data_line = pre.header_line + 1
-    table = _load_table(body, names, used, first_data_line, source, pre.header_line)
-    line_of = _line_locator(body, first_data_line)
+    body = _Body(path, pre.body_start, pre.header_line + 1, source)
+    table = _load_table(body, names, used, pre.header_line)
 
     def where(k: int, name: str | None = None) -> tuple[str, int | None]:
-        line = line_of(k)
+        line = body.line_of(k)
         return (f"line {line}, {label(name)}" if name else f"line {line}"), line
 
     columns = {name: table[:, j] for j, name in enumerate(used)}
@@ -82,55 +79,77 @@ def read_csv(path: Path, source: str) -> RawLog:
     return RawLog(source, columns, pre.metadata, metadata_where, notes, where)
 
 
-def _decode(data: bytes, source: str) -> str:
-    """UTF-8 text (a byte-order mark dropped) with every line ending made '\\n'."""
+def _decode_line(data: bytes, source: str, lineno: int) -> str:
     try:
-        text = data.decode("utf-8-sig")
+        return data.decode("utf-8-sig" if lineno == 1 else "utf-8")
+    except UnicodeDecodeError as err:
+        raise LogError(
+            source,
+            f"byte {err.start} of line {lineno} is not UTF-8 text; is this a binary file "
+            "(use .mat for MATLAB)?",
+        ) from None
+
+
+def _sniff_text(head: bytes, source: str) -> None:
+    """LogError if the file's first bytes are not text (NUL bytes, or not UTF-8)."""
+    nul = head.find(b"\x00")
+    if nul >= 0:
+        raise LogError(source, f"byte {nul} is NUL: a binary file, not a CSV log (use .mat for MATLAB)")
+    cut = head.rfind(b"\n") + 1 if len(head) == 1 << 16 else len(head)  # whole lines only
+    try:
+        head[:cut].decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise LogError(
             source, f"byte {err.start} is not UTF-8 text; is this a binary file (use .mat for MATLAB)?"
         ) from None
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
-    return text
 
 
-def _read_preamble(text: str, source: str) -> _Preamble:
+def _read_preamble(path: Path, source: str) -> _Preamble:
     """The ``# key: value`` lines up to the header line (the first non-blank, non-comment line)."""
     pre = _Preamble()
-    pos = lineno = 0
-    while pos < len(text):
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end
-        line, pos, lineno = text[pos:end], end + 1, lineno + 1
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if not stripped.startswith("#"):
-            pre.header, pre.header_line, pre.body_start = line, lineno, pos
-            return pre
-        body = stripped[1:].strip()
-        key, sep, value = body.partition(":")
-        key, value = key.strip(), value.strip()
-        if not sep or not key:
-            if "," in body and {"t", "x1"} <= {c.strip() for c in body.split(",")}:
-                pre.commented_header = lineno
-            pre.notes.append(f"line {lineno}: comment without 'key: value' ignored")
-            continue
-        if key in pre.metadata and pre.metadata[key] != value:
-            raise LogError(
-                source,
-                f"metadata {key!r} is given twice with different values: {pre.metadata[key]!r} "
-                f"(line {pre.meta_line[key]}) and {value!r}",
-                where=f"line {lineno}",
-                line=lineno,
-            )
-        pre.metadata[key], pre.meta_line[key] = value, lineno
+    with path.open("rb") as f:
+        _sniff_text(f.read(1 << 16), source)
+        f.seek(0)
+        for lineno, data in enumerate(iter(f.readline, b""), start=1):
+            if b"\r" in data.rstrip(b"\r\n"):
+                raise LogError(
+                    source,
+                    "lines end in a bare carriage return (classic Mac); save the file with "
+                    "'\\n' line endings",
+                    where=f"line {lineno}",
+                    line=lineno,
+                )
+            stripped = _decode_line(data, source, lineno).strip()
+            if not stripped:
+                continue
+            if not stripped.startswith("#"):
+                pre.header, pre.header_line, pre.body_start = stripped, lineno, f.tell()
+                return pre
+            _metadata_line(pre, stripped[1:].strip(), lineno, source)
     raise LogError(
         source,
         "empty file: no header line and no data (expected '# key: value' lines, a header such "
         "as 't,x1,x3,u1,u2', then numeric rows)",
     )
+
+
+def _metadata_line(pre: _Preamble, body: str, lineno: int, source: str) -> None:
+    key, sep, value = body.partition(":")
+    key, value = key.strip(), value.strip()
+    if not sep or not key:
+        if "," in body and {"t", "x1"} <= {c.strip() for c in body.split(",")}:
+            pre.commented_header = lineno
+        pre.notes.append(f"line {lineno}: comment without 'key: value' ignored")
+        return
+    if key in pre.metadata and pre.metadata[key] != value:
+        raise LogError(
+            source,
+            f"metadata {key!r} is given twice with different values: {pre.metadata[key]!r} "
+            f"(line {pre.meta_line[key]}) and {value!r}",
+            where=f"line {lineno}",
+            line=lineno,
+        )
+    pre.metadata[key], pre.meta_line[key] = value, lineno
 
 
 def _header_names(pre: _Preamble, source: str) -> list[str]:
@@ -186,66 +205,102 @@ def _header_names(pre: _Preamble, source: str) -> list[str]:
     return names
 
 
-def _data_body(body: str, source: str, header_line: int) -> str:
-    """The text after the header, lines of only spaces emptied; LogError if it holds no rows."""
-    if "\n " in body or "\n\t" in body or body[:1] in (" ", "\t"):
-        # lines holding only spaces would be rows to numpy; make them empty (line count unchanged)
-        body = re.sub(r"(?m)^[ \t]+$", "", body)
-    if not re.search(r"\S", body):
+class _Body:
+    """The data rows of a CSV file, read from disk on demand (never held as text)."""
+
+    _CHUNK = 1 << 22
+
+    def __init__(self, path: Path, offset: int, first_line: int, source: str) -> None:
+        self.path, self.offset, self.first_line, self.source = path, offset, first_line, source
+        self.n_lines = self.n_commas = 0
+        with path.open("rb") as f:  # one pass over the bytes: lines, commas, any blank line
+            f.seek(offset)
+            previous, blank = b"\n", False
+            for chunk in iter(lambda: f.read(self._CHUNK), b""):
+                self.n_lines += chunk.count(b"\n")
+                self.n_commas += chunk.count(b",")
+                blank = blank or b"\n\n" in chunk or (previous == b"\n" and chunk[:1] == b"\n")
+                blank = blank or b"\n\r\n" in chunk or b"\n " in chunk or b"\n\t" in chunk
+                previous = chunk[-1:]
+            if previous not in (b"\n", b""):
+                self.n_lines += 1  # a last line without its newline
+        self.may_have_blank_lines = blank or self.first_line_blank()
+        self._line_numbers: list[int] | None = None
+
+    def first_line_blank(self) -> bool:
+        with self.path.open("rb") as f:
+            f.seek(self.offset)
+            return not f.readline().strip()
+
+    def text_lines(self, *, blank_spaces: bool = False):
+        """The rows as text lines (a generator); ``blank_spaces`` empties lines of only spaces."""
+        with self.path.open("r", encoding="utf-8", newline=None) as f:
+            f.seek(self.offset)
+            for line in f:
+                yield "\n" if blank_spaces and not line.strip() else line
+
+    def line_of(self, k: int) -> int:
+        """The editor line of data row ``k`` (blank lines skipped)."""
+        if not self.may_have_blank_lines:
+            return self.first_line + k
+        if self._line_numbers is None:
+            self._line_numbers = [
+                self.first_line + i for i, line in enumerate(self.text_lines()) if line.strip()
+            ]
+        return self._line_numbers[k]
+
+
+def _load_table(body: _Body, names: list[str], used: list[str], header_line: int) -> np.ndarray:
+    """The used columns as an (n, len(used)) array; LogError at the first bad cell or row."""
+    source = body.source
+    if body.n_lines == 0:
         raise LogError(
             source,
             "header only: no data rows after the header",
             where=f"line {header_line}",
             line=header_line,
         )
-    return body
-
-
-def _line_locator(body: str, first_data_line: int):
-    """k -> the editor line of data row k (blank lines skipped)."""
-    contiguous = not body.startswith("\n") and "\n\n" not in body.rstrip("\n")
-    line_numbers: list[int] = []  # filled on first use when blank lines break "row k = line k"
-
-    def line_of(k: int) -> int:
-        if contiguous:
-            return first_data_line + k
-        if not line_numbers:
-            line_numbers.extend(first_data_line + i for i, s in enumerate(body.split("\n")) if s.strip())
-        return line_numbers[k]
-
-    return line_of
-
-
-def _load_table(
-    body: str, names: list[str], used: list[str], first_data_line: int, source: str, header_line: int
-) -> np.ndarray:
-    """The used columns as an (n, len(used)) array; LogError at the first bad cell or row."""
     index = {name: j for j, name in enumerate(names)}
     usecols = [index[name] for name in used]
-    try:
+
+    def parse(lines) -> np.ndarray:
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # an empty or odd file must not pass with a warning
-            table = np.loadtxt(
-                io.StringIO(body), delimiter=",", comments=None, usecols=usecols, ndmin=2, dtype=float
-            )
+            return np.loadtxt(lines, delimiter=",", comments=None, usecols=usecols, ndmin=2, dtype=float)
+
+    try:
+        try:
+            table = parse(body.text_lines())
+        except (ValueError, UserWarning):
+            if not body.may_have_blank_lines:
+                raise
+            table = parse(body.text_lines(blank_spaces=True))  # lines of only spaces are blank
     except (ValueError, UserWarning) as err:
-        _locate_bad_cell(body, names, used, first_data_line, source, header_line)
+        _locate_bad_cell(body, names, used, header_line)
         raise LogError(source, f"could not read the data rows: {err}", where=f"line {header_line}") from None
-    n_rows = table.shape[0]
-    if body.count(",") != n_rows * (len(names) - 1):
-        _locate_bad_cell(body, names, used, first_data_line, source, header_line)
+    except UnicodeDecodeError:
+        raise LogError(source, "the data rows are not UTF-8 text; is this a binary file?") from None
+    if table.shape[0] == 0:
+        raise LogError(
+            source,
+            "header only: no data rows after the header",
+            where=f"line {header_line}",
+            line=header_line,
+        )
+    if body.n_commas != table.shape[0] * (len(names) - 1):
+        _locate_bad_cell(body, names, used, header_line)
     return table
 
 
-def _locate_bad_cell(
-    body: str, names: list[str], used: list[str], first_line: int, source: str, header_line: int
-) -> None:
+def _locate_bad_cell(body: _Body, names: list[str], used: list[str], header_line: int) -> None:
     """Slow pass over the rows, only after the fast parse failed: raise at the first bad cell."""
+    source = body.source
     wanted = [(j, name) for j, name in enumerate(names) if name in used]
-    for i, line in enumerate(body.split("\n")):
+    for i, line in enumerate(body.text_lines()):
+        line = line.rstrip("\n")
         if not line.strip():
             continue
-        lineno = first_line + i
+        lineno = body.first_line + i
         cells = line.split(",")
         if len(cells) != len(names):
             raise LogError(

@@ -144,7 +144,10 @@ def diagnose(
     )
     base0, fitted, tr = clock("base_fit", _base_fit, session, design0)
     library, design, sel, fitted = clock("selection", _select, session, fitted, tuple(exclude))
-    library, design, sel = clock("waviness", _waviness, session, fitted, library, design, sel)
+    periods = clock("waviness", _waviness_periods, session, fitted, design, sel)
+    if periods:
+        del design, sel  # the design with the waviness replaces this one: never hold both
+        library, design, sel = clock("waviness", _with_waviness, session, fitted, library, periods)
     sel, not_sep, rejected, unexplained = clock(
         "unexplained", _separate_unexplained, session, fitted, library, design, sel, tr
     )
@@ -186,7 +189,7 @@ def diagnose(
 
 
 class _Clock:
-    """Runs a step and records its wall time under a name."""
+    """Runs a step and adds its wall time to its name's."""
 
     def __init__(self, timings: dict[str, float]) -> None:
         self.timings = timings
@@ -194,7 +197,7 @@ class _Clock:
     def __call__(self, name, fn, *args):
         t0 = time.perf_counter()
         out = fn(*args)
-        self.timings[name] = time.perf_counter() - t0
+        self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0  # a step may run in parts
         return out
 
 
@@ -236,7 +239,7 @@ def _base_fit(session: _Session, design0: Design):
 def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     """Steps 4-5: the library and the selection; when the chosen effects move the constants by more
     than :data:`REFIT_TOLERANCE`, the references are converged and the selection repeated once."""
-    for _ in range(2):
+    for attempt in range(2):
         full = candidate_library(fitted, session.data)
         unknown = sorted(set(exclude) - {c.name for c in full})
         if unknown:
@@ -254,26 +257,29 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         if moved(converged, fitted) <= REFIT_TOLERANCE:
             break
         fitted = converged
+        if attempt == 0:
+            del design, sel  # the next design replaces this one: never hold both (samples x columns)
     return library, design, sel, fitted
 
 
-def _waviness(session: _Session, fitted: StageModel, library, design: Design, sel: Selection):
-    """Step 5b: periodicities of the residual that no motor period explains become guide-waviness
-    candidates (at refined periods) and the selection is repeated with them."""
+def _waviness_periods(session: _Session, fitted: StageModel, design: Design, sel: Selection) -> list[float]:
+    """Step 5b: periodicities of the residual that no motor period explains, at refined periods."""
     data, train = session.data, session.train
     res = residuals(design, sel.final)
     tr_after = trace(
         data.x[:, train], data.du[:, train], res[:, train], session.model.params, data.sample_time
     )
-    periods = sorted(
+    return sorted(
         {
             round(refine_waviness_period(fitted, data, res, session.weights, train, lam), 4)
             for _, lam in unexplained_periods(tr_after, tolerance=0.03)
         }
     )
-    if not periods:
-        return library, design, sel
-    wavy = {c.name: c for c in (waviness_candidate(fitted, data, lam) for lam in periods)}
+
+
+def _with_waviness(session: _Session, fitted: StageModel, library, periods: list[float]):
+    """Step 5c: guide-waviness candidates at ``periods`` join the library; the selection is repeated."""
+    wavy = {c.name: c for c in (waviness_candidate(fitted, session.data, lam) for lam in periods)}
     library = [*library, *wavy.values()]
     design = session.library_design(fitted, library)
     return library, design, session.select(design, library)

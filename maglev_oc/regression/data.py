@@ -54,6 +54,9 @@ __all__ = [
     "reduce_rate",
 ]
 
+_FILTER_ROWS = 16
+"""Rows filtered per FFT call: the workspace is a few times 16 x n complex values."""
+
 DEFAULT_MAX_RATE = 1000.0
 """[Hz] Logs faster than this are reduced to it by block means: every effect the fits look for
 lives below 30 Hz, and the regression's memory grows with the number of samples."""
@@ -219,16 +222,29 @@ class PreparedLogs:
         sg = self.differentiator
         return max(sg.velocity_window, sg.acceleration_window) // 2 + self.kernel.size // 2
 
-    def filter(self, columns: np.ndarray) -> np.ndarray:
-        """F applied along the last axis of ``columns`` (..., n), log by log (zero outside)."""
+    def filter(self, columns: np.ndarray, *, inplace: bool = False) -> np.ndarray:
+        """F applied along the last axis of ``columns`` (..., n), log by log (zero outside).
+
+        A few rows at a time, so that the FFT's workspace stays small next to the columns;
+        ``inplace`` overwrites ``columns`` (a float, C-contiguous array) instead of copying it."""
         columns = np.ascontiguousarray(columns, dtype=float)
-        out = np.empty_like(columns)
-        shape = (1,) * (columns.ndim - 1) + (self.kernel.size,)
-        for s in range(self.n_logs):
-            idx = self.segment == s
-            # zero-padded 'same' convolution by FFT (the kernel is symmetric: no flip needed)
-            out[..., idx] = fftconvolve(columns[..., idx], self.kernel.reshape(shape), mode="same", axes=-1)
+        out = columns if inplace else np.empty_like(columns)
+        rows_in, rows_out = columns.reshape(-1, self.n), out.reshape(-1, self.n)
+        kernel = self.kernel.reshape(1, -1)
+        for start, stop in self.segment_bounds:
+            for r in range(0, rows_in.shape[0], _FILTER_ROWS):
+                block = rows_in[r : r + _FILTER_ROWS, start:stop]
+                # zero-padded 'same' convolution by FFT (the kernel is symmetric: no flip needed)
+                rows_out[r : r + _FILTER_ROWS, start:stop] = fftconvolve(block, kernel, mode="same", axes=-1)
         return out
+
+    @property
+    def segment_bounds(self) -> list[tuple[int, int]]:
+        """(start, stop) of each log's samples (logs are concatenated in order)."""
+        edges = np.flatnonzero(np.diff(self.segment)) + 1
+        starts = [0, *edges.tolist()]
+        stops = [*edges.tolist(), self.n]
+        return list(zip(starts, stops, strict=True))
 
     def masks(self, holdout_fraction: float = 0.0, samples: Sequence[np.ndarray] | None = None):
         """(fit, held-out) boolean masks (n,).

@@ -217,10 +217,8 @@ def build_design(
     prep = prepared
     n, P = prep.n, len(names)
     fn, where = _symbolic(model, estimate, terms, at_vec)
-    cols, known, sens = (np.asarray(v) for v in fn.map(n)(prep.x, prep.u, prep.du))
-    # mapped outputs are concatenated sample by sample: cols (2, n P) -> (P, 2, n)
-    cols = np.ascontiguousarray(cols.reshape(2, n, P).transpose(2, 0, 1)) if P else np.zeros((0, 2, n))
-    columns = prep.filter(cols)
+    columns, known, sens = _evaluate(fn, prep, P, len(where))
+    columns = prep.filter(columns, inplace=True)
     target = prep.acc - prep.filter(known)
 
     fit = prep.valid.copy() if fit is None else np.asarray(fit, dtype=bool) & prep.valid
@@ -231,7 +229,7 @@ def build_design(
     size = max(1, round(block_seconds / prep.sample_time))
     noise = _NoiseSensitivities.of(prep, sens, where, weights, P)
     acc = _accumulate(columns, target, weights, _blocks(fit, prep.segment, size), prep.segment, noise)
-    held = [np.ascontiguousarray(columns[:, a, holdout]) for a in range(2)]
+    hold_gram, hold_rhs = _held_out_normal_equations(columns, target, holdout)
     return Design(
         names=names,
         groups=groups,
@@ -243,13 +241,49 @@ def build_design(
         holdout=holdout,
         **acc,
         block_seconds=size * prep.sample_time,
-        hold_gram=np.stack([h @ h.T for h in held]),
-        hold_rhs=np.stack([h @ target[a, holdout] for a, h in enumerate(held)]),
+        hold_gram=hold_gram,
+        hold_rhs=hold_rhs,
         hold_yy=np.array([float(target[a, holdout] @ target[a, holdout]) for a in range(2)]),
         hold_n=int(holdout.sum()),
         at=at_vec,
         prepared=prep,
     )
+
+
+def _held_out_normal_equations(columns: np.ndarray, target: np.ndarray, holdout: np.ndarray):
+    """Per axis, X X' and X y over the held-out samples, run by run of consecutive samples (no
+    copy of the held-out columns)."""
+    P = columns.shape[0]
+    gram, rhs = np.zeros((2, P, P)), np.zeros((2, P))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], holdout.astype(np.int8), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        for a in range(2):
+            x = columns[:, a, start:stop]
+            gram[a] += x @ x.T
+            rhs[a] += x @ target[a, start:stop]
+    return gram, rhs
+
+
+def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int):
+    """``fn`` over every sample, ``_CHUNK`` samples per mapped call into preallocated arrays:
+    columns (P, 2, n), known (2, n), sensitivities (m, n). (One map over all samples would hold
+    CasADi's output and its NumPy copy, each of the size of the columns, at once.)"""
+    n = prep.n
+    cols, known, sens = np.empty((P, 2, n)), np.empty((2, n)), np.empty((m, n))
+    mapped: dict[int, ca.Function] = {}
+    for a in range(0, n, _CHUNK):
+        b = min(a + _CHUNK, n)
+        f = mapped.setdefault(b - a, fn.map(b - a))
+        c, k, s = (np.asarray(v) for v in f(prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b]))
+        # mapped outputs are concatenated sample by sample: (2, k P) -> (P, 2, k)
+        cols[:, :, a:b] = c.reshape(2, b - a, P).transpose(2, 0, 1)
+        known[:, a:b] = k
+        sens[:, a:b] = s.reshape(m, b - a)
+    return cols, known, sens
+
+
+_CHUNK = 5_000
+"""Samples per mapped evaluation of the design (5 s at 1 kHz; larger chunks are no faster)."""
 
 
 def _parameters(model: StageModel, estimate: tuple[str, ...], terms: tuple[AccelerationTerm, ...], at):
@@ -305,8 +339,8 @@ class _NoiseSensitivities:
         group = where[:, 1] * 4 + where[:, 2] * 2 + where[:, 3]
         scatter = np.zeros((P, len(where)))
         scatter[where[:, 0], np.arange(len(where))] = 1.0
-        scaled = sens.reshape(-1, prep.n) * np.sqrt(gain)[:, None]
-        return cls(scaled, group[:, None] == group[None, :], scatter)
+        sens *= np.sqrt(gain)[:, None]  # in place: the sensitivities are this design's own copy
+        return cls(sens, group[:, None] == group[None, :], scatter)
 
     def gram(self, part: slice) -> np.ndarray:
         e = self.scaled[:, part]
@@ -318,13 +352,11 @@ def _accumulate(columns, target, weights, blocks, segment, noise: _NoiseSensitiv
     P, n = columns.shape[0], columns.shape[2]
     grams, noises, rhss, yys, logs = [], [], [], [], []
     block_of = np.full(n, -1)
-    xw_all = columns * weights[None, :, None]
-    yw_all = target * weights[:, None]
     for b, sel in enumerate(blocks):
         block_of[sel] = b
         part = slice(sel[0], sel[-1] + 1)  # blocks are runs of consecutive samples
-        xw = xw_all[:, :, part].reshape(P, -1)
-        yw = yw_all[:, part].reshape(-1)
+        xw = (columns[:, :, part] * weights[None, :, None]).reshape(P, -1)
+        yw = (target[:, part] * weights[:, None]).reshape(-1)
         grams.append(xw @ xw.T)
         rhss.append(xw @ yw)
         yys.append(float(yw @ yw))
