@@ -42,7 +42,8 @@ def _log_file(path: Path, n: int, dt: float) -> Path:
 
 def _peak_memory(code: str) -> tuple[float, float]:
     """(peak resident memory [MB], wall time [s]) of running ``code`` in a fresh Python."""
-    report = "\nimport resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+    # VmHWM: this process's peak (ru_maxrss would include the parent's, kept across exec)
+    report = "\nprint([ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')][0])"
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", code + report], check=True, capture_output=True, text=True)
     return int(out.stdout.split()[-1]) / 1024, time.perf_counter() - t0
