@@ -62,18 +62,31 @@ from maglev_oc.diagnosis.trace import trace, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.data import PreparedLogs, prepare
+from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_subset, predicted, residuals
 from maglev_oc.results import AXES, Estimate, PerAxis
 
-__all__ = ["DEFAULT_BANDWIDTH", "ERROR_METRIC", "Diagnosis", "Effect", "NotSeparable", "diagnose"]
+__all__ = [
+    "DEFAULT_BANDWIDTH",
+    "ERROR_METRIC",
+    "MAX_SAMPLES",
+    "Diagnosis",
+    "Effect",
+    "NotSeparable",
+    "diagnose",
+]
 
 DEFAULT_BANDWIDTH = 10.0
 """[Hz] Band of the diagnosis's differentiator: the spatial periods of interest (19-114 mm)
 pass at speeds up to 0.2 m/s, guide-friction reversals and the regulators' poles (up to 9 Hz)
 too; above it the differentiated encoder quantization (rising as f^4) and the closed-loop
 currents' echo of it dominate the residual."""
+
+MAX_SAMPLES = 300_000
+"""Samples a diagnosis keeps (5 minutes at 1 kHz): longer runs are reduced to a lower rate by
+block means (memory grows as samples x candidate columns, ~1.3 kB per sample; a 10 Hz band loses
+nothing at 500 Hz)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -216,7 +229,10 @@ def _prepare(logs: list[Log], holdout_fraction: float, bandwidth: float, min_dur
                 f"{log.duration:.1f} s is too short to diagnose: need at least "
                 f"{min_duration:g} s (a quarter is held out for validation)",
             )
-    data = prepare(logs, bandwidth=bandwidth)
+    # memory grows as samples x candidate columns: a long run is diagnosed at a rate that keeps
+    # MAX_SAMPLES (the band of the fit, 10 Hz, stays far below any such rate)
+    total = sum(log.duration for log in logs)
+    data = prepare(logs, bandwidth=bandwidth, max_rate=min(DEFAULT_MAX_RATE, MAX_SAMPLES / total))
     if not np.any(data.moving):
         raise LogError(
             ", ".join(data.sources),
