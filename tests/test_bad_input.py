@@ -28,6 +28,9 @@ binary, 2 MB, a directory                                         "JSON object",
 ``--json DIR`` / ``--report DIR``          diagnose, identify     "is a directory" (before any work)
 ``simulate --out DIR``                     simulate               "is a directory"
 ``report --out FILE``                      report                 "is a file"
+a random edit anywhere (hypothesis: a      read_log               read, or a LogError naming the file;
+character inserted, deleted or replaced,                          never another exception
+truncation, a line doubled or swapped)
 a bug inside the tool                      any                    exit 1, "internal error", "--debug"
 Ctrl-C                                     diagnose               exit 130, "interrupted"
 =========================================  =====================  ===========================================
@@ -46,6 +49,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.io
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from maglev_oc.cli import EXIT_INTERRUPTED, EXIT_USAGE, main
 from maglev_oc.data.writing import write_log_arrays
@@ -324,3 +329,42 @@ def test_interrupt_ends_with_one_line_and_130(tmp_path):
     assert proc.returncode == EXIT_INTERRUPTED, err
     assert err.strip().count("\n") == 0 and "interrupted" in err and "Traceback" not in err
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    edit=st.sampled_from(["insert", "delete", "replace", "truncate", "duplicate-line", "swap-lines"]),
+    where=st.floats(0.0, 1.0),
+    char=st.sampled_from(list("0123456789.,-+eE \t;#:abcXnN\r\x00é")),
+)
+def test_any_corruption_is_read_or_refused_in_one_line(tmp_path, good_text, edit, where, char):
+    """Fuzz: a log edited at a random place is either read or refused with a LogError naming the
+    file; never another exception (a crash, a numpy warning, a traceback)."""
+    from maglev_oc.data.reading import read_log
+    from maglev_oc.errors import LogError
+
+    text = good_text[:4000]  # the metadata, the header and about 40 rows
+    k = int(where * (len(text) - 1))
+    lines = text.split("\n")
+    j = min(int(where * len(lines)), len(lines) - 2)
+    if edit == "insert":
+        text = text[:k] + char + text[k:]
+    elif edit == "delete":
+        text = text[:k] + text[k + 1 :]
+    elif edit == "replace":
+        text = text[:k] + char + text[k + 1 :]
+    elif edit == "truncate":
+        text = text[:k]
+    elif edit == "duplicate-line":
+        text = "\n".join([*lines[: j + 1], lines[j], *lines[j + 1 :]])
+    else:
+        lines[j], lines[j + 1] = lines[j + 1], lines[j]
+        text = "\n".join(lines)
+    path = tmp_path / "fuzz.csv"
+    path.write_bytes(text.encode("utf-8"))
+    try:
+        log = read_log(path, min_samples=10, min_duration=0.005)
+    except LogError as err:
+        assert str(path) in str(err) and "\n" not in str(err)
+    else:
+        assert log.n >= 10 and np.all(np.diff(log.t) > 0)
