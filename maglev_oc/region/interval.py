@@ -107,19 +107,10 @@ def _cosh(lo, hi):
 
 
 def _constpow(lo, hi, expo):
+    """x**expo for a non-integer constant exponent (CasADi expands integer powers of SX into
+    products and inverses before they get here): defined for x >= 0, monotone there."""
     if float(expo).is_integer():
-        n = int(expo)
-        if n == 0:
-            return np.ones_like(lo), np.ones_like(hi)
-        if n < 0:
-            ilo, ihi = _inv(lo, hi)
-            return _constpow(ilo, ihi, -n)
-        if n % 2 == 0:
-            a, b = np.abs(lo) ** n, np.abs(hi) ** n
-            contains_zero = (lo <= 0) & (hi >= 0)
-            return np.where(contains_zero, 0.0, np.minimum(a, b)), np.maximum(a, b)
-        return lo**n, hi**n
-    # non-integer exponent: defined for x >= 0, monotone in x on [0, inf)
+        raise NotImplementedError(f"pow with the integer exponent {expo:g} (CasADi expands these)")
     with np.errstate(invalid="ignore"):
         if expo > 0:
             return np.maximum(lo, 0.0) ** expo, np.where(hi < 0, np.nan, hi**expo)
