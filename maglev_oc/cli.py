@@ -432,6 +432,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _caused_by_interrupt(err: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in ``err``'s chain of causes and contexts."""
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return False
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse unusable output paths before any work (the writes check again, atomically)."""
     files = [getattr(args, k, None) for k in ("json", "report")]
@@ -460,6 +471,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"maglev-oc {args.command}: interrupted (no output is left half-written)", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as err:  # a bug: say so, briefly, and never blame the user's input
+        if _caused_by_interrupt(err):  # Ctrl-C inside a C extension surfaces as its SystemError
+            print(f"maglev-oc {args.command}: interrupted (no output is left half-written)", file=sys.stderr)
+            return EXIT_INTERRUPTED
         if args.debug:
             raise
         print(

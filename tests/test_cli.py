@@ -95,3 +95,26 @@ def test_a_bug_is_not_reported_as_the_users_mistake(monkeypatch, capsys):
     assert main(["model"]) == 2
     err = capsys.readouterr().err
     assert "run.csv" in err and "line 3" in err and "internal" not in err
+
+
+def test_an_interrupt_inside_a_c_extension_is_an_interrupt(monkeypatch, capsys):
+    # Ctrl-C while CasADi converts to NumPy surfaces as "SystemError: ... returned a result with
+    # an exception set", the KeyboardInterrupt as its cause: exit 130, not "internal error"
+    import maglev_oc.cli as cli
+
+    def interrupted(_args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as stop:
+            raise SystemError("<function DM.__array__> returned a result with an exception set") from stop
+
+    monkeypatch.setattr(cli, "cmd_model", interrupted)
+    assert main(["model"]) == cli.EXIT_INTERRUPTED
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "internal error" not in err
+
+    def broken(_args):
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(cli, "cmd_model", broken)
+    assert main(["model"]) == cli.EXIT_INTERNAL

@@ -104,22 +104,18 @@ def test_refuted_just_above(certificates, binding):
         assert out.witness_level <= above
 
 
-def _unit_boxes(draw):
+@st.composite
+def _boxes(draw):
+    """A box of (zeta (3) in the unit cube, phase in [0, 2 pi)): (lo (4,), hi (4,))."""
     lo, hi = [], []
     for _ in range(3):
         a = draw(st.floats(-1.0, 1.0))
-        w = draw(st.floats(1e-3, 1.0))
         lo.append(a)
-        hi.append(min(a + w, 1.0))
+        hi.append(min(a + draw(st.floats(1e-3, 1.0)), 1.0))
     p = draw(st.floats(0.0, 2 * math.pi))
     lo.append(p)
     hi.append(min(p + draw(st.floats(0.0, 1.5)), 2 * math.pi))
     return np.array(lo), np.array(hi)
-
-
-@st.composite
-def _boxes(draw):
-    return _unit_boxes(draw)
 
 
 @settings(max_examples=60, deadline=None)

@@ -213,24 +213,17 @@ class _Body:
     def __init__(self, path: Path, offset: int, first_line: int, source: str) -> None:
         self.path, self.offset, self.first_line, self.source = path, offset, first_line, source
         self.n_lines = self.n_commas = 0
-        with path.open("rb") as f:  # one pass over the bytes: lines, commas, any blank line
+        self.n_rows: int | None = None  # set once parsed
+        with path.open("rb") as f:  # one pass over the bytes: lines and commas
             f.seek(offset)
-            previous, blank = b"\n", False
+            last = b""
             for chunk in iter(lambda: f.read(self._CHUNK), b""):
                 self.n_lines += chunk.count(b"\n")
                 self.n_commas += chunk.count(b",")
-                blank = blank or b"\n\n" in chunk or (previous == b"\n" and chunk[:1] == b"\n")
-                blank = blank or b"\n\r\n" in chunk or b"\n " in chunk or b"\n\t" in chunk
-                previous = chunk[-1:]
-            if previous not in (b"\n", b""):
+                last = chunk[-1:]
+            if last not in (b"\n", b""):
                 self.n_lines += 1  # a last line without its newline
-        self.may_have_blank_lines = blank or self.first_line_blank()
         self._line_numbers: list[int] | None = None
-
-    def first_line_blank(self) -> bool:
-        with self.path.open("rb") as f:
-            f.seek(self.offset)
-            return not f.readline().strip()
 
     def text_lines(self, *, blank_spaces: bool = False):
         """The rows as text lines (a generator); ``blank_spaces`` empties lines of only spaces."""
@@ -240,8 +233,9 @@ class _Body:
                 yield "\n" if blank_spaces and not line.strip() else line
 
     def line_of(self, k: int) -> int:
-        """The editor line of data row ``k`` (blank lines skipped)."""
-        if not self.may_have_blank_lines:
+        """The editor line of data row ``k`` (blank lines skipped: found by a second pass, only
+        when the rows are fewer than the lines and a message needs a line)."""
+        if self.n_rows == self.n_lines:
             return self.first_line + k
         if self._line_numbers is None:
             self._line_numbers = [
@@ -253,13 +247,6 @@ class _Body:
 def _load_table(body: _Body, names: list[str], used: list[str], header_line: int) -> np.ndarray:
     """The used columns as an (n, len(used)) array; LogError at the first bad cell or row."""
     source = body.source
-    if body.n_lines == 0:
-        raise LogError(
-            source,
-            "header only: no data rows after the header",
-            where=f"line {header_line}",
-            line=header_line,
-        )
     index = {name: j for j, name in enumerate(names)}
     usecols = [index[name] for name in used]
 
@@ -272,12 +259,15 @@ def _load_table(body: _Body, names: list[str], used: list[str], header_line: int
         try:
             table = parse(body.text_lines())
         except (ValueError, UserWarning):
-            if not body.may_have_blank_lines:
-                raise
             table = parse(body.text_lines(blank_spaces=True))  # lines of only spaces are blank
     except (ValueError, UserWarning) as err:
-        _locate_bad_cell(body, names, used, header_line)
-        raise LogError(source, f"could not read the data rows: {err}", where=f"line {header_line}") from None
+        if not any(line.strip() for line in body.text_lines()):
+            table = np.zeros((0, len(used)))  # nothing but blank lines: header only, below
+        else:
+            _locate_bad_cell(body, names, used, header_line)
+            raise LogError(
+                source, f"could not read the data rows: {err}", where=f"line {header_line}"
+            ) from None
     except UnicodeDecodeError:
         raise LogError(source, "the data rows are not UTF-8 text; is this a binary file?") from None
     if table.shape[0] == 0:
@@ -287,6 +277,7 @@ def _load_table(body: _Body, names: list[str], used: list[str], header_line: int
             where=f"line {header_line}",
             line=header_line,
         )
+    body.n_rows = table.shape[0]
     if body.n_commas != table.shape[0] * (len(names) - 1):
         _locate_bad_cell(body, names, used, header_line)
     return table

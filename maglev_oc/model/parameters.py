@@ -216,18 +216,17 @@ class LumpedConstants:
         """From a JSON object. With ``defaults``, absent constants are taken from it (and
         ``source`` says which); without, all four are required. Errors name ``where`` and the key."""
         values = _checked_keys(cls, data, where)
-        if defaults is not None:
-            given = [k for k in ("C1", "C2", "C3", "C4") if k in values]
-            missing = [k for k in ("C1", "C2", "C3", "C4") if k not in values]
-            if missing and "source" not in values:
-                values["source"] = f"{where} ({', '.join(given) or 'none'}); {', '.join(missing)} from " + (
-                    defaults.source or "the defaults"
-                )
-            values = {**{k: getattr(defaults, k) for k in missing}, **values}
-        else:
-            missing = [k for k in ("C1", "C2", "C3", "C4") if k not in values]
-            if missing:
-                raise InputError(f"{where}: missing {', '.join(missing)}")
+        given = [k for k in ("C1", "C2", "C3", "C4") if k in values]
+        missing = [k for k in ("C1", "C2", "C3", "C4") if k not in values]
+        if missing and defaults is None:
+            raise InputError(f"{where}: missing {', '.join(missing)}")
+        if missing:
+            values.setdefault(
+                "source",
+                f"{where} ({', '.join(given) or 'none'}); {', '.join(missing)} from "
+                + (defaults.source or "the defaults"),
+            )
+            values.update({k: getattr(defaults, k) for k in missing})
         return _from_checked(cls, values, where)
 
 

@@ -37,6 +37,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
+from maglev_oc.units import M_TO_MM
 
 __all__ = [
     "CONSTRAINT_LABELS",
@@ -197,7 +198,7 @@ class FeasibleSet:
     def check_setpoint(self, gap: float, position: float = 0.0) -> None:
         """Raise :class:`InputError` unless the stage at rest at (``gap``, ``position``) [m] lies
         strictly inside F; the message says which constraint fails and the range allowed."""
-        mm = 1e3
+        mm = M_TO_MM
         where = f"set-point {gap * mm:g} mm gap, {position * mm:g} mm position"
         for name, value, rng in (("gap", gap, self.gap_range), ("position", position, self.position_range)):
             if rng is not None and not (rng[0] < value < rng[1]):
