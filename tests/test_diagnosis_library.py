@@ -1,0 +1,354 @@
+"""Every candidate of the diagnosis library recovers an effect planted with a known sign and size.
+
+The log is a clean one from the independent generator (``tests/independent``: its own plant,
+integrator and FL loop at 5 kHz logged at 1 kHz, 10 um encoders, constants 1-4 % off the papers').
+Each effect is planted in the measured accelerations the regression sees (``PreparedLogs.acc``,
+which is F[true acceleration], so the planted acceleration passes through the same filter F),
+written here from its physics with the model's own dynamics and not with the candidate's
+columns: a gap offset is the model evaluated at the shifted gap, a commutation error rotates the
+currents, an amplifier lag delays them, friction uses the sign of the velocity. A wrong sign, a
+wrong conversion to physical units or a wrong column shows as a wrong recovered value.
+
+Each case is planted with both signs where the sign is physical (a tilt, an offset, a slope, an
+angle, a phase) and the joint fit of C1..C4 with the candidate (the fit the diagnosis judges and
+reports) must return the planted values within a tolerance stated beside each case: 2 % where
+the candidate's form is the planted physics exactly (plus the clean log's own noise), and wider
+where the candidate linearizes (offsets, slopes, lags: a second-order term of the planted size)
+or smooths (friction's sign near zero velocity).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis.guides import waviness_candidate
+from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.pipeline import _prepare
+from maglev_oc.diagnosis.selection import fitted_constants
+from maglev_oc.model.parameters import LumpedConstants
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.solve import fit_subset
+from tests.independent import write_log
+from tests.independent.sets import named_set
+from tests.independent.simulate import simulate
+
+
+@dataclasses.dataclass(frozen=True)
+class Plant:
+    """The clean log, prepared, and the model with the generator's true constants."""
+
+    data: object
+    train: np.ndarray
+    hold: np.ndarray
+    model: StageModel
+
+    @property
+    def mv(self) -> float:
+        return self.model.params.mass_vertical
+
+    @property
+    def mh(self) -> float:
+        return self.model.params.mass_horizontal
+
+    @property
+    def g(self) -> float:
+        return self.model.params.gravity
+
+    def acc(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """(x2', x4') of the model at states x (4, n) and currents u (2, n)."""
+        return self.model.dynamics(x, u)[[1, 3]]
+
+    def shifted_gap(self, dgap: np.ndarray) -> np.ndarray:
+        """The model's accelerations with the true gap = reading + dgap, minus the modelled ones."""
+        x, u = self.data.x, self.data.u
+        true = x.copy()
+        true[0] = x[0] + dgap
+        return self.acc(true, u) - self.acc(x, u)
+
+    def normal_force(self, x: np.ndarray) -> np.ndarray:
+        """The magnetic normal force M_v (G - x2'_model) [N], positive towards the stator."""
+        return self.mv * (self.g - self.acc(x, self.data.u)[0])
+
+
+@pytest.fixture(scope="module")
+def plant(tmp_path_factory) -> Plant:
+    scenario = dict(named_set("clean"))["clean_01"]
+    csv, truth = write_log(simulate(scenario), tmp_path_factory.mktemp("library"), stem="clean_01")
+    true = json.loads(truth.read_text())["plant"]["constants_true"]
+    data, train, hold = _prepare([read_log(csv)], 0.25, 10.0, 10.0)
+    model = StageModel().with_constants(LumpedConstants(**{k: true[k] for k in ("C1", "C2", "C3", "C4")}))
+    return Plant(data, train, hold, model)
+
+
+def _fit(plant: Plant, candidate, planted: np.ndarray, *, known: bool = False, differential: bool = True):
+    """What the joint fit of C1..C4 and ``candidate`` attributes to ``planted`` (2, n) [m/s^2]: the
+    candidate's coefficients on the log with it added, minus those on the clean log. The fit is
+    linear in the accelerations, so the difference is the fit of the planted effect alone, free of
+    what the clean log's own noise and the known near-collinearity of vertical terms with a common
+    scale of C2..C4 put into the candidate (the diagnosis reports those as not separable).
+
+    ``known``: C1..C4 held at the truth, as after the experiment that separates a candidate the
+    diagnosis finds confounded with them (a gauge block, a load change). ``differential=False``:
+    the fit on the log with the effect, as the diagnosis reports it."""
+    estimate = () if known else ("C1", "C2", "C3", "C4")
+    groups = [candidate.name] if known else ["base", candidate.name]
+    coef = []
+    for acc in (plant.data.acc + plant.data.filter(planted), plant.data.acc):
+        data = dataclasses.replace(plant.data, acc=acc)
+        design = build_design(
+            data, plant.model, estimate=estimate, terms=[candidate.term], fit=plant.train, holdout=plant.hold
+        )
+        fit = fit_subset(design, groups)
+        coef.append(fit.group(design, candidate.name))
+        if len(coef) == 1:
+            constants = fitted_constants(fit)
+    (q, cov), (q0, _) = coef
+    if not differential:
+        q0 = np.zeros_like(q)
+    return candidate.term.physical_parameters(q - q0, cov, constants)
+
+
+def _candidate(plant: Plant, name: str):
+    """The library's candidate ``name``, its magnetic references the papers' constants (1-4 % off
+    the truth, as a base fit's are off the final one), so that the conversion of its coefficients
+    with the fitted constants is exercised."""
+    (cand,) = [c for c in candidate_library(StageModel(), plant.data) if c.name == name]
+    return cand
+
+
+def _vertical(plant: Plant, force: np.ndarray) -> np.ndarray:
+    """A vertical force [N], positive towards the stator (it closes the gap: x2' -= F / M_v)."""
+    return np.vstack([-force / plant.mv, np.zeros_like(force)])
+
+
+def _horizontal(plant: Plant, force: np.ndarray) -> np.ndarray:
+    """A horizontal force [N] along +x3."""
+    return np.vstack([np.zeros_like(force), force / plant.mh])
+
+
+def _close(found, expected: float, rel: float, what: str) -> None:
+    value = found.value if hasattr(found, "value") else float(found)
+    assert value == pytest.approx(expected, rel=rel), f"{what}: found {value:.6g}, planted {expected:.6g}"
+
+
+def _phase_close(found: float, expected: float, tol: float) -> None:
+    d = (found - expected + math.pi) % (2 * math.pi) - math.pi
+    assert abs(d) < tol, f"phase {found:.3f} rad, planted {expected:.3f} rad"
+
+
+# --- guides ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("axis", ["vertical", "horizontal"])
+def test_guide_friction_opposes_the_velocity_with_its_size(plant, axis):
+    # Coulomb 1.2 N whose sign reverses over 2 mm/s (below that the 10 um encoders see the axis as
+    # stopped), plus 6 N s/m viscous: 5 %. The sharper LuGre friction of the independent
+    # generator, with pre-sliding, is sized in tests/test_diagnose.py (30 %, the issue's bound).
+    x = plant.data.x
+    v = x[1] if axis == "vertical" else x[3]
+    force = -(1.2 * np.tanh(v / 2e-3) + 6.0 * v)  # along +x1 (vertical) or +x3
+    planted = np.vstack([force / plant.mv, 0 * v]) if axis == "vertical" else _horizontal(plant, force)
+    p = _fit(plant, _candidate(plant, f"guide_friction_{axis}"), planted)
+    _close(p["coulomb"], 1.2, 0.05, "Coulomb force [N]")
+    _close(p["viscous"], 6.0, 0.05, "viscous coefficient [N s/m]")
+
+
+@pytest.mark.parametrize("force", [0.8, -0.8])
+def test_a_tilt_of_the_guides_is_a_constant_force_with_its_sign(plant, force):
+    n = plant.data.n
+    p = _fit(plant, _candidate(plant, "horizontal_guides_not_level"), _horizontal(plant, np.full(n, force)))
+    _close(p["force"], force, 0.02, "force [N]")
+    _close(p["tilt"], math.asin(force / (plant.mh * plant.g)), 0.02, "tilt [rad]")
+
+
+@pytest.mark.parametrize("force", [3.0, -3.0])
+def test_a_constant_vertical_force_has_its_sign(plant, force):
+    # Near equilibrium the magnetic force always carries the weight, so a constant vertical force
+    # is nearly collinear with a common scale of C2..C4 (the diagnosis calls it not separable):
+    # with the constants free the fit recovers it to 30 %, with them known to 2 %.
+    n = plant.data.n
+    cand = _candidate(plant, "constant_vertical_force")
+    planted = _vertical(plant, np.full(n, force))
+    _close(_fit(plant, cand, planted)["force"], force, 0.30, "force [N], constants free")
+    _close(_fit(plant, cand, planted, known=True)["force"], force, 0.02, "force [N], constants known")
+
+
+@pytest.mark.parametrize(("stiffness", "neutral"), [(6.0, 0.015), (6.0, -0.025)])
+def test_a_cable_carrier_is_a_spring_about_its_neutral_position(plant, stiffness, neutral):
+    x3 = plant.data.x[2]
+    p = _fit(plant, _candidate(plant, "cable_carrier_force"), _horizontal(plant, -stiffness * (x3 - neutral)))
+    _close(p["stiffness"], stiffness, 0.02, "stiffness [N/m]")
+    assert p["neutral_position"].value == pytest.approx(neutral, abs=1e-3)  # 1 mm of 50
+
+
+@pytest.mark.parametrize("offset", [0.3e-3, -0.3e-3])
+def test_a_gap_encoder_offset_is_found_with_its_sign(plant, offset):
+    # true gap = reading + offset; the candidate is the first-order change, so 5 % for 0.3 mm of
+    # a 20 mm gap (the second-order term is about offset / gap of the first: 1.5 %). The field
+    # decays with the gap, so an offset is nearly a common scale of C2..C4 (the diagnosis calls it
+    # not separable): recovered with the constants known (a gauge block at a stopper).
+    planted = plant.shifted_gap(np.full(plant.data.n, offset))
+    p = _fit(plant, _candidate(plant, "gap_sensor_offset"), planted, known=True)
+    _close(p["offset"], offset, 0.05, "offset [m]")
+
+
+@pytest.mark.parametrize("slope", [3e-3, -3e-3])
+def test_a_guide_misalignment_is_found_with_its_sign(plant, slope):
+    # The guides slope against the stator: the true gap is the reading + slope x3, and along the
+    # sloping guides the weight pulls and the normal force pushes (slope (M_h G - F_n) / M_h).
+    x = plant.data.x
+    true = x.copy()
+    true[0] = x[0] + slope * x[2]
+    along = slope * (plant.mh * plant.g - plant.normal_force(true)) / plant.mh
+    planted = plant.shifted_gap(slope * x[2]) + np.vstack([0 * along, along])
+    p = _fit(plant, _candidate(plant, "guide_misalignment"), planted)
+    _close(p["slope"], slope, 0.05, "slope [rad]")
+
+
+@pytest.mark.parametrize("phase", [0.4, 0.4 + math.pi])
+def test_guide_waviness_is_found_with_its_amplitude_and_phase(plant, phase):
+    period, amplitude = 0.030, 10e-6
+    x = plant.data.x
+    k = 2 * math.pi / period
+    w = amplitude * np.sin(k * x[2] + phase)
+    true = x.copy()
+    true[0] = x[0] + w
+    slope = amplitude * k * np.cos(k * x[2] + phase)
+    along = slope * (plant.mh * plant.g - plant.normal_force(true)) / plant.mh
+    planted = plant.shifted_gap(w) + np.vstack([0 * along, along])
+    p = _fit(plant, waviness_candidate(StageModel(), plant.data, period), planted)
+    _close(p["amplitude"], amplitude, 0.05, "amplitude [m]")
+    _phase_close(p["phase"].value, phase, 0.05)
+
+
+# --- magnetics ---------------------------------------------------------------------------------------
+COGGING = [
+    ("cogging_vertical_19mm", "vertical", 1),
+    ("cogging_vertical_38mm", "vertical", 2),
+    ("cogging_horizontal_19mm", "horizontal", 1),
+    ("cogging_horizontal_57mm", "horizontal", 0),
+]
+
+
+@pytest.mark.parametrize(("name", "axis", "slots"), COGGING)
+@pytest.mark.parametrize("phase", [0.7, 0.7 + math.pi])
+def test_cogging_is_found_with_its_peak_and_phase(plant, name, axis, slots, phase):
+    # F = A sin(2 pi x3 / P + phase) exp(-2 pi (x1 - g_ref) / P) (a field harmonic of wavelength P
+    # decays so in the gap, Laplace's equation); positive F pulls towards the stator (vertical) or
+    # along +x3. A = 1.5 N at g_ref; the candidate states its peak at the median gap.
+    params = plant.model.params
+    period = slots * params.slot_pitch if slots else params.pole_pitch
+    x = plant.data.x
+    g_ref = 0.015
+    force = 1.5 * np.sin(2 * math.pi * x[2] / period + phase) * np.exp(-2 * math.pi * (x[0] - g_ref) / period)
+    planted = _vertical(plant, force) if axis == "vertical" else _horizontal(plant, force)
+    p = _fit(plant, _candidate(plant, name), planted)
+    at = p["at_gap"].value
+    _close(p["amplitude"], 1.5 * math.exp(-2 * math.pi * (at - g_ref) / period), 0.02, "peak [N]")
+    _close(p["amplitude_15mm"], 1.5, 0.02, "peak at 15 mm [N]")
+    # the candidate's phase convention: a sin + b cos = A sin(arg + phase)
+    _phase_close(p["phase"].value, phase, 0.03)
+
+
+def _parts(plant: Plant) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The model's thrust, the magnets' attraction and the currents' normal force as accelerations
+    [m/s^2] (x4' = thrust, x2' = G - attraction - currents' normal force)."""
+    x, u = plant.data.x, plant.data.u
+    L = plant.model.coefficients(x[0])
+    thrust = plant.acc(x, u)[1]
+    attraction = L[1]
+    normal = plant.g - plant.acc(x, u)[0] - attraction
+    return thrust, attraction, normal
+
+
+def test_end_effects_are_lost_thrust_and_attraction_towards_the_ends(plant):
+    # 8 % of the thrust and 5 % of the attraction lost where the profile is 1, the profile
+    # exp((x3 - 45 mm) / 15 mm) + exp((-45 mm - x3) / 15 mm); the candidate reports the loss at the
+    # logged ends relative to the centre (its own ends and width: 30 %, the issue's size criterion)
+    x3 = plant.data.x[2]
+    w, end = 0.015, 0.045
+    profile = np.exp((x3 - end) / w) + np.exp((-end - x3) / w)
+    thrust, attraction, normal = _parts(plant)
+    planted = np.vstack([(0.05 * attraction + 0.08 * normal) * profile, -0.08 * thrust * profile])
+    p = _fit(plant, _candidate(plant, "end_effects"), planted)
+    ends = (p["low_end_position"].value, p["high_end_position"].value)
+
+    def prof(v):
+        return math.exp((v - end) / w) + math.exp((-end - v) / w)
+
+    drop = sum(prof(v) for v in ends) / 2 - prof(0.5 * sum(ends))
+    _close(p["thrust_loss_at_ends"], 0.08 * drop, 0.30, "thrust loss at the ends")
+    _close(p["attraction_loss_at_ends"], 0.05 * drop, 0.30, "attraction loss at the ends")
+
+
+@pytest.mark.parametrize("name", ["attraction_gap_dependence", "magnet_field_gap_dependence"])
+@pytest.mark.parametrize("gain", [4.0, -4.0])
+def test_the_attraction_departing_from_the_field_model_with_the_gap(plant, name, gain):
+    # the attraction changes by a(x1) = gain (x1 - mean gap) (4 /m: 1 % over 2.5 mm); the magnet
+    # field (B ~ sqrt of the attraction) changes the thrust and the currents' normal force by a/2
+    x = plant.data.x
+    cand = _candidate(plant, name)
+    thrust, attraction, _ = _parts(plant)
+    lo, hi = np.percentile(x[0][plant.data.valid], [1, 99])
+    a = gain * (x[0] - np.mean(x[0][plant.data.valid]))
+    vertical = -attraction * a
+    horizontal = np.zeros_like(a)
+    if name == "magnet_field_gap_dependence":
+        L = plant.model.coefficients(x[0])
+        currents_field = L[2] * plant.data.u[1]  # the C3 part of the normal force
+        vertical -= currents_field * a / 2
+        horizontal = thrust * a / 2
+    # a gain over the gap is partly a change of C2..C4's shape: recovered with the constants known
+    # (10 %: the planted change is linear, the candidate's basis adds a quadratic)
+    p = _fit(plant, cand, np.vstack([vertical, horizontal]), known=True)
+    _close(p["attraction_change_at_smallest_gap"], gain * (lo - hi) / 2, 0.10, "change at the smallest gap")
+    _close(p["attraction_change_at_largest_gap"], gain * (hi - lo) / 2, 0.10, "change at the largest gap")
+
+
+# --- currents ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("phase", [0.3, 0.3 + math.pi])
+def test_thrust_ripple_is_a_fraction_of_the_thrust(plant, phase):
+    params = plant.model.params
+    x3 = plant.data.x[2]
+    thrust = _parts(plant)[0]
+    ripple = 0.03 * np.sin(2 * math.pi * x3 / params.slot_pitch + phase) + 0.01 * np.sin(
+        2 * math.pi * x3 / params.pole_pitch
+    )
+    p = _fit(plant, _candidate(plant, "thrust_ripple"), np.vstack([0 * x3, thrust * ripple]))
+    _close(p["amplitude"], 0.03, 0.03, "slot-pitch ripple")
+    _close(p["amplitude_pole_pitch"], 0.01, 0.10, "pole-pitch ripple")
+    _phase_close(p["phase"].value, phase, 0.05)
+
+
+@pytest.mark.parametrize("angle", [0.04, -0.04])
+def test_a_commutation_offset_rotates_the_currents(plant, angle):
+    # the amplifiers' angle is off by `angle`: the currents the motor sees are the logged ones
+    # rotated, i_q' = i_q cos d + i_d sin d, i_d' = i_d cos d - i_q sin d (the candidate is first
+    # order in d: 5 %)
+    x, u = plant.data.x, plant.data.u
+    c, s = math.cos(angle), math.sin(angle)
+    rotated = np.vstack([c * u[0] + s * u[1], c * u[1] - s * u[0]])
+    planted = plant.acc(x, rotated) - plant.acc(x, u)
+    p = _fit(plant, _candidate(plant, "commutation_offset"), planted)
+    _close(p["angle"], angle, 0.05, "angle [rad]")
+
+
+def test_an_amplifier_lag_delays_the_forces(plant):
+    # the motor sees the currents 0.6 ms late (interpolated). The candidate's time constant is the
+    # delay beyond the loop's own zero-order hold (half the generator's 0.2 ms control period), so
+    # on the log as the diagnosis sees it, it is 0.6 ms plus what the clean log already carries
+    # (0.06 +- 0.02 ms): 15 %. Its total delay adds the hold back.
+    cand = _candidate(plant, "current_amplifier_lag")
+    data = plant.data
+    t = np.arange(data.n) * data.sample_time
+    delay = 0.6e-3
+    late = np.vstack([np.interp(t - delay, t, data.u[k]) for k in range(2)])
+    p = _fit(plant, cand, plant.acc(data.x, late) - plant.acc(data.x, data.u), differential=False)
+    _close(p["time_constant"], delay, 0.15, "amplifier time constant [s]")
+    _close(p["hold_delay"], 0.5 * 0.2e-3, 1e-9, "the loop's hold [s]")
+    _close(p["total_delay"], delay + 0.1e-3, 0.15, "total delay [s]")
