@@ -90,7 +90,8 @@ class MicrostepperTransformation:
         iqb = -self.masses[1] * v[1] / (2 * k1)
         load = self.masses[2] * (self.gravity - v[2])
         R = k3**2 - 4 * k4 * (k2 + k4 * (iqa**2 + iqb**2) / 2 - load / 4)
-        i_d = (-k3 - ca.sqrt(ca.fmax(R, 0))) / (2 * k4)
+        # a floor above 0 keeps the derivative finite (0, not 0 * inf) where R < 0
+        i_d = (-k3 - ca.sqrt(ca.fmax(R, 1e-300))) / (2 * k4)
         self.function = ca.Function(
             "microstepper_fl", [y, v], [ca.vertcat(iqa, i_d, iqb, i_d), R], ["gap", "v"], ["u", "R"]
         )
