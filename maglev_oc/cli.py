@@ -117,18 +117,24 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from maglev_oc.sim.scenarios import excitation_scenario, paper_scenarios
     from maglev_oc.sim.twin import RigTwin
 
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration must be positive [s], got {args.duration}")
+    if not args.rate > 0:
+        raise InputError(f"--rate must be positive [Hz], got {args.rate}")
     model = load_model(args.params)
+    # the plant's stage is --twin-params, else the controller's (--params); its constants
+    # --twin-constants, else that file's
     plant = (
-        load_model(args.twin_params, args.twin_constants)
+        load_model(args.twin_params or args.params, args.twin_constants)
         if (args.twin_params or args.twin_constants)
         else model
     )
     scenarios = paper_scenarios()
     if args.scenario == "excitation":
-        scenario = excitation_scenario(args.duration or 60.0, seed=args.seed)
+        scenario = excitation_scenario(60.0 if args.duration is None else args.duration, seed=args.seed)
     else:
         scenario = scenarios[args.scenario]
-        if args.duration:
+        if args.duration is not None:
             scenario = dataclasses.replace(scenario, duration=args.duration)
     effects = TwinEffects.rig() if args.twin == "rig" else TwinEffects.ideal()
     controller = build_controller(args.controller, model)
@@ -164,6 +170,8 @@ def cmd_region(args: argparse.Namespace) -> int:
         raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
     if args.current_limit is not None and not (0 < args.current_limit < 100):
         raise InputError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
+    if args.current_limit is not None and args.no_current_limit:
+        raise InputError("--current-limit and --no-current-limit contradict each other: give one")
     if args.samples < 0:
         raise InputError(f"--samples must be >= 0, got {args.samples}")
     limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)

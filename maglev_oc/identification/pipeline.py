@@ -12,6 +12,7 @@ This is what ``maglev-oc identify`` runs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -31,7 +32,7 @@ from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.data import as_log_list
+from maglev_oc.regression.data import as_log_list, delayed_inputs
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Result
 
@@ -246,7 +247,7 @@ def identify(
     segment_duration, window_duration : float
         [s] Multiple-shooting segment and continuity window.
     input_delay : float
-        [s] Delay applied to the logged currents.
+        [s] Delay applied to the logged currents (by every method, NPFSI included).
     min_duration : float
         [s] Shortest log accepted.
 
@@ -293,8 +294,12 @@ def identify(
     constants = tuple(e for e in estimate if e in CONSTANT_NAMES)
     if "npfsi" in methods and constants:
         t0 = time.perf_counter()
+        # the estimator sees the currents as the amplifiers applied them: shifted by the delay
+        log0 = logs[0]
+        if input_delay:
+            log0 = dataclasses.replace(log0, u=delayed_inputs(log0, input_delay))
         for eps in npfsi_eps:
-            runs.append(npfsi(logs[0], model, estimate=constants, eps=eps, gamma=npfsi_gamma))
+            runs.append(npfsi(log0, model, estimate=constants, eps=eps, gamma=npfsi_gamma))
         times["npfsi"] = time.perf_counter() - t0
     times["total"] = sum(times.values())
     return IdentificationOutcome(
