@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.model.allocation import MicrostepperTransformation
-from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
+from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import microstepper
 from maglev_oc.region.microstepper import MicrostepperRegion
 
@@ -44,7 +44,7 @@ def _violations(region: MicrostepperRegion, setpoint, z: np.ndarray) -> dict[str
             out[name] = int(np.sum(np.hypot(u[q], u[d]) > region.current_limit))
     if region.stoppers:
         e = region.errors @ z + np.asarray(setpoint)[:, None]
-        out["gap"] = int(np.sum((e[2] < STOPPER_GAP[0]) | (e[2] > STOPPER_GAP[1])))
+        out["gap"] = int(np.sum((e[2] < MICROSTEPPER_STOPPER_GAP[0]) | (e[2] > MICROSTEPPER_STOPPER_GAP[1])))
         out["travel"] = int(
             np.sum((np.abs(e[0]) > STOPPER_POSITION[1]) | (np.abs(e[1]) > STOPPER_POSITION[1]))
         )
@@ -53,7 +53,7 @@ def _violations(region: MicrostepperRegion, setpoint, z: np.ndarray) -> dict[str
 
 CASES = [
     # (limits, set-point (x, y, gap) [m], constraint that must bind)
-    (dict(), (0.0, 0.0, 0.025), "gap"),  # the 30 mm stopper, 5 mm above the set-point
+    (dict(), (0.0, 0.0, 0.032), "gap"),  # the 35 mm stopper, 3 mm above (below 31 mm the 9 A limit binds)
     (dict(), (0.04, -0.04, 0.021), "headroom"),  # near the stator: the 9 A limit first
     (dict(stoppers=False), (0.0, 0.0, 0.025), "headroom"),
     (dict(current_limit=None, stoppers=False), (0.04, -0.04, 0.022), "margin"),  # R >= 0 alone
@@ -136,7 +136,7 @@ def test_with_the_default_budget_the_brackets_close_to_a_few_percent():
 def test_a_setpoint_outside_the_travel_or_infeasible_is_said_so():
     region = MicrostepperRegion(PLATFORM)
     with pytest.raises(Exception, match="outside"):
-        region.largest_level((0.0, 0.0, 0.031))
+        region.largest_level((0.0, 0.0, 0.036))
     # a limit below the equilibrium current: the set-point itself is infeasible
     weak = MicrostepperRegion(PLATFORM, current_limit=0.5)
     res = weak.largest_level((0.0, 0.0, 0.025))

@@ -3,6 +3,7 @@
 __all__ = [
     "CONTINUOUS_CURRENT_LIMIT",
     "ENCODER_RESOLUTION",
+    "MICROSTEPPER_STOPPER_GAP",
     "PEAK_CURRENT_LIMIT",
     "RIG_SAMPLE_TIME",
     "STOPPER_GAP",
@@ -22,3 +23,6 @@ STOPPER_GAP = (8e-3, 30e-3)
 outside the working range)."""
 STOPPER_POSITION = (-60e-3, 60e-3)
 """Horizontal position between the stoppers [m] (about +-50 mm of travel, 002 Sec. 4)."""
+MICROSTEPPER_STOPPER_GAP = (8e-3, 35e-3)
+"""Gap between the microstepper's vertical stoppers [m] (assumed: 002 Sec. 8 gives the operating
+range 20-30 mm, so the upper stopper sits outside it, not on its edge as the 2-DOF's 30 mm does)."""

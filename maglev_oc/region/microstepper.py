@@ -41,7 +41,7 @@ from scipy.linalg import block_diag, cholesky, solve_continuous_lyapunov
 from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V, augmented_axis, checked_gains
 from maglev_oc.errors import InputError
 from maglev_oc.model.allocation import MicrostepperTransformation
-from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT, STOPPER_GAP, STOPPER_POSITION
+from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import Platform, microstepper
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
@@ -166,7 +166,12 @@ class MicrostepperRegion:
         for j, solver in enumerate(self._refuters):
             for _ in range(starts):
                 x0 = self.chol @ rng.normal(size=4) * 3.0
-                sol = solver(x0=x0, p=gap0, ubg=0.0, lbg=-ca.inf)
+                # the gap stays physical (1 mm or more): the field model is not defined at a closed gap
+                bounds = {
+                    "lbx": [1e-3 - gap0, -ca.inf, -ca.inf, -ca.inf],
+                    "ubx": [0.1, ca.inf, ca.inf, ca.inf],
+                }
+                sol = solver(x0=x0, p=gap0, ubg=0.0, lbg=-ca.inf, **bounds)
                 ell = np.asarray(sol["x"]).ravel()
                 h = np.asarray(self._h_of_l(ell, gap0)).ravel()
                 if h[j] <= 1e-9 * max(1.0, abs(h[j])):  # on or beyond the boundary
@@ -181,7 +186,7 @@ class MicrostepperRegion:
         if not self.stoppers:
             return {}
         out = {}
-        bounds = (STOPPER_POSITION, STOPPER_POSITION, STOPPER_GAP)
+        bounds = (STOPPER_POSITION, STOPPER_POSITION, MICROSTEPPER_STOPPER_GAP)
         for j, (axis, (lo, hi)) in enumerate(zip(AXES, bounds, strict=True)):
             room = min(setpoint[j] - lo, hi - setpoint[j])
             if room <= 0:
@@ -237,7 +242,7 @@ class MicrostepperRegion:
     def _linear_witness(self, setpoint, axis: str, level: float) -> np.ndarray:
         """The point of {V <= level} farthest along ``axis``'s error towards its nearer limit."""
         j = AXES.index(axis)
-        lo, hi = (STOPPER_POSITION, STOPPER_POSITION, STOPPER_GAP)[j]
+        lo, hi = (STOPPER_POSITION, STOPPER_POSITION, MICROSTEPPER_STOPPER_GAP)[j]
         sign = 1.0 if hi - setpoint[j] <= setpoint[j] - lo else -1.0
         m = self.errors[j]
         p_inv_m = np.linalg.solve(self.P, m)
