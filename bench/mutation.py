@@ -1,71 +1,207 @@
-"""Mutation testing with mutmut (the ``mutation`` extra), one module or package at a time.
+"""Mutation testing with mutmut (the ``mutation`` extra): score per package, survivors listed.
 
+    python bench/mutation.py                        # the five packages, 120 sampled mutants each
+    python bench/mutation.py --packages region --sample 0 --show   # every mutant of one package
     python bench/mutation.py --mutate maglev_oc/region/interval.py \
-        --tests tests/test_region_interval.py tests/test_region_soundness.py [--children 2]
+        --tests tests/test_region_interval.py tests/test_region_soundness.py
 
-Copies ``maglev_oc/``, ``tests/`` and ``pyproject.toml`` into a scratch folder (mutmut 3 writes
-its mutants beside the sources), adds a ``[tool.mutmut]`` table that mutates only ``--mutate``
-and runs only ``--tests``, runs ``mutmut run``, and prints the counts and the score:
-killed (and timed out) over all mutants, "no tests" counted as survivors. Survivors are listed
-with ``--show`` (their diffs, from ``mutmut show``). Not run in CI: a module takes minutes to
-hours, since each mutant reruns the tests that reach it.
+mutmut 3 writes its mutants beside the sources, so ``maglev_oc/``, ``tests/`` and
+``pyproject.toml`` are copied into a work folder (``bench/out/mutation/``, kept between runs so
+that mutmut's map from functions to the tests that reach them is collected once). The tests are
+the quick subset (``-m "not slow"``) unless ``--tests`` names files; each mutant reruns only the
+tests that reach its function.
+
+The packages hold about 12 000 mutants; running them all takes most of a day on two cores. By
+default a seeded random sample of ``--sample`` mutants per package is run, and the score is
+printed with its 95 % Wilson interval, so the estimate says how far it can be off. Killed and
+timed-out mutants count as detected; "no tests" (a function no quick test reaches) and
+"survived" count against the score. Surviving diffs go to ``survivors.txt`` in the work folder.
+Not run in CI.
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
+import math
+import random
+import re
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+WORK = ROOT / "bench" / "out" / "mutation"
+PACKAGES = ("model", "control", "region", "identification", "diagnosis", "regression")
+DETECTED = ("killed", "timeout", "segfault")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--mutate", required=True, help="a module or package path under maglev_oc/")
-    parser.add_argument("--tests", nargs="+", required=True, help="test files that guard it")
+    parser.add_argument("--packages", nargs="+", default=list(PACKAGES), choices=PACKAGES)
+    parser.add_argument("--mutate", help="one module or package path instead of --packages")
+    parser.add_argument("--tests", nargs="+", help="test files to run (default: the quick suite)")
+    parser.add_argument("--sample", type=int, default=120, help="mutants per package; 0 runs all")
+    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--children", type=int, default=2)
+    parser.add_argument("--fresh", action="store_true", help="start from a new copy of the sources")
     parser.add_argument("--show", action="store_true", help="print the surviving mutants' diffs")
+    parser.add_argument("--report-only", action="store_true", help="score the last run again, run nothing")
     args = parser.parse_args()
     if shutil.which("mutmut") is None:
         raise SystemExit('mutmut is missing: pip install -e ".[mutation]"')
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        for name in ("maglev_oc", "tests"):
-            shutil.copytree(ROOT / name, work / name, ignore=shutil.ignore_patterns("__pycache__"))
-        tests = ", ".join(f'"{t}"' for t in args.tests)
-        config = (
-            "\n[tool.mutmut]\n"
-            f'source_paths = ["{args.mutate}"]\n'
-            f"pytest_add_cli_args_test_selection = [{tests}]\n"
-            'also_copy = ["tests/", "maglev_oc/"]\n'
+    paths = [args.mutate] if args.mutate else [f"maglev_oc/{p}" for p in args.packages]
+    if not args.report_only:
+        _prepare(paths, args.tests, fresh=args.fresh)
+    status = _status()
+    groups = _by_package(status, paths)
+    chosen = _sample(groups, args.sample, args.seed)
+    if not args.report_only:
+        subprocess.run(["mutmut", "run", "--max-children", str(args.children), *chosen], cwd=WORK)
+        status = _status()
+    left = [n for n in chosen if status.get(n) in ("survived", "no tests")]
+    diffs = {n: _diff(n) for n in left}
+    equivalent = {n: why for n in left if (why := _equivalent(n, diffs[n]))}
+    _report(groups, chosen, status, equivalent)
+    survivors = [n for n in left if n not in equivalent]
+    text = "".join(f"--- {n} ({status[n]})\n{diffs[n]}\n" for n in survivors)
+    (WORK / "survivors.txt").write_text(text)
+    listed = "".join(f"{n}: {why}\n" for n, why in sorted(equivalent.items()))
+    (WORK / "equivalent.txt").write_text(listed)
+    print(f"surviving diffs: {WORK / 'survivors.txt'}; equivalent, with reasons: {WORK / 'equivalent.txt'}")
+    if args.show:
+        print(text)
+
+
+def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool) -> None:
+    """Copy the sources into WORK and let mutmut generate the mutants and its test map."""
+    if fresh and WORK.exists():
+        shutil.rmtree(WORK)
+    WORK.mkdir(parents=True, exist_ok=True)
+    for name in ("maglev_oc", "tests"):
+        if (WORK / name).exists():
+            shutil.rmtree(WORK / name)
+        shutil.copytree(ROOT / name, WORK / name, ignore=shutil.ignore_patterns("__pycache__"))
+    sources = ", ".join(f'"{p}"' for p in paths)
+    selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
+    # tests that read the sources as text (exports, README commands) see mutmut's trampolines
+    marker = (
+        ""
+        if tests
+        else 'pytest_add_cli_args = ["-m", "not slow", "-p", "no:cacheprovider", '
+        '"--ignore=tests/test_house.py", "--ignore=tests/test_readme.py"]\n'
+    )
+    config = (
+        "\n[tool.mutmut]\n"
+        f"source_paths = [{sources}]\n"
+        f"pytest_add_cli_args_test_selection = [{selection}]\n"
+        f"{marker}"
+        'also_copy = ["tests/", "maglev_oc/"]\n'
+    )
+    (WORK / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text() + config)
+    # A pattern that matches no mutant: mutmut generates the mutants and collects which tests
+    # reach which function, then stops before running any mutant.
+    subprocess.run(["mutmut", "run", "no-such-mutant-*"], cwd=WORK, capture_output=True)
+
+
+def _status() -> dict[str, str]:
+    out = subprocess.run(
+        ["mutmut", "results", "--all", "true"], cwd=WORK, capture_output=True, text=True
+    ).stdout
+    status = {}
+    for line in out.splitlines():
+        name, _, word = line.strip().rpartition(": ")
+        if name:
+            status[name] = word
+    return status
+
+
+def _by_package(status: dict[str, str], paths: list[str]) -> dict[str, list[str]]:
+    groups: dict[str, list[str]] = {}
+    for path in paths:
+        prefix = path.removesuffix(".py").replace("/", ".")
+        groups[path] = sorted(n for n in status if n == prefix or n.startswith(prefix + "."))
+    return groups
+
+
+def _sample(groups: dict[str, list[str]], size: int, seed: int) -> list[str]:
+    rng = random.Random(seed)
+    chosen = []
+    for names in groups.values():
+        chosen += names if size <= 0 or size >= len(names) else rng.sample(names, size)
+    return chosen
+
+
+def _report(
+    groups: dict[str, list[str]], chosen: list[str], status: dict[str, str], equivalent: dict[str, str]
+) -> None:
+    """Per package: mutants, sampled, detected, equivalent, score = detected / (run - equivalent)."""
+    picked = set(chosen)
+    detected_all = total_all = 0.0
+    head = f"{'package':<30}{'mutants':>8}{'run':>5}{'killed':>7}{'equiv':>6}{'score':>7}   95 % interval"
+    print("\n" + head)
+    for path, names in groups.items():
+        run = [n for n in names if n in picked]
+        counts = collections.Counter(status.get(n, "not checked") for n in run)
+        detected = sum(counts[w] for w in DETECTED)
+        n_eq = sum(n in equivalent for n in run)
+        judged = max(len(run) - n_eq, 1)
+        low, high = _wilson(detected, judged)
+        print(
+            f"{path:<30}{len(names):>8}{len(run):>5}{detected:>7}{n_eq:>6}{detected / judged:>7.1%}"
+            f"   {low:.1%} - {high:.1%}   ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))})"
         )
-        (work / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text() + config)
-        subprocess.run(["mutmut", "run", "--max-children", str(args.children)], cwd=work, capture_output=True)
-        out = subprocess.run(
-            ["mutmut", "results", "--all", "true"], cwd=work, capture_output=True, text=True
-        ).stdout
-        status = {}
-        for line in out.splitlines():
-            name, _, word = line.strip().rpartition(": ")
-            if name:
-                status[name] = word
-        counts = collections.Counter(status.values())
-        detected = counts["killed"] + counts["timeout"]
-        total = sum(counts.values())
-        print(f"{args.mutate}: {total} mutants; " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-        print(f"score (killed or timed out / all): {detected / max(total, 1):.1%}")
-        if args.show:
-            for name, word in status.items():
-                if word in ("survived", "no tests"):
-                    diff = subprocess.run(["mutmut", "show", name], cwd=work, capture_output=True, text=True)
-                    print(f"--- {name} ({word})\n{diff.stdout}")
-    sys.exit(0)
+        # each package weighted by its number of mutants for the overall estimate
+        if run:
+            detected_all += detected / judged * len(names)
+            total_all += len(names)
+    overall = detected_all / max(total_all, 1)
+    print(f"{'overall (weighted by mutants)':<30}{int(total_all):>8}{'':>25}{overall:>7.1%}")
+
+
+EQUIVALENT_FILE = ROOT / "bench" / "mutation_equivalent.txt"
+"""Mutants judged equivalent by reading them: ``name: reason`` per line (function-level names, so
+a list stays valid while the function is unchanged)."""
+
+_STRING = re.compile(r"'[^']*'|\"[^\"]*\"")
+
+
+def _equivalent(name: str, diff: str) -> str | None:
+    """Why a surviving mutant cannot change a result (or None): the listed reasons, or a change
+    confined to the text of a label — a CasADi Function's name or its inputs' and outputs' names
+    (nothing looks them up), or the words of an error message (its type and the value it names
+    are what tests check)."""
+    if EQUIVALENT_FILE.is_file():
+        for line in EQUIVALENT_FILE.read_text().splitlines():
+            key, _, why = line.partition(": ")
+            if key.strip() == name:
+                return why.strip()
+    minus = [ln[1:] for ln in diff.splitlines() if ln.startswith("-") and not ln.startswith("---")]
+    plus = [ln[1:] for ln in diff.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
+    if len(minus) != 1 or len(plus) != 1 or _STRING.sub('""', minus[0]) != _STRING.sub('""', plus[0]):
+        return None
+    if re.search(r"ca\.Function\(|nlpsol\(|qpsol\(|\.sym\(", minus[0]):
+        return "label: a CasADi Function's or symbol's name (nothing looks it up)"
+    if re.search(r"raise \w+|Error\(|warnings\.warn|message=", minus[0]):
+        return "text of a message (tests check the error's type and what it names)"
+    return None
+
+
+def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    if n == 0:
+        return 0.0, 1.0
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(centre - half, 0.0), min(centre + half, 1.0)
+
+
+def _diff(name: str) -> str:
+    out = subprocess.run(["mutmut", "show", name], cwd=WORK, capture_output=True, text=True).stdout
+    return re.sub(r"^# .*\n", "", out)
 
 
 if __name__ == "__main__":
     main()
+    sys.exit(0)

@@ -158,6 +158,13 @@ def test_open_loop_poles_vectorised_agrees_with_linearize(model):
         op = equilibrium(model, g)
         lin = linearize(model, op.x, op.u)
         assert_allclose(ol.vertical[k, 0].real, lin.poles[0].real, rtol=1e-12)
+        # the stiffness is the Jacobian's d x2'/d x1, and the vertical pair is +-its square root
+        assert_allclose(ol.stiffness[k], lin.A[1, 0], rtol=1e-12)
+        assert_allclose(
+            np.sort(ol.vertical[k].real), [-np.sqrt(lin.A[1, 0]), np.sqrt(lin.A[1, 0])], rtol=1e-9
+        )
+        # the horizontal axis is a double integrator at every equilibrium (u1 = 0)
+        assert_allclose(ol.horizontal[k], [0, 0], atol=1e-12)
     # the unstable pole grows as the gap closes (stiffer magnet pull)
     assert np.all(np.diff(ol.vertical[:, 0].real) < 0)
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
+import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
@@ -122,3 +124,25 @@ def test_json_syntax_error_gives_line(tmp_path):
     path.write_text('{"stage": {\n  "mass_vertical": 4.3,\n}}')
     with pytest.raises(ValueError, match="line 3"):
         load_json(path)
+
+
+def test_physical_constants_scale_with_winding_factor_and_masses():
+    # 002 eqs. (5)-(8): C1 and C3 carry k_w once, C4 twice, C2 not at all; C1 divides by M_h,
+    # C2..C4 by M_v. Table I's full-pitch winding has k_w = 1, which hides a wrong power of k_w,
+    # so a short-pitched coil (two slots instead of three) makes it show.
+    base = StageParameters()
+    short = dataclasses.replace(base, coil_pitch=2 * base.slot_pitch)
+    kw = short.winding_factor
+    assert abs(kw - 1) > 0.05
+    c0, c1 = base.physical_constants(), short.physical_constants()
+    assert_allclose(c1.C1 / c0.C1, kw, rtol=1e-12)
+    assert_allclose(c1.C2 / c0.C2, 1.0, rtol=1e-12)
+    assert_allclose(c1.C3 / c0.C3, kw, rtol=1e-12)
+    assert_allclose(c1.C4 / c0.C4, kw**2, rtol=1e-12)
+    heavy = dataclasses.replace(
+        base, mass_horizontal=2 * base.mass_horizontal, mass_vertical=3 * base.mass_vertical
+    )
+    c2 = heavy.physical_constants()
+    assert_allclose(
+        np.array(c2.as_array()) / np.array(c0.as_array()), [1 / 2, 1 / 3, 1 / 3, 1 / 3], rtol=1e-12
+    )
