@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from maglev_oc.errors import InputError
+from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import (
     GAP_TRAVEL,
@@ -83,3 +85,15 @@ def test_validation(model):
         feasibility_map(
             FeasibleSet(model), RegulatorLoop(), Reference.setpoint(0.02), ("gap", "e1"), (0, 1), (0, 1)
         )
+
+
+@pytest.mark.parametrize("gap_mm", [12.0, 20.0, 26.0])
+def test_a_setpoint_is_held_exactly_when_its_equilibrium_current_fits(model, gap_mm):
+    # at rest the currents are (0, u2_eq) (000 eq. (7), closed form): a limit 1 mA above |u2_eq|
+    # leaves a headroom of about 2 |u2_eq| 1e-3 A^2 (far below 1 A^2) and must be accepted; 1 mA
+    # below must be refused, naming the current
+    gap = gap_mm * 1e-3
+    current = abs(float(equilibrium_currents(model, [gap]).current[0]))
+    FeasibleSet(model, current_limit=current + 1e-3).check_setpoint(gap)
+    with pytest.raises(InputError, match="needs \\|u\\| >"):
+        FeasibleSet(model, current_limit=current - 1e-3).check_setpoint(gap)

@@ -10,7 +10,7 @@ import pytest
 from maglev_oc.control.gains import PAPER_GAINS, axis_poles
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.region.closed_loop import Reference
-from maglev_oc.region.roa import LinearizedLoop, certify_roa, frozen_poles
+from maglev_oc.region.roa import LinearizedLoop, RoaCertifier, certify_roa, frozen_poles
 from maglev_oc.results import check_result
 
 TARGET = Reference.setpoint(0.018, 0.020)
@@ -68,6 +68,11 @@ def test_feedforward_only_moves_the_start(model, linear, roa):
     np.testing.assert_allclose(roa2.level, roa.level, rtol=1e-9)
     loop2 = LinearizedLoop(model, noff, TARGET)
     assert abs(loop2.z_eq[2]) > 0
+    # z_eq is the regulator's equilibrium: with zero errors its internal model alone supplies the
+    # equilibrium current (u2 = K_v z_eq without feedforward), and the internal model is at rest
+    # there (phi xi_eq = 0: only xi1, the integrator's state, is nonzero)
+    np.testing.assert_allclose(loop2.K_v @ loop2.z_eq[:5], loop2.u_eq[1], rtol=1e-12)
+    np.testing.assert_allclose(loop2.z_eq[[0, 1, 3, 4]], 0.0, atol=0)
     start = [0.026, 0, 0, 0]
     v1 = roa.value(LinearizedLoop(model, linear, TARGET).initial_error(start))
     v2 = roa2.value(loop2.initial_error(start))
@@ -86,3 +91,13 @@ def test_validation(model, linear):
         LinearizedLoop(model, linear, Reference.paper_sinusoid())
     with pytest.raises(TypeError):
         LinearizedLoop(model, object(), TARGET)
+
+
+def test_the_stability_level_is_the_largest_certified_within_one_percent(model, linear, roa):
+    # bisection on the Jacobian box's decrease test: at the certified level the box proves
+    # V' < 0, and 1 % above it the same test fails (unless the stoppers' level, which caps the
+    # search at 4x, is below it)
+    cert = RoaCertifier(LinearizedLoop(model, linear, TARGET))
+    assert cert.decrease_margin(roa.P, cert.jacobian_box(roa.P, roa.level_stability)) < 0
+    if roa.level_stability < 4 * roa.level_travel:
+        assert cert.decrease_margin(roa.P, cert.jacobian_box(roa.P, 1.01 * roa.level_stability)) >= 0
