@@ -16,7 +16,7 @@ from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.identification.equation_error import EquationError, fit_equation_error
 from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log, identification_effects
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.base import CONSTANT_NAMES
+from maglev_oc.regression.base import CONSTANT_NAMES, GAP_OFFSET_BOUND
 from maglev_oc.regression.data import matching_kernel
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.terms import AccelerationTerm, constant_acceleration
@@ -131,6 +131,18 @@ def test_gap_offset_is_estimated_natively(model, truth_model):
     alone = fit_equation_error(log, truth_model, estimate=("gap_offset",))
     assert alone.success and alone.settings["linear"] is False
     assert alone.values["gap_offset"] == pytest.approx(-1e-4, abs=3e-6)
+    assert 1 <= alone.iterations <= 30  # Gauss-Newton's default budget
+
+
+def test_a_gap_offset_beyond_its_bound_stops_at_the_bound(model, truth_model):
+    # The encoder reads 6 mm short of the true gap, more than the +-5 mm (GAP_OFFSET_BOUND) the fit allows:
+    # the Gauss-Newton iterates stay within the bound; the final unconstrained solve finds the 6 mm,
+    # and the fit says it is beyond what it allows instead of passing it as a success
+    effects = dataclasses.replace(identification_effects(), encoder=Encoder(offset=(-6e-3, 0.0)))
+    log = excitation_log(truth_model, duration=6.0, seed=5, controller_model=model, effects=effects)
+    fit = fit_equation_error(log, truth_model, estimate=("gap_offset",))
+    assert fit.values["gap_offset"] > GAP_OFFSET_BOUND
+    assert not fit.success and fit.status == "at_bound" and "gap_offset" in fit.message
 
 
 @pytest.mark.slow

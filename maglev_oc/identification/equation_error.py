@@ -363,6 +363,16 @@ class EquationError:
         )
         design = build(sub.coef, first.weights) if status == "converged" else design
         sub = fit_subset(design, list(design.groups), band=hac_band)
+        # the final solve is unconstrained: an estimate beyond its bounds (a gap offset over 5 mm
+        # is a wrong setup, not a parameter) is reported, and the fit does not count as a success
+        outside = [
+            n for n, v, lo, hi in zip(design.names, sub.coef, lower, upper, strict=True) if not lo <= v <= hi
+        ]
+        if outside:
+            status = "at_bound"
+            message = (
+                f"{', '.join(outside)} beyond the bounds the fit allows: check the rig's setup (encoder zero)"
+            )
         return design, sub, status, message, iterations
 
     def _settings(self, hac_band: float, weights: np.ndarray, compensated: bool) -> dict:
