@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from maglev_oc.errors import InputError
 from maglev_oc.identification.layout import ParameterLayout
 from maglev_oc.regression.terms import (
     AccelerationTerm,
@@ -151,3 +152,14 @@ def test_friction_force_and_periodic_terms_in_newtons(model):
     est = pf.physical_parameters(np.array([3.0, 4.0]), np.diag([0.01, 0.01]))
     assert est["amplitude"].value == pytest.approx(5.0) and est["amplitude"].stderr == pytest.approx(0.1)
     assert est["period"].value == 0.019
+    # growing as the gap closes: (g_ref / x1)^n, stated at the reference gap it was given
+    grow = periodic_force(params, "vertical", 0.019, gap_exponent=2.0, reference_gap=0.015)
+    assert grow.physical_parameters(np.array([3.0, 4.0]), np.eye(2))["at_gap"].value == 0.015
+    at_ref = np.asarray(grow.function([0.015, 0, 0.019 / 4, 0], [0, 0], [0, 0], [1.0, 0.0])).ravel()
+    closer = np.asarray(grow.function([0.0075, 0, 0.019 / 4, 0], [0, 0], [0, 0], [1.0, 0.0])).ravel()
+    assert at_ref[0] == pytest.approx(-1.0 / params.mass_vertical)  # sin(pi/2) = 1 N towards the stator
+    assert closer[0] == pytest.approx(4 * at_ref[0])  # half the gap, exponent 2
+    for bad in (dict(period=0.0), dict(period=-0.019), dict(reference_gap=0.0), dict(gap_exponent=-1.0)):
+        kw = {"period": 0.019, **bad}
+        with pytest.raises(InputError):
+            periodic_force(params, "vertical", kw.pop("period"), **kw)
