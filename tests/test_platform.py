@@ -159,7 +159,7 @@ def test_minimum_norm_is_the_smallest_and_maximum_margin_the_lowest_peak(req):
     assert high.peak <= low.peak + 1e-9
     # brute force over the free current i_dA: none with the same forces has a smaller norm
     scan = np.linspace(low.currents[1] - 3, low.currents[1] + 3, 4001)
-    k = np.asarray(FL3._coefficients(gap)).ravel()
+    k = np.asarray(FL3.coefficients(gap)).ravel()
     n_a = k[1] + k[2] * scan + k[3] * (low.currents[0] ** 2 + scan**2)
     load = MICRO.masses[2] * (MICRO.gravity[2] - vg)
     c = k[1] + k[3] * low.currents[2] ** 2 - (load / 2 - n_a)

@@ -399,19 +399,10 @@ class MicrostepperRegulator:
         )
 
     def _force_coefficients(self, gap):
-        """(k1, k2, k3, k4) of one motor at ``gap``, read off the model's force law
-        (thrust -k1 i_q, normal k2 + k3 i_d + k4 (i_q^2 + i_d^2), every motor alike)."""
-        x = ca.vertcat(0, 0, 0, 0, gap, 0)
-
-        def forces(iq, i_d):
-            thrust, normal, _, _ = self.model.motor_forces(x, ca.DM([iq, i_d, 0, 0]))
-            return thrust[0], normal[0]
-
-        t1, _ = forces(1.0, 0.0)
-        _, n0 = forces(0.0, 0.0)
-        _, n_plus = forces(0.0, 1.0)
-        _, n_minus = forces(0.0, -1.0)
-        return -t1, n0, (n_plus - n_minus) / 2, (n_plus + n_minus) / 2 - n0
+        """(k1, k2, k3, k4) of one motor at ``gap`` (thrust -k1 i_q, normal k2 + k3 i_d +
+        k4 (i_q^2 + i_d^2), every motor alike)."""
+        k = self.transformation.coefficients(gap)
+        return k[0], k[1], k[2], k[3]
 
     def _margin_function(self) -> ca.Function:
         """(gap, v) -> -R / (dR/dv_gap) [m/s^2]: R is affine in v_gap, so this is how much further

@@ -70,6 +70,8 @@ class MicrostepperTransformation:
 
     ``function`` is the CasADi Function (gap, v (3)) -> (currents (4), R) of the minimum-norm
     allocation, for use inside a controller; :meth:`allocate` also gives the maximum-margin one.
+    ``coefficients`` is gap -> (k1, k2, k3, k4) of one motor: thrust -k1 i_q [N], normal force
+    k2 + k3 i_d + k4 (i_q^2 + i_d^2) [N] (K_i l_i(gap)).
     """
 
     def __init__(self, platform: Platform) -> None:
@@ -95,7 +97,7 @@ class MicrostepperTransformation:
         self.function = ca.Function(
             "microstepper_fl", [y, v], [ca.vertcat(iqa, i_d, iqb, i_d), R], ["gap", "v"], ["u", "R"]
         )
-        self._coefficients = ca.Function("k", [y], [ca.vertcat(k1, k2, k3, k4)])
+        self.coefficients = ca.Function("k", [y], [ca.vertcat(k1, k2, k3, k4)], ["gap"], ["k"])
 
     def allocate(self, gap: float, v, method: str = "minimum_norm") -> Allocation:
         """The currents that give accelerations ``v`` (3) [m/s^2] at ``gap`` [m]."""
@@ -110,7 +112,7 @@ class MicrostepperTransformation:
 
     def _maximum_margin(self, gap: float, u: np.ndarray, v) -> np.ndarray:
         """Split the normal load between the pairs so that the larger pair magnitude is smallest."""
-        _, k2, k3, k4 = np.asarray(self._coefficients(gap)).ravel()
+        _, k2, k3, k4 = np.asarray(self.coefficients(gap)).ravel()
         iqa, iqb = u[0], u[2]
         load = self.masses[2] * (self.gravity - float(v[2]))
         # per pair: 2 N(i_q, i_d) = 2 (k2 + k3 i_d + k4 (i_q^2 + i_d^2)); given i_dA, i_dB solves
