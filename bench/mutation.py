@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import collections
 import math
+import os
 import random
 import re
 import shutil
@@ -48,6 +49,11 @@ def main() -> None:
     parser.add_argument("--fresh", action="store_true", help="start from a new copy of the sources")
     parser.add_argument("--show", action="store_true", help="print the surviving mutants' diffs")
     parser.add_argument("--report-only", action="store_true", help="score the last run again, run nothing")
+    parser.add_argument(
+        "--verify",
+        action="store_true",
+        help="rerun each survivor against every quick test file that imports its package",
+    )
     args = parser.parse_args()
     if shutil.which("mutmut") is None:
         raise SystemExit('mutmut is missing: pip install -e ".[mutation]"')
@@ -61,6 +67,10 @@ def main() -> None:
         subprocess.run(["mutmut", "run", "--max-children", str(args.children), *chosen], cwd=WORK)
         status = _status()
     left = [n for n in chosen if status.get(n) in ("survived", "no tests")]
+    if args.verify:
+        killed = _verify(left)
+        status.update({n: "killed" for n in killed})
+        left = [n for n in left if n not in killed]
     diffs = {n: _diff(n) for n in left}
     equivalent = {n: why for n in left if (why := _equivalent(n, diffs[n]))}
     _report(groups, chosen, status, equivalent)
@@ -158,6 +168,51 @@ def _report(
             total_all += len(names)
     overall = detected_all / max(total_all, 1)
     print(f"{'overall (weighted by mutants)':<30}{int(total_all):>8}{'':>25}{overall:>7.1%}")
+
+
+def _verify(names: list[str]) -> set[str]:
+    """Survivors killed when rerun against every quick test file that imports their package.
+
+    mutmut runs for each mutant only the tests it saw reach the mutated function; a function
+    first reached inside a session fixture is attributed to whichever test built the fixture,
+    so a test that uses the fixture later is not rerun and the mutant is reported as surviving.
+    Here each survivor is applied to the work copy and the test files that import its package
+    run (stopping at the first failure); the original file is restored after each."""
+    killed = set()
+    tests = sorted((WORK / "tests").glob("test_*.py"))
+    for name in names:
+        module = re.sub(r"\.x.*$", "", name)  # maglev_oc.pkg.module
+        package = ".".join(module.split(".")[:2])
+        source = WORK / (module.replace(".", "/") + ".py")
+        if not source.is_file():
+            continue
+        files = [str(t.relative_to(WORK)) for t in tests if package in t.read_text()]
+        original = source.read_text()
+        try:
+            subprocess.run(["mutmut", "apply", name], cwd=WORK, capture_output=True)
+            run = subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "pytest",
+                    "-x",
+                    "-q",
+                    "-m",
+                    "not slow",
+                    "-p",
+                    "no:cacheprovider",
+                    *files,
+                ],
+                cwd=WORK,
+                capture_output=True,
+                env={**os.environ, "PYTHONPATH": str(WORK)},
+            )
+            if run.returncode != 0:
+                killed.add(name)
+            print(f"{name}: {'killed' if run.returncode else 'survived'} ({len(files)} test files)")
+        finally:
+            source.write_text(original)
+    return killed
 
 
 EQUIVALENT_FILE = ROOT / "bench" / "mutation_equivalent.txt"
