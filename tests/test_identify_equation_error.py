@@ -15,7 +15,6 @@ from maglev_oc.data.logs import Log
 from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.identification.equation_error import EquationError, fit_equation_error
 from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log, identification_effects
-from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import CONSTANT_NAMES, GAP_OFFSET_BOUND
 from maglev_oc.regression.data import matching_kernel
 from maglev_oc.regression.design import build_design
@@ -23,11 +22,6 @@ from maglev_oc.regression.terms import AccelerationTerm, constant_acceleration
 from maglev_oc.sim.effects import Encoder
 
 TRUTH = dict(zip(CONSTANT_NAMES, TWIN_TRUTH.as_array(), strict=True))
-
-
-@pytest.fixture(scope="module")
-def truth_model(model: StageModel) -> StageModel:
-    return model.with_constants(TWIN_TRUTH)
 
 
 @pytest.fixture(scope="module")

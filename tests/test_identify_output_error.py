@@ -11,20 +11,13 @@ from maglev_oc.identification.equation_error import fit_equation_error
 from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
 from maglev_oc.identification.layout import CONSTANT_NAMES
 from maglev_oc.identification.output_error import MultipleShooting, fit_output_error, simulate_open_loop
-from maglev_oc.model.stage import StageModel
 
 TRUTH = dict(zip(CONSTANT_NAMES, TWIN_TRUTH.as_array(), strict=True))
 
 
 @pytest.fixture(scope="module")
-def truth_model(model: StageModel) -> StageModel:
-    return model.with_constants(TWIN_TRUTH)
-
-
-@pytest.fixture(scope="module")
-def short_log(model, truth_model) -> Log:
-    """6 s of excitation on the twin (encoder + amplifier)."""
-    return excitation_log(truth_model, duration=6.0, seed=7, controller_model=model)
+def short_log(twin_log) -> Log:
+    return twin_log
 
 
 @pytest.fixture(scope="module")

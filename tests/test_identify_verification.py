@@ -11,7 +11,6 @@ from maglev_oc.data.logs import Log
 from maglev_oc.identification.experiments import (
     EQUILIBRIUM_GAPS,
     FIXED_GAPS,
-    TWIN_TRUTH,
     equilibrium_current_runs,
     fixed_gap_logs,
     verification_effects,
@@ -66,11 +65,6 @@ def test_cogging_from_c2_is_the_k2_difference(model):
     l2 = model.coefficients(gaps)[1] / model.constants.C2
     assert_allclose(xi, model.params.mass_vertical * (769.99 - 796.99) * l2, rtol=1e-12)
     assert np.all(xi < 0) and abs(xi[0]) > abs(xi[-1])
-
-
-@pytest.fixture(scope="module")
-def truth_model(model):
-    return model.with_constants(TWIN_TRUTH)
 
 
 def test_parabola_and_npfsi_at_two_fixed_gaps(model, truth_model):

@@ -69,6 +69,8 @@ OPTION_TESTS: dict[str, str] = {
     "simulate --seed": f"{HERE}::test_simulate_seed_sets_the_noise",
     "simulate --describe-twin": f"{HERE}::test_simulate_describe_twin_names_the_effects",
     "simulate --out": "tests/test_cli.py::test_simulate_writes_a_readable_log",
+    "simulate --stage": f"{HERE}::test_simulate_stage_microstepper_writes_three_axes",
+    "simulate --no-anti-windup": f"{HERE}::test_simulate_no_anti_windup_winds_up_into_the_stopper",
     # region
     "region --gaps": "tests/test_region_cli.py::test_region_writes_certificates",
     "region --position": f"{HERE}::test_region_position_moves_the_set_point",
@@ -80,6 +82,8 @@ OPTION_TESTS: dict[str, str] = {
     "region --samples": f"{HERE}::test_region_samples_runs_monte_carlo_inside",
     "region --json": "tests/test_region_cli.py::test_region_writes_certificates",
     "region --params": f"{HERE}::test_region_params_is_the_model",
+    "region --stage": f"{HERE}::test_region_stage_microstepper_certifies_the_3dof_loop",
+    "region --setpoint": f"{HERE}::test_region_setpoint_places_each_axis",
     # diagnose
     "diagnose --json": "tests/test_diagnose.py::test_json_follows_the_spec_contract",
     "diagnose --report": f"{HERE}::test_diagnose_report_is_written_with_the_findings",
@@ -155,6 +159,18 @@ LIBRARY_OPTION_TESTS: dict[str, str] = {
     ),
     "maglev_oc.model.loading.load_model(constants)": f"{HERE}::test_model_constants_names_a_paper_set",
     "maglev_oc.model.summary.summarize_model(table_gaps)": "tests/test_cli.py::test_model_table",
+    "maglev_oc.control.microstepper.MicrostepperRegulator(anti_windup)": (
+        f"{HERE}::test_simulate_no_anti_windup_winds_up_into_the_stopper"
+    ),
+    "maglev_oc.control.microstepper.MicrostepperRegulator(levitation_first)": (
+        "tests/test_microstepper_control.py::test_amplifier_scaling_of_the_currents_drops_the_platform"
+    ),
+    "maglev_oc.region.microstepper.MicrostepperRegion(current_limit)": (
+        f"{HERE}::test_region_stage_microstepper_certifies_the_3dof_loop"
+    ),
+    "maglev_oc.region.microstepper.MicrostepperRegion(stoppers)": (
+        "tests/test_microstepper_region.py::test_each_constraint_binds_in_some_case"
+    ),
 }
 """The main keyword options of the library behind the commands -> the test of their effect."""
 
@@ -429,6 +445,123 @@ def test_simulate_refuses_a_zero_rate(tmp_path, capsys):
     argv = ["simulate", "--twin", "ideal", "--duration", "0.01", "--rate", "0"]
     assert main([*argv, "--out", str(tmp_path / "run.csv")]) == cli.EXIT_USAGE
     assert "internal error" not in capsys.readouterr().err
+
+
+# --- the microstepper (--stage microstepper) ----------------------------------------------------------
+def _microstepper_csv(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
+    """(the ``# key: value`` lines, the column names, the rows) of ``simulate --stage microstepper``'s CSV."""
+    lines = path.read_text().splitlines()
+    meta = dict(line[2:].split(": ", 1) for line in lines if line.startswith("# "))
+    body = [line for line in lines if not line.startswith("#")]
+    return meta, body[0].split(","), np.loadtxt(body[1:], delimiter=",", ndmin=2)
+
+
+def test_simulate_stage_microstepper_writes_three_axes(tmp_path):
+    from maglev_oc.errors import LogError
+
+    out = tmp_path / "ms.csv"
+    argv = ["simulate", "--stage", "microstepper", "--scenario", "setpoints", "--twin", "ideal"]
+    _ok([*argv, "--duration", "0.05", "--out", str(out)])
+    meta, columns, rows = _microstepper_csv(out)
+    assert columns == ["t", "x", "y", "gap", "i_qA", "i_dA", "i_qB", "i_dB"]
+    assert "not a SPEC 2 log" in meta["format"] and meta["controller"] == "microstepper FL regulator"
+    assert rows.shape == (50, 8)  # 0.05 s at the default 1 kHz
+    t, x, y, gap, i_qa, i_da, i_qb, i_db = rows.T
+    # the scenario starts at rest at (0, 0, 25) mm; the ideal twin reads the positions exactly
+    assert (x[0], y[0], gap[0]) == (0.0, 0.0, 25 * MM_TO_M)
+    # the first set-point (-40, -40, 21) mm: both pairs push towards -x and -y (i_q = -m v / (2 K1 l1)
+    # with v < 0), levitation first holds each pair at the 9 A limit, and the gap closes towards 21 mm
+    assert np.all(i_qa[:10] > 0) and np.all(i_qb[:10] > 0)
+    assert_allclose(np.hypot(i_qa[:10], i_da[:10]), 9.0, rtol=1e-6)
+    assert x[-1] < -0.1 * MM_TO_M and y[-1] < -0.1 * MM_TO_M and gap[-1] < gap[0]
+    # three axes do not fit a SPEC 2 log, and the file does not pass for one
+    with pytest.raises(LogError):
+        read_log(out)
+    # the default stage is the 2-DOF one, and the microstepper's scenarios are not its own
+    assert main(["simulate", "--scenario", "setpoints", "--out", str(tmp_path / "two.csv")]) == cli.EXIT_USAGE
+
+
+def test_simulate_no_anti_windup_winds_up_into_the_stopper(tmp_path, capsys):
+    # The 90 mm step on x and y (-45 -> 45 mm) saturates both pairs. Without back-calculation the
+    # internal models wind up and x overshoots into its stopper at 60 mm after 0.10 s (measured;
+    # test_microstepper_control.py holds the full runs); with it, x peaks at 57.8 mm, later.
+    argv = ["simulate", "--stage", "microstepper", "--scenario", "saturation", "--duration", "0.3"]
+    _ok([*argv, "--out", str(tmp_path / "aw.csv")])
+    assert "FAILED" not in capsys.readouterr().out
+    assert main([*argv, "--no-anti-windup", "--out", str(tmp_path / "plain.csv")]) == 1  # a failed run
+    assert "hit a mechanical stopper" in capsys.readouterr().out
+    (aw_meta, _, aw), (plain_meta, _, plain) = (
+        _microstepper_csv(tmp_path / f) for f in ("aw.csv", "plain.csv")
+    )
+    assert aw_meta["controller"] == "microstepper FL regulator"
+    assert plain_meta["controller"] == "microstepper FL regulator (no anti-windup)"
+    # readings are 10 um counts with 2 um noise: the stopper at 60 mm reads 60 mm within a count
+    assert plain[:, 1].max() >= STOPPER_POSITION[1] - ENCODER_RESOLUTION
+    assert aw[:, 1].max() < STOPPER_POSITION[1] - 1e-3
+
+
+def _region_json(folder: Path, *options: str) -> dict:
+    out = folder / f"ms{len(list(folder.iterdir()))}.json"
+    _ok(["region", "--stage", "microstepper", *options, "--json", str(out)])
+    return json.loads(out.read_text())
+
+
+def test_region_stage_microstepper_certifies_the_3dof_loop(tmp_path, capsys):
+    from maglev_oc.region.microstepper import MicrostepperRegion
+
+    doc = _region_json(tmp_path, "--setpoint", "0", "0", "32")
+    assert "3-DOF microstepper" in capsys.readouterr().out
+    # 3 mm under the 35 mm gap stopper the stopper binds (below 31 mm the 9 A limit does;
+    # test_microstepper_region.py), the gap's half-width is that room, and the level is the library's
+    assert doc["certified"] and doc["binding"] == "gap"
+    assert doc["half_widths_mm"]["gap"] == pytest.approx(3.0, rel=1e-9)
+    expected = MicrostepperRegion().largest_level((0.0, 0.0, 0.032))
+    assert doc["level"] == pytest.approx(expected.level, rel=1e-12)
+    # the limits the 2-DOF region takes reach the 3-DOF one: without the current limit the centre's
+    # set is bounded by the gap stoppers alone (10 mm to 35 mm; with the 9 A limit pair B binds at a
+    # 6.1 mm half-width, test_microstepper_region.py)
+    free = _region_json(tmp_path, "--setpoint", "0", "0", "25", "--no-current-limit")
+    assert free["binding"] == "gap" and free["half_widths_mm"]["gap"] == pytest.approx(10.0, rel=1e-9)
+    assert "pair currents" not in free["constraints"]
+
+
+def test_region_setpoint_places_each_axis(tmp_path):
+    # Each coordinate of --setpoint X Y GAP [mm] moves its own axis towards its stopper: 5 mm from
+    # the x (or y) stopper at 60 mm that axis's travel binds with a 5 mm half-width (the 9 A limit
+    # alone allows 7.9 mm at 25 mm), and 3 mm under the gap stopper the gap binds (3 mm).
+    for setpoint, axis, room in (
+        (("55", "0", "25"), "x", 5.0),
+        (("0", "55", "25"), "y", 5.0),
+        (("0", "0", "32"), "gap", 3.0),
+    ):
+        doc = _region_json(tmp_path, "--setpoint", *setpoint)
+        assert doc["setpoint_mm"] == [float(v) for v in setpoint]
+        assert doc["binding"] == axis, setpoint
+        assert doc["half_widths_mm"][axis] == pytest.approx(room, rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["simulate", "--stage", "microstepper", "--controller", "lqr"], "--controller lqr"),
+        (["simulate", "--stage", "microstepper", "--twin-constants", "table2_eps0.05"], "--twin-constants"),
+        (["simulate", "--stage", "microstepper", "--scenario", "small_step"], "--scenario small_step"),
+        (["simulate", "--no-anti-windup"], "--no-anti-windup"),
+        (["simulate", "--scenario", "saturation"], "--scenario saturation"),
+        (["region", "--stage", "microstepper", "--setpoint", "0", "0", "25", "--sdp"], "--sdp"),
+        (["region", "--stage", "microstepper", "--setpoint", "0", "0", "25", "--gaps", "20"], "--gaps"),
+        (["region", "--stage", "microstepper"], "--setpoint"),
+        (["region", "--setpoint", "0", "0", "25"], "--setpoint"),
+        (["region", "--stage", "microstepper", "--setpoint", "0", "0", "0.025"], "--setpoint"),
+    ],
+)
+def test_options_of_the_other_stage_are_refused(tmp_path, capsys, argv, named):
+    if argv[0] == "simulate":
+        argv = [*argv, "--out", str(tmp_path / "run.csv")]
+    assert main(argv) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert named in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.iterdir())  # nothing written
 
 
 # --- controllers (library options) ----------------------------------------------------------------

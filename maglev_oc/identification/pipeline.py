@@ -85,7 +85,7 @@ def check_identifiable(
         if log.duration < min_duration:
             raise LogError(
                 name,
-                f"too short for identification: {log.duration:.3g} s ({log.n} samples); need at least "
+                f"too short for identification: {log.duration:.6g} s ({log.n} samples); need at least "
                 f"{min_duration:g} s of excitation (the sum-of-sines references of 000 Sec. IV have "
                 "periods up to 10 s)",
             )

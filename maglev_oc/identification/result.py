@@ -221,37 +221,39 @@ class FitResult(Result):
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no per-sample residuals)."""
-        return {
-            "method": self.method,
-            "parameters": {
-                k: {
-                    "value": self.values[k],
-                    "stderr": self.stderr[k],
-                    "stderr_naive": self.stderr_naive[k],
-                    "initial": self.initial[k],
-                    "unit": UNITS.get(k, ""),
-                }
-                for k in self.names
-            },
-            "fixed": dict(self.fixed),
-            "covariance": self.covariance.tolist(),
-            "correlation": self.correlation.tolist(),
-            "residual_rms": dict(self.residual_rms),
-            "residual_unit": self.residual_unit,
-            "n_samples": self.n_samples,
-            "n_residuals": self.n_residuals,
-            "chi_square": self.chi_square,
-            "reduced_chi_square": self.reduced_chi_square,
-            "hac_frequencies": self.hac_frequencies,
-            "success": self.success,
-            "status": self.status,
-            "message": self.message,
-            "iterations": self.iterations,
-            "timings": dict(self.timings),
-            "sources": list(self.sources),
-            "settings": jsonable(dict(self.settings)),
-        }
+        """JSON-ready summary (no per-sample residuals); NaN (a failed fit's errors) -> None."""
+        return jsonable(
+            {
+                "method": self.method,
+                "parameters": {
+                    k: {
+                        "value": self.values[k],
+                        "stderr": self.stderr[k],
+                        "stderr_naive": self.stderr_naive[k],
+                        "initial": self.initial[k],
+                        "unit": UNITS.get(k, ""),
+                    }
+                    for k in self.names
+                },
+                "fixed": dict(self.fixed),
+                "covariance": self.covariance.tolist(),
+                "correlation": self.correlation.tolist(),
+                "residual_rms": dict(self.residual_rms),
+                "residual_unit": self.residual_unit,
+                "n_samples": self.n_samples,
+                "n_residuals": self.n_residuals,
+                "chi_square": self.chi_square,
+                "reduced_chi_square": self.reduced_chi_square,
+                "hac_frequencies": self.hac_frequencies,
+                "success": self.success,
+                "status": self.status,
+                "message": self.message,
+                "iterations": self.iterations,
+                "timings": dict(self.timings),
+                "sources": list(self.sources),
+                "settings": dict(self.settings),
+            }
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -354,19 +356,22 @@ class NpfsiResult(Result):
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "method": "npfsi",
-            "eps": self.eps,
-            "gamma": self.gamma,
-            "Q": None if self.Q is None else self.Q.tolist(),
-            "Q0": self.Q0.tolist(),
-            "values": dict(self.values),
-            "theta0": dict(self.theta0),
-            "velocity_method": self.velocity_method,
-            "success": self.success,
-            "status": self.status,
-            "message": self.message,
-            "timings": dict(self.timings),
-            "sources": list(self.sources),
-            "settings": jsonable(dict(self.settings)),
-        }
+        """JSON-ready summary; NaN (a diverged run) -> None."""
+        return jsonable(
+            {
+                "method": "npfsi",
+                "eps": self.eps,
+                "gamma": self.gamma,
+                "Q": None if self.Q is None else self.Q.tolist(),
+                "Q0": self.Q0.tolist(),
+                "values": dict(self.values),
+                "theta0": dict(self.theta0),
+                "velocity_method": self.velocity_method,
+                "success": self.success,
+                "status": self.status,
+                "message": self.message,
+                "timings": dict(self.timings),
+                "sources": list(self.sources),
+                "settings": dict(self.settings),
+            }
+        )
