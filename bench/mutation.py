@@ -156,7 +156,8 @@ def _report(
         counts = collections.Counter(status.get(n, "not checked") for n in run)
         detected = sum(counts[w] for w in DETECTED)
         n_eq = sum(n in equivalent for n in run)
-        judged = max(len(run) - n_eq, 1)
+        # a run stopped early leaves mutants "not checked": they count neither way
+        judged = max(len(run) - n_eq - counts["not checked"], 1)
         low, high = _wilson(detected, judged)
         print(
             f"{path:<30}{len(names):>8}{len(run):>5}{detected:>7}{n_eq:>6}{detected / judged:>7.1%}"
