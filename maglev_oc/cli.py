@@ -4,8 +4,12 @@
     maglev-oc model [--params JSON] [--gaps MM ...]  print the equilibrium table
     maglev-oc simulate --controller fl --scenario sinusoid --out run.csv
                                                      closed loop on the rig twin -> log (SPEC 2)
+    maglev-oc simulate --stage microstepper --scenario setpoints --out run.csv
+                                                     the 3-DOF microstepper -> CSV (t, x, y, gap, currents)
     maglev-oc region [--gaps MM ...] [--sdp] [--samples N] [--json OUT.json]
                                                      certified operating region (Procedure 2)
+    maglev-oc region --stage microstepper --setpoint X Y GAP
+                                                     the 3-DOF loop's certificate at one set-point [mm]
     maglev-oc diagnose LOG... --json OUT.json [--report OUT.pdf]
                                                      residual -> missing effect -> error before/after
     maglev-oc identify LOG... --json OUT.json [--report OUT.pdf]
@@ -47,6 +51,20 @@ EXIT_NOT_CERTIFIED = 3
 """Exit status of ``region`` when a certificate fails or a Monte Carlo run leaves the feasible set."""
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT, as shells report it)."""
+
+STAGES = ("two_dof", "microstepper")
+"""``--stage``: the 2-DOF stage of papers 000-002, or the 3-DOF microstepper of 002 Sec. 8."""
+SCENARIOS = {
+    "two_dof": ("setpoint_steps", "small_step", "large_step", "sinusoid", "excitation"),
+    "microstepper": ("setpoints", "sinusoid", "saturation"),
+}
+"""``simulate --scenario`` per stage; the first is the default."""
+DEFAULT_REGION_GAPS = (15.0, 17.5, 20.0, 22.5, 25.0)
+"""``region --gaps`` when not given [mm]."""
+MICROSTEPPER_COLUMNS = ("t", "x", "y", "gap", "i_qA", "i_dA", "i_qB", "i_dB")
+"""Columns of ``simulate --stage microstepper``'s CSV: time [s], the encoder readings [m] and the
+commanded pair currents [A]. SPEC 2's logs hold two axes (x1, x3), so the 3-DOF run gets its own
+CSV, described in its header lines."""
 
 
 def analysis_modules() -> dict[str, object]:
@@ -107,7 +125,45 @@ def cmd_model(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refuse(stage: str, options: dict[str, bool]) -> None:
+    """One line naming every given option that does not apply to ``stage``."""
+    given = [name for name, is_given in options.items() if is_given]
+    if given:
+        other = "two_dof" if stage == "microstepper" else "microstepper"
+        raise InputError(
+            f"{', '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to --stage {stage} "
+            f"(only to --stage {other})"
+        )
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration must be positive [s], got {args.duration}")
+    if not args.rate > 0:
+        raise InputError(f"--rate must be positive [Hz], got {args.rate}")
+    scenarios = SCENARIOS[args.stage]
+    if args.scenario is not None and args.scenario not in scenarios:
+        raise InputError(
+            f"--scenario {args.scenario} is not a scenario of --stage {args.stage}; "
+            f"choose from {', '.join(scenarios)}"
+        )
+    if args.stage == "microstepper":
+        _refuse(
+            "microstepper",
+            {
+                f"--controller {args.controller}": args.controller not in (None, "fl"),
+                "--twin-constants": args.twin_constants is not None,
+                "--twin-params": args.twin_params is not None,
+            },
+        )
+        if Path(args.out).suffix.lower() == ".mat":
+            raise InputError(f"{args.out}: the microstepper's run is written as CSV only (give a .csv name)")
+        return _simulate_microstepper(args)
+    _refuse("two_dof", {"--no-anti-windup": args.no_anti_windup})
+    return _simulate_two_dof(args)
+
+
+def _simulate_two_dof(args: argparse.Namespace) -> int:
     from maglev_oc.control.registry import build_controller
     from maglev_oc.data.logs import write_log
     from maglev_oc.sim.effects import TwinEffects
@@ -117,10 +173,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from maglev_oc.sim.scenarios import excitation_scenario, paper_scenarios
     from maglev_oc.sim.twin import RigTwin
 
-    if args.duration is not None and not args.duration > 0:
-        raise InputError(f"--duration must be positive [s], got {args.duration}")
-    if not args.rate > 0:
-        raise InputError(f"--rate must be positive [Hz], got {args.rate}")
     model = load_model(args.params)
     # the plant's stage is --twin-params, else the controller's (--params); its constants
     # --twin-constants, else that file's
@@ -129,15 +181,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if (args.twin_params or args.twin_constants)
         else model
     )
-    scenarios = paper_scenarios()
-    if args.scenario == "excitation":
+    name = args.scenario or SCENARIOS["two_dof"][0]
+    if name == "excitation":
         scenario = excitation_scenario(60.0 if args.duration is None else args.duration, seed=args.seed)
     else:
-        scenario = scenarios[args.scenario]
+        scenario = paper_scenarios()[name]
         if args.duration is not None:
             scenario = dataclasses.replace(scenario, duration=args.duration)
     effects = TwinEffects.rig() if args.twin == "rig" else TwinEffects.ideal()
-    controller = build_controller(args.controller, model)
+    controller = build_controller(args.controller or "fl", model)
     result = ClosedLoop(RigTwin(plant, effects), controller).run(scenario, seed=args.seed)
     metrics = evaluate(result, scenario)
     log = result_to_log(result, rate_hz=args.rate, describe_twin=args.describe_twin)
@@ -155,7 +207,116 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def _simulate_microstepper(args: argparse.Namespace) -> int:
+    from maglev_oc.control.microstepper import MicrostepperRegulator
+    from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.model.platform import microstepper
+    from maglev_oc.numerics import c_compiler
+    from maglev_oc.sim.microstepper import MicrostepperLoop, evaluate_microstepper
+    from maglev_oc.sim.microstepper_scenarios import microstepper_scenarios
+    from maglev_oc.sim.microstepper_twin import MicrostepperEffects, MicrostepperTwin
+
+    model = load_model(args.params)
+    platform = microstepper(model.params, model.constants)
+    scenario = microstepper_scenarios()[args.scenario or SCENARIOS["microstepper"][0]]
+    if args.duration is not None:
+        # a run shorter than the scenario's tracking window is scored from its start
+        start = scenario.evaluate_from if args.duration > scenario.evaluate_from else 0.0
+        scenario = scenario.shortened(args.duration, evaluate_from=start)
+    effects = MicrostepperEffects.rig() if args.twin == "rig" else MicrostepperEffects.ideal()
+    controller = MicrostepperRegulator(platform, anti_windup=not args.no_anti_windup)
+    twin = MicrostepperTwin(platform, effects)
+    loop = MicrostepperLoop(twin, controller, backend="c" if c_compiler() is not None else "vm")
+    result = loop.run(scenario, seed=args.seed)
+    metrics = evaluate_microstepper(result, scenario)
+    text, n, rate = _microstepper_csv(result, args.rate, describe_twin=args.describe_twin)
+    write_text_atomic(args.out, text)
+
+    def per_axis(values, scale: float = 1.0, digits: int = 2) -> str:
+        return ", ".join("-" if not math.isfinite(v) else f"{v * scale:.{digits}f}" for v in values)
+
+    print(
+        f"{controller.name} on {scenario.name} ({args.twin} twin): "
+        f"{'ok' if result.success else 'FAILED: ' + result.message}"
+    )
+    if metrics.steps:
+        print(
+            f"  settling, slowest step (x, y, gap): to 0.1 mm {per_axis(metrics.worst_settling('01mm'))} s; "
+            f"to 10 um {per_axis(metrics.worst_settling('10um'))} s; overshoot "
+            f"{per_axis(metrics.max_overshoot(), digits=0)} %"
+        )
+    print(
+        f"  mean |error| (x, y, gap) = {per_axis(metrics.mean_error, M_TO_MM, 3)} mm from "
+        f"{scenario.evaluate_from:g} s; peak pair current {metrics.peak_current:.2f} A "
+        f"({metrics.saturated} samples over the limit); simulated in {result.timings['total']:.2f} s"
+    )
+    print(f"  wrote {args.out} ({n} samples at {rate:g} Hz; columns {', '.join(MICROSTEPPER_COLUMNS)})")
+    return 0 if result.success else 1
+
+
+def _microstepper_csv(result, rate_hz: float, *, describe_twin: bool) -> tuple[str, int, float]:
+    """(the CSV text, rows, logging rate [Hz]) of a microstepper run: what the rig would record,
+    encoder readings and commanded currents, decimated to ``rate_hz``; a run that blew up is kept
+    up to its first non-finite sample."""
+    import io
+
+    fs = 1.0 / result.sample_time
+    ratio = fs / rate_hz
+    step = round(ratio)
+    if step < 1 or abs(ratio - step) > 1e-9:
+        raise InputError(f"--rate {rate_hz:g} Hz must divide the controller rate {fs:g} Hz")
+    k = np.arange(0, result.t.size, step)
+    finite = np.all(np.isfinite(result.y[:, k]), axis=0) & np.all(np.isfinite(result.u[:, k]), axis=0)
+    if not np.all(finite):
+        k = k[: int(np.argmin(finite))]
+    meta = {
+        "format": "maglev_oc 3-DOF microstepper run (not a SPEC 2 log: SPEC 2 holds two axes)",
+        "columns": "t [s]; x, y, gap: encoder readings [m]; i_qA, i_dA, i_qB, i_dB: commanded pair "
+        "currents [A] (pair A drives x, pair B drives y)",
+        "units": "SI",
+        "source": "maglev_oc rig twin",
+        "controller": result.controller,
+        "scenario": result.scenario,
+        "sample_rate_hz": f"{fs / step:.10g}",
+    }
+    if describe_twin:
+        meta["twin_effects"] = " ".join(result.effects) or "none"
+    buf = io.StringIO()
+    buf.write("".join(f"# {key}: {value}\n" for key, value in meta.items()))
+    np.savetxt(
+        buf,
+        np.vstack([result.t[k], result.y[:, k], result.u[:, k]]).T,
+        fmt="%.17g",
+        delimiter=",",
+        header=",".join(MICROSTEPPER_COLUMNS),
+        comments="",
+    )
+    return buf.getvalue(), int(k.size), fs / step
+
+
 def cmd_region(args: argparse.Namespace) -> int:
+    if args.current_limit is not None and not (0 < args.current_limit < 100):
+        raise InputError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
+    if args.current_limit is not None and args.no_current_limit:
+        raise InputError("--current-limit and --no-current-limit contradict each other: give one")
+    limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
+    if args.stage == "microstepper":
+        _refuse(
+            "microstepper",
+            {
+                "--gaps": args.gaps is not None,
+                "--position": args.position is not None,
+                "--sinusoid": args.sinusoid,
+                "--sdp": args.sdp,
+                "--samples": args.samples is not None,
+            },
+        )
+        return _region_microstepper(args, limit)
+    _refuse("two_dof", {"--setpoint": args.setpoint is not None})
+    return _region_two_dof(args, limit)
+
+
+def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     import json
 
     from maglev_oc.fileio import write_text_atomic
@@ -164,22 +325,19 @@ def cmd_region(args: argparse.Namespace) -> int:
     from maglev_oc.region.procedure2 import Procedure2
 
     model = load_model(args.params)
-    gaps = [float(g) for g in args.gaps]
+    gaps = [float(g) for g in (DEFAULT_REGION_GAPS if args.gaps is None else args.gaps)]
     bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
     if bad:
         raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
-    if args.current_limit is not None and not (0 < args.current_limit < 100):
-        raise InputError(f"--current-limit must be in (0, 100) A, got {args.current_limit}")
-    if args.current_limit is not None and args.no_current_limit:
-        raise InputError("--current-limit and --no-current-limit contradict each other: give one")
-    if args.samples < 0:
-        raise InputError(f"--samples must be >= 0, got {args.samples}")
-    limit = None if args.no_current_limit else (args.current_limit or PEAK_CURRENT_LIMIT)
+    samples = 0 if args.samples is None else args.samples
+    if samples < 0:
+        raise InputError(f"--samples must be >= 0, got {samples}")
+    position = 0.0 if args.position is None else args.position
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
     proc = Procedure2(feasible, RegulatorLoop())
     for g in gaps:
-        feasible.check_setpoint(g * MM_TO_M, args.position * MM_TO_M)
-    refs = [Reference.setpoint(g * MM_TO_M, args.position * MM_TO_M) for g in gaps]
+        feasible.check_setpoint(g * MM_TO_M, position * MM_TO_M)
+    refs = [Reference.setpoint(g * MM_TO_M, position * MM_TO_M) for g in gaps]
     if args.sinusoid:
         refs.append(Reference.paper_sinusoid())
     print(f"feasible set: {feasible.label}; gains: printed K_h, K_v (001/002)")
@@ -187,7 +345,7 @@ def cmd_region(args: argparse.Namespace) -> int:
         f"{'reference':>10s} {'P':>9s} {'level':>10s} {'c/upper':>8s} {'binding':>13s} "
         f"{'e1 [mm]':>8s} {'e1dot [mm/s]':>12s} {'e2 [mm]':>8s} {'e2dot [mm/s]':>12s} {'runs/viol.':>11s}"
     )
-    check = _region_checker(model, proc.loop, args.samples, limit)
+    check = _region_checker(model, proc.loop, samples, limit)
     records = []
     for ref in refs:
         for label, cert in _certificates(proc, ref, sdp=args.sdp):
@@ -217,6 +375,68 @@ def cmd_region(args: argparse.Namespace) -> int:
         print(f"wrote {args.json}")
     ok = all(r["certified"] and r["monte_carlo"]["violations"] == 0 for r in records)
     return 0 if ok else EXIT_NOT_CERTIFIED
+
+
+def _region_microstepper(args: argparse.Namespace, limit: float | None) -> int:
+    import json
+
+    from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, STOPPER_POSITION
+    from maglev_oc.model.platform import microstepper
+    from maglev_oc.region.microstepper import MicrostepperRegion
+
+    if args.setpoint is None:
+        raise InputError("--stage microstepper needs --setpoint X Y GAP (millimetres)")
+    x, y, gap = (float(v) for v in args.setpoint)
+    if not (5.0 <= gap <= 40.0) or max(abs(x), abs(y)) > 100.0:
+        raise InputError(
+            f"--setpoint X Y GAP are millimetres, |X|, |Y| <= 100 and GAP in [5, 40]; got {x, y, gap}"
+        )
+    model = load_model(args.params)
+    region = MicrostepperRegion(
+        microstepper(model.params, model.constants), current_limit=limit, stoppers=not args.no_stoppers
+    )
+    parts = ["R >= 0"]
+    if limit is not None:
+        parts.append(f"pair currents <= {limit:g} A")
+    if not args.no_stoppers:
+        parts.append(
+            f"x and y within +-{STOPPER_POSITION[1] * M_TO_MM:g} mm, gap in "
+            f"[{MICROSTEPPER_STOPPER_GAP[0] * M_TO_MM:g}, {MICROSTEPPER_STOPPER_GAP[1] * M_TO_MM:g}] mm"
+        )
+    constraints = "; ".join(parts)
+    res = region.largest_level(np.array([x, y, gap]) * MM_TO_M)
+    widths = {a: w * M_TO_MM for a, w in res.half_widths.items()}
+    bracket = res.refuted_level / res.level - 1 if res.level > 0 else math.inf
+    print(
+        f"3-DOF microstepper, FL loop with the printed K_h (x, y) and K_v (gap); constraints: {constraints}"
+    )
+    print(f"set-point (x, y, gap) = ({x:g}, {y:g}, {gap:g}) mm: {res.status}")
+    print(
+        f"  level {res.level:.4g} certified; a constraint fails at {res.refuted_level:.4g} "
+        f"(bracket {bracket:.1%})"
+    )
+    print(f"  binding: {res.binding}")
+    print("  half-widths: " + ", ".join(f"{a} {w:.3f} mm" for a, w in widths.items()))
+    print(f"  {res.boxes} boxes, {res.timings.get('total', math.nan):.1f} s; {res.message}")
+    if args.json:
+        doc = {
+            "stage": "microstepper",
+            "setpoint_mm": [x, y, gap],
+            "constraints": constraints,
+            "certified": bool(res.success),
+            "status": res.status,
+            "message": res.message,
+            "level": res.level,
+            "refuted_level": res.refuted_level,
+            "binding": res.binding,
+            "half_widths_mm": widths,
+            "half_widths": "largest error of each axis inside {V <= level}, the other states free",
+            "boxes": res.boxes,
+        }
+        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0 if res.success else EXIT_NOT_CERTIFIED
 
 
 def _certificates(proc, ref, *, sdp: bool) -> list[tuple[str, object]]:
@@ -364,11 +584,26 @@ def build_parser() -> argparse.ArgumentParser:
     from maglev_oc.control.registry import CONTROLLERS
 
     p = sub.add_parser("simulate", help="closed loop on the rig twin, written as a log")
-    p.add_argument("--controller", choices=list(CONTROLLERS), default="fl")
+    p.add_argument(
+        "--stage",
+        choices=STAGES,
+        default="two_dof",
+        help="the 2-DOF stage (default) or the 3-DOF microstepper of 002 Sec. 8",
+    )
+    p.add_argument("--controller", choices=list(CONTROLLERS), help="two_dof: the controller (default fl)")
     p.add_argument(
         "--scenario",
-        default="setpoint_steps",
-        choices=["setpoint_steps", "small_step", "large_step", "sinusoid", "excitation"],
+        choices=list(dict.fromkeys(SCENARIOS["two_dof"] + SCENARIOS["microstepper"])),
+        help="two_dof: "
+        + ", ".join(SCENARIOS["two_dof"])
+        + "; microstepper: "
+        + ", ".join(SCENARIOS["microstepper"])
+        + " (the first is the default)",
+    )
+    p.add_argument(
+        "--no-anti-windup",
+        action="store_true",
+        help="microstepper: the regulator without back-calculation anti-windup",
     )
     p.add_argument(
         "--twin",
@@ -383,25 +618,52 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=1000.0, help="logging rate [Hz] (default 1000)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--describe-twin", action="store_true", help="write the twin's effects into the log")
-    p.add_argument("--out", type=Path, required=True, help="log file (.csv or .mat)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="two_dof: log file (.csv or .mat, SPEC 2); microstepper: a CSV with columns "
+        + ", ".join(MICROSTEPPER_COLUMNS)
+        + " (SPEC 2 holds two axes; the header lines say so)",
+    )
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("region", help="certified operating region of the FL regulator (adapted Procedure 2)")
     p.add_argument(
+        "--stage",
+        choices=STAGES,
+        default="two_dof",
+        help="the 2-DOF stage (default) or the 3-DOF microstepper of 002 Sec. 8",
+    )
+    p.add_argument(
+        "--setpoint",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "GAP"),
+        help="microstepper: the set-point (x, y, gap) in millimetres",
+    )
+    p.add_argument(
         "--gaps",
         nargs="+",
         type=float,
-        default=[15, 17.5, 20, 22.5, 25],
         metavar="MM",
-        help="set-point gaps in millimetres (default 15 17.5 20 22.5 25)",
+        help="two_dof: set-point gaps in millimetres (default 15 17.5 20 22.5 25)",
     )
-    p.add_argument("--position", type=float, default=0.0, metavar="MM", help="horizontal set-point [mm]")
-    p.add_argument("--sinusoid", action="store_true", help="also the papers' ellipse reference")
-    p.add_argument("--sdp", action="store_true", help="also enlarge the certified set by SDP")
+    p.add_argument(
+        "--position", type=float, metavar="MM", help="two_dof: horizontal set-point [mm] (default 0)"
+    )
+    p.add_argument("--sinusoid", action="store_true", help="two_dof: also the papers' ellipse reference")
+    p.add_argument("--sdp", action="store_true", help="two_dof: also enlarge the certified set by SDP")
     p.add_argument("--current-limit", type=float, metavar="A", help="limit on |u| [A] (default 9)")
     p.add_argument("--no-current-limit", action="store_true", help="only R >= 0 (the papers' set A)")
-    p.add_argument("--no-stoppers", action="store_true", help="ignore the gap stoppers")
-    p.add_argument("--samples", type=int, default=0, help="Monte Carlo runs inside each certified set")
+    p.add_argument(
+        "--no-stoppers",
+        action="store_true",
+        help="ignore the gap stoppers (microstepper: and the x, y travel)",
+    )
+    p.add_argument(
+        "--samples", type=int, help="two_dof: Monte Carlo runs inside each certified set (default 0)"
+    )
     p.add_argument("--json", type=Path, help="write the certificates (P, levels, sizes) here")
     p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
     p.set_defaults(func=cmd_region)
