@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-import re
 import textwrap
 import time
 from collections.abc import Callable, Sequence
@@ -1124,7 +1123,7 @@ def _model_text(study: MicrostepperStudy) -> list[str]:
     pf = study.platform
     p, k = pf.params, pf.force_constants()
     taus = MicrostepperRegulator(pf).tracking_time_constants
-    assumptions = [re.sub(r"\s*Override with [^.]*\.\.\.\)\.", "", a) for a in MICROSTEPPER_ASSUMPTIONS]
+    assumptions = list(MICROSTEPPER_ASSUMPTIONS)
     return [
         "Platform coordinates q = (x, y, gap) [m]; inputs u = (i_qA, i_dA, i_qB, i_dB) [A], the quadrature "
         "and "

@@ -61,10 +61,6 @@ SCENARIOS = {
 """``simulate --scenario`` per stage; the first is the default."""
 DEFAULT_REGION_GAPS = (15.0, 17.5, 20.0, 22.5, 25.0)
 """``region --gaps`` when not given [mm]."""
-MICROSTEPPER_COLUMNS = ("t", "x", "y", "gap", "i_qA", "i_dA", "i_qB", "i_dB")
-"""Columns of ``simulate --stage microstepper``'s CSV: time [s], the encoder readings [m] and the
-commanded pair currents [A]. SPEC 2's logs hold two axes (x1, x3), so the 3-DOF run gets its own
-CSV, described in its header lines."""
 
 
 def analysis_modules() -> dict[str, object]:
@@ -215,6 +211,7 @@ def _simulate_microstepper(args: argparse.Namespace) -> int:
     from maglev_oc.sim.microstepper import MicrostepperLoop, evaluate_microstepper
     from maglev_oc.sim.microstepper_scenarios import microstepper_scenarios
     from maglev_oc.sim.microstepper_twin import MicrostepperEffects, MicrostepperTwin
+    from maglev_oc.sim.recording import MICROSTEPPER_COLUMNS, microstepper_csv
 
     model = load_model(args.params)
     platform = microstepper(model.params, model.constants)
@@ -229,7 +226,7 @@ def _simulate_microstepper(args: argparse.Namespace) -> int:
     loop = MicrostepperLoop(twin, controller, backend="c" if c_compiler() is not None else "vm")
     result = loop.run(scenario, seed=args.seed)
     metrics = evaluate_microstepper(result, scenario)
-    text, n, rate = _microstepper_csv(result, args.rate, describe_twin=args.describe_twin)
+    text, n, rate = microstepper_csv(result, args.rate, describe_twin=args.describe_twin)
     write_text_atomic(args.out, text)
 
     def per_axis(values, scale: float = 1.0, digits: int = 2) -> str:
@@ -252,46 +249,6 @@ def _simulate_microstepper(args: argparse.Namespace) -> int:
     )
     print(f"  wrote {args.out} ({n} samples at {rate:g} Hz; columns {', '.join(MICROSTEPPER_COLUMNS)})")
     return 0 if result.success else 1
-
-
-def _microstepper_csv(result, rate_hz: float, *, describe_twin: bool) -> tuple[str, int, float]:
-    """(the CSV text, rows, logging rate [Hz]) of a microstepper run: what the rig would record,
-    encoder readings and commanded currents, decimated to ``rate_hz``; a run that blew up is kept
-    up to its first non-finite sample."""
-    import io
-
-    fs = 1.0 / result.sample_time
-    ratio = fs / rate_hz
-    step = round(ratio)
-    if step < 1 or abs(ratio - step) > 1e-9:
-        raise InputError(f"--rate {rate_hz:g} Hz must divide the controller rate {fs:g} Hz")
-    k = np.arange(0, result.t.size, step)
-    finite = np.all(np.isfinite(result.y[:, k]), axis=0) & np.all(np.isfinite(result.u[:, k]), axis=0)
-    if not np.all(finite):
-        k = k[: int(np.argmin(finite))]
-    meta = {
-        "format": "maglev_oc 3-DOF microstepper run (not a SPEC 2 log: SPEC 2 holds two axes)",
-        "columns": "t [s]; x, y, gap: encoder readings [m]; i_qA, i_dA, i_qB, i_dB: commanded pair "
-        "currents [A] (pair A drives x, pair B drives y)",
-        "units": "SI",
-        "source": "maglev_oc rig twin",
-        "controller": result.controller,
-        "scenario": result.scenario,
-        "sample_rate_hz": f"{fs / step:.10g}",
-    }
-    if describe_twin:
-        meta["twin_effects"] = " ".join(result.effects) or "none"
-    buf = io.StringIO()
-    buf.write("".join(f"# {key}: {value}\n" for key, value in meta.items()))
-    np.savetxt(
-        buf,
-        np.vstack([result.t[k], result.y[:, k], result.u[:, k]]).T,
-        fmt="%.17g",
-        delimiter=",",
-        header=",".join(MICROSTEPPER_COLUMNS),
-        comments="",
-    )
-    return buf.getvalue(), int(k.size), fs / step
 
 
 def cmd_region(args: argparse.Namespace) -> int:
@@ -623,8 +580,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         required=True,
         help="two_dof: log file (.csv or .mat, SPEC 2); microstepper: a CSV with columns "
-        + ", ".join(MICROSTEPPER_COLUMNS)
-        + " (SPEC 2 holds two axes; the header lines say so)",
+        "t, x, y, gap, i_qA, i_dA, i_qB, i_dB (SPEC 2 holds two axes; the header lines say so)",
     )
     p.set_defaults(func=cmd_simulate)
 

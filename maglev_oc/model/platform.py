@@ -255,7 +255,7 @@ MICROSTEPPER_ASSUMPTIONS = (
     "magnetic overlap does not change (end effects across the stator are neglected).",
     "Masses per axis (Table I gives the 2-DOF's only): the platform and the four movers, 4 M_h, move in "
     "x (the innermost guides); the y guides carry them plus one 2-DOF guide carriage (M_v - M_h); the "
-    "vertical guides carry everything plus another. Override with microstepper(masses=...).",
+    "vertical guides carry everything plus another (the masses are a parameter of the instance).",
     "Gravity opens the gap, as in the 2-DOF rig (the stators above the movers).",
     "Operating region 002 Sec. 8: x, y in [-50, 50] mm, gap in [20, 30] mm.",
 )

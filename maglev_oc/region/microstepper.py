@@ -195,8 +195,11 @@ class MicrostepperRegion:
             out[axis] = (room / self._spread[j]) ** 2
         return out
 
-    def certify(self, setpoint, level: float, *, max_boxes: int = 1_000_000) -> tuple[str, int, str]:
-        """Branch and bound of the nonlinear constraints on {V <= level}: (status, boxes, binding)."""
+    def certify(
+        self, setpoint, level: float, *, max_boxes: int = 1_000_000
+    ) -> tuple[str, int, str, np.ndarray | None]:
+        """Branch and bound of the nonlinear constraints on {V <= level}: (status, boxes, binding,
+        the state z~ at which ``binding`` fails when refuted)."""
         par_l = (math.sqrt(level) * self.chol).ravel(order="F")[:, None]
         gap0 = np.array([[float(setpoint[2])]])
         edges = np.linspace(-1, 1, 5)
@@ -221,9 +224,10 @@ class MicrostepperRegion:
             bad = np.any(vals < 0, axis=0)
             if np.any(bad):
                 k = int(np.argmax(bad))
-                return "refuted", boxes, MICROSTEPPER_CONSTRAINTS[int(np.argmin(vals[:, k]))]
+                state = self.state_of(math.sqrt(level) * self.chol @ near[:, k])
+                return "refuted", boxes, MICROSTEPPER_CONSTRAINTS[int(np.argmin(vals[:, k]))], state
             if boxes > max_boxes:
-                return "undecided", boxes, ""
+                return "undecided", boxes, "", None
             width = hi - lo
             dim = np.argmax(width, axis=0)
             cols = np.arange(lo.shape[1])
@@ -232,7 +236,7 @@ class MicrostepperRegion:
             hi[dim, cols] = mid
             lo2[dim, cols] = mid
             lo, hi = np.hstack([lo, lo2]), np.hstack([hi, hi2])
-        return "certified", boxes, ""
+        return "certified", boxes, "", None
 
     def state_of(self, ell) -> np.ndarray:
         """The z~ of least V with M z~ = ``ell`` (4,); V there is ell' S^-1 ell."""
@@ -265,7 +269,7 @@ class MicrostepperRegion:
         if len(setpoint) != 3:
             raise InputError(f"set-point needs (x, y, gap) [m], got {setpoint!r}")
         linear = self.linear_levels(setpoint)
-        status, total, binding = self.certify(setpoint, 1e-12)
+        status, total, binding, _ = self.certify(setpoint, 1e-12)
         if status != "certified":
             return MicrostepperRegionResult(
                 False, "infeasible_setpoint", f"the set-point itself violates {binding}",
@@ -280,24 +284,26 @@ class MicrostepperRegion:
             hi, binding, witness = found, why, self.state_of(ell)
         else:
             raise InputError("no constraint fails anywhere: nothing bounds the region")
-        lo, note = 0.0, ""
-        status, boxes, why = self.certify(setpoint, hi * (1 - 1e-9), max_boxes=max_boxes)
+        # bisection between lo (certified) and top (not proved: refuted, or the box budget spent)
+        lo, top, note = 0.0, hi, ""
+        status, boxes, why, _ = self.certify(setpoint, hi * (1 - 1e-9), max_boxes=max_boxes)
         total += boxes
         if status == "certified":
             lo = hi * (1 - 1e-9)
-        while status != "certified" or hi - lo > rel_tol * hi:
-            mid = 0.5 * (lo + hi) if lo > 0 else 0.5 * hi
-            status, boxes, why = self.certify(setpoint, mid, max_boxes=max_boxes)
+        for _ in range(60):
+            if lo > 0 and top - lo <= rel_tol * top:
+                break
+            mid = 0.5 * (lo + top) if lo > 0 else 0.5 * top
+            status, boxes, why, state = self.certify(setpoint, mid, max_boxes=max_boxes)
             total += boxes
             if status == "certified":
                 lo = mid
-            elif status == "refuted":
-                hi, binding = mid, why
-            elif lo > 0:
-                note = f" (bracket {hi / lo - 1:.0%} wide: box budget spent)"
-                break
-            if lo > 0 and hi - lo <= rel_tol * hi:
-                break
+            else:
+                top = mid
+                if status == "refuted":  # a sampled point of {V <= mid}: its own V bounds c*
+                    hi, binding, witness = float(state @ self.P @ state), why, state
+        if lo > 0 and top < hi * (1 - 1e-9):
+            note = f" (not proved above {top:.4g}: box budget spent)"
         half = {a: float(math.sqrt(lo) * self._spread[j]) for j, a in enumerate(AXES)}
         message = f"certified V <= {lo:.4g}; {binding} fails at V = {hi:.4g}{note}"
         return MicrostepperRegionResult(

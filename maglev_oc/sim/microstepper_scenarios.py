@@ -107,12 +107,12 @@ class MicrostepperScenario:
 def microstepper_scenarios() -> dict[str, MicrostepperScenario]:
     """The paper's experiments on the microstepper (002 Sec. 8), by name.
 
-    * ``setpoints``: five set-points 5 s apart from rest at the centre (0, 0, 25) mm, at the four
-      corners (+-40, +-40) mm of the horizontal region alternating between the bottom (21 mm) and
-      the top (29 mm) of the gap range, then back to the centre: every step moves all three axes,
-      by 80 mm horizontally (pairs saturate) and 8 mm in the gap; the region is spanned with 10 mm
-      of margin to the +-50 mm edge (overshoot stays inside the travel). 002 Figs. 15-16 do not
-      print the set-points.
+    * ``setpoints``: five set-points 5 s apart from rest at the centre (0, 0, 25) mm: the four
+      corners (+-40, +-40) mm of the horizontal region, alternating between the bottom (21 mm) and
+      the top (29 mm) of the gap range, then back to the centre. The first and last steps move x
+      and y by 40 mm each, the three between them one of x or y by 80 mm (pairs saturate); every
+      step moves the gap by 4 or 8 mm. The region is spanned with 10 mm of margin to the +-50 mm
+      edge (overshoot stays inside the travel). 002 Figs. 15-16 do not print the set-points.
     * ``sinusoid``: simultaneous sinusoids at omega0 = 1.5 pi (the internal model's frequency):
       x = 40 sin(w t), y = 40 cos(w t) mm (a 40 mm circle, the 2-DOF's 30 mm ellipse axis scaled
       to the larger travel), gap = 25 + 4 sin(w t + pi/4) mm (the 2-DOF's 5 mm over a 10 mm
