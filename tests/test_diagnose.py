@@ -23,6 +23,7 @@ from maglev_oc.cli import main
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.data.logs import LogError, read_log
 from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.errors import InputError
 from maglev_oc.sim.effects import Encoder, GuideFriction, TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
@@ -219,10 +220,31 @@ def test_json_follows_the_spec_contract(generated, tmp_path):
         assert set(j[key]) == {"vertical", "horizontal"}
     assert j["error_after"]["horizontal"] < j["error_before"]["horizontal"]
     assert isinstance(j["error_metric"], str) and "m/s^2" in j["error_metric"]
+    # the details a script reads beyond the contract, and their consistency
+    for key in ("output_error_before", "output_error_after"):
+        assert set(j[key]) == {"vertical", "horizontal"}
+    assert "m" in j["output_error_metric"]
+    assert set(e) >= {"finding", "parameter_details", "confidence", "holdout_gain", "z", "runner_up"}
+    assert set(e["parameter_details"]["coulomb"]) >= {"value", "stderr", "unit"}
+    ranking = {r["name"]: r["holdout_gain"] for r in j["candidate_ranking"]}
+    assert ranking["guide_friction_horizontal"] == pytest.approx(e["holdout_gain"])
+    first = j["selection_steps"][0]
+    assert first["chosen"] == "guide_friction_horizontal"
+    for cand in first["candidates"]:
+        assert set(cand) == {"name", "verdict", "holdout_gain", "z", "wald", "vif"}
+        assert cand["wald"] is None or cand["wald"] >= 0  # a quadratic form in the covariance
+    gains = [c["holdout_gain"] for c in first["candidates"] if c["holdout_gain"] is not None]
+    assert gains == sorted(gains, reverse=True)  # listed from the most helpful down
+    for r in j["rejected"]:
+        assert set(r) == {"name", "verdict", "reason", "holdout_gain", "z"} and r["reason"]
 
 
 def test_bad_or_short_logs_are_refused(generated, tmp_path, capsys):
     path, _ = generated("clean", "clean_01")
+    # the held-out share: 5 % at least (a validation), half at most (a fit)
+    for share in (0.04, 0.51):
+        with pytest.raises(InputError, match="holdout_fraction"):
+            diagnose([read_log(path)], holdout_fraction=share)
     with pytest.raises(LogError, match="too short"):
         diagnose([read_log(path).index_slice(0, 5000)])  # 5 s
     bad = tmp_path / "bad.csv"
@@ -230,6 +252,17 @@ def test_bad_or_short_logs_are_refused(generated, tmp_path, capsys):
     assert main(["diagnose", str(bad), "--json", str(tmp_path / "o.json")]) == 2
     assert "u2" in capsys.readouterr().err
     assert not (tmp_path / "o.json").exists()
+
+
+def test_a_long_log_is_diagnosed_at_a_rate_that_keeps_the_sample_cap(generated, monkeypatch):
+    # memory grows as samples x candidate columns, so the diagnosis keeps at most MAX_SAMPLES: with
+    # the cap at 20 000, the 60 s log at 1 kHz is reduced (block means) to 20 000 samples or fewer
+    import maglev_oc.diagnosis.pipeline as pipeline
+
+    path, _ = generated("clean", "clean_01")
+    monkeypatch.setattr(pipeline, "MAX_SAMPLES", 20_000)
+    data, _, _ = pipeline._prepare([read_log(path)], 0.25, 10.0, 10.0)
+    assert 10_000 <= data.n <= 20_000
 
 
 def test_locked_axis_and_fast_log(model):

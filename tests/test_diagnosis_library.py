@@ -352,3 +352,48 @@ def test_an_amplifier_lag_delays_the_forces(plant):
     _close(p["time_constant"], delay, 0.15, "amplifier time constant [s]")
     _close(p["hold_delay"], 0.5 * 0.2e-3, 1e-9, "the loop's hold [s]")
     _close(p["total_delay"], delay + 0.1e-3, 0.15, "total delay [s]")
+
+
+# --- the linearized candidates are the first-order change of the exact physics -----------------------
+def _column(cand, x, u, du, size: float) -> np.ndarray:
+    """The candidate's acceleration (2, n) with its (single) parameter = ``size``."""
+    fn = cand.term.function.map(x.shape[1])
+    return np.asarray(fn(x, u, du, np.full((1, x.shape[1]), size)))
+
+
+def _states(plant: Plant, n: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(11)
+    k = rng.choice(np.flatnonzero(plant.data.valid), n, replace=False)
+    return plant.data.x[:, k], plant.data.u[:, k], plant.data.du[:, k]
+
+
+@pytest.mark.parametrize("name", ["current_amplifier_lag", "commutation_offset", "gap_sensor_offset"])
+def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, name):
+    # each candidate is the derivative of an exact effect written with the model: currents late
+    # by T (u - T du), rotated by an angle, a gap read off by an offset. At a size 1e-3 of their
+    # plausible range the second-order remainder is ~1e-3 of the change: 1 % tolerance
+    model = StageModel()  # the candidates' references (see _candidate)
+    cand = _candidate(plant, name)
+    x, u, du = _states(plant)
+    size = {"current_amplifier_lag": 2e-6, "commutation_offset": 3e-4, "gap_sensor_offset": 2e-7}[name]
+    if name == "current_amplifier_lag":
+        exact = model.dynamics(x, u - size * du) - model.dynamics(x, u)
+    elif name == "commutation_offset":
+        c, s = math.cos(size), math.sin(size)
+        exact = model.dynamics(x, np.vstack([c * u[0] + s * u[1], c * u[1] - s * u[0]])) - model.dynamics(
+            x, u
+        )
+    else:
+        shifted = x.copy()
+        shifted[0] += size
+        exact = model.dynamics(shifted, u) - model.dynamics(x, u)
+    exact = exact[[1, 3]]
+    column = _column(cand, x, u, du, size)
+    for axis in range(2):
+        scale = np.max(np.abs(exact[axis]))
+        if scale == 0:  # an axis the effect does not touch: the column must not either
+            assert np.max(np.abs(column[axis])) == 0, (name, axis)
+            continue
+        np.testing.assert_allclose(
+            column[axis], exact[axis], atol=0.01 * scale, err_msg=f"{name}, axis {axis}"
+        )
