@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import (
     NoEquilibriumError,
     equilibrium,
@@ -187,3 +188,27 @@ def test_model_rejects_bad_options():
         StageModel(field_model="spline")
     with pytest.raises(TypeError):
         StageModel(constants=[14.2, 797, 31, 0.07])
+
+
+def test_the_equilibrium_table_says_which_limit_each_gap_needs(model):
+    # status by the closed-form equilibrium current: within the 7 A continuous rating, up to the
+    # 9 A peak, beyond it (000 Sec. V-B's table; LCAM ratings)
+    from maglev_oc.model.summary import equilibrium_table_rows, summarize_model
+
+    gaps = np.array([5.0, 10.0, 20.0, 50.0, 60.0]) * 1e-3  # currents 7.8, 5.3, 1.5, -7.3, -9.1 A
+    rows = equilibrium_table_rows(summarize_model(model, table_gaps=gaps))
+    for gap_mm, current, status, pole in rows:
+        expected = (
+            "ok" if abs(current) <= 7.0 else ("> 7 A continuous" if abs(current) <= 9.0 else "> 9 A peak")
+        )
+        assert status == expected, (gap_mm, current, status)
+        assert pole > 0  # the vertical axis is open-loop unstable at every equilibrium
+    assert {r[2] for r in rows} == {"ok", "> 7 A continuous", "> 9 A peak"}
+
+
+def test_the_field_polynomial_refuses_a_range_that_is_not_a_gap():
+    from maglev_oc.model.magnetics import fit_field_polynomial
+
+    for bad in ((0.0, 35e-3), (-1e-3, 35e-3), (35e-3, 5e-3), (5e-3, 5e-3)):
+        with pytest.raises(InputError, match="fit_range"):
+            fit_field_polynomial(StageModel().params, fit_range=bad)

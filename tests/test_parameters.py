@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import (
     DEFAULT_CONSTANTS,
     MU0,
@@ -146,3 +147,9 @@ def test_physical_constants_scale_with_winding_factor_and_masses():
     assert_allclose(
         np.array(c2.as_array()) / np.array(c0.as_array()), [1 / 2, 1 / 3, 1 / 3, 1 / 3], rtol=1e-12
     )
+
+
+def test_an_unknown_stage_field_is_named_with_where_it_came_from():
+    # errors name the file (``where``) and the field, for the stage as for the constants
+    with pytest.raises(InputError, match=r"rig\.json.*\bmagnet_heigth\b|\bmagnet_heigth\b.*rig\.json"):
+        StageParameters.from_dict({"magnet_heigth": 5e-3}, where="rig.json")
