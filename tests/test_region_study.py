@@ -68,3 +68,23 @@ def test_tiny_study_follows_the_result_convention(model):
     assert steps[0] == "build solvers" and steps[-1] == "total"
     doc = json.loads(json.dumps(st.to_dict()))
     assert doc["status"] == "certified" and len(doc["references"]) == 1
+
+
+def test_sinusoid_checks_sample_the_whole_period_and_every_run():
+    # Monte Carlo inside a certificate for the ellipse reference: n runs spread over eight phases
+    # of one period (not over a set-point's single phase), every run counted once
+    import math
+
+    from maglev_oc.region.closed_loop import Reference
+    from maglev_oc.region.study import _phases
+
+    for n in (0, 5, 8, 21):
+        groups = _phases(Reference.paper_sinusoid(), n)
+        assert sum(c for _, c in groups) == n
+        if n:
+            phases = [p for p, _ in groups]
+            assert phases == sorted(phases) and phases[0] == 0.0
+            assert max(phases) < 2 * math.pi and 2 * math.pi - max(phases) == pytest.approx(2 * math.pi / 8)
+            counts = [c for _, c in groups]
+            assert max(counts) - min(counts) <= 1
+    assert _phases(Reference.setpoint(0.02), 7) == [(0.0, 7)]
