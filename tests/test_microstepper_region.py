@@ -142,3 +142,47 @@ def test_a_setpoint_outside_the_travel_or_infeasible_is_said_so():
     res = weak.largest_level((0.0, 0.0, 0.025))
     assert not res.success and res.status == "infeasible_setpoint"
     assert PEAK_CURRENT_LIMIT == 9.0  # the amplifier limit the default region uses (002 Sec. 4)
+
+
+@pytest.fixture(scope="module")
+def sampled_loop():
+    """The 5 kHz loop (observers, internal models, anti-windup) on the ideal twin: the plant of the
+    certificate, sampled; generated C when a compiler is there."""
+    from maglev_oc.control.microstepper import MicrostepperRegulator
+    from maglev_oc.numerics import c_compiler
+    from maglev_oc.sim.microstepper import MicrostepperLoop
+    from maglev_oc.sim.microstepper_twin import MicrostepperEffects, MicrostepperTwin
+
+    twin = MicrostepperTwin(PLATFORM, MicrostepperEffects.ideal())
+    return MicrostepperLoop(twin, MicrostepperRegulator(PLATFORM), backend="c" if c_compiler() else "vm")
+
+
+def _run_from(loop, setpoint, z: np.ndarray):
+    from maglev_oc.sim.microstepper_scenarios import MicrostepperScenario, MicrostepperSetpoints
+
+    q0 = np.zeros(6)
+    xi = np.zeros(9)
+    for j in range(3):
+        q0[2 * j] = setpoint[j] + z[5 * j]
+        q0[2 * j + 1] = z[5 * j + 1]
+        xi[3 * j : 3 * j + 3] = z[5 * j + 2 : 5 * j + 5]
+    hold = MicrostepperSetpoints(times=(0.0,), setpoints=(tuple(setpoint),))
+    scenario = MicrostepperScenario("hold", "hold a set-point", tuple(setpoint), hold, duration=1.0)
+    return loop.run(scenario, start=(q0, xi))
+
+
+def test_the_sampled_loop_stays_feasible_inside_and_is_flagged_outside(sampled_loop):
+    # Monte Carlo check of the certificate on the 5 kHz loop: starts drawn in {V <= 0.8 c} (the
+    # 20 % leaves room for what the continuous certificate does not cover: sampling, observers)
+    # never hit the 9 A limit, clip R or touch a stopper; a start 1.3x beyond the witness of the
+    # binding constraint (the planted violation) is flagged at once
+    setpoint = (0.0, 0.0, 0.025)
+    region = MicrostepperRegion(PLATFORM)
+    res = region.largest_level(setpoint, rel_tol=0.05, max_boxes=300_000)
+    rng = np.random.default_rng(6)
+    for z in _sample_ellipsoid(region.P, 0.8 * res.level, 12, rng, surface=False).T:
+        run = _run_from(sampled_loop, setpoint, z)
+        assert run.success, run.message
+        assert run.events["saturated"] == 0 and run.events["clipped"] == 0 and run.events["stopper_hit"] == 0
+    outside = _run_from(sampled_loop, setpoint, np.sqrt(1.3) * res.witness)
+    assert outside.events["saturated"] > 0 or outside.events["clipped"] > 0

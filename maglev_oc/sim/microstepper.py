@@ -170,14 +170,25 @@ class MicrostepperLoop:
             out = np.concatenate([out, np.full((out.shape[0], n_pad - out.shape[1]), np.nan)], axis=1)
         return out[:, :n]
 
-    def run(self, scenario: MicrostepperScenario, *, seed: int = 0) -> MicrostepperResult:
-        """Simulate ``scenario`` from rest at ``scenario.q0`` with the holding currents flowing.
+    def run(
+        self,
+        scenario: MicrostepperScenario,
+        *,
+        seed: int = 0,
+        start: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> MicrostepperResult:
+        """Simulate ``scenario`` from rest at ``scenario.q0`` with the holding currents flowing, or
+        from ``start``.
 
         Parameters
         ----------
         scenario : MicrostepperScenario
         seed : int
             Seed of the encoder noise.
+        start : (q0 (6,), xi (9,)), optional
+            The mechanical state (x, x', y, y', gap, gap') [m, m/s] and the controller's internal
+            models (three per axis, x, y, gap) to start from (the observers start at the first
+            reading and the true rates; the currents flowing are the holding currents of the gap).
 
         Returns
         -------
@@ -187,11 +198,16 @@ class MicrostepperLoop:
         t, ref = scenario.sample(twin.sample_time)
         q0 = np.zeros(6)
         q0[0::2] = scenario.q0
-        u0 = twin.holding_currents(scenario.q0[2])
+        if start is not None:
+            q0 = np.asarray(start[0], dtype=float).reshape(6)
+        u0 = twin.holding_currents(q0[4])
         s0 = twin.initial_state(q0, u0)
         noise = np.random.default_rng(seed).standard_normal((N_MEASUREMENTS, t.size))
         y0 = np.asarray(twin.measure(s0, noise[:, 0])).ravel()
         c0 = ctrl.initial_state(y0, ref[:, 0], u0)
+        if start is not None:
+            c0[1:6:2] = q0[1::2]
+            c0[6:15] = np.asarray(start[1], dtype=float).reshape(9)
         t0 = time.perf_counter()
         out = self._simulate(np.concatenate([s0, c0]), ref, noise)
         wall = time.perf_counter() - t0
