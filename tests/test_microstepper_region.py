@@ -125,12 +125,11 @@ def test_the_enclosure_contains_sampled_values():
 
 
 @pytest.mark.slow
-def test_with_the_default_budget_the_brackets_close_to_a_few_percent():
-    # measured: 0 % (a stopper binds), 0.8 % (the 9 A limit), 3 % (the 9 A limit off-centre, and
-    # R >= 0 without limits)
-    for limits, setpoint, _ in CASES:
-        res = MicrostepperRegion(PLATFORM, **limits).largest_level(setpoint)
-        assert res.refuted_level <= 1.035 * res.level, res.message
+def test_with_the_default_budget_the_bracket_closes_to_a_few_percent():
+    # the widest case measured (the 9 A limit off-centre near the stator): 3.2 % (the centre 0.8 %,
+    # R >= 0 without limits 3 %, a stopper 0 %); the quick budget above leaves it at 14 %
+    res = MicrostepperRegion(PLATFORM).largest_level((0.04, -0.04, 0.021))
+    assert res.refuted_level <= 1.035 * res.level, res.message
 
 
 def test_a_setpoint_outside_the_travel_or_infeasible_is_said_so():
