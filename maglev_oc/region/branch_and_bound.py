@@ -24,7 +24,7 @@ from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, transformation_
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
-__all__ = ["BoxSearch", "LevelCertifier"]
+__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest"]
 
 
 @dataclass(frozen=True)
@@ -190,9 +190,16 @@ def _initial_boxes(periodic: bool, phase_cells: int) -> tuple[np.ndarray, np.nda
 
 def _bisect_boxes(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, periodic: bool):
     """Every box halved along its widest (scaled) side; the phase only for a sinusoid."""
-    width = (hi - lo) * scale[:, None]
     if not periodic:
-        width[3] = 0
+        scale = scale.copy()
+        scale[3] = 0.0
+    return bisect_widest(lo, hi, scale)
+
+
+def bisect_widest(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None):
+    """Boxes (lo, hi) (d, k), every one halved along its widest side (widths times ``scale``, a
+    zero scale never splits that side): (lo, hi) (d, 2k)."""
+    width = hi - lo if scale is None else (hi - lo) * scale[:, None]
     dim = np.argmax(width, axis=0)
     cols = np.arange(lo.shape[1])
     mid = 0.5 * (lo[dim, cols] + hi[dim, cols])

@@ -43,6 +43,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import Platform, microstepper
+from maglev_oc.region.branch_and_bound import bisect_widest
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
@@ -228,14 +229,7 @@ class MicrostepperRegion:
                 return "refuted", boxes, MICROSTEPPER_CONSTRAINTS[int(np.argmin(vals[:, k]))], state
             if boxes > max_boxes:
                 return "undecided", boxes, "", None
-            width = hi - lo
-            dim = np.argmax(width, axis=0)
-            cols = np.arange(lo.shape[1])
-            mid = 0.5 * (lo[dim, cols] + hi[dim, cols])
-            lo2, hi2 = lo.copy(), hi.copy()
-            hi[dim, cols] = mid
-            lo2[dim, cols] = mid
-            lo, hi = np.hstack([lo, lo2]), np.hstack([hi, hi2])
+            lo, hi = bisect_widest(lo, hi)
         return "certified", boxes, "", None
 
     def state_of(self, ell) -> np.ndarray:

@@ -28,7 +28,22 @@ from maglev_oc.results import Result
 from maglev_oc.sim.scenarios import Scenario
 from maglev_oc.sim.twin import RigTwin
 
-__all__ = ["CHUNK", "ClosedLoop", "SimulationResult", "simulate"]
+__all__ = ["CHUNK", "ClosedLoop", "SimulationResult", "run_outcome", "simulate"]
+
+
+def run_outcome(t: np.ndarray, x: np.ndarray, stopper: np.ndarray) -> tuple[bool, str, str]:
+    """(success, status, message) of a closed-loop run from its time grid (n,), true states
+    (n_x, n) and stopper flags (n,): ``"diverged"`` at the first non-finite state,
+    ``"stopper_hit"`` at the first stopper contact, else ``"completed"``."""
+    finite = np.all(np.isfinite(x), axis=0)
+    if not np.all(finite):
+        k = int(np.argmin(finite))
+        return False, "diverged", f"state became non-finite at t = {t[k]:.4f} s"
+    if np.any(stopper > 0):
+        k = int(np.argmax(stopper > 0))
+        return False, "stopper_hit", f"unstable: hit a mechanical stopper at t = {t[k]:.3f} s"
+    dt = t[1] - t[0] if t.size > 1 else 0.0
+    return True, "completed", f"completed {t.size} samples ({t.size * dt:.4g} s) without instability"
 
 
 @dataclass(frozen=True)
@@ -253,16 +268,7 @@ class ClosedLoop:
         }
         for k, name in enumerate(twin.FLAG_NAMES):
             events[name] = int(np.nansum(flags[k]))
-        finite = np.all(np.isfinite(x), axis=0)
-        success, status = True, "completed"
-        message = f"completed {t.size} samples ({t.size * twin.sample_time:.4g} s) without instability"
-        if not np.all(finite):
-            k = int(np.argmin(finite))
-            success, status, message = False, "diverged", f"state became non-finite at t = {t[k]:.4f} s"
-        elif events["stopper_hit"] > 0:
-            k = int(np.argmax(flags[1] > 0))
-            success, status = False, "stopper_hit"
-            message = f"unstable: hit a mechanical stopper at t = {t[k]:.3f} s"
+        success, status, message = run_outcome(t, x, flags[twin.FLAG_NAMES.index("stopper_hit")])
         return SimulationResult(
             controller=ctrl.name,
             scenario=scenario.name,

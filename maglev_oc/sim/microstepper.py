@@ -30,7 +30,7 @@ from maglev_oc.control.microstepper import N_MEASUREMENTS, N_REFERENCE, Microste
 from maglev_oc.errors import InputError
 from maglev_oc.numerics import jit
 from maglev_oc.results import Result
-from maglev_oc.sim.engine import CHUNK
+from maglev_oc.sim.engine import CHUNK, run_outcome
 from maglev_oc.sim.metrics import BANDS, MIN_STEP
 from maglev_oc.sim.microstepper_scenarios import MicrostepperScenario, MicrostepperSetpoints
 from maglev_oc.sim.microstepper_twin import MicrostepperTwin
@@ -228,16 +228,7 @@ class MicrostepperLoop:
             else 0,
         }
         events |= {name: int(np.nansum(flags[k])) for k, name in enumerate(twin.FLAG_NAMES)}
-        finite = np.all(np.isfinite(x), axis=0)
-        success, status = True, "completed"
-        message = f"completed {t.size} samples ({t.size * twin.sample_time:.4g} s) without instability"
-        if not np.all(finite):
-            k = int(np.argmin(finite))
-            success, status, message = False, "diverged", f"state became non-finite at t = {t[k]:.4f} s"
-        elif events["stopper_hit"] > 0:
-            k = int(np.argmax(flags[2] > 0))
-            success, status = False, "stopper_hit"
-            message = f"hit a mechanical stopper at t = {t[k]:.3f} s"
+        success, status, message = run_outcome(t, x, flags[twin.FLAG_NAMES.index("stopper_hit")])
         return MicrostepperResult(
             controller=ctrl.name,
             scenario=scenario.name,
