@@ -270,7 +270,6 @@ def _papers_page(pdf: PdfReport, cmp: Comparison) -> None:
             "Papers: 002 Sec. 7, 001 Sec. VI (SPEC 4). Our five set-points (not printed in "
             "the papers) span 15-25 mm and -40..40 mm with steps up to 10 mm / 40 mm."
         ],
-        col_widths=[0.4, 0.2, 0.18, 0.18],
     )
 
 
@@ -304,7 +303,6 @@ def _summary_page(pdf: PdfReport, cmp: Comparison, twin: str) -> None:
         list(SUMMARY_COLUMNS),
         rows,
         font_size=6.5,
-        col_widths=[0.09, 0.1, 0.04, 0.065, 0.065, 0.06, 0.06, 0.08, 0.08, 0.06, 0.06, 0.08, 0.055, 0.06],
         notes=[
             "T0.1: worst settling time to 0.1 mm over the steps (— : not settled before "
             "the next change); OS: worst overshoot in % of the step (steps under "

@@ -255,7 +255,6 @@ def _nls_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
         ],
         _nls_rows(st),
         notes=_nls_notes(st),
-        col_widths=[0.05, 0.08, 0.08, 0.1, 0.08, 0.1, 0.06, 0.1, 0.08, 0.1, 0.06],
         font_size=7.5,
     )
     pdf.add_figure(
@@ -311,7 +310,6 @@ def _coverage_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
             "plain errors happen to be close too; on the output-error fit they are not (see the setup "
             "page).",
         ],
-        col_widths=[0.07, 0.12, 0.18, 0.14, 0.14, 0.15, 0.15],
     )
     pdf.add_figure(plots.coverage_figure(cov.names, cov.z, cov.z_naive, cov.duration))
 
@@ -408,7 +406,6 @@ def _npfsi_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
             "estimation/differentiate.py) and lags by 2 eps_obs; the estimator's error filter (time "
             "constant eps) adds lag on top. C4 multiplies a small term strongly correlated with C3's.",
         ],
-        col_widths=[0.2, 0.1, 0.23, 0.23, 0.23],
     )
     pdf.add_figure(
         plots.npfsi_convergence_figure(
@@ -428,7 +425,6 @@ def _npfsi_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
             "x3 = 0), C1 held at the nominal value; NPFSI with observer velocities, equation error on "
             "the same log for comparison."
         ],
-        col_widths=[0.14, 0.09, 0.19, 0.19, 0.19, 0.19],
     )
 
 
@@ -482,7 +478,6 @@ def _parabola_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
             "The parabolas are within 0.01 % of the truth; the NPFSI discrepancy is the observer's "
             "velocity bias (2 %) and, at eps = 0.05, a transient that a 0.2-0.3 s run cannot outlast.",
         ],
-        col_widths=[0.09, 0.1, 0.16, 0.2, 0.2, 0.2],
     )
 
 
@@ -564,7 +559,6 @@ def _equilibrium_pages(pdf: PdfReport, st: IdentificationStudy) -> None:
             "about 2 % at 10-15 mm: it is real but smaller than the divergence the papers saw at x3 = "
             "0, which needs a cogging null away from x3 = 0 or a stronger cogging.",
         ],
-        col_widths=[0.08, 0.11, 0.1, 0.1, 0.12, 0.14, 0.1, 0.14],
         font_size=7.5,
     )
 
@@ -615,7 +609,6 @@ def _timing_page(pdf: PdfReport, st: IdentificationStudy) -> None:
         ["step", "wall time [s]"],
         _timing_rows(st),
         notes=["Each NPFSI time includes building its CasADi mapaccum (about a third of it)."],
-        col_widths=[0.7, 0.25],
     )
 
 

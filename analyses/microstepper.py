@@ -10,19 +10,14 @@ seconds), else in CasADi's virtual machine; the certified region takes most of t
 
 from __future__ import annotations
 
-import dataclasses
-import datetime as _dt
 import math
-import textwrap
 import time
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
-from matplotlib.table import Table
 
 from maglev_oc.control.microstepper import MicrostepperRegulator
 from maglev_oc.model.allocation import Allocation, MicrostepperTransformation
@@ -31,14 +26,8 @@ from maglev_oc.model.platform import MICROSTEPPER_ASSUMPTIONS, Platform, Platfor
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import c_compiler
 from maglev_oc.region.microstepper import MicrostepperRegion, MicrostepperRegionResult
-from maglev_oc.reporting.pdf import (
-    PAGE_SIZE,
-    FigureSection,
-    PdfReport,
-    ReportContents,
-    TableSection,
-    TextSection,
-)
+from maglev_oc.reporting.pdf import PAGE_SIZE, PdfReport, Plot, ReportContents, Table, Text, caption, grid
+from maglev_oc.reporting.style import bands, thin
 from maglev_oc.sim.effects import GuideFriction
 from maglev_oc.sim.metrics import BANDS
 from maglev_oc.sim.microstepper import (
@@ -546,181 +535,14 @@ def region_rows(study: MicrostepperStudy) -> list[tuple[str, ...]]:
     return rows
 
 
-# --- pages holding several tables, texts and figures -----------------------------------------------------
-@dataclass(frozen=True)
-class _Text:
-    paragraphs: Sequence[str]
-    font_size: float = 9.0
-    width: int = 104  # characters per line
-
-
-@dataclass(frozen=True)
-class _Table:
-    heading: str
-    columns: Sequence[str]
-    rows: Sequence[Sequence[str]]
-    notes: Sequence[str] = ()
-    font_size: float = 8.0
-
-
-@dataclass(frozen=True)
-class _Plot:
-    draw: Callable[[Figure, tuple[float, float, float, float]], str]  # (fig, (l, b, w, h)) -> title
-    height: float  # [page fraction]
-
-
-_INCH = 1.0 / PAGE_SIZE[1]  # page-height fraction per inch
-_EM = 0.58 / 72 / PAGE_SIZE[0]  # page-width fraction per character per point of font size
-_TABLE_WIDTH = 0.9
-_BOTTOM = 0.02
-
-
-class _Report(PdfReport):
-    """A PdfReport that also lays out pages holding several texts, tables and figures, recorded as
-    :meth:`PdfReport.add_text`, :meth:`PdfReport.add_table` and :meth:`PdfReport.add_figure` record
-    theirs (the page counted once, on its first section). Content that would run off the page is
-    an error, not a clipped page."""
-
-    def add_page(self, heading: str, blocks: Sequence, *, first_page: bool = False) -> None:
-        fig = Figure(figsize=PAGE_SIZE)
-        y = 0.955
-        if first_page:
-            fig.text(0.06, y, self.title, fontsize=17, weight="bold", va="top")
-            stamp = _dt.date.today().isoformat()
-            fig.text(0.06, y - 0.035, f"{self.subtitle} — {stamp}", fontsize=9.5, color="0.35", va="top")
-            y -= 0.065
-        fig.text(0.06, y, heading, fontsize=13, weight="bold", va="top")
-        y -= 0.032
-        sections = []
-        for block in blocks:
-            if isinstance(block, _Text):
-                y = _draw_text(fig, y, block)
-                sections.append(TextSection(heading, tuple(block.paragraphs), 0))
-            elif isinstance(block, _Table):
-                y, printed = _draw_table(fig, y, block)
-                sections.append(printed if printed.heading else dataclasses.replace(printed, heading=heading))
-            else:
-                title = block.draw(fig, (0.0, y - block.height, 1.0, block.height))
-                sections.append(FigureSection(title, 0))
-                y -= block.height + 0.01
-            if y < _BOTTOM - 0.01:
-                raise ValueError(f"page {heading!r} runs {(_BOTTOM - y) * 100:.1f} % of a page too long")
-        self._save(fig)
-        sections[0] = dataclasses.replace(sections[0], pages=1)
-        self._sections.extend(sections)
-
-
-def _draw_text(fig: Figure, top: float, t: _Text) -> float:
-    line = t.font_size * 1.25 / 72 * _INCH
-    y = top
-    for para in t.paragraphs:
-        lines = []
-        for raw in para.split("\n"):
-            indent = " " * (len(raw) - len(raw.lstrip(" •")))
-            lines += textwrap.wrap(raw, t.width, subsequent_indent=indent) or [""]
-        fig.text(0.06, y, "\n".join(lines), fontsize=t.font_size, va="top", linespacing=1.25)
-        y -= len(lines) * line + 0.008
-    return y - 0.005
-
-
-def _cell_lines(text: str) -> list[str]:
-    return str(text).split("\n")
-
-
-def _draw_table(fig: Figure, top: float, t: _Table) -> tuple[float, TableSection]:
-    """Draw ``t`` from ``top`` down, each column as wide as its longest line (headers in bold count
-    wider), the font shrunk where the table would be wider than the page. Returns the y below it
-    and what it printed."""
-    cells = [list(t.columns), *[[str(c) for c in r] for r in t.rows]]
-
-    def longest(j: int) -> float:
-        header = max(len(x) * 1.12 for x in _cell_lines(t.columns[j]))  # bold
-        return max(header, *(len(x) for r in cells[1:] for x in _cell_lines(r[j])))
-
-    chars = [longest(j) + 2.5 for j in range(len(t.columns))]
-    size = min(t.font_size, _TABLE_WIDTH / (sum(chars) * _EM))
-    widths = [c * size * _EM for c in chars]
-    width = sum(widths)
-    y = top
-    if t.heading:
-        fig.text(0.06, y, t.heading, fontsize=10.5, weight="bold", va="top")
-        y -= 0.024
-    line = size * 1.3 / 72 * _INCH
-    heights = [max(len(_cell_lines(c)) for c in row) * line + 0.007 for row in cells]
-    height = sum(heights)
-    ax = fig.add_axes((0.5 - width / 2, y - height, width, height))
-    ax.axis("off")
-    table = Table(ax, bbox=(0, 0, 1, 1))
-    for r, row in enumerate(cells):
-        for j, text in enumerate(row):
-            cell = table.add_cell(
-                r,
-                j,
-                widths[j] / width,
-                heights[r] / height,
-                text=text,
-                loc="left" if (j == 0 and r > 0) else "center",
-                facecolor="0.9" if r == 0 else "white",
-                edgecolor="0.6",
-            )
-            cell.set_text_props(fontsize=size, weight="bold" if r == 0 else "normal")
-            cell.set_linewidth(0.5)
-    table.auto_set_font_size(False)
-    ax.add_table(table)
-    y -= height + 0.01
-    if t.notes:
-        text = "\n".join(line for n in t.notes for line in (textwrap.wrap(n, 122) or [""]))
-        fig.text(0.06, y, text, fontsize=8, va="top", linespacing=1.3)
-        y -= (text.count("\n") + 1) * 8 * 1.3 / 72 * _INCH + 0.006
-    printed = TableSection(t.heading, tuple(t.columns), tuple(tuple(r) for r in cells[1:]), tuple(t.notes), 0)
-    return y - 0.012, printed
-
-
-def _grid(fig: Figure, rect, nrows: int, ncols: int, *, bottom: float = 0.05, top: float = 0.02, **kw):
-    """A grid of axes inside ``rect`` (page fractions), ``bottom`` and ``top`` left free, room for
-    the y labels on the left."""
-    r_bottom, r_height = rect[1], rect[3]
-    return fig.add_gridspec(
-        nrows, ncols, left=0.11, right=0.97, bottom=r_bottom + bottom, top=r_bottom + r_height - top, **kw
-    )
-
-
-def _caption(fig: Figure, rect, title: str, text: str = "") -> str:
-    top = rect[1] + rect[3]
-    fig.text(0.06, top, title, fontsize=10.5, weight="bold", va="top")
-    if text:
-        fig.text(0.06, top - 0.019, textwrap.fill(text, 125), fontsize=8, va="top", color="0.25")
-    return title
-
-
 # --- figures ---------------------------------------------------------------------------------------------
-_MAX_POINTS = 3000
-
-
-def _thin(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """At most about 2 * _MAX_POINTS points, keeping each block's minimum and maximum (the
-    10 µm steps and the peaks survive)."""
-    k = max(1, t.size // _MAX_POINTS)
-    if k == 1:
-        return t, y
-    n = (t.size // k) * k
-    blocks = y[:n].reshape(-1, k)
-    return np.repeat(t[:n:k], 2), np.column_stack([np.nanmin(blocks, 1), np.nanmax(blocks, 1)]).ravel()
-
-
-def _bands(ax, unit: float) -> None:
-    """The 0.1 mm and 10 µm bands, ``unit`` per metre."""
-    ax.axhspan(-BANDS[0] * unit, BANDS[0] * unit, color="0.92", zorder=0)
-    ax.axhspan(-BANDS[1] * unit, BANDS[1] * unit, color="0.78", zorder=0)
-
-
 def _key_figure(study: MicrostepperStudy):
     run = study.runs["setpoints"]
     r, m = run.result, run.metrics
     limits = study.scenarios["setpoints"].paper
 
     def draw(fig: Figure, rect) -> str:
-        gs = _grid(fig, rect, 2, 3, wspace=0.08, hspace=0.12, bottom=0.07, top=0.07)
+        gs = grid(fig, rect, 2, 3, wspace=0.08, hspace=0.12, bottom=0.07, top=0.07)
         top = [fig.add_subplot(gs[0, j]) for j in range(3)]
         low = [fig.add_subplot(gs[1, j]) for j in range(3)]
         for k, s in enumerate(m.steps):
@@ -732,7 +554,7 @@ def _key_figure(study: MicrostepperStudy):
                 top[j].plot(t, e * M_TO_MM, lw=0.9, color=f"C{k}", label=f"step {k + 1}")
                 low[j].plot(t, worst_from_here * M_TO_UM, lw=1.1, color=f"C{k}")
         for j in range(3):
-            _bands(top[j], M_TO_MM)
+            bands(top[j], M_TO_MM)
             top[j].set_ylim(-0.3, 0.3)
             top[j].set_title(AXES[j], fontsize=9.5)
             top[j].tick_params(labelbottom=False)
@@ -759,7 +581,7 @@ def _key_figure(study: MicrostepperStudy):
             frameon=False,
             bbox_to_anchor=(0.54, rect[1] - 0.006),
         )
-        return _caption(
+        return caption(
             fig,
             rect,
             "Key figure: the error after each set-point change (rig twin)",
@@ -776,12 +598,12 @@ def _setpoint_errors_plot(study: MicrostepperStudy):
     r = run.result
 
     def draw(fig: Figure, rect) -> str:
-        gs = _grid(fig, rect, 3, 1, hspace=0.1, top=0.05, bottom=0.045)
+        gs = grid(fig, rect, 3, 1, hspace=0.1, top=0.05, bottom=0.045)
         err = r.measured_error * M_TO_UM
         for j in range(3):
             ax = fig.add_subplot(gs[j, 0])
-            ax.plot(*_thin(r.t, err[j]), lw=0.6, color="tab:blue")
-            _bands(ax, M_TO_UM)
+            ax.plot(*thin(r.t, err[j]), lw=0.6, color="tab:blue")
+            bands(ax, M_TO_UM)
             for s in run.metrics.steps:
                 ax.axvline(s.time, color="0.5", lw=0.6, ls=":")
             ax.set_ylim(-200, 200)
@@ -791,7 +613,7 @@ def _setpoint_errors_plot(study: MicrostepperStudy):
             if j < 2:
                 ax.tick_params(labelbottom=False)
         ax.set_xlabel("time [s]")
-        return _caption(
+        return caption(
             fig,
             rect,
             "Set-point errors (002 Fig. 16)",
@@ -807,14 +629,14 @@ def _setpoint_response_figure(study: MicrostepperStudy) -> Figure:
     fig = Figure(figsize=PAGE_SIZE, layout="constrained")
     axes = fig.subplots(5, 1, sharex=True)
     for j in range(3):
-        axes[j].plot(*_thin(r.t, r.x[2 * j] * M_TO_MM), lw=0.9, color="tab:blue", label="position")
+        axes[j].plot(*thin(r.t, r.x[2 * j] * M_TO_MM), lw=0.9, color="tab:blue", label="position")
         axes[j].plot(r.t, r.reference[3 * j] * M_TO_MM, "k--", lw=0.8, label="set-point")
         axes[j].set_ylabel(f"{AXES[j]} [mm]")
     for j, c in enumerate(("tab:blue", "tab:orange", "tab:green")):
-        axes[3].plot(*_thin(r.t, r.x[2 * j + 1] * M_TO_MM), lw=0.8, color=c, label=AXES[j])
+        axes[3].plot(*thin(r.t, r.x[2 * j + 1] * M_TO_MM), lw=0.8, color=c, label=AXES[j])
     axes[3].set_ylabel("velocity [mm/s]")
     for k, (pair, c) in enumerate((("A", "tab:blue"), ("B", "tab:orange"))):
-        axes[4].plot(*_thin(r.t, np.hypot(r.u[2 * k], r.u[2 * k + 1])), lw=0.8, color=c, label=f"pair {pair}")
+        axes[4].plot(*thin(r.t, np.hypot(r.u[2 * k], r.u[2 * k + 1])), lw=0.8, color=c, label=f"pair {pair}")
     axes[4].axhline(PEAK_CURRENT_LIMIT, color="tab:red", ls=":", lw=0.9, label="9 A limit")
     axes[4].set_ylabel("pair current\nmagnitude [A]")
     axes[4].set_ylim(0, 10)
@@ -879,7 +701,7 @@ def _sinusoid_errors_plot(study: MicrostepperStudy):
     runs = (("rig twin (0.1 N on x, y)", study.runs["sinusoid"]), (HEAVY, study.runs[f"sinusoid:{HEAVY}"]))
 
     def draw(fig: Figure, rect) -> str:
-        gs = _grid(fig, rect, 3, 2, hspace=0.12, wspace=0.05, top=0.06, bottom=0.045)
+        gs = grid(fig, rect, 3, 2, hspace=0.12, wspace=0.05, top=0.06, bottom=0.045)
         for j in range(3):
             lim = 1.1 * M_TO_UM * max(np.nanmax(np.abs(run.result.measured_error[j])) for _, run in runs)
             for col, (label, run) in enumerate(runs):
@@ -887,7 +709,7 @@ def _sinusoid_errors_plot(study: MicrostepperStudy):
                 ax = fig.add_subplot(gs[j, col])
                 ax.axvspan(0, r.evaluate_from, color="0.93", zorder=0)
                 color = "tab:blue" if col == 0 else "tab:green"
-                ax.plot(*_thin(r.t, r.measured_error[j] * M_TO_UM), lw=0.5, color=color)
+                ax.plot(*thin(r.t, r.measured_error[j] * M_TO_UM), lw=0.5, color=color)
                 for sign in (1, -1):
                     ax.axhline(sign * m.mean_error[j] * M_TO_UM, color="k", lw=0.8, ls="--")
                 ax.set_ylim(-lim, lim)
@@ -913,7 +735,7 @@ def _sinusoid_errors_plot(study: MicrostepperStudy):
                     ax.tick_params(labelbottom=False)
                 else:
                     ax.set_xlabel("time [s]")
-        return _caption(
+        return caption(
             fig,
             rect,
             "Sinusoid errors (002 Fig. 18): reading − reference",
@@ -928,7 +750,7 @@ def _saturation_plot(study: MicrostepperStudy):
     runs = [(k, study.runs[f"saturation:{k}"]) for k in VARIANTS]
 
     def draw(fig: Figure, rect) -> str:
-        gs = _grid(fig, rect, 4, 1, hspace=0.1, top=0.055, bottom=0.085)
+        gs = grid(fig, rect, 4, 1, hspace=0.1, top=0.055, bottom=0.085)
         axes = [fig.add_subplot(gs[i, 0]) for i in range(4)]
         window = 3.0
         for key, run in runs:
@@ -977,7 +799,7 @@ def _saturation_plot(study: MicrostepperStudy):
             frameon=False,
             bbox_to_anchor=(0.54, rect[1] - 0.006),
         )
-        return _caption(
+        return caption(
             fig,
             rect,
             "The 90 mm step with and without anti-windup and levitation first (the first 3 s)",
@@ -993,7 +815,7 @@ def _region_plot(study: MicrostepperStudy):
     idx = {"x": 0, "y": 5, "gap": 10}
 
     def draw(fig: Figure, rect) -> str:
-        gs = _grid(fig, rect, 1, 2, wspace=0.25, top=0.06, bottom=0.06)
+        gs = grid(fig, rect, 1, 2, wspace=0.25, top=0.06, bottom=0.06)
         for col, (a, b) in enumerate((("x", "y"), ("x", "gap"))):
             ax = fig.add_subplot(gs[0, col])
             sub = P[np.ix_([idx[a], idx[b]], [idx[a], idx[b]])]
@@ -1027,7 +849,7 @@ def _region_plot(study: MicrostepperStudy):
             frameon=False,
             bbox_to_anchor=(0.54, rect[1] - 0.004),
         )
-        return _caption(
+        return caption(
             fig,
             rect,
             "Certified starts at rest",
@@ -1049,8 +871,8 @@ def write_report(out: Path, study: MicrostepperStudy) -> ReportContents:
     """Write the report of a finished study."""
     t0 = time.perf_counter()
     sp = study.runs["setpoints"]
-    with _Report(out, TITLE, subtitle="reports/microstepper.pdf from analyses/microstepper.py") as pdf:
-        scorecard = _Table(
+    with PdfReport(out, TITLE, subtitle="reports/microstepper.pdf from analyses/microstepper.py") as pdf:
+        scorecard = Table(
             "",
             ("claim (002 Sec. 8)", "paper", "ours (rig twin)", "verdict"),
             scorecard_rows(study),
@@ -1058,39 +880,39 @@ def write_report(out: Path, study: MicrostepperStudy) -> ReportContents:
         )
         pdf.add_page(
             "Scorecard: 002 Sec. 8's claims beside ours",
-            [scorecard, _Plot(_key_figure(study), 0.43)],
+            [scorecard, Plot(_key_figure(study), 0.43)],
             first_page=True,
         )
-        pdf.add_page("The model and its assumptions", [_Text(_model_text(study))])
+        pdf.add_page("The model and its assumptions", [Text(_model_text(study))])
         pdf.add_page(
             "Rig twin, scenarios, equilibria",
-            [_Text(_twin_text(study)), _equilibrium_table(study), _allocation_table(study)],
+            [Text(_twin_text(study)), _equilibrium_table(study), _allocation_table(study)],
         )
         pdf.add_page(
             "Set-points, step by step",
             [
-                _Table("", STEP_COLUMNS, step_rows(sp.metrics, sp.scenario), notes=_step_notes(study)),
-                _Plot(_setpoint_errors_plot(study), 0.66),
+                Table("", STEP_COLUMNS, step_rows(sp.metrics, sp.scenario), notes=_step_notes(study)),
+                Plot(_setpoint_errors_plot(study), 0.66),
             ],
         )
         pdf.add_figure(_setpoint_response_figure(study))
         pdf.add_figure(_sinusoid_response_figure(study))
         pdf.add_page(
             "Sinusoid: what sets the error",
-            [_breakdown_table(study), _Plot(_sinusoid_errors_plot(study), 0.58)],
+            [_breakdown_table(study), Plot(_sinusoid_errors_plot(study), 0.58)],
         )
         pdf.add_page(
             "The amplifier limit: anti-windup and levitation first",
             [
-                _Table("", SATURATION_COLUMNS, saturation_rows(study), notes=_saturation_notes(study)),
-                _Plot(_saturation_plot(study), 0.55),
+                Table("", SATURATION_COLUMNS, saturation_rows(study), notes=_saturation_notes(study)),
+                Plot(_saturation_plot(study), 0.55),
             ],
         )
         pdf.add_page(
             "Certified region at the paper's set-points",
             [
-                _Table("", REGION_COLUMNS, region_rows(study), notes=_region_notes(study)),
-                _Plot(_region_plot(study), 0.4),
+                Table("", REGION_COLUMNS, region_rows(study), notes=_region_notes(study)),
+                Plot(_region_plot(study), 0.4),
             ],
         )
         study.timings["report"] = time.perf_counter() - t0
@@ -1200,13 +1022,13 @@ def _step_notes(study: MicrostepperStudy) -> list[str]:
     ]
 
 
-def _equilibrium_table(study: MicrostepperStudy) -> _Table:
+def _equilibrium_table(study: MicrostepperStudy) -> Table:
     rows = [
         (f"{g:.0f}", f"{i_d:.3f}", f"{pole:.1f}", f"{ax:.1f}", f"{ay:.1f}")
         for g, i_d, pole, ax, ay in study.equilibria
     ]
     m = study.platform.masses
-    return _Table(
+    return Table(
         "Equilibrium currents over 20-30 mm (at rest: i_qA = i_qB = 0)",
         (
             "gap [mm]",
@@ -1233,7 +1055,7 @@ def _fits(minimum_norm: float, maximum_margin: float) -> str:
     return "max. margin" if maximum_margin <= PEAK_CURRENT_LIMIT else "neither"
 
 
-def _allocation_table(study: MicrostepperStudy) -> _Table:
+def _allocation_table(study: MicrostepperStudy) -> Table:
     def currents(a: Allocation) -> str:
         return "(" + ", ".join(f"{round(c, 2) + 0.0:.2f}" for c in a.currents) + ")"
 
@@ -1249,7 +1071,7 @@ def _allocation_table(study: MicrostepperStudy) -> _Table:
         )
         for gap_mm, v, mn, mm in study.allocations
     ]
-    return _Table(
+    return Table(
         "Four currents for three forces: minimum norm against maximum margin",
         (
             "gap\n[mm]",
@@ -1272,12 +1094,12 @@ def _allocation_table(study: MicrostepperStudy) -> _Table:
     )
 
 
-def _breakdown_table(study: MicrostepperStudy) -> _Table:
+def _breakdown_table(study: MicrostepperStudy) -> Table:
     paper = study.scenarios["sinusoid"].paper
     keys = ("mean_err_x_mm", "mean_err_y_mm", "mean_err_gap_mm")
     rows = [("paper (002 Sec. 8)", *(f"{float(paper[k]) * 1e3:.0f}" for k in keys))]
     rows += [(label, *(_um(v) for v in m.mean_error)) for label, m in study.breakdown]
-    return _Table(
+    return Table(
         "Mean |error| from 8 to 20 s with the rig twin changed",
         ("twin", "x [µm]", "y [µm]", "gap [µm]"),
         rows,
@@ -1327,7 +1149,7 @@ def _region_notes(study: MicrostepperStudy) -> list[str]:
     ]
 
 
-def _timing_table(study: MicrostepperStudy) -> _Table:
+def _timing_table(study: MicrostepperStudy) -> Table:
     rows = [
         (
             f"{SCENARIO_WORDS[run.scenario.name]}: {run.label}",
@@ -1350,7 +1172,7 @@ def _timing_table(study: MicrostepperStudy) -> _Table:
         ("total", "", f"{t['total'] + t.get('report', 0.0):.1f}"),
     ]
     backend = {"c": "generated C with a C loop", "vm": "CasADi's virtual machine"}[study.backend]
-    return _Table(
+    return Table(
         "",
         ("what", "build [s]", "run [s]"),
         rows,

@@ -126,7 +126,6 @@ def _gains_page(pdf: PdfReport, gain_checks: list[GainCheck]) -> None:
             "K_v_retuned: its poles are printed to one decimal in 002, so the recomputed "
             "gains differ from the printed ones by up to a few percent.",
         ],
-        col_widths=[0.1, 0.07, 0.13, 0.11, 0.1, 0.1, 0.17, 0.2],
     )
 
 

@@ -261,7 +261,6 @@ def _timing_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
             "over "
             "the starts on 2 threads. bench/region.py times each step on its own.",
         ],
-        col_widths=[0.6, 0.2],
     )
 
 
@@ -315,7 +314,6 @@ def _certificate_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
             "(decay rate 0.1 1/s), then certified against F itself, so its level may exceed 1.",
             "Sinusoid: deviations from the steady-state orbit; every phase of the exosystem is covered.",
         ],
-        col_widths=[0.09, 0.1, 0.08, 0.08, 0.07, 0.11, 0.07, 0.09, 0.07, 0.09, 0.12],
         font_size=7.5,
     )
     pdf.add_figure(plots.certified_sets_figure(st))
@@ -399,7 +397,6 @@ def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
             "Encoder row: the 10 um quantiser with 2 um noise (one realisation shared by the runs), full "
             "starts.",
         ],
-        col_widths=[0.1, 0.11, 0.14, 0.09, 0.1, 0.1, 0.09, 0.2],
         font_size=8,
     )
     pdf.add_figure(plots.montecarlo_figure(st))
@@ -443,7 +440,6 @@ def _slice_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
             f"Slice ranges: e1 over the stoppers ({g[0] * 1e3:g}-{g[1] * 1e3:g} mm gap), e2 over the "
             "horizontal stoppers, e1' over +-0.8 m/s.",
         ],
-        col_widths=[0.1, 0.16, 0.12, 0.08, 0.08, 0.1, 0.16, 0.12],
     )
     pdf.add_figure(
         plots.slices_figure(
@@ -512,7 +508,6 @@ def _large_step_pages(pdf: PdfReport, st: OperatingRegionStudy, model: StageMode
             "sampled "
             "ideal twin — an estimate, not a certificate.",
         ],
-        col_widths=[0.28, 0.1, 0.1, 0.08, 0.08, 0.08, 0.1, 0.09],
     )
     pdf.add_figure(plots.large_step_figure(ls))
     pdf.add_figure(plots.sweep_figure(ls, st.feasible.gap_range))

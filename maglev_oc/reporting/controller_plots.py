@@ -7,26 +7,15 @@ from matplotlib.figure import Figure
 
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.reporting.pdf import new_figure
+from maglev_oc.reporting.style import controller_colour
 from maglev_oc.sim.comparison import Comparison, StepSweep
 from maglev_oc.sim.engine import SimulationResult
 from maglev_oc.sim.metrics import BANDS
 from maglev_oc.units import M_TO_MM
 
-__all__ = ["COLORS", "MAX_POINTS", "color", "scenario_figure", "sweep_figure"]
+__all__ = ["MAX_POINTS", "scenario_figure", "sweep_figure"]
 
 MAX_POINTS = 2500
-COLORS = {
-    "FL regulator": "tab:blue",
-    "linear regulator": "tab:orange",
-    "linear regulator (no feedforward)": "tab:brown",
-    "LQR": "tab:green",
-    "PID": "tab:red",
-    "NMPC": "tab:purple",
-}
-
-
-def color(name: str) -> str:
-    return COLORS.get(name, "0.3")
 
 
 def _stride(n: int) -> int:
@@ -53,7 +42,7 @@ def scenario_figure(cmp: Comparison, scenario: str, twin: str) -> Figure:
             continue
         first = first or res
         k = _stride(res.t.size)
-        c = color(name)
+        c = controller_colour(name)
         lw = 1.6 if name == cmp.controllers[0] else 0.8
         label = name if res.success else f"{name} (failed)"
         for col, (row_x, row_r, row_u) in enumerate(((0, 0, 1), (2, 3, 0))):
@@ -97,8 +86,8 @@ def sweep_figure(sweep: StepSweep) -> Figure:
     g = sweep.target_gaps * M_TO_MM
     for i, name in enumerate(sweep.controllers):
         ok = sweep.success[i]
-        ax.plot(g, sweep.min_gap[i] * M_TO_MM, "-", color=color(name), label=name)
-        ax.plot(g[~ok], sweep.min_gap[i, ~ok] * M_TO_MM, "x", color=color(name), ms=9, mew=2)
+        ax.plot(g, sweep.min_gap[i] * M_TO_MM, "-", color=controller_colour(name), label=name)
+        ax.plot(g[~ok], sweep.min_gap[i, ~ok] * M_TO_MM, "x", color=controller_colour(name), ms=9, mew=2)
     ax.plot(g, g, "k:", lw=0.8, label="target gap")
     ax.set_xlabel(
         "target gap [mm] (start 26 mm, horizontal step to %.0f mm)" % (sweep.target_position * M_TO_MM)
