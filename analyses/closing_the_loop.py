@@ -12,10 +12,10 @@ from pathlib import Path
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.diagnosis.feedback import compensation_study
 from maglev_oc.diagnosis.pipeline import diagnose
-from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
 from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
 from maglev_oc.reporting.pdf import ReportContents
+from maglev_oc.reporting.twins import DIAGNOSIS_TRUTH
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
@@ -27,13 +27,12 @@ __all__ = ["ORDER", "REPORT", "build", "main"]
 
 REPORT = "closing_the_loop.pdf"
 ORDER = 60
-TRUE_CONSTANTS = "table3_eps0.05"  # the plant's constants differ from the papers' default
 
 
 def _builtin_log(model: StageModel, duration: float = 60.0):
     """60 s of the papers' PID sum-of-sines excitation on the rig twin, logged at 1 kHz. The log
     carries no description of the twin. Returns (log, twin)."""
-    twin = RigTwin(model.with_constants(PAPER_CONSTANTS[TRUE_CONSTANTS]), TwinEffects.rig())
+    twin = RigTwin(model.with_constants(DIAGNOSIS_TRUTH), TwinEffects.rig())
     res = ClosedLoop(twin, paper_pid(model)).run(excitation_scenario(duration, seed=7))
     return result_to_log(res, rate_hz=1000.0), twin
 

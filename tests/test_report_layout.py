@@ -88,3 +88,19 @@ def test_thinning_keeps_every_peak():
     tt, yy = thin(t, y)
     assert tt.size <= 2.1 * 3000 and yy.max() == y.max() and yy.min() == y.min()
     assert tt[-1] == t[-1] and y[-1] in yy[-2:]  # the end of the trace is kept
+
+
+def test_each_twin_is_stated_once_with_its_true_constants():
+    from maglev_oc.identification.experiments import TWIN_TRUTH
+    from maglev_oc.model.parameters import PAPER_CONSTANTS
+    from maglev_oc.reporting.twins import TWINS, twin_sentence, twin_table
+    from maglev_oc.sim.comparison import RIG_CONSTANTS
+
+    # the sentences state the constants the studies actually simulate (4 significant digits)
+    assert f"{PAPER_CONSTANTS[RIG_CONSTANTS].C1:.4g}" in twin_sentence("rig twin")
+    assert "Table III at eps = 0.001" in twin_sentence("rig twin")
+    assert f"{TWIN_TRUTH.C4:.3g}" in twin_sentence("identification twin")
+    assert "cogging" not in twin_sentence("identification twin")  # encoders and amplifiers only
+    assert "none" in twin_sentence("ideal twin")
+    rows = twin_table().rows
+    assert [r[0] for r in rows] == list(TWINS) and all("_" not in r[2] for r in rows)  # plain words

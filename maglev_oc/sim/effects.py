@@ -307,6 +307,43 @@ class TwinEffects:
         skip = ("input_delay_samples", "locked_gap", "locked_position")
         return [f.name for f in fields(self) if f.name not in skip and getattr(self, f.name)]
 
+    def describe(self) -> list[str]:
+        """Each effect that is on, in plain words with its size (what a report states)."""
+        words = []
+        if c := self.cogging:
+            words.append(
+                f"cogging {c.peak_at_reference:g} N peak at {c.reference_gap * 1e3:g} mm gap, "
+                f"falling as gap^-{c.exponent:g}"
+                + (f", {c.horizontal_peak:g} N along the travel" if c.horizontal_peak else "")
+            )
+        for axis, f in (("horizontal", self.friction_horizontal), ("vertical", self.friction_vertical)):
+            if f:
+                words.append(f"{axis} guide friction {f.coulomb:g} N Coulomb + {f.viscous:g} N s/m viscous")
+        if m := self.misalignment:
+            words.append(
+                f"guide misalignment ({m.tilt * 1e3:g} mrad tilt, {m.waviness * 1e6:g} µm waviness "
+                f"over {m.waviness_period * 1e3:g} mm)"
+            )
+        if a := self.amplifier:
+            words.append(
+                f"current amplifiers {a.bandwidth_hz:g} Hz bandwidth, {a.continuous:g} A continuous / "
+                f"{a.peak:g} A peak"
+            )
+        if e := self.encoder:
+            words.append(f"encoders {e.resolution * 1e6:g} µm steps, {e.noise_std * 1e6:g} µm noise")
+        if c := self.commutation:
+            words.append(f"commutation angle off by {c.angle:g} rad")
+        if r := self.ripple:
+            words.append(f"thrust ripple {r.amplitude * 100:g} % over {r.period * 1e3:g} mm")
+        if c := self.cable:
+            words.append(f"cable drag {c.stiffness:g} N/m about {c.neutral * 1e3:g} mm")
+        if self.extra is not None:
+            words.append("an identified extra force")
+        if self.input_delay_samples:
+            n = self.input_delay_samples
+            words.append(f"{n} sample{'s' if n > 1 else ''} of computation delay")
+        return words
+
     def locked(self, **locks: float | None) -> TwinEffects:
         """The same effects with an axis blocked by the hardware stoppers, as in the papers'
         verification procedures (000 Sec. V): ``locked(gap=0.02)`` or ``locked(position=0.0)``."""
