@@ -119,7 +119,6 @@ def write_diagnosis_report(
                 "Found against true (the log's truth is known)",
                 ["true effect", "true size", "found as", "found size"],
                 list(truth_rows),
-                col_widths=[0.42, 0.14, 0.26, 0.18],
             )
         _effects_page(pdf, diag)
         _verdicts_page(pdf, diag)
@@ -127,7 +126,6 @@ def write_diagnosis_report(
             "Lumped constants",
             ["constant", "base model alone", "refitted with the effects", "unit"],
             _constant_rows(diag),
-            col_widths=[0.12, 0.3, 0.3, 0.2],
         )
         pdf.add_figure(plots.spectrum_figure(diag))
         pdf.add_figure(plots.dependence_figure(diag))
@@ -191,7 +189,6 @@ def _effects_page(pdf: PdfReport, diag: Diagnosis) -> None:
             "the spread over the effect's model-form variants and 1 % for the differentiator's "
             "calibration, in quadrature."
         ],
-        col_widths=[0.28, 0.3, 0.27, 0.15],
     )
 
 
@@ -220,7 +217,6 @@ def _verdicts_page(pdf: PdfReport, diag: Diagnosis) -> None:
             "the constants and the other effects (variance inflation <= 100) and it is physically "
             "plausible."
         ],
-        col_widths=[0.27, 0.13, 0.12, 0.48],
         font_size=7,
     )
 
