@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import io
 import math
 import os
 import random
@@ -30,6 +31,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,10 +95,25 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool) -> None:
     if fresh and WORK.exists():
         shutil.rmtree(WORK)
     WORK.mkdir(parents=True, exist_ok=True)
+    # the committed sources (HEAD), not the work tree: the score belongs to a commit, and edits
+    # made while the run goes on do not reach it
     for name in ("maglev_oc", "tests"):
         if (WORK / name).exists():
             shutil.rmtree(WORK / name)
-        shutil.copytree(ROOT / name, WORK / name, ignore=shutil.ignore_patterns("__pycache__"))
+    archive = subprocess.run(
+        ["git", "archive", "--format=tar", "HEAD", "maglev_oc", "tests", "analyses"],
+        cwd=ROOT,
+        capture_output=True,
+        check=True,
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(WORK, filter="data")
+    # the analyses ship as maglev_oc.analyses (an editable install maps them to ROOT/analyses):
+    # inside the copied package they are found first
+    shutil.move(WORK / "analyses", WORK / "maglev_oc" / "analyses")
+    (WORK / "commit.txt").write_text(
+        subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    )
     sources = ", ".join(f'"{p}"' for p in paths)
     selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
     # tests that read the sources as text (exports, README commands) see mutmut's trampolines
