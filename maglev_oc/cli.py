@@ -1,6 +1,7 @@
 """The ``maglev-oc`` command.
 
-    maglev-oc report [--out DIR] [--only NAME ...]   run every analysis script -> DIR/*.pdf
+    maglev-oc report [--out DIR] [--only NAME ...] [--jobs N]
+                                                     every analysis script, in parallel -> DIR/*.pdf
     maglev-oc model [--params JSON] [--gaps MM ...]  print the equilibrium table
     maglev-oc simulate --controller fl --scenario sinusoid --out run.csv
                                                      closed loop on the rig twin -> log (SPEC 2)
@@ -26,10 +27,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
 import math
 import os
-import pkgutil
 import sys
 import time
 from pathlib import Path
@@ -63,38 +62,30 @@ DEFAULT_REGION_GAPS = (15.0, 17.5, 20.0, 22.5, 25.0)
 """``region --gaps`` when not given [mm]."""
 
 
-def analysis_modules() -> dict[str, object]:
-    """Analysis scripts by name (maglev_oc.analyses.<name>), each with REPORT and build()."""
-    import maglev_oc.analyses as pkg
-
-    found = {}
-    for info in pkgutil.iter_modules(pkg.__path__):
-        module = importlib.import_module(f"{pkg.__name__}.{info.name}")
-        if hasattr(module, "build") and hasattr(module, "REPORT"):
-            found[info.name] = module
-    return dict(sorted(found.items(), key=lambda kv: getattr(kv[1], "ORDER", 100)))
-
-
 # ----------------------------------------------------------------------------------------------
 def cmd_report(args: argparse.Namespace) -> int:
+    from maglev_oc.reporting.runner import analysis_modules, run_reports
+
     modules = analysis_modules()
     names = args.only or list(modules)
     unknown = [n for n in names if n not in modules]
     if unknown:
         raise InputError(f"unknown analysis {unknown}; available: {', '.join(modules)}")
-    model = load_model(args.params)
-    failed = []
-    for name in names:
-        module = modules[name]
-        out = args.out / module.REPORT
-        t0 = time.perf_counter()
-        try:
-            module.build(out, model)
-        except Exception as err:  # one failing report must not stop the others
-            failed.append(name)
-            print(f"  {name:<22s} FAILED: {type(err).__name__}: {err}", file=sys.stderr)
-            continue
-        print(f"  {name:<22s} -> {out}  ({time.perf_counter() - t0:.1f} s)")
+    if args.params is not None:
+        load_model(args.params)  # a bad file is refused before any analysis starts
+    if args.jobs is not None and args.jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {args.jobs}")
+    t0 = time.perf_counter()
+
+    def done(run) -> None:
+        if run.success:
+            print(f"  {run.name:<22s} -> {run.path}  ({run.seconds:.1f} s)", flush=True)
+        else:
+            print(f"  {run.name:<22s} FAILED: {run.error}", file=sys.stderr, flush=True)
+
+    runs = run_reports(names, args.out, params=args.params, jobs=args.jobs, done=done)
+    failed = [r.name for r in runs if not r.success]
+    print(f"{len(runs) - len(failed)} report(s) in {time.perf_counter() - t0:.1f} s")
     if failed:
         print(f"{len(failed)} report(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
@@ -530,6 +521,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("reports"), help="output folder")
     p.add_argument("--only", nargs="+", metavar="NAME", help="run only these analyses")
     p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.add_argument(
+        "--jobs", type=int, help="analyses run at once, each in its own process (default: the cores)"
+    )
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("model", help="print the equilibrium table")

@@ -251,25 +251,53 @@ def fake_analyses(monkeypatch) -> list:
 
         return SimpleNamespace(REPORT=f"{name}.pdf", build=build)
 
-    monkeypatch.setattr(cli, "analysis_modules", lambda: {n: analysis(n) for n in ("first", "second")})
+    from maglev_oc.reporting import runner
+
+    fakes = {n: analysis(n) for n in ("first", "second")}
+    monkeypatch.setattr(runner, "analysis_modules", lambda package=runner.ANALYSES: fakes)
     return calls
 
 
 def test_report_only_runs_the_named_analyses(tmp_path, fake_analyses):
-    _ok(["report", "--out", str(tmp_path / "some"), "--only", "second"])
+    _ok(["report", "--out", str(tmp_path / "some"), "--only", "second", "--jobs", "1"])
     assert [name for name, _, _ in fake_analyses] == ["second"]
     assert sorted(p.name for p in (tmp_path / "some").iterdir()) == ["second.pdf"]
     fake_analyses.clear()
-    _ok(["report", "--out", str(tmp_path / "all")])
+    _ok(["report", "--out", str(tmp_path / "all"), "--jobs", "1"])
     assert [name for name, _, _ in fake_analyses] == ["first", "second"]
 
 
 def test_report_params_is_the_model_the_analyses_get(tmp_path, fake_analyses, stage_file):
-    _ok(["report", "--out", str(tmp_path), "--only", "first", "--params", str(stage_file)])
-    _ok(["report", "--out", str(tmp_path / "papers"), "--only", "first"])
+    _ok(["report", "--out", str(tmp_path), "--only", "first", "--params", str(stage_file), "--jobs", "1"])
+    _ok(["report", "--out", str(tmp_path / "papers"), "--only", "first", "--jobs", "1"])
     (_, out, with_file), (_, _, default) = fake_analyses
     assert with_file.C3 == WEAK_C3.C3 and default.C3 == DEFAULT_CONSTANTS.C3
     assert out == tmp_path / "first.pdf" and repr(WEAK_C3.C3) in out.read_text()
+
+
+def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, stage_file):
+    from maglev_oc.reporting.runner import run_reports
+
+    names = ["slow", "slower", "broken"]
+    kwargs = dict(params=stage_file, package="tests.fake_analyses")
+    runs = run_reports(names, tmp_path / "two", jobs=2, **kwargs)
+    assert [r.name for r in runs] == names and [r.success for r in runs] == [True, True, False]
+    assert "failed on purpose" in runs[2].error and not (tmp_path / "two" / "broken.pdf").exists()
+    texts = [dict(line.split(" = ") for line in r.path.read_text().splitlines()) for r in runs[:2]]
+    assert all(t["C3"] == repr(WEAK_C3.C3) for t in texts)  # --params reaches every worker
+    # two processes whose runs overlap in time: the two 1.5 s analyses ran at once
+    assert texts[0]["pid"] != texts[1]["pid"]
+    start, end = [float(t["started"]) for t in texts], [float(t["ended"]) for t in texts]
+    assert max(start) < min(end)
+    # one job: one after the other, in this process
+    runs = run_reports(names[:2], tmp_path / "one", jobs=1, **kwargs)
+    texts = [dict(line.split(" = ") for line in r.path.read_text().splitlines()) for r in runs]
+    assert float(texts[1]["started"]) >= float(texts[0]["ended"])
+
+
+def test_report_jobs_must_be_positive(capsys):
+    assert main(["report", "--only", "model", "--jobs", "0"]) == cli.EXIT_USAGE
+    assert "--jobs must be at least 1" in capsys.readouterr().err
 
 
 # --- model ------------------------------------------------------------------------------------------
