@@ -53,6 +53,7 @@ OPTION_TESTS: dict[str, str] = {
     "report --out": "tests/test_cli.py::test_report_writes_model_pdf",
     "report --only": f"{HERE}::test_report_only_runs_the_named_analyses",
     "report --params": f"{HERE}::test_report_params_is_the_model_the_analyses_get",
+    "report --jobs": f"{HERE}::test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none",
     # model
     "model --params": f"{HERE}::test_model_params_gives_the_files_equilibria",
     "model --constants": f"{HERE}::test_model_constants_names_a_paper_set",
