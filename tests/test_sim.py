@@ -96,6 +96,27 @@ def test_friction_and_cogging_act_as_documented(model):
     assert_allclose(base[0] - acc[0], 1.5 / model.params.mass_vertical, rtol=1e-12)
 
 
+def test_a_purely_viscous_guide_is_finite_and_exactly_viscous(model):
+    # coulomb = 0 is a valid guide (validation allows it): Dahl's state has sigma = 0, so it stays
+    # at zero and only the viscous force acts (it used to divide 0 by 0 at the first step)
+    fr = GuideFriction(coulomb=0.0, viscous=2.0)
+    twin = RigTwin(model, TwinEffects(friction_vertical=fr, friction_horizontal=fr))
+    op = equilibrium(model, 20 * MM)
+    s = twin.initial_state([20 * MM, 0.05, 0, 0.1], op.u)
+    for _ in range(5):
+        s, _ = twin.step(s, op.u)
+    s = np.asarray(s).ravel()
+    assert np.all(np.isfinite(s)) and s[7] == 0.0 and s[8] == 0.0
+    x = [20 * MM, 0.05, 0, 0.1]
+    acc = np.asarray(twin.acceleration(x, op.u, [0, 0])).ravel()
+    free = np.asarray(RigTwin(model).acceleration(x, op.u, [0, 0])).ravel()
+    assert_allclose(
+        free - acc,
+        [2.0 * 0.05 / model.params.mass_vertical, 2.0 * 0.1 / model.params.mass_horizontal],
+        rtol=1e-12,
+    )
+
+
 def test_effects_validate():
     with pytest.raises(ValueError, match="coulomb"):
         GuideFriction(coulomb=-1.0)

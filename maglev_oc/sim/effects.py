@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+import casadi as ca
+
 from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import (
     CONTINUOUS_CURRENT_LIMIT,
@@ -101,6 +103,18 @@ class GuideFriction:
     def stiffness(self) -> float:
         """Pre-sliding stiffness sigma [N/m]."""
         return self.coulomb / self.presliding_distance
+
+    def dahl_step(self, force, velocity, h: float, level=None):
+        """The Coulomb state after a step ``h`` [s] with the velocity held (CasADi expressions):
+        dF/dt = sigma v - (sigma |v| / Fc) F is linear in F, so F(h) = Fss + (F - Fss)
+        exp(-sigma |v| h / Fc), Fss = Fc sign(v). ``level``: the Coulomb level Fc (default
+        :attr:`coulomb`; the 2-DOF twin raises it where the guides bind). Without Coulomb friction
+        (sigma = 0) the state stays where it is (zero from rest): a purely viscous guide."""
+        fc = self.coulomb if level is None else level
+        f_ss = fc * ca.sign(velocity)
+        if self.coulomb == 0:
+            return force
+        return f_ss + (force - f_ss) * ca.exp(-self.stiffness * ca.fabs(velocity) * h / fc)
 
 
 @dataclass(frozen=True)

@@ -307,9 +307,8 @@ class MicrostepperTwin:
 
 
 def _dahl(force, fr: GuideFriction | None, vel, h: float):
-    """Dahl's friction force over a step h [s] with the velocity held (the 2-DOF twin's law):
-    F(h) = Fss + (F - Fss) exp(-sigma |v| h / Fc), Fss = Fc sign(v), sigma = Fc / presliding."""
+    """Dahl's friction force over a step h [s] with the velocity held (the 2-DOF twin's law,
+    :meth:`GuideFriction.dahl_step`)."""
     if fr is None:
         return ca.SX(0)
-    f_ss = fr.coulomb * ca.sign(vel)
-    return f_ss + (force - f_ss) * ca.exp(-fr.stiffness * ca.fabs(vel) * h / fr.coulomb)
+    return fr.dahl_step(force, vel, h)

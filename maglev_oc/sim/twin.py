@@ -130,20 +130,13 @@ class RigTwin:
         return levels
 
     def _friction_update(self, friction, x, h):
-        """Dahl's law over one step with the velocity held: dF/dt = sigma v - (sigma |v| / Fc) F
-        is linear in F, so F(h) = Fss + (F - Fss) exp(-sigma |v| h / Fc), Fss = Fc sign(v)."""
+        """Dahl's law over one step with the velocity held (:meth:`GuideFriction.dahl_step`), at
+        the Coulomb levels of :meth:`_coulomb_levels`."""
         e = self.effects
         out = []
         levels = self._coulomb_levels(x)
         for k, (fr, vel) in enumerate(((e.friction_vertical, x[1]), (e.friction_horizontal, x[3]))):
-            if fr is None:
-                out.append(ca.SX(0))
-                continue
-            fc = levels[k]
-            sigma = fr.coulomb / fr.presliding_distance
-            f_ss = fc * ca.sign(vel)
-            decay = ca.exp(-sigma * ca.fabs(vel) * h / fc)
-            out.append(f_ss + (friction[k] - f_ss) * decay)
+            out.append(ca.SX(0) if fr is None else fr.dahl_step(friction[k], vel, h, levels[k]))
         return ca.vertcat(*out)
 
     def _build(self) -> None:
