@@ -53,7 +53,7 @@ from maglev_oc.identification.experiments import (
     verification_effects,
 )
 from maglev_oc.identification.layout import CONSTANT_NAMES
-from maglev_oc.identification.npfsi import PAPER_EPSILONS, PAPER_GAMMA, _stage_regression, npfsi
+from maglev_oc.identification.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi, stage_regression
 from maglev_oc.identification.study import PARTIAL as TABLE2_NAMES
 from maglev_oc.identification.study import VERTICAL_GAP
 from maglev_oc.model.parameters import PAPER_CONSTANTS, LumpedConstants
@@ -350,7 +350,7 @@ def npfsi_stationary_point(
         The constants at the end point.
     """
     diff = HighGainDifferentiator(log.sample_time) if differentiator is None else differentiator
-    A, b, y, _ = _stage_regression(log, model, estimate, diff)
+    A, b, y, _ = stage_regression(log, model, estimate, diff)
     return stationary_point(A, b, y, log.sample_time, eps, gamma)
 
 

@@ -51,7 +51,15 @@ from maglev_oc.identification.layout import CONSTANT_NAMES
 from maglev_oc.identification.result import NpfsiResult
 from maglev_oc.model.stage import StageModel
 
-__all__ = ["CHUNK", "DEFAULT_Q0_SECONDS", "PAPER_EPSILONS", "PAPER_GAMMA", "NpfsiEstimator", "npfsi"]
+__all__ = [
+    "CHUNK",
+    "DEFAULT_Q0_SECONDS",
+    "PAPER_EPSILONS",
+    "PAPER_GAMMA",
+    "NpfsiEstimator",
+    "npfsi",
+    "stage_regression",
+]
 
 PAPER_EPSILONS = (0.001, 0.01, 0.05)
 """The eps values of Tables II and III of 000."""
@@ -253,7 +261,7 @@ class NpfsiEstimator:
         return traj, z, "completed", "completed"
 
 
-def _stage_regression(
+def stage_regression(
     log: Log,
     model: StageModel,
     estimate: Sequence[str],
@@ -318,7 +326,7 @@ def npfsi(
         when the run did not give an estimate.
     """
     diff = HighGainDifferentiator(log.sample_time) if differentiator is None else differentiator
-    A, b, y, method = _stage_regression(log, model, estimate, diff)
+    A, b, y, method = stage_regression(log, model, estimate, diff)
     consts = dict(zip(CONSTANT_NAMES, model.constants.as_array(), strict=True))
     init = {k: consts[k] for k in estimate}
     for key, value in (theta0 or {}).items():
