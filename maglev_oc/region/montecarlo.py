@@ -1,10 +1,11 @@
 """Monte Carlo on the sampled twin: many closed-loop runs at once, reduced to what a region needs.
 
 The engine's fused closed-loop step (:attr:`maglev_oc.sim.engine.ClosedLoop.step_function`, twin
-and controller at 5 kHz) is wrapped into one CasADi Function that runs a whole horizon
-(``mapaccum``) while carrying the running extremes a feasibility check needs, and that Function
-is ``map``-ped over thousands of initial conditions (threads, optionally JIT-compiled). Nothing
-per sample or per trajectory happens in Python.
+and controller at 5 kHz) is extended with the running extremes a feasibility check needs, then
+run over the horizon from thousands of initial conditions at once: generated as C with a C loop
+over runs and samples (:class:`maglev_oc.sim.native.NativeBatch`, on threads) when a C compiler
+is there, else as a CasADi Function that runs the horizon (``mapaccum``) ``map``-ped over the
+starts in CasADi's virtual machine. Nothing per sample or per trajectory happens in Python.
 
 Per trajectory it returns the least feasibility margin R/(4 L4) the controller saw (NaN for
 controllers without one), the largest current-vector magnitude commanded, whether a stopper was
@@ -16,6 +17,7 @@ had to clip), a commanded |u| above the limit, or a stopper hit.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -25,12 +27,13 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from maglev_oc.errors import InputError
+from maglev_oc.errors import InputError, SolverError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
-from maglev_oc.numerics import jit
+from maglev_oc.numerics import c_compiler
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.results import Result
 from maglev_oc.sim.engine import ClosedLoop
+from maglev_oc.sim.native import NativeBatch
 from maglev_oc.sim.twin import RigTwin
 
 __all__ = [
@@ -121,8 +124,8 @@ class BatchSimulator:
     threads : int
         Parallel evaluations of the mapped Function.
     compile : bool
-        JIT-compile the horizon Function with the system C compiler (falls back to CasADi's
-        virtual machine if compilation fails; ``compiled`` tells which).
+        Generate the step as C and run it in a C loop (falls back to CasADi's virtual machine
+        when there is no C compiler or compilation fails; ``compiled`` tells which).
     """
 
     def __init__(self, twin: RigTwin, controller, *, duration: float, threads: int = 2, compile: bool = True):
@@ -136,14 +139,39 @@ class BatchSimulator:
         self.n_steps = round(duration / twin.sample_time)
         self.threads = int(threads)
         self._nz = twin.n_state + controller.n_state
-        horizon = self._accumulating_step().mapaccum("horizon", self.n_steps)
-        z0 = ca.MX.sym("z0", self._nz + _N_EXTREMA)
-        ref = ca.MX.sym("r", 6, self.n_steps)
-        noise = ca.MX.sym("w", 2, self.n_steps)
-        fn = ca.Function("horizon", [z0, ref, noise], [horizon(z0, ref, noise)[:, -1]])
-        self._fn = jit(fn, symbolic="MX") if compile else fn
-        self.compiled = self._fn is not fn
+        self._step = self._accumulating_step()
+        self._native = None
+        if compile and c_compiler() is not None:
+            try:
+                self._native = NativeBatch(self._step)
+            except SolverError:
+                self._native = None
+        self.compiled = self._native is not None
+        self._fn: ca.Function | None = None
         self._maps: dict[int, ca.Function] = {}
+
+    def with_duration(self, duration: float) -> BatchSimulator:
+        """The same twin and controller over another horizon [s], sharing what was built."""
+        if not (duration > 0 and math.isfinite(duration)):
+            raise InputError(f"duration must be positive [s], got {duration!r}")
+        other = copy.copy(self)
+        other.n_steps = round(duration / self.twin.sample_time)
+        other._fn, other._maps = None, {}
+        return other
+
+    def _horizon_map(self, n: int) -> ca.Function:
+        """The virtual machine's horizon Function mapped over n starts (built on first use)."""
+        if self._fn is None:
+            horizon = self._step.mapaccum("horizon", self.n_steps)
+            z0 = ca.MX.sym("z0", self._nz + _N_EXTREMA)
+            ref = ca.MX.sym("r", 6, self.n_steps)
+            noise = ca.MX.sym("w", 2, self.n_steps)
+            self._fn = ca.Function("horizon", [z0, ref, noise], [horizon(z0, ref, noise)[:, -1]])
+        fmap = self._maps.get(n)
+        if fmap is None:
+            fmap = self._fn.map(n, "thread", self.threads) if self.threads > 1 else self._fn.map(n)
+            self._maps = {n: fmap}
+        return fmap
 
     def _accumulating_step(self) -> ca.Function:
         """The engine's fused step with the running extremes (:data:`EXTREMA_NAMES`) appended
@@ -206,14 +234,13 @@ class BatchSimulator:
         s0 = np.column_stack([self.twin.initial_state(x0[:, k]) for k in range(n)])
         ext0 = np.tile(np.array([[np.inf], [0.0], [0.0], [np.inf], [-np.inf], [0.0]]), (1, n))
         z0 = np.vstack([s0, c0, ext0])
-        fmap = self._maps.get(n)
-        if fmap is None:
-            fmap = self._fn.map(n, "thread", self.threads) if self.threads > 1 else self._fn.map(n)
-            self._maps = {n: fmap}
         w = np.zeros((2, self.n_steps)) if noise is None else np.asarray(noise, dtype=float)
         if w.shape != (2, self.n_steps):
             raise InputError(f"noise must have shape (2, {self.n_steps}), got {w.shape}")
-        zf = np.asarray(fmap(z0, ref, w))
+        if self._native is not None:
+            zf = self._native(z0, ref, w, threads=self.threads)
+        else:
+            zf = np.asarray(self._horizon_map(n)(z0, ref, w))
         ns = self.twin.n_state
         ext = zf[self._nz :]
         has_margin = "margin" in self.controller.diag_names
