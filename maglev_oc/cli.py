@@ -512,9 +512,24 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0 if all(f.success for f in fits) and all(r.success for r in outcome.npfsi) else 1
 
 
+def _version() -> str:
+    """maglev-oc's version and the versions of what its numbers depend on."""
+    import platform
+
+    import casadi
+
+    from maglev_oc import __version__
+
+    return (
+        f"maglev-oc {__version__} (CasADi {casadi.__version__}, NumPy {np.__version__}, "
+        f"Python {platform.python_version()})"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="maglev-oc", description=__doc__.splitlines()[0])
     parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("report", help="run every analysis script and write its PDF")

@@ -388,15 +388,65 @@ def test_blank_and_space_only_lines_keep_line_numbers_right(tmp_path: Path):
     assert f"line {_line(20) + 1}, column 2" in str(err)  # +1: the extra blank line
 
 
-def test_matlab_v73_is_refused_with_advice(tmp_path: Path):
-    # the 128-byte MAT header of a v7.3 file (the HDF5 body is irrelevant to the check)
+def _write_v73(path: Path, variables: dict, metadata: dict | None = None) -> None:
+    """A file laid out as MATLAB's save(..., '-v7.3') lays it out (written without MATLAB): a
+    512-byte user block holding the 128-byte MAT header, then HDF5 with each variable stored
+    transposed (MATLAB is column-major) and tagged with its MATLAB_class; a struct is a group and
+    a string is uint16 characters."""
+    h5py = pytest.importorskip("h5py")
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for name, value in variables.items():
+            if isinstance(value, str):
+                d = f.create_dataset(name, data=np.array([[ord(c)] for c in value], dtype=np.uint16))
+                d.attrs["MATLAB_class"] = np.bytes_("char")
+            else:
+                d = f.create_dataset(name, data=np.atleast_2d(np.asarray(value, dtype=float)))
+                d.attrs["MATLAB_class"] = np.bytes_("double")
+        if metadata is not None:
+            g = f.create_group("metadata")
+            g.attrs["MATLAB_class"] = np.bytes_("struct")
+            for key, text in metadata.items():
+                d = g.create_dataset(key, data=np.array([[ord(c)] for c in text], dtype=np.uint16))
+                d.attrs["MATLAB_class"] = np.bytes_("char")
+        f.create_group("#refs#")  # MATLAB's bookkeeping, to be left out
     header = (
         b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5 schema 1.00 ."
     )
-    path = tmp_path / "run.mat"
-    path.write_bytes(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM" + b"\x00" * 512)
-    with pytest.raises(LogError, match=r"-v7"):
-        read_log(path)
+    with path.open("r+b") as fh:
+        fh.write(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM")
+
+
+def test_matlab_v73_reads_like_v7(tmp_path: Path):
+    # MATLAB stores an n x 1 column as HDF5 shape (1, n): row vectors (1, n) here, so the reader
+    # must transpose back; the same log saved as v7 reads to the same arrays and metadata
+    sig = _signals()
+    names = ("t", "x1", "x2", "x3", "u1", "u2")
+    meta = {"units": "SI (m, A, s)", "currents": "measured", "sample_rate_hz": "1000"}
+    _write_v73(tmp_path / "new.mat", {n: sig[n].reshape(1, -1) for n in names} | {"note": "bench"}, meta)
+    scipy.io.savemat(tmp_path / "old.mat", {n: sig[n] for n in names} | {"metadata": meta})
+    new, old = read_log(tmp_path / "new.mat"), read_log(tmp_path / "old.mat")
+    for a in ("t", "x", "u"):
+        assert_array_equal(getattr(new, a), getattr(old, a))
+    assert new.metadata == old.metadata and new.metadata["units"] == "SI (m, A, s)"
+    assert any("'note'" in n for n in new.notes)  # an extra variable is named, not read
+
+
+def test_matlab_v73_errors_name_the_variable(tmp_path: Path):
+    sig = _signals()
+    columns = {n: sig[n].reshape(1, -1) for n in ("t", "x1", "x3", "u1", "u2")}
+    _write_v73(tmp_path / "mm.mat", columns | {"x1": sig["x1"].reshape(1, -1) * 1000})
+    with pytest.raises(LogError, match=r"variable 'x1', element 1: .*millimetres"):
+        read_log(tmp_path / "mm.mat")
+    _write_v73(tmp_path / "text.mat", columns | {"u2": "1.5"})
+    with pytest.raises(LogError, match=r"variable 'u2'.*not numeric"):
+        read_log(tmp_path / "text.mat")
+    # a v7.3 header with no HDF5 behind it
+    header = (
+        b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5 schema 1.00 ."
+    )
+    (tmp_path / "cut.mat").write_bytes(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM" + b"\x00" * 512)
+    with pytest.raises(LogError, match=r"cut.mat.*not a readable MATLAB 7.3"):
+        read_log(tmp_path / "cut.mat")
 
 
 def test_mat_errors_name_variable_and_element(tmp_path: Path):

@@ -49,6 +49,7 @@ HERE = "tests/test_options.py"
 
 OPTION_TESTS: dict[str, str] = {
     "--debug": f"{HERE}::test_debug_shows_the_traceback_of_a_bug_only",
+    "--version": f"{HERE}::test_version_names_the_package_and_casadi",
     # report
     "report --out": "tests/test_cli.py::test_report_writes_model_pdf",
     "report --only": f"{HERE}::test_report_only_runs_the_named_analyses",
@@ -235,6 +236,19 @@ def test_debug_shows_the_traceback_of_a_bug_only(monkeypatch, capsys):
     monkeypatch.undo()
     assert main(["--debug", "model", "--gaps", "0"]) == cli.EXIT_USAGE
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_version_names_the_package_and_casadi(capsys):
+    import tomllib
+
+    import casadi
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]
+    assert out.startswith(f"maglev-oc {project['version']} ") and f"CasADi {casadi.__version__}" in out
 
 
 # --- report -----------------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
-"""Reading a MATLAB ``.mat`` log (v5/v7, what ``scipy.io.loadmat`` reads) into a
-:class:`~maglev_oc.data.validation.RawLog` (SPEC 2).
+"""Reading a MATLAB ``.mat`` log into a :class:`~maglev_oc.data.validation.RawLog` (SPEC 2):
+v5/v7 files with ``scipy.io.loadmat``, v7.3 files (HDF5, what MATLAB writes with ``-v7.3`` and
+Simulink/QUARC's large logs) with ``h5py``.
 
 The same names as the CSV columns, as top-level vectors, and optionally a struct ``metadata``
 of strings (numbers are accepted and written with 17 significant digits). Locations in messages
@@ -19,9 +20,9 @@ from maglev_oc.errors import LogError
 
 __all__ = ["read_mat"]
 
-_V73 = (
-    "MATLAB 7.3 MAT-file is an HDF5 file, which this reader does not take; save it as v7 "
-    "in MATLAB with save(name, ..., '-v7')"
+_NO_H5PY = (
+    "MATLAB 7.3 MAT-file (HDF5): reading it needs h5py (pip install h5py), or save it as v7 in "
+    "MATLAB with save(name, ..., '-v7')"
 )
 
 
@@ -42,7 +43,8 @@ def read_mat(path: Path, source: str) -> RawLog:
     variables = _load_variables(path, source)
     metadata: dict[str, str] = {}
     if "metadata" in variables:
-        metadata = _mat_metadata(variables.pop("metadata"), source)
+        meta = variables.pop("metadata")
+        metadata = meta if isinstance(meta, dict) else _mat_metadata(meta, source)
     names = list(variables)
     check_required_columns(names, source, where=None, line=None)
     columns = _vectors(variables, source)
@@ -69,17 +71,76 @@ def _load_variables(path: Path, source: str) -> dict[str, object]:
     with path.open("rb") as fh:
         head = fh.read(128)
     if head.startswith(b"MATLAB 7.3"):
-        raise LogError(source, _V73)
+        return _load_v73(path, source)
     try:
         data = scipy.io.loadmat(path, squeeze_me=False, chars_as_strings=True, appendmat=False)
-    except NotImplementedError:
-        raise LogError(source, _V73) from None
+    except NotImplementedError:  # an HDF5 body behind another header
+        return _load_v73(path, source)
     except (ValueError, TypeError, OSError) as err:
         raise LogError(source, f"not a readable MATLAB .mat file ({err})") from None
     variables = {k: v for k, v in data.items() if not k.startswith("__")}
     if not variables:
         raise LogError(source, "empty file: no variables")
     return variables
+
+
+def _load_v73(path: Path, source: str) -> dict[str, object]:
+    """The top-level variables of a v7.3 file: numeric arrays as MATLAB shapes them (HDF5 stores
+    them transposed), the struct ``metadata`` as a dict of str. MATLAB's bookkeeping (``#refs#``,
+    ``#subsystem#``) is left out."""
+    try:
+        import h5py
+    except ImportError:
+        raise LogError(source, _NO_H5PY) from None
+    try:
+        with h5py.File(path, "r") as f:
+            variables = {}
+            for name, item in f.items():
+                if name.startswith("#"):
+                    continue
+                kind = _matlab_class(item)
+                if name == "metadata" and kind == "struct" and isinstance(item, h5py.Group):
+                    variables[name] = _v73_struct_strings(item, source)
+                elif isinstance(item, h5py.Dataset) and kind not in ("char", "cell", "struct"):
+                    variables[name] = _v73_array(item)
+                else:
+                    variables[name] = np.array([kind or "unknown"])  # refused by name if it is a column
+    except OSError as err:
+        raise LogError(source, f"not a readable MATLAB 7.3 (HDF5) file ({err})") from None
+    if not variables:
+        raise LogError(source, "empty file: no variables")
+    return variables
+
+
+def _matlab_class(item) -> str:
+    kind = item.attrs.get("MATLAB_class", b"")
+    return kind.decode() if isinstance(kind, bytes) else str(kind)
+
+
+def _v73_array(dataset) -> np.ndarray:
+    if dataset.attrs.get("MATLAB_empty", 0):
+        return np.zeros((0, 0))
+    return np.asarray(dataset[()]).T  # HDF5 keeps MATLAB's column-major order: transpose back
+
+
+def _v73_struct_strings(group, source: str) -> dict[str, str]:
+    """A v7.3 struct of strings (uint16 characters) or scalars -> dict of str."""
+    out: dict[str, str] = {}
+    for key, item in group.items():
+        kind = _matlab_class(item)
+        data = None if not hasattr(item, "shape") else _v73_array(item)
+        if kind == "char" and data is not None:
+            out[key] = "".join(map(chr, data.ravel(order="F"))) if data.size else ""
+        elif data is not None and data.dtype.kind in "biuf" and data.size == 1:
+            out[key] = f"{float(data.ravel()[0]):.17g}"
+        else:
+            raise LogError(
+                source,
+                f"field {key!r} is neither a string nor a number",
+                where="variable 'metadata'",
+                column="metadata",
+            )
+    return out
 
 
 def _vectors(variables: dict[str, object], source: str) -> dict[str, np.ndarray]:
