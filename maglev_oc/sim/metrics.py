@@ -4,13 +4,21 @@ Errors are the *measured* tracking errors (encoder reading minus reference), as 
 report them; on the twin the true error differs from it by the encoder's quantization and noise.
 
 * settling time to a band (0.1 mm, 10 um): time from the set-point change until the error
-  enters the band for good (NaN when it never does before the next change);
+  enters the band for good (NaN when it never does before the next change, or does so less than
+  :data:`MIN_HOLD` before it: a reading that enters the band on the segment's last samples has
+  not shown that it stays);
 * overshoot: largest excursion past the new set-point, in % of the step (steps under 0.5 mm on
   an axis are not scored);
 * tracking: mean and peak |error| after ``evaluate_from``;
-* current: RMS and peak of the current-vector magnitude |(i_q, i_d)| of the commands;
-* the minimum feasibility margin R / (4 L4) of controllers that have one, the number of samples
-  clipped, and the controller's per-call time (online controllers).
+* current: RMS and peak of the current-vector magnitude |(i_q, i_d)| of the commands, and the
+  samples commanded above the amplifiers' 9 A peak rating (the rig twin's amplifier clips them,
+  the ideal twin has no amplifier and applies them);
+* the minimum feasibility margin R / (4 L4) of controllers that have one and the samples where
+  the feedback transformation was undefined (R < 0: the controller clipped i_d to the nearest
+  realisable value, a different event from the amplifier's current limit), and the
+  controller's per-call time (online controllers).
+
+A reading within a band by round-off (a 10 um error read as 1.0000000000000003e-05 m) is inside it.
 """
 
 from __future__ import annotations
@@ -20,14 +28,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.results import PerAxis, Result
 from maglev_oc.sim.engine import SimulationResult
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence
 
-__all__ = ["BANDS", "MIN_STEP", "RunMetrics", "StepMetrics", "evaluate"]
+__all__ = ["BANDS", "MIN_HOLD", "MIN_STEP", "RunMetrics", "StepMetrics", "evaluate"]
 
 BANDS = (1e-4, 1e-5)  # [m]: 0.1 mm (the papers' accuracy goal) and 10 um (encoder resolution)
 MIN_STEP = 5e-4  # [m]: smaller steps are not scored for overshoot
+MIN_HOLD = 0.2  # [s]: a band entered later than this before the segment ends is not settled
+_ROUND_OFF = 1e-9  # relative: an error this close to a band's edge is on the edge (encoder counts)
 
 
 @dataclass(frozen=True)
@@ -57,12 +68,13 @@ class RunMetrics(Result):
     rms_current: float  # [A]
     peak_current: float  # [A]
     min_margin: float  # [m/s^2], NaN if the controller has no margin
-    clipped: int  # samples
-    current_limited: int  # samples
+    clipped: int  # samples where the feedback transformation was undefined (R < 0)
+    current_limited: int  # samples the twin's amplifier limited the current (0 without amplifier)
     step_time_median: float  # [s], NaN for expression controllers
     step_time_p99: float
     step_time_max: float
     timings: Mapping[str, float]  # [s] the run's
+    over_peak_rating: int = 0  # samples with the commanded |(i_q, i_d)| above the 9 A peak rating
 
     def worst_settling(self, axis: int | str, band: str = "01mm") -> float:
         """Longest settling time [s] over the steps on ``axis`` (0/"vertical", 1/"horizontal")
@@ -77,11 +89,11 @@ class RunMetrics(Result):
 
 
 def _settling(t: np.ndarray, err: np.ndarray, band: float) -> float:
-    outside = np.nonzero(np.abs(err) > band)[0]
+    outside = np.nonzero(np.abs(err) > band * (1 + _ROUND_OFF))[0]
     if outside.size == 0:
         return 0.0
     last = outside[-1]
-    if last >= t.size - 1:
+    if last >= t.size - 1 or t[-1] - t[last + 1] < MIN_HOLD:
         return float("nan")
     return float(t[last + 1] - t[0])
 
@@ -127,6 +139,7 @@ def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
         step_time_p99=float(np.nanpercentile(st, 99)) if st is not None else float("nan"),
         step_time_max=float(np.nanmax(st)) if st is not None else float("nan"),
         timings=dict(result.timings),
+        over_peak_rating=int(np.sum(mag > PEAK_CURRENT_LIMIT)),
     )
 
 
