@@ -46,10 +46,12 @@ __all__ = [
     "TableSection",
     "Text",
     "TextSection",
+    "block_height",
     "caption",
     "check_tables",
     "grid",
     "new_figure",
+    "page_room",
 ]
 
 PAGE_SIZE = (8.27, 11.69)  # A4 portrait [in]
@@ -372,6 +374,21 @@ class PdfReport:
 
 
 # --- layout ----------------------------------------------------------------------------------------------
+def page_room(first_page: bool = False) -> float:
+    """The page fraction :meth:`PdfReport.add_page` has for blocks under its heading."""
+    return _TOP - 0.032 - (0.065 if first_page else 0.0) - (_BOTTOM - 0.015)
+
+
+def block_height(block: Text | Table | Plot) -> float:
+    """The page fraction ``block`` takes in :meth:`PdfReport.add_page`, measured on a scratch figure
+    (to share blocks out over pages before drawing them)."""
+    if isinstance(block, Plot):
+        return block.height + 0.01
+    fig = Figure(figsize=PAGE_SIZE)
+    y = _draw_text(fig, _TOP, block) if isinstance(block, Text) else _draw_table(fig, _TOP, block)[0]
+    return _TOP - y
+
+
 def _draw_text(fig: Figure, top: float, t: Text) -> float:
     line = t.font_size * 1.25 / 72 * _INCH
     y = top
@@ -449,6 +466,8 @@ def _draw_table(fig: Figure, top: float, t: Table) -> tuple[float, TableSection]
             )
             cell.set_text_props(fontsize=size, weight="bold" if r == 0 else "normal")
             cell.set_linewidth(0.5)
+            if j == 0 and r > 0:  # left-aligned: a one-character margin, not a tenth of a wide column
+                cell.PAD = min(cell.PAD, size * _EM / widths[j])
     table.auto_set_font_size(False)
     ax.add_table(table)
     y -= height + 0.01
