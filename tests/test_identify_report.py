@@ -63,7 +63,7 @@ def test_report_prints_the_study(tmp_path, study):
 
     report = write_report(tmp_path / "identification.pdf", study)
     assert report.path.read_bytes()[:5] == b"%PDF-"
-    table = report.section("Nonlinear least squares")
+    table = report.section("Least squares")
     assert table.column("") == CONSTANT_NAMES
     truth = study.truth_values
     for k in CONSTANT_NAMES:
