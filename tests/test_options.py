@@ -825,16 +825,28 @@ def test_diagnose_holdout_holds_out_that_share(diagnosed, twin_csv):
     assert 0.38 * n < options["samples"] <= 0.4 * n
 
 
+def _words(text: str) -> str:
+    """Text with its line breaks (wrapped table cells) and no-break spaces as single spaces."""
+    return " ".join(text.split())
+
+
 def test_diagnose_report_is_written_with_the_findings(diagnosed):
+    from maglev_oc.reporting.diagnosis_plots import plain
+
     doc, contents = diagnosed["default"]
     assert contents.path.read_bytes()[:5] == b"%PDF-" and _pdf_pages(contents.path) == contents.n_pages
-    summary = contents.sections[0].text()
+    assert contents.sparse_pages() == []
+    scorecard = contents.sections[0]  # page 1: the scorecard table
+    summary = _words(scorecard.text())
     for axis, before in doc["error_before"].items():
         after = doc["error_after"][axis]
         assert f"{axis} {before:.3g} → {after:.3g} m/s²" in summary  # the JSON's numbers
-    for effect in doc["effects"]:
-        assert effect["finding"] in summary
     assert f"({doc['holdout']['samples']} samples" in summary
+    found = [_words(row[0]) for row in scorecard.rows]
+    words = _words(contents.text())
+    for effect in doc["effects"]:
+        assert plain(effect["name"]) in found  # a scorecard row per effect, in plain words
+        assert _words(effect["finding"]) in words  # and its finding on the pages after
 
 
 def test_diagnose_no_control_leaves_out_the_closed_loop_study(diagnosed):
@@ -842,7 +854,7 @@ def test_diagnose_no_control_leaves_out_the_closed_loop_study(diagnosed):
     study_page = "FL regulator on "  # the compensation figure: before and after compensating
 
     def has_study(contents) -> tuple[bool, bool]:
-        said = any(p.startswith("In control (") for p in contents.sections[0].paragraphs)
+        said = any(row[0].startswith("FL regulator") for row in contents.sections[0].rows)  # scorecard
         return said, any(h.startswith(study_page) for h in contents.headings)
 
     assert has_study(with_study) == (True, True)

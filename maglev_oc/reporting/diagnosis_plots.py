@@ -1,106 +1,90 @@
-"""Figures of the diagnosis report (closing the loop with measured data)."""
+"""Figures of the diagnosis report (closing the loop with measured data), and the effects' names in
+plain words.
+
+Each ``*_plot`` function returns a ``draw(fig, rect) -> title`` for a
+:class:`~maglev_oc.reporting.pdf.Plot` block; it takes a finished
+:class:`~maglev_oc.diagnosis.pipeline.Diagnosis` (and the closed-loop study) and draws it.
+"""
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
+
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from maglev_oc.diagnosis.feedback import CompensationStudy
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
-from maglev_oc.reporting.pdf import new_figure
+from maglev_oc.reporting.pdf import caption, grid
+from maglev_oc.reporting.style import bands, thin
 from maglev_oc.results import AXES
-from maglev_oc.units import M_TO_MM
+from maglev_oc.units import M_TO_MM, M_TO_UM
 
 __all__ = [
-    "before_after_figure",
-    "compensation_figure",
-    "dependence_figure",
+    "AFTER",
+    "BEFORE",
+    "Draw",
+    "compensation_plot",
+    "dependence_plot",
+    "effect_contribution",
+    "effects_plot",
+    "key_plot",
+    "panels",
     "plain",
-    "spectrum_figure",
-    "timeseries_figure",
+    "spectrum_plot",
+    "timeseries_plot",
 ]
+
+Draw = Callable[[Figure, tuple[float, float, float, float]], str]
+"""What a ``*_plot`` function returns: draws into a band of the page, returns the title."""
+
+BEFORE, AFTER = "tab:red", "tab:green"
+"""The base model alone (before) and with the found effects (after), in every figure."""
+AXIS_COLORS = ("tab:blue", "tab:orange")
+"""Vertical and horizontal, in every figure."""
+
+_WORDS = {
+    "guide_friction_horizontal": "horizontal guide friction",
+    "guide_friction_vertical": "vertical guide friction",
+    "horizontal_guides_not_level": "horizontal guides off level",
+    "constant_vertical_force": "constant vertical force",
+    "attraction_gap_dependence": "gap dependence of the attraction",
+    "magnet_field_gap_dependence": "gap dependence of the magnets' field",
+    "gap_sensor_offset": "gap sensor offset",
+    "thrust_ripple": "thrust ripple",
+    "guide_misalignment": "guides tilted against the stator",
+    "cable_carrier_force": "cable carrier force",
+    "commutation_offset": "commutation angle offset",
+    "end_effects": "end effects",
+    "current_amplifier_lag": "current amplifier lag",
+}
+"""The diagnosis library's effects in the words a control engineer uses."""
+
+
+def plain(name: str) -> str:
+    """An effect's name in words: ``cogging_vertical_38mm`` -> ``normal cogging, 38 mm period``,
+    ``guide_friction_horizontal`` -> ``horizontal guide friction``; unknown names lose their
+    underscores."""
+    if name in _WORDS:
+        return _WORDS[name]
+    if m := re.fullmatch(r"cogging_(vertical|horizontal)_(\d+)mm", name):
+        kind = "normal cogging" if m[1] == "vertical" else "cogging along the travel"
+        return f"{kind} ({m[2]} mm period)"
+    if m := re.fullmatch(r"guide_waviness_(\d+)mm", name):
+        return f"guide waviness ({m[1]} mm period)"
+    return name.replace("_", " ")
+
 
 _VARIABLE = {
     "gap": ("gap x1 [mm]", lambda d: d.x[0] * M_TO_MM),
     "gap_rate": ("gap rate x2 [mm/s]", lambda d: d.x[1] * M_TO_MM),
     "position": ("horizontal position x3 [mm]", lambda d: d.x[2] * M_TO_MM),
     "position_rate": ("horizontal rate x4 [mm/s]", lambda d: d.x[3] * M_TO_MM),
-    "current_rate": ("d i_q / dt (horizontal), d i_d / dt (vertical) [A/s]", None),
-    "current": ("i_d (horizontal), i_q (vertical) [A]", None),
+    "current_rate": ("rate of the other axis's current [A/s]", None),
+    "current": ("the other axis's current [A]", None),
 }
-
-
-def plain(name: str) -> str:
-    """An identifier in words: ``guide_friction_horizontal`` -> ``guide friction, horizontal``."""
-    words = name.replace("_", " ")
-    for axis in ("vertical", "horizontal"):
-        if words.endswith(" " + axis):
-            return words[: -len(axis) - 1] + f", {axis}"
-    return words
-
-
-def spectrum_figure(diag: Diagnosis) -> Figure:
-    tr = diag.trace
-    fig = new_figure((8.27, 5.5))
-    axes = fig.subplots(2, 1, sharex=True)
-    for a, ax in enumerate(axes):
-        ax.semilogx(tr.periods * M_TO_MM, tr.spectrum[a] * 100, "k", lw=1)
-        for name, lam in tr.motor_periods.items():
-            ax.axvline(lam * M_TO_MM, color="tab:red", ls=":", lw=1)
-            if a == 0:
-                ax.text(
-                    lam * M_TO_MM,
-                    0.97,
-                    f"{name.replace('_', ' ')} ",
-                    rotation=90,
-                    va="top",
-                    ha="right",
-                    fontsize=7,
-                    color="tab:red",
-                    transform=ax.get_xaxis_transform(),
-                )
-        ax.set_ylabel(f"{AXES[a]}: variance\nexplained [%]")
-        ax.grid(alpha=0.3, which="both")
-    axes[-1].set_xlabel("period in the horizontal position x3 [mm]")
-    fig.suptitle("Spatial spectrum of the base model's residual (red: motor periods)")
-    return fig
-
-
-def dependence_figure(diag: Diagnosis) -> Figure:
-    tr = diag.trace
-    fig = new_figure((8.27, 8.5))
-    axes = fig.subplots(3, 2)
-    panels = (
-        ("gap", "gap [mm]", M_TO_MM),
-        ("position", "x3 [mm]", M_TO_MM),
-        ("gap_rate", "gap rate [mm/s]", M_TO_MM),
-        ("position_rate", "x3 rate [mm/s]", M_TO_MM),
-    )
-    for ax, (key, label, scale) in zip(axes.ravel()[:4], panels, strict=True):
-        b = tr.binned[key]
-        for a, color in ((0, "tab:blue"), (1, "tab:orange")):
-            ax.errorbar(
-                b.centers * scale,
-                b.mean[a],
-                yerr=2 * b.stderr[a],
-                color=color,
-                lw=1,
-                marker=".",
-                label=AXES[a],
-            )
-        ax.axhline(0, color="0.5", lw=0.6)
-        ax.set_xlabel(label)
-        ax.set_ylabel("mean residual [m/s²]")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    for a, ax in enumerate(axes[2]):
-        ax.plot(tr.lags * 1e3, tr.lag_correlation[a], "k")
-        ax.axhline(0, color="0.5", lw=0.6)
-        ax.set_xlabel("lag [ms]")
-        ax.set_ylabel(f"corr({AXES[a]} residual, di/dt)")
-        ax.grid(alpha=0.3)
-    fig.suptitle("Base-model residual against the signals effects depend on (±2 s.e.)")
-    return fig
 
 
 def _variable(diag: Diagnosis, effect: Effect, axis: int) -> tuple[str, np.ndarray]:
@@ -113,79 +97,251 @@ def _variable(diag: Diagnosis, effect: Effect, axis: int) -> tuple[str, np.ndarr
     return label, get(d)
 
 
-def before_after_figure(diag: Diagnosis, effect: Effect) -> Figure:
-    """The residual that the effect explains against its variable, before (base-model residual
-    with the other effects removed) and after (final residual), held-out block, binned."""
+def effect_contribution(diag: Diagnosis, effect: Effect) -> np.ndarray:
+    """(2, n) [m/s^2] The effect's acceleration along the log, through the diagnosis's filter."""
     d = diag.data
-    axes_used = [0, 1] if effect.axis == "both" else [AXES.index(effect.axis)]
-    fig = new_figure((8.27, 4.3 * len(axes_used)))
-    axs = np.atleast_1d(fig.subplots(len(axes_used), 1))
-    contrib = np.asarray(effect.candidate.term.acceleration(effect.coefficients).map(d.n)(d.x, d.u, d.du))
-    contrib = d.filter(contrib)
+    term = effect.candidate.term.acceleration(effect.coefficients)
+    return d.filter(np.asarray(term.map(d.n)(d.x, d.u, d.du)))
+
+
+def panels(diag: Diagnosis) -> list[tuple[Effect, int]]:
+    """(effect, axis index) of every axis a found effect acts on."""
+    return [(e, a) for e in diag.effects for a in ([0, 1] if e.axis == "both" else [AXES.index(e.axis)])]
+
+
+def _before_after(ax, diag: Diagnosis, effect: Effect, a: int, contrib: np.ndarray, bins: int = 30) -> None:
+    """Held-out residual against the effect's variable, before (without this effect) and after,
+    bin means as lines over a cloud of every 20th sample."""
+    label, v = _variable(diag, effect, a)
     hold = diag.holdout
-    for ax, a in zip(axs, axes_used, strict=True):
-        label, v = _variable(diag, effect, a)
-        before = diag.residual_after[a] + contrib[a]
-        after = diag.residual_after[a]
-        vv = v[hold]
-        edges = np.linspace(*np.percentile(vv, [1, 99]), 41)
-        idx = np.clip(np.digitize(vv, edges) - 1, 0, 39)
-        centers = 0.5 * (edges[1:] + edges[:-1])
-        for series, color, name in (
-            (before[hold], "tab:red", "before (without this effect)"),
-            (after[hold], "tab:green", "after (effect added)"),
-        ):
-            m = np.array([series[idx == k].mean() if np.any(idx == k) else np.nan for k in range(40)])
-            ax.plot(vv[::20], series[::20], ".", color=color, ms=1.5, alpha=0.25)
-            ax.plot(centers, m, "-", color=color, lw=2, label=name)
-        ax.axhline(0, color="0.4", lw=0.6)
-        ax.set_xlabel(label)
-        ax.set_ylabel(f"{AXES[a]} residual [m/s²]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.suptitle(f"{plain(effect.name)}: residual before and after, held-out data (lines: bin means)")
-    return fig
+    before = diag.residual_after[a] + contrib[a]
+    after = diag.residual_after[a]
+    vv = v[hold]
+    edges = np.linspace(*np.percentile(vv, [1, 99]), bins + 1)
+    idx = np.clip(np.digitize(vv, edges) - 1, 0, bins - 1)
+    centers = 0.5 * (edges[1:] + edges[:-1])
+    for series, color in ((before[hold], BEFORE), (after[hold], AFTER)):
+        counts = np.bincount(idx, minlength=bins)
+        sums = np.bincount(idx, weights=series, minlength=bins)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(counts > 0, sums / counts, np.nan)
+        ax.plot(vv[::20], series[::20], ".", color=color, ms=1.2, alpha=0.2, rasterized=True)
+        ax.plot(centers, mean, "-", color=color, lw=1.8)
+    ax.axhline(0, color="0.4", lw=0.6)
+    lo, hi = np.nanpercentile(np.concatenate([before[hold], after[hold]]), [1, 99])
+    ax.set_ylim(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+    ax.set_xlabel(label)
+    ax.set_ylabel(f"{AXES[a]} residual [m/s²]")
+    ax.set_title(plain(effect.name), fontsize=8.5)
 
 
-def timeseries_figure(diag: Diagnosis, seconds: float = 4.0) -> Figure:
+def _legend_below(fig: Figure, rect, handles, labels, ncol: int, y: float = 0.0) -> None:
+    fig.legend(
+        handles, labels, loc="lower center", ncol=ncol, fontsize=7.5, bbox_to_anchor=(0.54, rect[1] + y)
+    )
+
+
+def _before_after_handles() -> tuple[list[Line2D], list[str]]:
+    return (
+        [Line2D([], [], color=BEFORE, lw=1.8), Line2D([], [], color=AFTER, lw=1.8)],
+        ["before: the base model (this effect left out)", "after: with the found effects"],
+    )
+
+
+# --- page 1 ----------------------------------------------------------------------------------------------
+def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 3) -> Draw:
+    """The residual each found effect explains, before and after, on held-out data (the first
+    ``n_effects`` panels), and the FL regulator's tracking error before and after compensating them."""
+
+    def draw(fig: Figure, rect) -> str:
+        shown = panels(diag)[:n_effects]
+        n = len(shown) + (study is not None)
+        if n == 0:
+            return caption(fig, rect, "Nothing found: the refitted papers' model explains the log")
+        gs = grid(fig, rect, 1, n, wspace=0.38, top=0.075, bottom=0.085)
+        for k, (effect, a) in enumerate(shown):
+            _before_after(fig.add_subplot(gs[0, k]), diag, effect, a, effect_contribution(diag, effect))
+        if study is not None:
+            ax = fig.add_subplot(gs[0, n - 1])
+            for res, color in ((study.result_before, BEFORE), (study.result_after, AFTER)):
+                err = np.hypot(res.y[0] - res.reference[0], res.y[1] - res.reference[3]) * M_TO_UM
+                ax.plot(*thin(res.t, err, 1500), color=color, lw=0.7)
+            ax.set_ylim(0, None)
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel("|tracking error|, both axes [µm]")
+            ax.set_title(f"FL regulator, {study.scenario}", fontsize=8.5)
+        h, lab = _before_after_handles()
+        _legend_below(fig, rect, h, lab, 2, y=-0.008)
+        return caption(
+            fig,
+            rect,
+            "Key figure: what the found effects explain, and what compensating them is worth",
+            "Residual of the acceleration on held-out data against the variable each effect depends on "
+            "(dots: samples; lines: bin means). Right: the closed loop's error (encoder − reference).",
+        )
+
+    return draw
+
+
+# --- where the residual lives ----------------------------------------------------------------------------
+def spectrum_plot(diag: Diagnosis) -> Draw:
+    tr = diag.trace
+
+    def draw(fig: Figure, rect) -> str:
+        gs = grid(fig, rect, 1, 2, wspace=0.3, top=0.06, bottom=0.07)
+        names = {
+            "slot_pitch": "t1",
+            "twice_slot_pitch": "2 t1",
+            "pole_pitch": "τ",
+            "twice_pole_pitch": "2 τ",
+        }
+        for a in range(2):
+            ax = fig.add_subplot(gs[0, a])
+            ax.semilogx(tr.periods * M_TO_MM, tr.spectrum[a] * 100, color=AXIS_COLORS[a], lw=1)
+            for name, lam in tr.motor_periods.items():
+                ax.axvline(lam * M_TO_MM, color="0.5", ls=":", lw=0.9)
+                ax.text(
+                    lam * M_TO_MM,
+                    1.0,
+                    names.get(name, name),
+                    ha="center",
+                    va="bottom",
+                    fontsize=7,
+                    transform=ax.get_xaxis_transform(),
+                )
+            ax.set_xlabel("period in the horizontal position x3 [mm]")
+            ax.set_ylabel(f"{AXES[a]} residual explained [%]")
+            ax.set_ylim(0, None)
+        return caption(
+            fig,
+            rect,
+            "Spatial spectrum of the base model's residual",
+            "Share of the residual a sinusoid in x3 of each period explains; dotted: the motor's periods "
+            "(slot pitch t1, pole pitch τ and twice each).",
+        )
+
+    return draw
+
+
+def dependence_plot(diag: Diagnosis) -> Draw:
+    tr = diag.trace
+
+    def draw(fig: Figure, rect) -> str:
+        gs = grid(fig, rect, 2, 3, wspace=0.4, hspace=0.55, top=0.06, bottom=0.075)
+        signals = (
+            ("gap", "gap x1 [mm]"),
+            ("position", "horizontal position x3 [mm]"),
+            ("gap_rate", "gap rate x2 [mm/s]"),
+            ("position_rate", "horizontal rate x4 [mm/s]"),
+        )
+        slots = ((0, 0), (0, 1), (1, 0), (1, 1))
+        for (key, label), (r, c) in zip(signals, slots, strict=True):
+            ax = fig.add_subplot(gs[r, c])
+            b = tr.binned[key]
+            for a in range(2):
+                ax.errorbar(
+                    b.centers * M_TO_MM,
+                    b.mean[a],
+                    yerr=2 * b.stderr[a],
+                    color=AXIS_COLORS[a],
+                    lw=1,
+                    marker=".",
+                    ms=3,
+                )
+            ax.axhline(0, color="0.5", lw=0.6)
+            ax.set_xlabel(label)
+            ax.set_ylabel("mean residual [m/s²]")
+        for a in range(2):
+            ax = fig.add_subplot(gs[a, 2])
+            ax.plot(tr.lags * 1e3, tr.lag_correlation[a], color=AXIS_COLORS[a])
+            ax.axhline(0, color="0.5", lw=0.6)
+            ax.set_xlabel("lag [ms]")
+            ax.set_ylabel(f"corr({AXES[a]} residual,\nits current's rate) [-]")
+        h = [Line2D([], [], color=c) for c in AXIS_COLORS]
+        _legend_below(fig, rect, h, list(AXES), 2, y=-0.008)
+        return caption(
+            fig,
+            rect,
+            "The base model's residual against the signals effects depend on",
+            "Bin means ± 2 standard errors; right: correlation with the rate of the axis's own current "
+            "(a lag of the amplifiers would show as a peak).",
+        )
+
+    return draw
+
+
+def effects_plot(diag: Diagnosis) -> Draw:
+    """Every found effect on every axis it acts on, before and after, held out."""
+
+    def draw(fig: Figure, rect) -> str:
+        every = panels(diag)
+        ncol = min(3, max(1, len(every)))
+        nrow = -(-len(every) // ncol)
+        gs = grid(fig, rect, nrow, ncol, wspace=0.38, hspace=0.5, top=0.045, bottom=0.08)
+        for k, (effect, a) in enumerate(every):
+            ax = fig.add_subplot(gs[k // ncol, k % ncol])
+            _before_after(ax, diag, effect, a, effect_contribution(diag, effect))
+        h, lab = _before_after_handles()
+        _legend_below(fig, rect, h, lab, 2, y=-0.008)
+        return caption(fig, rect, "Each found effect on held-out data: the residual before and after")
+
+    return draw
+
+
+def timeseries_plot(diag: Diagnosis, seconds: float = 3.0) -> Draw:
     d = diag.data
     hold = np.nonzero(diag.holdout)[0]
     k0 = hold[0]
     k1 = min(hold[-1], k0 + int(seconds / d.sample_time))
-    sl = slice(k0, k1)
-    t = d.t[sl]
-    fig = new_figure((8.27, 6.0))
-    axes = fig.subplots(2, 1, sharex=True)
-    for a, ax in enumerate(axes):
-        meas = d.acc[a, sl]
-        ax.plot(t, meas, "k", lw=1.2, label="measured (filtered)")
-        ax.plot(t, meas - diag.residual_before[a, sl], "tab:red", lw=0.9, label="base model")
-        ax.plot(
-            t, meas - diag.residual_after[a, sl], "tab:green", lw=0.9, ls="--", label="base + found effects"
+
+    def draw(fig: Figure, rect) -> str:
+        gs = grid(fig, rect, 2, 1, hspace=0.25, top=0.045, bottom=0.08)
+        sl = slice(k0, k1)
+        t = d.t[sl]
+        for a in range(2):
+            ax = fig.add_subplot(gs[a, 0])
+            meas = d.acc[a, sl]
+            ax.plot(t, meas, "k", lw=1.1)
+            ax.plot(t, meas - diag.residual_before[a, sl], color=BEFORE, lw=0.9)
+            ax.plot(t, meas - diag.residual_after[a, sl], color=AFTER, lw=0.9, ls="--")
+            ax.set_ylabel(f"{AXES[a]} acceleration\n[m/s²]")
+            if a == 0:
+                ax.tick_params(labelbottom=False)
+        ax.set_xlabel("time in the log [s] (held-out block)")
+        h = [Line2D([], [], color="k"), Line2D([], [], color=BEFORE), Line2D([], [], color=AFTER, ls="--")]
+        _legend_below(
+            fig, rect, h, ["measured (filtered)", "base model", "with the found effects"], 3, y=-0.008
         )
-        ax.set_ylabel(f"{AXES[a]} acceleration\n(x{2 if a == 0 else 4}') [m/s²]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[-1].set_xlabel("time in the log [s] (held-out block)")
-    fig.suptitle("Held-out data: measured and modelled accelerations")
-    return fig
+        return caption(fig, rect, "Held-out data: measured and modelled accelerations")
+
+    return draw
 
 
-def compensation_figure(study: CompensationStudy) -> Figure:
-    fig = new_figure((8.27, 5.5))
-    axes = fig.subplots(2, 1, sharex=True)
-    for res, color, name in (
-        (study.result_before, "tab:red", study.result_before.controller),
-        (study.result_after, "tab:green", study.result_after.controller),
-    ):
-        err = np.vstack([res.y[0] - res.reference[0], res.y[1] - res.reference[3]])
-        k = max(1, res.t.size // 3000)
-        for a, ax in enumerate(axes):
-            ax.plot(res.t[::k], err[a, ::k] * M_TO_MM, color=color, lw=0.8, label=name)
-    for a, ax in enumerate(axes):
-        ax.set_ylabel(f"{AXES[a]} error [mm]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"FL regulator on {study.scenario}: before and after compensating the found effects")
-    return fig
+def compensation_plot(study: CompensationStudy) -> Draw:
+    """Tracking error of the FL regulator before and after compensating the found effects."""
+
+    def draw(fig: Figure, rect) -> str:
+        gs = grid(fig, rect, 2, 1, hspace=0.25, top=0.045, bottom=0.08)
+        rb, ra = study.result_before, study.result_after
+        for a, (axis, j) in enumerate((("vertical", 0), ("horizontal", 3))):
+            ax = fig.add_subplot(gs[a, 0])
+            for res, color in ((rb, BEFORE), (ra, AFTER)):
+                ax.plot(*thin(res.t, (res.y[a] - res.reference[j]) * M_TO_UM), color=color, lw=0.6)
+            bands(ax, M_TO_UM)
+            lim = 1.1 * max(np.nanmax(np.abs((r.y[a] - r.reference[j]) * M_TO_UM)) for r in (rb, ra))
+            ax.set_ylim(-lim, lim)
+            ax.set_xlim(0, rb.t[-1])
+            ax.set_ylabel(f"{axis} error [µm]")
+            if a == 0:
+                ax.tick_params(labelbottom=False)
+        ax.set_xlabel("time [s]")
+        h = [Line2D([], [], color=BEFORE), Line2D([], [], color=AFTER)]
+        _legend_below(fig, rect, h, [rb.controller, ra.controller], 2, y=-0.008)
+        return caption(
+            fig,
+            rect,
+            f"FL regulator on {study.scenario}: before and after compensating the found effects",
+            "Encoder reading − reference; shaded: the 10 µm band.",
+        )
+
+    return draw

@@ -1,27 +1,46 @@
 """The diagnosis report: what the log's residual is made of, and what adding it is worth.
 
-Page 1 says what was found, in plain words with sizes and uncertainties, what could not be told
-apart from the constants on this log (and which experiment would), what no effect explains, and
-the held-out error before and after; when the truth is known (a twin's log) a table of found
-against true follows. Then every candidate's verdict with its reason, the constants, and the
-figures.
+Page 1 is the scorecard: each effect found with its size (and, for a log whose truth is known, the
+truth beside it and the verdict), what could not be told apart from the constants on this log,
+what no effect explains, the held-out error before and after, and the closed loop before and
+after compensating; then the key figure. The pages after it hold the findings in words, the
+parameters and constants, every candidate's verdict with its reason, the figures behind them, and
+an appendix of timings and settings.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import textwrap
 from collections.abc import Sequence
 
+import numpy as np
+
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
-from maglev_oc.diagnosis.pipeline import ERROR_METRIC, Diagnosis
+from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting.diagnosis_plots import plain
-from maglev_oc.reporting.pdf import PdfReport, ReportContents
-from maglev_oc.units import M_TO_UM
+from maglev_oc.reporting.pdf import (
+    MIN_FILL,
+    PdfReport,
+    Plot,
+    ReportContents,
+    Table,
+    Text,
+    block_height,
+    page_room,
+)
+from maglev_oc.units import M_TO_MM, M_TO_UM
 
-__all__ = ["write_diagnosis_report"]
+__all__ = ["KEY_PANELS", "effect_sizes", "outcome_rows", "scorecard_table", "write_diagnosis_report"]
+
+KEY_PANELS = 3
+"""Found effects the key figure shows (the first ones); the rest get a page of their own."""
+
+NBSP = "\u00a0"
+"""Joins a value and its unit so that a table cell never breaks between them."""
 
 
 def _fmt(value: float, err: float) -> str:
@@ -30,115 +49,146 @@ def _fmt(value: float, err: float) -> str:
     return f"{value:.4g} ± {err:.2g}"
 
 
-def _summary_paragraphs(diag: Diagnosis) -> list[str]:
-    """The conclusions, in plain words (page 1)."""
+def _wrap(text: str, width: int) -> str:
+    return "\n".join(line for part in text.split("\n") for line in (textwrap.wrap(part, width) or [""]))
+
+
+_POSITION_PARAMETERS = ("at_gap", "period", "low_end_position", "high_end_position", "width", "decay_length")
+"""Parameters [m] that say where an effect acts, not how large it is (left out of the sizes)."""
+
+
+def _size_parameters(effect: Effect) -> dict:
+    """The parameters that say how large an effect is (not where it acts, not its shape)."""
+    return {
+        k: v
+        for k, v in effect.parameters.items()
+        if not k.startswith("rms_force")
+        and k not in effect.candidate.nuisance
+        and not (v.unit == "m" and k in _POSITION_PARAMETERS)
+    }
+
+
+def effect_sizes(effect: Effect) -> str:
+    """'coulomb 0.128 ± 0.0048 N, viscous ...': an effect's size parameters, value ± standard error."""
+    return ", ".join(
+        f"{k.replace('_', ' ')} {_fmt(v.value, v.stderr)}{NBSP}{v.unit}".rstrip(NBSP)
+        for k, v in _size_parameters(effect).items()
+    )
+
+
+def _drop(before: float, after: float) -> str:
+    return f"{100 * (1 - after / before):.0f} %" if before > 0 else "—"
+
+
+def outcome_rows(diag: Diagnosis, study: CompensationStudy | None) -> list[tuple[str, str, str]]:
+    """(what, found, verdict) for the errors before and after and the closed loop."""
     eb, ea = diag.error_before, diag.error_after
+    axes = [a for a, b in eb.items() if math.isfinite(b)]
+    rows = [
+        (
+            "held-out acceleration error (RMS)",
+            "; ".join(f"{a} {eb[a]:.3g} → {ea[a]:.3g}{NBSP}m/s²" for a in axes),
+            "lowered by " + " and ".join(f"{_drop(eb[a], ea[a])} ({a})" for a in axes)
+            if diag.effects
+            else "nothing to add",
+        )
+    ]
+    ob, oa = diag.output_error_before, diag.output_error_after
+    oaxes = [a for a, b in ob.items() if math.isfinite(b)]
+    rows.append(
+        (
+            "held-out position error, model simulated 50 ms ahead (RMS)",
+            "; ".join(f"{a} {ob[a] * M_TO_UM:.1f} → {oa[a] * M_TO_UM:.1f}{NBSP}µm" for a in oaxes),
+            "lowered by " + " and ".join(f"{_drop(ob[a], oa[a])} ({a})" for a in oaxes)
+            if diag.effects
+            else "—",
+        )
+    )
+    if study is not None:
+        imp = improvement(study)
+        b, a = study.before.mean_error, study.after.mean_error
+        rows.append(
+            (
+                f"FL regulator tracking the {study.scenario}: mean error",
+                f"vertical {b[0] * M_TO_UM:.1f} → {a[0] * M_TO_UM:.1f}{NBSP}µm; horizontal "
+                f"{b[1] * M_TO_UM:.1f} → {a[1] * M_TO_UM:.1f}{NBSP}µm",
+                f"÷ {imp[0]:.1f} and ÷ {imp[1]:.1f} with "
+                + (", ".join(plain(n) for n in study.compensated) or "nothing")
+                + " compensated",
+            )
+        )
+    return rows
+
+
+def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
+    """(what, found, verdict) for each found, not separable and unexplained item (no truth known)."""
+    rows = [
+        (
+            plain(e.name),
+            effect_sizes(e),
+            f"claimed: held-out error −{100 * e.gain:.0f} % (z = {e.z:.1f}), chosen in "
+            f"{100 * e.confidence:.0f} % of resamples",
+        )
+        for e in diag.effects
+    ]
+    rows += [
+        (plain(n.name), f"real in the fit, confounded with {', '.join(n.confounded_with)}", "not claimed")
+        for n in diag.not_separable
+    ]
+    rows += [
+        (
+            f"{u.axis} residual varying with the {u.depends_on.replace('_', ' ')}",
+            f"{u.size:.3g}{NBSP}m/s² RMS",
+            "unexplained: no effect of the library fits it",
+        )
+        for u in diag.unexplained
+    ]
+    return rows
+
+
+SCORECARD_WIDTHS = {3: (30, 44, 44), 4: (26, 26, 34, 34)}
+"""Characters per line of the scorecard's columns (without, with the truth column)."""
+
+
+def scorecard_table(
+    diag: Diagnosis, study: CompensationStudy | None, truth_rows: Sequence[Sequence[str]] = ()
+) -> Table:
+    """Page 1's table: with ``truth_rows`` (what, true, found, verdict) those and the outcome rows
+    with the truth column; without, what was found on the log."""
+    if truth_rows:
+        columns = ("", "true (twin)", "found on the log", "verdict")
+        rows = [tuple(r) for r in truth_rows] + [(w, "—", f, v) for w, f, v in outcome_rows(diag, study)]
+    else:
+        columns = ("", "found on the log", "verdict")
+        rows = _finding_rows(diag) + outcome_rows(diag, study)
+    widths = SCORECARD_WIDTHS[len(columns)]
+    cells = [tuple(_wrap(c, w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    holdout = (
+        f"Held out: the last {diag.settings['holdout_fraction']:.0%} of each log "
+        f"({int(diag.holdout.sum())} samples; {int(diag.train.sum())} fitted). Acceleration error: measured "
+        "minus modelled acceleration, both through the same zero-phase filter."
+    )
+    return Table("", columns, cells, notes=[holdout], font_size=7.5)
+
+
+# --- the pages after the scorecard -----------------------------------------------------------------------
+def _finding_paragraphs(diag: Diagnosis) -> list[str]:
+    """What was found, in the diagnosis's own sentences."""
     out = []
     if diag.effects:
-        out.append("Found (most important first):")
-        for k, e in enumerate(diag.effects, 1):
-            out.append(
-                f"{k}. {plain(e.name).capitalize()} — {e.finding} It lowers the held-out error by "
-                f"{e.gain:.0%} (z = {e.z:.1f}; chosen in {e.confidence:.0%} of bootstrap resamples)."
-            )
+        out += [
+            f"{k}. {plain(e.name).capitalize()}: {e.finding} {e.explanation}"
+            for k, e in enumerate(diag.effects, 1)
+        ]
     else:
         out.append("No missing effect found: the papers' model, refitted, explains the log to its noise.")
-    if diag.not_separable:
-        out.append(
-            "Real in the fit but not separable on this log (not claimed): "
-            + "; ".join(
-                f"{plain(n.name)}, confounded with {', '.join(n.confounded_with)} — {n.experiment}"
-                for n in diag.not_separable
-            )
-            + "."
-        )
-    if diag.unexplained:
-        out.append(
-            "Not explained by any effect of the library: " + " ".join(u.description for u in diag.unexplained)
-        )
-    out.append(
-        "Held-out error before → after:  "
-        + ";  ".join(f"{a} {b:.3g} → {ea[a]:.3g} m/s²" for a, b in eb.items() if math.isfinite(b))
-        + f"  ({ERROR_METRIC})."
-    )
-    ob, oa = diag.output_error_before, diag.output_error_after
-    out.append(
-        "Position error of the model simulated over 50 ms from the estimated state (held out), "
-        "before → after:  "
-        + ";  ".join(
-            f"{a} {b * M_TO_UM:.1f} → {oa[a] * M_TO_UM:.1f} µm" for a, b in ob.items() if math.isfinite(b)
-        )
-        + "."
-    )
+    out += [
+        f"Real in the fit but not separable on this log (not claimed): {plain(n.name)}, confounded with "
+        f"{', '.join(n.confounded_with)}. What would separate it: {n.experiment}."
+        for n in diag.not_separable
+    ]
+    out += [f"Not explained by any effect of the library: {u.description}" for u in diag.unexplained]
     return out
-
-
-def write_diagnosis_report(
-    path: str | os.PathLike,
-    diag: Diagnosis,
-    *,
-    study: CompensationStudy | None = None,
-    truth_rows: Sequence[Sequence[str]] = (),
-    title: str = "maglev_oc — closing the loop with measured data",
-    preamble: Sequence[str] = (),
-    epilogue: Sequence[str] = (),
-) -> ReportContents:
-    """Write the PDF (atomically).
-
-    Parameters
-    ----------
-    path : path-like
-        Where the PDF goes.
-    diag : Diagnosis
-        The diagnosis to report.
-    study : CompensationStudy, optional
-        The FL regulator before and after compensating the found effects.
-    truth_rows : sequence of rows
-        For a log whose truth is known, rows (true effect, true size, found as, found size) for
-        the found-against-true table.
-    title, preamble, epilogue
-        The report's title; paragraphs before and after the conclusions on page 1.
-
-    Returns
-    -------
-    ReportContents
-        What the report says, section by section.
-    """
-    summary = [*preamble, *_summary_paragraphs(diag)]
-    if study is not None:
-        summary.append(_control_paragraph(study))
-    summary.extend(epilogue)
-    summary.append(
-        f"Logs: {', '.join(diag.sources)}; the last {diag.settings['holdout_fraction']:.0%} of each is held "
-        f"out ({int(diag.holdout.sum())} samples; {int(diag.train.sum())} fitted)."
-    )
-    with PdfReport(path, title, subtitle="maglev-oc diagnose") as pdf:
-        pdf.add_text("What the log shows", summary, first_page=True)
-        if truth_rows:
-            pdf.add_table(
-                "Found against true (the log's truth is known)",
-                ["true effect", "true size", "found as", "found size"],
-                list(truth_rows),
-            )
-        _effects_page(pdf, diag)
-        _verdicts_page(pdf, diag)
-        pdf.add_table(
-            "Lumped constants",
-            ["constant", "base model alone", "refitted with the effects", "unit"],
-            _constant_rows(diag),
-        )
-        pdf.add_figure(plots.spectrum_figure(diag))
-        pdf.add_figure(plots.dependence_figure(diag))
-        for e in diag.effects:
-            pdf.add_figure(plots.before_after_figure(diag, e))
-        pdf.add_figure(plots.timeseries_figure(diag))
-        if study is not None:
-            pdf.add_figure(plots.compensation_figure(study))
-        pdf.add_text(
-            "Timings",
-            ["Wall time of each step [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in diag.timings.items())],
-        )
-    return pdf.contents
 
 
 def _control_paragraph(study: CompensationStudy) -> str:
@@ -146,9 +196,9 @@ def _control_paragraph(study: CompensationStudy) -> str:
     imp = improvement(study)
     return (
         f"In control ({study.scenario}, FL regulator, plant: {study.plant}): mean tracking error "
-        f"vertical {study.before.mean_error[0] * 1e3:.3f} → {study.after.mean_error[0] * 1e3:.3f} mm "
-        f"(÷ {imp[0]:.2f}), horizontal {study.before.mean_error[1] * 1e3:.3f} → "
-        f"{study.after.mean_error[1] * 1e3:.3f} mm (÷ {imp[1]:.2f}); compensated: "
+        f"vertical {study.before.mean_error[0] * M_TO_MM:.3f} → {study.after.mean_error[0] * M_TO_MM:.3f} mm "
+        f"(÷ {imp[0]:.2f}), horizontal {study.before.mean_error[1] * M_TO_MM:.3f} → "
+        f"{study.after.mean_error[1] * M_TO_MM:.3f} mm (÷ {imp[1]:.2f}); compensated: "
         f"{', '.join(plain(n) for n in study.compensated) or 'none'}"
         + (
             f"; left in the plant, not compensated (they depend on the currents): "
@@ -160,12 +210,8 @@ def _control_paragraph(study: CompensationStudy) -> str:
     )
 
 
-_POSITION_PARAMETERS = ("at_gap", "period", "low_end_position", "high_end_position", "width")
-"""Parameters [m] that say where an effect acts, not how large it is (left out of the table)."""
-
-
 def _effect_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
-    """(effect, parameter, value ± standard error, unit) of every found effect's size parameters."""
+    """(effect, parameter, value ± standard error, unit) of every found effect's parameters."""
     rows = []
     for e in diag.effects:
         for k, v in e.parameters.items():
@@ -173,52 +219,6 @@ def _effect_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
                 continue
             rows.append((plain(e.name), k.replace("_", " "), _fmt(v.value, v.stderr), v.unit))
     return rows
-
-
-def _effects_page(pdf: PdfReport, diag: Diagnosis) -> None:
-    rows = _effect_rows(diag)
-    if not rows:
-        return
-    pdf.add_table(
-        "The effects' parameters",
-        ["effect", "parameter", "value ± standard error", "unit"],
-        rows,
-        notes=[
-            "Standard errors: long-run covariance of the joint fit with the base constants, "
-            "plus half "
-            "the spread over the effect's model-form variants and 1 % for the differentiator's "
-            "calibration, in quadrature."
-        ],
-    )
-
-
-def _verdict_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
-    """(candidate, verdict, first-step held-out gain [%], reason), largest first-step gain first."""
-    first = diag.selection.steps[0].judgements if diag.selection.steps else diag.selection.last
-    rows = []
-    for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
-        reason = "\n".join(textwrap.wrap(j.reason or "—", 62))
-        rows.append((plain(j.name), j.verdict, f"{first.get(j.name, j).gain * 100:.1f}", reason))
-    return rows
-
-
-def _verdicts_page(pdf: PdfReport, diag: Diagnosis) -> None:
-    pdf.add_table(
-        "Every candidate and its verdict",
-        ["candidate", "verdict", "first-step\nheld-out gain [%]", "reason"],
-        _verdict_rows(diag),
-        notes=[
-            "Each candidate is fitted jointly with C1..C4 and the effects chosen before it. It "
-            "is claimed "
-            "only if it lowers the held-out error significantly (z >= 3 on 0.5 s blocks with a long-run "
-            "standard error), its coefficients pass a Wald test (p < 1e-4), it changes the prediction by "
-            "more than the 2.25e-3 m/s² a 15 rad/s loop turns into one encoder count, it is "
-            "separable from "
-            "the constants and the other effects (variance inflation <= 100) and it is physically "
-            "plausible."
-        ],
-        font_size=7,
-    )
 
 
 def _constant_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
@@ -231,3 +231,188 @@ def _constant_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
         )
         for k, v in diag.constants_final.items()
     ]
+
+
+def _verdict_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
+    """(candidate, verdict, first-step held-out gain [%], reason), largest first-step gain first."""
+    first = diag.selection.steps[0].judgements if diag.selection.steps else diag.selection.last
+    rows = []
+    for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
+        reason = "\n".join(textwrap.wrap(j.reason or "—", 60))
+        rows.append((plain(j.name), j.verdict, f"{first.get(j.name, j).gain * 100:.1f}", reason))
+    return rows
+
+
+_PARAMETER_NOTE = (
+    "Standard errors: long-run covariance of the joint fit with the base constants, plus half the spread "
+    "over the effect's model-form variants and 1 % for the differentiator's calibration, in quadrature."
+)
+_VERDICT_NOTE = (
+    "Each candidate is fitted jointly with C1..C4 and the effects chosen before it. It is claimed only if "
+    "it lowers the held-out error significantly (z ≥ 3 on 0.5 s blocks with a long-run standard error), "
+    "its coefficients pass a Wald test (p < 1e-4), it changes the prediction by more than the "
+    "2.25e-3 m/s² a 15 rad/s loop turns into one encoder count, it is separable from the constants and "
+    "the other effects (variance inflation ≤ 100) and it is physically plausible."
+)
+
+
+def _pack(pdf: PdfReport, parts: Sequence[tuple[str, Sequence[Text | Table | Plot]]]) -> None:
+    """Pages of ``parts`` (heading, blocks), the blocks in order: of every way to cut them into pages
+    that fit, the one with the fewest near-empty pages, then the fewest pages, then the fewest parts
+    cut in two, then the fullest emptiest page. A page is headed by the part of its first block
+    ("(continued)" when that part began on an earlier page)."""
+    blocks = [(j, k, block) for j, (_, bl) in enumerate(parts) for k, block in enumerate(bl)]
+    heights = [block_height(b) for *_, b in blocks]
+    room, heading = page_room(), 0.032  # the page's heading takes 0.032 of its fill
+    n = len(blocks)
+    best, best_key = None, None
+    for mask in range(1 << max(0, n - 1)):
+        cuts = [0, *(i + 1 for i in range(n - 1) if mask >> i & 1), n]
+        pages = list(itertools.pairwise(cuts))
+        fills = [heading + sum(heights[a:b]) for a, b in pages]
+        if max(fills) > room + heading:
+            continue
+        inside = sum(1 for a, _ in pages[1:] if blocks[a][1] > 0)
+        key = (sum(f < MIN_FILL for f in fills), len(pages), inside, -min(fills))
+        if best_key is None or key < best_key:
+            best, best_key = pages, key
+    if best is None:  # a block taller than a page: one block a page (add_page says what is wrong)
+        best = [(i, i + 1) for i in range(n)]
+    for a, b in best:
+        j, k, _ = blocks[a]
+        title = parts[j][0] if k == 0 else f"{parts[j][0]} (continued)"
+        pdf.add_page(title, [block for *_, block in blocks[a:b]])
+
+
+def write_diagnosis_report(
+    path: str | os.PathLike,
+    diag: Diagnosis,
+    *,
+    study: CompensationStudy | None = None,
+    truth_rows: Sequence[Sequence[str]] = (),
+    title: str = "maglev_oc — closing the loop with measured data",
+    subtitle: str = "maglev-oc diagnose",
+    preamble: Sequence[str] = (),
+    epilogue: Sequence[str] = (),
+    timings: dict[str, float] | None = None,
+) -> ReportContents:
+    """Write the PDF (atomically).
+
+    Parameters
+    ----------
+    path : path-like
+        Where the PDF goes.
+    diag : Diagnosis
+        The diagnosis to report.
+    study : CompensationStudy, optional
+        The FL regulator before and after compensating the found effects.
+    truth_rows : sequence of rows
+        For a log whose truth is known, rows (what, true size, found, verdict) of the scorecard.
+    title, subtitle : str
+        The report's title and the line under it.
+    preamble, epilogue : sequence of str
+        Paragraphs before and after the findings on page 2 (what the log is, how it was made).
+    timings : dict, optional
+        [s] Wall times of steps outside the diagnosis (the log's simulation, the closed loop), for
+        the appendix.
+
+    Returns
+    -------
+    ReportContents
+        What the report says, section by section.
+    """
+    with PdfReport(path, title, subtitle=subtitle) as pdf:
+        pdf.add_page(
+            "Scorecard: what the log's residual is made of",
+            [scorecard_table(diag, study, truth_rows), Plot(plots.key_plot(diag, study, KEY_PANELS), 0.34)],
+            first_page=True,
+        )
+        words = [*preamble, *_finding_paragraphs(diag), *epilogue]
+        found: list[Text | Table | Plot] = [Text(words)]
+        if diag.effects:
+            found.append(
+                Table(
+                    "The found effects' parameters",
+                    ("effect", "parameter", "value ± standard error", "unit"),
+                    _effect_rows(diag),
+                    notes=[_PARAMETER_NOTE],
+                )
+            )
+        constants = Table(
+            "Lumped constants",
+            ("constant", "base model alone", "refitted with the effects", "unit"),
+            _constant_rows(diag),
+        )
+        verdicts = Table(
+            "Every candidate and its verdict",
+            ("candidate", "verdict", "first-step\nheld-out gain [%]", "reason"),
+            _verdict_rows(diag),
+            notes=[_VERDICT_NOTE],
+            font_size=7.5,
+        )
+        n_panels = len(plots.panels(diag))
+        held_out: list[Text | Table | Plot] = []
+        if study is None or n_panels > KEY_PANELS:
+            held_out.append(Plot(plots.effects_plot(diag), 0.28 * max(1, -(-n_panels // 3))))
+        held_out.append(Plot(plots.timeseries_plot(diag), 0.36))
+        if study is not None:
+            held_out += [Text([_control_paragraph(study)]), Plot(plots.compensation_plot(study), 0.42)]
+        _pack(
+            pdf,
+            [
+                ("What was found, in words", [*found, constants]),
+                (
+                    "Where the base model's residual lives",
+                    [Plot(plots.spectrum_plot(diag), 0.3), Plot(plots.dependence_plot(diag), 0.56)],
+                ),
+                ("Held-out data" + (", and the closed loop before and after" if study else ""), held_out),
+                ("Every candidate and its verdict", [verdicts]),
+            ],
+        )
+        times = {
+            **(timings or {}),
+            **{f"diagnosis: {k.replace('_', ' ')}": v for k, v in diag.timings.items()},
+        }
+        pdf.add_page(
+            "Appendix: wall times and settings",
+            [
+                Table(
+                    "Wall times [s]", ("step", "wall time [s]"), [(k, f"{v:.2f}") for k, v in times.items()]
+                ),
+                Table(
+                    "Settings of the diagnosis",
+                    ("setting", "value"),
+                    [
+                        (_SETTING_WORDS.get(k, k.replace("_", " ")), _wrap(str(v), 70))
+                        for k, v in _flat(diag.settings).items()
+                    ],
+                ),
+            ],
+        )
+    return pdf.contents
+
+
+_SETTING_WORDS = {
+    "holdout_fraction": "held-out share of each log",
+    "bandwidth_hz": "differentiator band [Hz]",
+    "sg_windows": "Savitzky-Golay windows [samples]",
+    "edge_samples": "filter edge left out [samples]",
+    "logging_error_share": "share of the current error from logging",
+    "max_rate_hz": "highest sample rate kept [Hz]",
+}
+
+
+def _flat(settings: dict, prefix: str = "") -> dict[str, object]:
+    """Nested settings as one level: {"selection": {"min_z": 3}} -> {"selection, min_z": 3}; numbers
+    to 6 significant digits."""
+    out: dict[str, object] = {}
+    for k, v in settings.items():
+        if isinstance(v, dict):
+            out |= _flat(v, f"{prefix}{k}, ")
+        elif isinstance(v, list | tuple | np.ndarray):
+            out[f"{prefix}{k}"] = ", ".join(
+                f"{x:.6g}" if isinstance(x, float) else str(x) for x in np.ravel(v)
+            )
+        else:
+            out[f"{prefix}{k}"] = f"{v:.6g}" if isinstance(v, float) else v
+    return out
