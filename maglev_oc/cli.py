@@ -515,13 +515,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
 def _version() -> str:
     """maglev-oc's version and the versions of what its numbers depend on."""
     import platform
+    from importlib.metadata import version
 
     import casadi
 
-    from maglev_oc import __version__
-
     return (
-        f"maglev-oc {__version__} (CasADi {casadi.__version__}, NumPy {np.__version__}, "
+        f"maglev-oc {version('maglev_oc')} (CasADi {casadi.__version__}, NumPy {np.__version__}, "
         f"Python {platform.python_version()})"
     )
 

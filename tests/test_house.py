@@ -20,6 +20,7 @@ LAYERS = {
     "units": 0,
     "numerics": 0,
     "fileio": 0,
+    "progress": 0,
     "model": 1,
     "data": 2,
     "estimation": 3,

@@ -62,6 +62,7 @@ from maglev_oc.diagnosis.trace import trace, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
+from maglev_oc.progress import progress
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_subset, predicted, residuals
@@ -202,15 +203,25 @@ def diagnose(
 
 
 class _Clock:
-    """Runs a step and adds its wall time to its name's."""
+    """Runs a step and adds its wall time to its name's; shows the step on a terminal."""
+
+    STEPS = 7  # prepare, base_fit, selection, waviness, unexplained, effects, output_error
 
     def __init__(self, timings: dict[str, float]) -> None:
         self.timings = timings
+        self.bar = progress(total=self.STEPS, desc="diagnose", unit="step")
+        self.seen: set[str] = set()
 
     def __call__(self, name, fn, *args):
         t0 = time.perf_counter()
+        self.bar.set_description(f"diagnose: {name.replace('_', ' ')}")
         out = fn(*args)
         self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0  # a step may run in parts
+        if name not in self.seen:
+            self.seen.add(name)
+            self.bar.update(1)
+        if name == "output_error":
+            self.bar.close()
         return out
 
 
