@@ -1,27 +1,44 @@
-"""Operating-region report: the feasible set, the certified Procedure 2, the linear regulators' regions
-of attraction and their Monte Carlo validation.
+"""Operating-region report: where the FL regulator's feedback transformation stays defined and the
+currents fit the amplifiers. Page 1 is the scorecard (the feasible set, the certified Procedure 2,
+the basins of the FL and linear regulators, the papers' large step) with its key figure; the method,
+the feasible set, the certificates and their Monte Carlo checks, the basins and the large step
+follow; timings are in the appendix.
 
-python analyses/operating_region.py [--out reports/operating_region.pdf] [--params stage.json] [--quick]
+    python analyses/operating_region.py [--out reports/operating_region.pdf] [--params stage.json] [--quick]
 """
 
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
 
 from maglev_oc.control.linear_regulator import axis_linearizations
 from maglev_oc.model.stage import StageModel
-from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, certificate_rows, operating_region_study
+from maglev_oc.region.study import (
+    BASIN_OUTCOMES,
+    OperatingRegionStudy,
+    ReferenceStudy,
+    StudyConfig,
+    operating_region_study,
+)
 from maglev_oc.reporting import region_plots as plots
-from maglev_oc.reporting.pdf import PdfReport, ReportContents
+from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text
+from maglev_oc.reporting.twins import twin_sentence
+from maglev_oc.sim.effects import Encoder, TwinEffects
+from maglev_oc.units import M_TO_MM
 
-__all__ = ["ORDER", "QUICK", "REPORT", "build", "main", "write_report"]
+__all__ = ["FL", "LINEAR", "ORDER", "QUICK", "REPORT", "build", "main", "scorecard_rows", "write_report"]
 
 REPORT = "operating_region.pdf"
 TITLE = "maglev_oc — operating region of the FL regulator"
 ORDER = 60
+FL, LINEAR = "FL regulator", "linear regulator"
+"""The two controllers the papers compare (their names in the study)."""
+PAPER_RANGE = (0.015, 0.025)
+"""[m] The gaps the papers' set-point steps span (001 Sec. VI-A, 002 Sec. 7.1)."""
 
 QUICK = StudyConfig(
     setpoints_mm=(15.0, 20.0, 25.0),
@@ -41,289 +58,397 @@ def build(out: Path, model: StageModel, config: StudyConfig | None = None) -> Re
     return write_report(out, operating_region_study(model, config or StudyConfig()), model)
 
 
-def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> ReportContents:
-    """Write the report of a finished study (``model``: the one it was run on)."""
-    with PdfReport(
-        out, TITLE, subtitle="reports/operating_region.pdf from analyses/operating_region.py"
-    ) as pdf:
-        pdf.add_text(
-            "Feasible operating region: question, method, what is certified", _method(st), first_page=True
-        )
-        pdf.add_text("Results in brief", _results(st))
-        _feasibility_map_pages(pdf, st)
-        _certificate_pages(pdf, st)
-        _montecarlo_pages(pdf, st)
-        _slice_pages(pdf, st)
-        if st.large_step is not None:
-            _large_step_pages(pdf, st, model)
-        _timing_page(pdf, st)
-    return pdf.contents
+# --- the numbers as printed -------------------------------------------------------------------------------
+def _mm(x: float, digits: int = 3) -> str:
+    return f"{x * M_TO_MM:.{digits}g}"
 
 
-def _fmt(x, digits: int = 3) -> str:
-    if x is None or not math.isfinite(float(x)):
-        return "inf"
-    return f"{x:.{digits}g}"
-
-
-def _sizes(cert) -> str:
-    s = cert.initial_conditions.semi_axes
-    return (
-        f"|e1| <= {s['e1'] * 1e3:.2f} mm, |e1'| <= {s['e1_rate'] * 1e3:.0f} mm/s, "
-        f"|e2| <= {s['e2'] * 1e3:.1f} mm, |e2'| <= {s['e2_rate'] * 1e3:.0f} mm/s"
-    )
-
-
-def _method(st: OperatingRegionStudy) -> list[str]:
-    """The first page: the question, the adapted Procedure 2 and what 'certified' means."""
-    f = st.feasible
-    pos = f.position_range or (-math.inf, math.inf)
-    return [
-        "Question (001 Sec. V, 002 Sec. 6): the feedback transformation exists only where R(x1, v1, v2) >= "
-        "0, and "
-        "the amplifiers deliver |u| = sqrt(i_q^2 + i_d^2) <= 9 A. Which initial conditions keep (x(t), v(t)) "
-        "feasible for all t >= 0? The papers left Procedure 2 of Maggiore & Becerril (2004) unadapted to "
-        "their "
-        "output regulator; this report adapts it and certifies it.",
-        f"Feasible set F: {f.label}, position in [{pos[0] * 1e3:g}, {pos[1] * 1e3:g}] mm (the rig twin's "
-        "stoppers). Over 8-30 mm the root at R = 0 needs i_d = -L3/(2 L4) >= 18 A, so with the 9 A limit the "
-        "current constraint always binds before R = 0: the papers' set A is larger than F. At a fixed gap, F "
-        "is "
-        "exactly the ellipse (v1/L1)^2 + ((v2 - G + L2 + L4 I^2)/L3)^2 <= I^2 in (v1, v2).",
-        "Adapted Procedure 2. Wherever (x, v) is in F the loop is linear in the error coordinates zt = z - "
-        "Pi w "
-        "(errors, their rates and the internal-model states, minus the exosystem's steady state): zt' = A_cl "
-        "zt. "
-        "With V = zt' P zt and A_cl' P + P A_cl <= 0, a level set {V <= c} that lies in F for every phase of "
-        "the "
-        "exosystem is invariant: every solution started in it stays feasible forever and converges. F "
-        "depends "
-        "on zt only through (e1, e2, v1, v2): the stoppers give their level in closed form, and the "
-        "nonlinear "
-        "constraints are checked on the exact image of {V <= c} in (e1, v1, v2) (a 3-D ellipsoid, times the "
-        "phase) by branch and bound with interval arithmetic on the CasADi expression graph.",
-        "What 'certified' means: every box of a cover of that image was proved feasible by outward-rounded "
-        "interval arithmetic, so the certified c is a sound lower bound on min V over the complement of F "
-        "(up to "
-        "libm's elementary functions being accurate to within an ulp). Multistart IPOPT with exact "
-        "derivatives "
-        "(minimise V on R = 0 and on |u| = 9 A) only bounds that minimum from above; c / upper bound is the "
-        "tightness. The SDP's P is certified the same way; its inner polytope of F is proved by intervals "
-        "too.",
-        "Assumptions of the certificate: plant = controller model (nominal constants; no cogging, friction "
-        "or "
-        "misalignment); the continuous-time FL loop; exact velocities; an ideal amplifier (commands applied "
-        "exactly while |u| <= 9 A); references generated by the exosystem (set-points, or the pure sinusoid "
-        "without ramp-in); the printed gains K_h, K_v of 001/002. Not covered: the 5 kHz sampling, the "
-        "high-gain observer and the encoder's quantisation; the Monte Carlo on the sampled twin checks them.",
-    ]
-
-
-def _results(st: OperatingRegionStudy) -> list[str]:
-    """The second page: the results in words, one paragraph per part of the study."""
-    out = [_certified_sizes_paragraph(st)]
-    enlargement = _enlargement_paragraph(st)
-    if enlargement:
-        out.append(enlargement)
-    out.append(_montecarlo_paragraph(st))
-    if st.quantization is not None:
-        q = st.quantization
-        out.append(
-            f"With the 10 um encoder and 2 um noise in the loop ({q.n} runs inside the SDP set at "
-            f"{q.reference.gap * 1e3:g} mm): {q.violations} violations, largest |u| {q.max_current:.2f} A."
-        )
-    if st.large_step is not None:
-        out.append(_large_step_paragraph(st.large_step))
-    return out
-
-
-def _setpoint_studies(st: OperatingRegionStudy) -> list:
+def _setpoints(st: OperatingRegionStudy) -> list[ReferenceStudy]:
     return [r for r in st.references if r.reference.is_setpoint]
 
 
-def _middle(st: OperatingRegionStudy):
+def _middle(st: OperatingRegionStudy) -> ReferenceStudy:
     """The set-point study nearest 20 mm."""
-    return min(_setpoint_studies(st), key=lambda r: abs(r.reference.gap - 0.02))
+    return min(_setpoints(st), key=lambda r: abs(r.reference.gap - 0.02))
 
 
-def _certified_sizes_paragraph(st: OperatingRegionStudy) -> str:
-    mid = _middle(st)
-    return (
-        f"Set-points 15-25 mm (horizontal 0). Certified initial errors (each alone, at rest, internal models "
-        f"empty) at {mid.reference.gap * 1e3:g} mm with the Lyapunov equation's P (Q = identity in "
-        f"acceleration-scaled coordinates): {_sizes(mid.lyapunov)}; with the SDP's P: {_sizes(mid.best)}. "
-        "The other set-points are in the table; at 15 and 25 mm the stoppers bind."
-    )
+def _name(rs: ReferenceStudy) -> str:
+    return f"{_mm(rs.reference.gap, 4)} mm" if rs.reference.is_setpoint else "ellipse"
 
 
-def _enlargement_paragraph(st: OperatingRegionStudy) -> str:
-    """The SDP's gain over the Lyapunov equation ("" without an SDP)."""
-    enl = [r.enlargement for r in _setpoint_studies(st) if r.enlargement is not None]
-    if not enl:
-        return ""
-    return (
-        f"SDP enlargement of the certified rectangle |e1| <= a1, |e2| <= a2 (at rest): area "
-        f"x{min(e.area for e in enl):.3g} to x{max(e.area for e in enl):.3g} over the set-points; "
-        f"e1 half-side x{min(e.e1 for e in enl):.2f} to x{max(e.e1 for e in enl):.2f}, e2 half-side "
-        f"x{min(e.e2 for e in enl):.2f} to x{max(e.e2 for e in enl):.2f}. The SDP trades rate directions "
-        "for position directions (see the semi-axes in the table)."
-    )
-
-
-def _montecarlo_paragraph(st: OperatingRegionStudy) -> str:
-    tot = st.inside_totals()
-    unsafe = sum(s.unsafe_certified for v in st.slices.values() for s in v)
-    cov_txt = "; ".join(
-        f"{s.reference.gap * 1e3:g} mm ({s.axes[0]}, {s.axes[1]}): "
-        + " / ".join(f"{100 * sl[k].coverage:.0f} %" for sl in st.slices.values() if k < len(sl))
-        for k, s in enumerate(st.slices.get("Lyapunov P", ()))
-    )
-    return (
-        f"Monte Carlo on the sampled ideal twin (5 kHz, high-gain observers started at the true velocities, "
-        f"discrete internal models at the start's value): {tot['runs']} runs started inside certified sets, "
-        f"{tot['violations']} violations (R < 0, |u| > 9 A, or a stopper). Conservativeness, the share of "
-        "the "
-        f"empirically safe starts on a slice that the certificate covers (Lyapunov P / SDP P): {cov_txt}. "
-        f"Certified but unsafe grid starts: {unsafe}."
-    )
-
-
-def _reach(ls) -> float:
-    """How far (in multiples of its initial error) the SDP aimed at the large step certifies it."""
-    return ls.fl_direction.best.reach if ls.fl_direction is not None and ls.fl_direction.best else math.nan
-
-
-def _large_step_paragraph(ls) -> str:
-    reach = _reach(ls)
-    lin = "; ".join(f"{x.controller}: V(start)/c = {_fmt(x.large_step_ratio)}" for x in ls.linear)
-    return (
-        "The papers' large step (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0). FL regulator: V(start)/c = "
-        f"{ls.fl_ratio_lyapunov:.3g} with the Lyapunov equation's P and {ls.fl_ratio_sdp:.3g} with the "
-        "SDP's P "
-        f"for the rectangle (both outside), but an SDP aimed at this start certifies {reach:.3g} times "
-        "its "
-        f"initial error: the step is {'inside' if reach >= 1 else 'outside'} a certified set. On the "
-        "sampled "
-        f"twin it stays feasible (largest |u| {ls.fl_run.max_current:.2f} A). Linear regulators, "
-        "certified "
-        f"regions of attraction: {lin} — far outside: a few tenths of a millimetre are certified, which "
-        "neither predicts nor rules out the failure; the sampled estimate and the frozen-gain analysis "
-        "on the "
-        "last pages do explain it."
-    )
-
-
-def _certified(rs) -> dict[str, tuple[np.ndarray, float]]:
-    """(P, level) of a reference's certified sets by name: the Lyapunov one and, if certified, the SDP's."""
+def _certs(rs: ReferenceStudy) -> dict[str, tuple[np.ndarray, float]]:
+    """(P, level) of a reference's certified sets: the Lyapunov equation's and, if certified, the SDP's."""
     certs = {"Lyapunov P": (rs.lyapunov.P, rs.lyapunov.level)}
     if rs.sdp is not None and rs.sdp.certified is not None:
         certs["SDP P"] = (rs.best.P, rs.best.level)
     return certs
 
 
-def _feasibility_map_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
-    """F on slices through the middle set-point and along the sinusoid, with the certified sets."""
+def _share(d, key: str = "success") -> float:
+    return 100.0 * float(np.mean(d[key]))
+
+
+def _paper_range_steps(st: OperatingRegionStudy) -> tuple[int, int]:
+    """(FL runs that stay in F and settle, runs) over the map's pairs with start and target gap in
+    the papers' 15-25 mm."""
+    ls = st.large_step
+    s_in = (ls.map_starts >= PAPER_RANGE[0] - 1e-9) & (ls.map_starts <= PAPER_RANGE[1] + 1e-9)
+    t_in = (ls.sweep_targets >= PAPER_RANGE[0] - 1e-9) & (ls.sweep_targets <= PAPER_RANGE[1] + 1e-9)
+    ok = ls.maps[FL]["success"][np.ix_(t_in, s_in)]
+    return int(ok.sum()), int(ok.size)
+
+
+def _edge_distance(st: OperatingRegionStudy, name: str) -> float:
+    """[m] From the papers' 18 mm target down to the highest target that fails from 26 mm (inf if none)."""
+    ls = st.large_step
+    d = ls.sweep[name]
+    bad = ls.sweep_targets[~d["success"] & (ls.sweep_targets < ls.reference.gap)]
+    return float(ls.reference.gap - bad.max()) if bad.size else math.inf
+
+
+def _reach(st: OperatingRegionStudy) -> float:
+    """How far (in multiples of its initial error) an SDP aimed at the large step certifies it."""
+    ls = st.large_step
+    return ls.fl_direction.best.reach if ls.fl_direction is not None and ls.fl_direction.best else math.nan
+
+
+def _stopper_agreement(st: OperatingRegionStudy) -> tuple[int, int, int]:
+    """(FL stopper hits the linear error dynamics predict, FL stopper hits, pairs where prediction and
+    simulation disagree)."""
+    ls = st.large_step
+    hit = ls.maps[FL]["outcome"] == BASIN_OUTCOMES.index("stopper")
+    return int(np.sum(hit & ls.predicted_stopper)), int(hit.sum()), int(np.sum(hit != ls.predicted_stopper))
+
+
+def scorecard_rows(st: OperatingRegionStudy) -> list[tuple[str, str, str, str]]:
+    """(the papers' claim, their value, ours, verdict): page 1."""
+    f = st.feasible
+    limit = f.current_limit
+    i0, g0 = st.r_zero_current
+    lo, hi = f.gap_range or (math.nan, math.nan)
+    binds = limit is not None and i0 > limit
+    rows = [
+        (
+            "The transformation exists where\nR >= 0 (the set A; 001 Sec. V,\n002 Sec. 6)",
+            "A = {R >= 0},\nno current limit",
+            f"on R = 0, |u| >= {i0:.1f} A over\n{_mm(lo)}-{_mm(hi)} mm (least at {_mm(g0)} mm)",
+            f"differs, because the {limit:g} A\namplifiers bind first: the\nregion is F, inside A (note 1)"
+            if binds
+            else "reproduced: R >= 0 binds",
+        )
+    ]
+    sps = _setpoints(st)
+    certified = [r for r in st.references if r.lyapunov.success]
+    tight = min(r.lyapunov.tightness for r in certified) if certified else math.nan
+    sin = " and the ellipse" if any(not r.reference.is_setpoint for r in certified) else ""
+    rows.append(
+        (
+            "Procedure 2 must be adapted to\nestimate the range of operation\n(001 Sec. V, 002 Sec. 6)",
+            "left undone\n('beyond the scope')",
+            f"certified at {sum(r.reference.is_setpoint for r in certified)} set-points, "
+            f"{_mm(sps[0].reference.gap)}-{_mm(sps[-1].reference.gap)} mm,\n"
+            f"{sin.strip()}; levels within {1 - tight:.1%} of the\nleast infeasible V found",
+            "new here" if len(certified) == len(st.references) else "not certified everywhere",
+        )
+    )
+    mid = _middle(st)
+    a1, a2 = mid.best.initial_conditions.rectangle
+    b1, b2 = mid.lyapunov.initial_conditions.rectangle
+    tot = st.inside_totals()
+    rows.append(
+        (
+            f"Certified starts at rest around\nthe {_mm(mid.reference.gap)} mm set-point",
+            "—",
+            f"gap ±{_mm(a1)} mm with position ±{_mm(a2)} mm\n(SDP; Lyapunov ±{_mm(b1)} / ±{_mm(b2)} mm)",
+            f"new; {tot['runs']} runs inside\nthe certified sets, {tot['violations']} left F",
+        )
+    )
+    if st.large_step is None:
+        return rows
+    ls = st.large_step
+    ok, n = _paper_range_steps(st)
+    rows.append(
+        (
+            "The FL regulator works over the\nrange of interest, gaps 15-25 mm\n(002 Sec. 6, 7.1)",
+            "shown on the rig",
+            f"ideal twin: {ok} of {n} steps between\n15 and 25 mm stay in F and settle",
+            "reproduced (sampled,\nnot certified)" if ok == n else "differs",
+        )
+    )
+    reach = _reach(st)
+    run = ls.fl_run
+    fl_ok = reach >= 1 and run is not None and run.violations == 0
+    rows.append(
+        (
+            "The FL regulator settles the\nlarge step 26 → 18 mm, 0 → 20 mm\n(001 Fig. 9, 002 Fig. 12)",
+            "settles",
+            f"certified: an SDP aimed at the start\ncovers {reach:.2f} times its error; ideal\n"
+            f"twin: stays in F, |u| <= {run.max_current:.1f} A",
+            "reproduced, and certified" if fl_ok else "differs",
+        )
+    )
+    lin = next(x for x in ls.linear if x.controller == LINEAR)
+    d = ls.sweep[LINEAR]
+    k = int(np.argmin(np.abs(ls.sweep_targets - ls.reference.gap)))
+    edge = _edge_distance(st, LINEAR)
+    survives = bool(d["success"][k])
+    rows.append(
+        (
+            "The linear regulator goes\nunstable on that step",
+            "unstable; shut\ndown at 5.5 s",
+            f"ideal twin: converges, least gap\n{_mm(d['min_gap'][k])} mm; its certified region is\n"
+            f"{lin.large_step_ratio:,.0f} times too small to decide",
+            f"differs: on the nominal model the\nstep is inside its basin, {_mm(edge, 2)} mm\n"
+            "from the edge (note 2)"
+            if survives
+            else "reproduced on the ideal twin",
+        )
+    )
+    fl, li = ls.maps[FL], ls.maps[LINEAR]
+    overshoot = -ls.fl_step_range[0, 0]
+    predicted, hits, _ = _stopper_agreement(st)
+    rows.append(
+        (
+            "The FL regulator's range exceeds\nthe linear regulator's (001, 002:\nthe linear one fails "
+            "that step)",
+            "implied",
+            f"start x target pairs that converge:\nFL {_share(fl):.0f} %, linear {_share(li):.0f} %; "
+            f"within\n9 A: FL {_share(fl, 'within_limit'):.0f} %, linear {_share(li, 'within_limit'):.0f} %",
+            f"differs, because both end where\nthe step's overshoot ({overshoot:.0%}) meets\na stopper: "
+            f"{predicted} of the FL's {hits}\nstopper hits predicted (note 3)",
+        )
+    )
+    return rows
+
+
+def _scorecard_notes(st: OperatingRegionStudy) -> list[str]:
+    f = st.feasible
+    i0, _ = st.r_zero_current
+    notes = [
+        f"1. F: R >= 0, |u| <= {f.current_limit:g} A and the stoppers (gap {_mm(f.gap_range[0])}-"
+        f"{_mm(f.gap_range[1])} mm, position ±{_mm(f.position_range[1])} mm). On R = 0 the transformation "
+        f"commands i_d = −L3/(2 L4), at least {i0:.1f} A, so the current limit is met before R = 0 anywhere.",
+    ]
+    if st.large_step is None:
+        return notes
+    ls = st.large_step
+    fl, li = ls.outcomes(FL), ls.outcomes(LINEAR)
+    _, _, disagree = _stopper_agreement(st)
+    notes += [
+        "2. The papers' step overshoots below 15 mm, where 000 found the model to stop predicting the rig "
+        "(cogging above 1 N); the ideal twin has no cogging, friction, amplifier lag or sampling noise. "
+        "Page 9 gives the frozen-gain analysis.",
+        f"3. Both controllers place the same poles (the linear one at the target's linearization), so both "
+        f"overshoot a gap step by about {-ls.fl_step_range[0, 0]:.0%} of its size; the FL loop's error "
+        f"dynamics are exactly linear, and a step from rest predicts its stopper hits pair for pair "
+        f"({disagree} disagree). Of the FL's failures, {fl['stopper']} are stopper hits, "
+        f"{fl['over the current limit']} exceed 9 A and {fl['R < 0']} meet R < 0. The linear regulator "
+        f"fails on {li['stopper']} pairs by the stoppers and converges on "
+        f"{li['over the current limit']} more only by commanding over 9 A, which the rig's amplifiers "
+        "would not give.",
+    ]
+    return notes
+
+
+# --- the report -------------------------------------------------------------------------------------------
+def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> ReportContents:
+    """Write the report of a finished study (``model``: the one it was run on)."""
+    t0 = time.perf_counter()
+    with PdfReport(
+        out, TITLE, subtitle="reports/operating_region.pdf from analyses/operating_region.py"
+    ) as pdf:
+        first = [
+            Table(
+                "", ("claim (source)", "papers", "ours", "verdict"), scorecard_rows(st), _scorecard_notes(st)
+            )
+        ]
+        if st.large_step is not None:
+            first.append(Plot(_key_figure(st), 0.36))
+        pdf.add_page("Scorecard: the papers' operating region beside ours", first, first_page=True)
+        pdf.add_page("How the region is found", [Text(_method(st)), _parts_table(st)])
+        _feasible_page(pdf, st)
+        _certificate_page(pdf, st)
+        _montecarlo_page(pdf, st)
+        _slices_page(pdf, st)
+        if st.large_step is not None:
+            _basins_page(pdf, st)
+            _large_step_pages(pdf, st, model)
+        timings = {**st.timings, "writing the report (before this page)": time.perf_counter() - t0}
+        pdf.add_page(
+            "Appendix: compute times and each constraint's bounds",
+            [_timing_table(st, timings), Text(_runs_text(st)), _levels_table(st)],
+        )
+    return pdf.contents
+
+
+def _key_figure(st: OperatingRegionStudy):
+    ls = st.large_step
+    n = ls.map_starts.size * ls.sweep_targets.size
+    return plots.basin_maps_plot(
+        ls,
+        [FL, LINEAR],
+        "Key figure: where each start x target step ends, FL and linear regulator",
+        f"{n} steps from rest at a start gap (position 0) to a target gap (position "
+        f"{_mm(ls.target_position, 2)} mm), each simulated for {st.config.linear_horizon:g} s on the sampled "
+        "ideal twin. Dashed: where the FL loop's linear error dynamics reach a stopper.",
+    )
+
+
+def _method(st: OperatingRegionStudy) -> list[str]:
+    f = st.feasible
+    encoder = "; ".join(TwinEffects(encoder=Encoder()).describe())
+    return [
+        "The question (001 Sec. V, 002 Sec. 6). The feedback transformation exists only where R(x1, v1, v2) "
+        "≥ 0, and the amplifiers deliver |u| = sqrt(i_q² + i_d²) ≤ 9 A. Which initial conditions keep the "
+        "loop feasible for all time? The papers left Procedure 2 of Maggiore & Becerril (2004) unadapted to "
+        "their output regulator and showed the range on the rig instead; this report adapts and certifies "
+        "it.",
+        f"The feasible set F: {f.label}, position within ±{_mm(f.position_range[1])} mm (the stoppers).",
+        "Adapted Procedure 2. While the loop is in F it is linear in the error coordinates z (the errors, "
+        "their rates and the internal models' states, minus the reference's steady state): z' = A_cl z. "
+        "With V = z' P z and A_cl' P + P A_cl ≤ 0, a level set {V ≤ c} that lies in F for every phase of "
+        "the reference is invariant: every run started in it stays feasible forever and converges. F "
+        "depends on z only through the gap and position errors and the two commanded accelerations; the "
+        "stoppers give their level in closed form, and R ≥ 0 and the 9 A limit are checked on the exact "
+        "image of {V ≤ c} by branch and bound with interval arithmetic. Two choices of P: the Lyapunov "
+        "equation's (each state weighted by the acceleration it commands) and one from a semidefinite "
+        "program (SDP) that enlarges the certified gap x position rectangle.",
+        "'Certified' means every box of a cover of that image was proved feasible by outward-rounded "
+        "interval arithmetic: the certified c is a sound lower bound on the least V outside F. A local "
+        "optimiser (multistart IPOPT, exact derivatives) finds infeasible points, an upper bound; their "
+        "ratio is the tightness.",
+        "What the certificate assumes: plant = the controllers' model; the continuous-time loop with exact "
+        "velocities and an ideal amplifier while |u| ≤ 9 A; references from the papers' exosystem "
+        "(set-points, or the ellipse without its ramp-in); the printed gains K_h, K_v. What it leaves out, "
+        "checked by Monte Carlo instead: the 5 kHz sampling, the high-gain observers and the encoder.",
+        "Simulations. " + twin_sentence("ideal twin") + " Runs are sampled at 5 kHz with the observers "
+        "started at the true velocities and the internal models at the start's value. One check adds the "
+        f"encoders ({encoder}). Basins are sampled, not certified: a grid of start x target steps per "
+        "controller, each judged by how it ends.",
+    ]
+
+
+def _parts_table(st: OperatingRegionStudy) -> Table:
+    """What each part of the study computes, how much, and whether it proves or samples."""
+    c, ls = st.config, st.large_step
+    refs = len(st.references)
+    sdp = sum(r.sdp is not None and r.sdp.certified is not None for r in st.references)
+    slices = st.slices.get("Lyapunov P", ())
+    rows = [
+        (
+            "the feasible set F",
+            f"{len(st.maps)} slices, {c.map_points} x {c.map_points} grid, exact edges",
+            "exact",
+        ),
+        ("Procedure 2", f"{refs} references: {refs} Lyapunov and {sdp} SDP certificates", "certified"),
+        ("Monte Carlo inside", f"{st.inside_totals()['runs']} runs of {c.horizon:g} s", "sampled"),
+        ("coverage on slices", f"{sum(x.n for x in slices)} starts on {len(slices)} slices", "sampled"),
+        ("encoder check", f"{0 if st.quantization is None else st.quantization.n} runs", "sampled"),
+    ]
+    if ls is not None:
+        n = ls.map_starts.size * ls.sweep_targets.size
+        rows += [
+            ("basins", f"{n} start x target steps x {len(ls.maps)} controllers", "sampled"),
+            ("linear regulators' regions", f"{len(ls.linear)} certified regions of attraction", "certified"),
+        ]
+    return Table("What the study computes", ("part", "how much", "proves or samples"), rows)
+
+
+def _feasible_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    if not st.maps:
+        return
     mid = _middle(st)
     sin = next((r for r in st.references if not r.reference.is_setpoint), None)
-    setpoint_maps = [m for m in st.maps if m.reference.is_setpoint]
-    if setpoint_maps:
-        pdf.add_figure(
-            plots.feasibility_maps_figure(
-                setpoint_maps[:4],
-                _certified(mid),
-                f"F on slices through the set-point {mid.reference.gap * 1e3:g} mm (other states at "
-                "rest, "
-                "internal models empty),\nwith the certified sets' slices",
-            )
-        )
+    sp_maps = [m for m in st.maps if m.reference.is_setpoint]
     sin_maps = [m for m in st.maps if not m.reference.is_setpoint]
-    if sin_maps and sin is not None:
-        pdf.add_figure(
-            plots.feasibility_maps_figure(
-                sin_maps,
-                _certified(sin),
-                "Sinusoid r_v = 20 + 5 cos(w0 t) mm, r_h = 30 sin(w0 t) mm: F over the exosystem's "
-                "phase,\n"
-                "deviations from the steady-state orbit",
-            )
-        )
-
-
-def _timing_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
-    pdf.add_table(
-        "Compute times (this run)",
-        ["step", "wall time [s]"],
-        [(k, f"{v:.2f}") for k, v in st.timings.items()],
-        notes=[
-            "On the machine that wrote this report (2 cores, possibly shared). Monte Carlo runs are one "
-            "CasADi "
-            "Function per horizon (mapaccum of the fused twin + controller step, JIT-compiled) mapped "
-            "over "
-            "the starts on 2 threads. bench/region.py times each step on its own.",
+    i0, g0 = st.r_zero_current
+    text = [
+        f"F is where the regulator's commands are feasible. Its edge is the 9 A limit or a stopper: R = 0 "
+        f"lies further out (at least {i0:.1f} A on R = 0, least at {_mm(g0)} mm). The certified sets (lines) "
+        f"must lie in F for every phase of the reference. {_binding_sentence(st)}",
+    ]
+    pdf.add_page(
+        "The feasible set F",
+        [
+            Text(text),
+            Plot(plots.feasibility_plot(sp_maps, _certs(mid), sin_maps, _certs(sin) if sin else {}), 0.8),
         ],
     )
 
 
-def _certificate_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
-    rows = [
+def _binding_sentence(st: OperatingRegionStudy) -> str:
+    """Which constraint of F binds the Lyapunov equation's certificate, by reference."""
+    by: dict[str, list[str]] = {}
+    for rs in st.references:
+        words = plots.BINDING_WORDS.get(rs.lyapunov.binding, rs.lyapunov.binding)
+        by.setdefault(words, []).append(_name(rs))
+    parts = [f"the {w} at {', '.join(names)}" for w, names in by.items()]
+    return "Binding with the Lyapunov equation's P: " + "; ".join(parts) + "."
+
+
+def _certificate_rows(st: OperatingRegionStudy) -> list[tuple[str, ...]]:
+    rows = []
+    for rs in st.references:
+        items = [("Lyapunov", rs.lyapunov)]
+        if rs.sdp is not None and rs.sdp.certified is not None:
+            items.append(("SDP", rs.sdp.certified))
+        for label, c in items:
+            s = c.initial_conditions.semi_axes
+            a, b = c.initial_conditions.rectangle
+            rows.append(
+                (
+                    _name(rs),
+                    label,
+                    f"{c.level:.4g}",
+                    f"{c.level_upper:.4g}",
+                    f"{c.tightness:.3f}",
+                    plots.BINDING_WORDS.get(c.binding, c.binding),
+                    f"{s['e1'] * M_TO_MM:.2f}",
+                    f"{s['e1_rate'] * M_TO_MM:.0f}",
+                    f"{s['e2'] * M_TO_MM:.1f}",
+                    f"{s['e2_rate'] * M_TO_MM:.0f}",
+                    f"{a * M_TO_MM:.2f} x {b * M_TO_MM:.2f}",
+                )
+            )
+    return rows
+
+
+def _certificate_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    table = Table(
+        "",
         (
-            r[0],
-            r[1],
-            _fmt(r[2], 4),
-            _fmt(r[3], 4),
-            f"{r[4]:.3f}",
-            r[5],
-            f"{r[6]:.2f}",
-            f"{r[7]:.0f}",
-            f"{r[8]:.1f}",
-            f"{r[9]:.0f}",
-            r[10],
-        )
-        for r in certificate_rows(st)
-    ]
-    pdf.add_table(
-        "Certified sets per reference (adapted Procedure 2)",
-        [
             "reference",
             "P",
             "level c",
-            "upper bd",
-            "c/upper",
+            "upper\nbound",
+            "c / upper",
             "binding",
-            "e1 [mm]",
-            "e1' [mm/s]",
-            "e2 [mm]",
-            "e2' [mm/s]",
-            "rect. [mm]",
-        ],
-        rows,
+            "gap\n[mm]",
+            "gap rate\n[mm/s]",
+            "position\n[mm]",
+            "pos. rate\n[mm/s]",
+            "rectangle\n[mm]",
+        ),
+        _certificate_rows(st),
         notes=[
-            "level c: certified (branch and bound, sound); upper bd: least V found on the complement of F "
-            "(IPOPT "
-            "or a refuting box; for the stoppers the exact closed form); c/upper: tightness.",
-            "binding: the constraint of the upper bound: headroom (|u| <= 9 A), margin (R >= 0), "
-            "gap_low/high or "
-            "position_low/high (stoppers).",
-            "e1, e1', e2, e2': largest deviation of that state alone from the steady state (set-point: at "
-            "rest, "
-            "internal models empty) inside the certified set; rect.: the largest-area box |e1| <= a1, |e2| "
-            "<= a2.",
-            "Lyapunov eq.: A_cl' P + P A_cl = -diag(K_v^2, K_h^2) (the identity when each state is measured "
-            "by the "
-            "acceleration it commands). SDP: P maximising the rectangle over a proved inner polytope of F "
-            "(decay rate 0.1 1/s), then certified against F itself, so its level may exceed 1.",
-            "Sinusoid: deviations from the steady-state orbit; every phase of the exosystem is covered.",
+            "level c: certified (branch and bound, sound); upper bound: the least V found outside F; "
+            "binding: the constraint at that point. Gap, gap rate, position, position rate: the largest "
+            "deviation of that state alone from the steady state inside the certified set (set-point: at "
+            "rest, internal models empty); rectangle: the largest-area box of gap x position errors inside "
+            "it. Lyapunov: A_cl' P + P A_cl = −diag(K_v², K_h²); SDP: P maximising the rectangle over a "
+            "proved inner polytope of F (decay rate 0.1 1/s), then certified against F itself. Ellipse: "
+            "deviations from the steady-state orbit, every phase covered.",
         ],
         font_size=7.5,
     )
-    pdf.add_figure(plots.certified_sets_figure(st))
+    pdf.add_page(
+        "Certified sets: the adapted Procedure 2", [table, Plot(plots.certified_sets_plot(st), 0.42)]
+    )
 
 
 def _montecarlo_rows(st: OperatingRegionStudy) -> list[tuple]:
-    """One row per reference and certified set (runs inside it), and the encoder row."""
     rows = []
     for rs in st.references:
-        name = f"{rs.reference.gap * 1e3:g} mm" if rs.reference.is_setpoint else "sinusoid"
         for label in ("Lyapunov P", "SDP P"):
             chks = [c for k, c in rs.checks.items() if k.startswith(label)]
             if not chks:
@@ -332,264 +457,343 @@ def _montecarlo_rows(st: OperatingRegionStudy) -> list[tuple]:
             worst = rs.worst_start.get(label)
             rows.append(
                 (
-                    name,
-                    label,
+                    _name(rs),
+                    label.removesuffix(" P"),
                     " + ".join(str(c.n) for c in chks),
                     sum(c.violations for c in chks),
                     f"{max(float(np.max(c.final_ratio)) for c in chks):.2g}",
                     f"{max(c.max_current for c in chks):.2f}",
-                    f"{room * 1e3:.2f}",
+                    f"{room * M_TO_MM:.2f}",
                     "—"
                     if worst is None
                     else f"{worst.max_current:.2f} / "
-                    f"{float(np.min(plots.stopper_room(worst, st))) * 1e3:.2f}",
+                    f"{float(np.min(plots.stopper_room(worst, st))) * M_TO_MM:.2f}",
                 )
             )
     if st.quantization is not None:
         q = st.quantization
         rows.append(
             (
-                f"{q.reference.gap * 1e3:g} mm",
-                "best P, encoder",
+                _mm(q.reference.gap, 4) + " mm",
+                "best, encoder",
                 str(q.n),
                 q.violations,
                 "—",
                 f"{q.max_current:.2f}",
-                f"{np.min(plots.stopper_room(q, st)) * 1e3:.2f}",
+                f"{np.min(plots.stopper_room(q, st)) * M_TO_MM:.2f}",
                 "—",
             )
         )
     return rows
 
 
-def _montecarlo_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
-    """Runs started inside the certified sets: table and figure."""
-    pdf.add_table(
-        "Monte Carlo inside the certified sets (sampled ideal twin)",
-        [
+def _montecarlo_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    if not any(rs.checks for rs in st.references):
+        return
+    table = Table(
+        "",
+        (
             "reference",
             "P",
-            "runs (full + rest)",
-            "violations",
-            "max V_end/c",
-            "max |u| [A]",
-            "room [mm]",
-            "worst start: |u| / room",
-        ],
+            "runs (all\nstates + at rest)",
+            "left F",
+            "largest\nV_end / c",
+            "largest\n|u| [A]",
+            "least room to\na stopper [mm]",
+            "worst certified start:\n|u| [A] / room [mm]",
+        ),
         _montecarlo_rows(st),
         notes=[
-            f"Each run: {st.config.horizon:g} s at 5 kHz with the FL regulator as implemented (high-gain "
-            "observers "
-            "started at the true velocities, discrete internal models at the start's xi), from starts "
-            "uniform in "
-            "the certified ellipsoid: all 10 error states (full), or e1 and e2 only (at rest). Violation: a "
-            "sample "
-            "with R < 0, a commanded |u| > 9 A, or a stopper hit.",
-            "max V_end/c: the largest V/c at the end of the horizon; far below 1 means every run is back "
-            "deep "
-            "inside the certified set, where the certificate keeps it. room: least distance of any run to a "
-            "stopper.",
-            "worst start: the infeasible point found by IPOPT or branch and bound (V = upper bound) scaled "
-            "back "
-            "onto V = 0.999 c; its largest |u| [A] and stopper room [mm] show how close the certified "
-            "boundary "
-            "comes to the edge of F on the twin (9 A; 0 mm).",
-            "Encoder row: the 10 um quantiser with 2 um noise (one realisation shared by the runs), full "
-            "starts.",
+            f"Each run: {st.config.horizon:g} s at 5 kHz with the FL regulator as implemented, from starts"
+            " uniform in the certified set: all 10 error states, or the gap and position errors only (at "
+            "rest). Left F: a sample with R < 0, a commanded |u| over 9 A, or a stopper hit. Largest "
+            "V_end / c: far below 1 means every run is deep inside the certified set again. Worst "
+            "certified start: the infeasible point nearest the set scaled back onto its edge. Encoder "
+            "row: the 10 µm steps with 2 µm noise, starts in the best certified set.",
         ],
-        font_size=8,
     )
-    pdf.add_figure(plots.montecarlo_figure(st))
+    pdf.add_page("Monte Carlo inside the certified sets", [table, Plot(plots.montecarlo_plot(st), 0.46)])
 
 
-def _slice_rows(st: OperatingRegionStudy) -> list[tuple]:
-    return [
-        (
-            f"{s.reference.gap * 1e3:g} mm",
-            f"{s.axes[0]} x {s.axes[1]}",
-            label,
-            s.n,
-            int(s.safe.sum()),
-            int(s.certified.sum()),
-            s.unsafe_certified,
-            f"{100 * s.coverage:.1f} %",
-        )
-        for label, sl in st.slices.items()
-        for s in sl
-    ]
-
-
-def _slice_pages(pdf: PdfReport, st: OperatingRegionStudy) -> None:
-    """Conservativeness: grids of simulated starts on slices against the certified sets."""
-    rows = _slice_rows(st)
-    if not rows:
+def _slices_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    lyap = st.slices.get("Lyapunov P", ())
+    if not lyap:
         return
-    g = st.feasible.gap_range or (0, 0)
-    pdf.add_table(
-        "Conservativeness on slices: empirically safe starts vs the certificate",
-        ["set-point", "slice", "P", "starts", "safe", "certified", "certified & unsafe", "coverage"],
+    sdp = {(x.reference.gap, x.axes): x for x in st.slices.get("SDP P", ())}
+    rows = []
+    for x in lyap:
+        y = sdp.get((x.reference.gap, x.axes))
+        rows.append(
+            (
+                _mm(x.reference.gap, 4) + " mm",
+                " x ".join(plots.slice_axis_name(a) for a in x.axes),
+                x.n,
+                int(x.safe.sum()),
+                f"{int(x.certified.sum())} / {'—' if y is None else int(y.certified.sum())}",
+                x.unsafe_certified + (0 if y is None else y.unsafe_certified),
+                f"{100 * x.coverage:.1f} %",
+                "—" if y is None else f"{100 * y.coverage:.1f} %",
+            )
+        )
+    table = Table(
+        "",
+        (
+            "set-point",
+            "slice",
+            "starts",
+            "safe",
+            "certified\nLyapunov / SDP",
+            "certified\nbut unsafe",
+            "covers\nLyapunov",
+            "covers\nSDP",
+        ),
         rows,
         notes=[
-            "A grid of starts on the slice (other states at rest, internal models empty), each simulated "
-            "on "
-            "the sampled ideal twin; safe = never left F. coverage = |certified and safe| / |safe|: the "
-            "share "
-            "of the empirically safe part of the slice that the certificate covers (the rest is the "
-            "price of "
-            "one quadratic Lyapunov function and of the invariance argument).",
-            f"Slice ranges: e1 over the stoppers ({g[0] * 1e3:g}-{g[1] * 1e3:g} mm gap), e2 over the "
-            "horizontal stoppers, e1' over +-0.8 m/s.",
+            "Safe: the run never left F. Covers: |certified and safe| / |safe|, the share of the empirically "
+            "safe starts that the certificate proves; the rest is the price of one quadratic V and of "
+            "invariance.",
         ],
     )
-    pdf.add_figure(
-        plots.slices_figure(
-            st.slices["Lyapunov P"],
-            st.slices.get("SDP P", ()),
-            "Empirically safe starts vs certified sets (conservativeness)",
-            {rs.reference.gap: _certified(rs) for rs in _setpoint_studies(st)},
+    certs = {rs.reference.gap: _certs(rs) for rs in _setpoints(st)}
+    pdf.add_page(
+        "How much of the safe region the certificates cover",
+        [table, Plot(plots.slices_plot(lyap, st.slices.get("SDP P", ()), certs), 0.64)],
+    )
+
+
+def _basins_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
+    ls = st.large_step
+    rows = []
+    for name in ls.maps:
+        o = ls.outcomes(name)
+        rows.append(
+            (
+                name,
+                *(str(o[k]) for k in BASIN_OUTCOMES),
+                f"{_share(ls.maps[name]):.0f} %",
+                f"{_share(ls.maps[name], 'within_limit'):.0f} %",
+            )
         )
+    table = Table(
+        "",
+        (
+            "controller",
+            *(k.replace(" the ", "\nthe ") for k in BASIN_OUTCOMES),
+            "converge",
+            "converge\nwithin 9 A",
+        ),
+        rows,
+        notes=[
+            "How each step ends (study order: diverged, stopper, not settled, R < 0, over 9 A, else "
+            "converged; 'converge' counts the last three for the linear regulators, whose ideal twin does "
+            "not limit the current, and only the first for the FL regulator, which must stay in F).",
+        ],
+    )
+    pdf.add_page(
+        "Basins: every controller, start gap x target gap",
+        [
+            table,
+            Plot(
+                plots.basin_maps_plot(
+                    ls,
+                    list(ls.maps),
+                    "How each step ends, per controller (sampled ideal twin)",
+                    "Without equilibrium feedforward the internal model must build up the holding current: "
+                    "the gap sags into the lower stopper on steps to small gaps.",
+                ),
+                0.7,
+            ),
+        ],
+    )
+
+
+def _roa_table(st: OperatingRegionStudy) -> Table:
+    ls = st.large_step
+    rows = []
+    for x in ls.linear:
+        r = x.roa
+        s = r.initial_conditions.semi_axes
+        rows.append(
+            (
+                x.controller,
+                f"{r.level_stability:.3g}",
+                f"{r.level_travel:.3g}",
+                f"{r.level_current:.3g}",
+                f"{s['e1'] * M_TO_MM:.3f}",
+                f"{s['e2'] * M_TO_MM:.3f}",
+                f"{x.large_step_ratio:.4g}",
+            )
+        )
+    reach = _reach(st)
+    rows.append((f"{FL} (aimed SDP)", "—", "—", "—", "—", "—", f"{1 / reach**2:.4g}" if reach > 0 else "inf"))
+    return Table(
+        "Certified regions of attraction at the large step's target (18 mm, 20 mm)",
+        ("controller", "c stability", "c stoppers", "c 9 A", "gap [mm]", "position [mm]", "V(start) / c"),
+        rows,
+        notes=[
+            "A linear regulator's certified region: V = z' P z (Lyapunov equation); on {V ≤ c} the Jacobian "
+            "of the linearization's remainder is enclosed by interval arithmetic and V' < 0 checked at every "
+            "vertex of the enclosure. c stability: the largest such c; c stoppers: exact; c 9 A: where the "
+            "commanded current reaches 9 A. Gap, position: certified errors at rest. V(start) / c: the "
+            "papers' start (26, 0, 0, 0) with empty internal models. FL row: 1 / reach² of the SDP aimed at "
+            "that start.",
+        ],
     )
 
 
 def _large_step_pages(pdf: PdfReport, st: OperatingRegionStudy, model: StageModel) -> None:
     ls = st.large_step
-    reach = _reach(ls)
-    rows = []
-    for x in ls.linear:
-        r = x.roa
-        s = r.initial_conditions.semi_axes
-        share = ls.maps[x.controller]["success"].mean()
-        rows.append(
-            (
-                x.controller,
-                _fmt(r.level_stability),
-                _fmt(r.level_travel),
-                _fmt(r.level_current),
-                f"{s['e1'] * 1e3:.3f}",
-                f"{s['e2'] * 1e3:.3f}",
-                _fmt(x.large_step_ratio, 4),
-                f"{100 * share:.0f} %",
-            )
-        )
-    fl_share = ls.maps.get("FL regulator", {}).get("success")
-    rows.append(
-        (
-            "FL regulator (aimed SDP)",
-            "—",
-            "—",
-            "—",
-            "—",
-            "—",
-            _fmt(1 / reach**2 if reach > 0 else math.inf, 4),
-            f"{100 * fl_share.mean():.0f} %" if fl_share is not None else "—",
-        )
-    )
-    pdf.add_table(
-        "Regions of attraction at the large step's target (18 mm, 20 mm)",
-        ["controller", "c stability", "c stoppers", "c 9 A", "e1 [mm]", "e2 [mm]", "V(start)/c", "sampled"],
-        rows,
-        notes=[
-            "Certified ROA of a linear regulator: V = z^' P z^ (Lyapunov equation, Q = identity in "
-            "current-scaled "
-            "coordinates); on {V <= c} the Jacobian of the linearization's remainder is enclosed by interval "
-            "arithmetic, and V' < 0 is checked at every vertex of that enclosure (the loop is a convex "
-            "combination "
-            "of linear loops there). c stability: the largest such c (bisection); c stoppers: exact; c 9 A: "
-            "where "
-            "the commanded current would reach 9 A (the ideal twin does not limit it).",
-            "e1, e2: certified semi-axes at rest with the internal model at its equilibrium value. "
-            "V(start)/c: the "
-            "papers' start (26, 0, 0, 0) with empty internal models (without feedforward the internal model "
-            "must "
-            "supply the equilibrium current, so that start lies further out). FL row: with the SDP aimed at "
-            "this "
-            "start, 1/reach^2.",
-            "sampled: share of the (start gap, target gap) pairs of the next figure that converge on the "
-            "sampled "
-            "ideal twin — an estimate, not a certificate.",
+    pdf.add_page(
+        "The papers' large step, 26 → 18 mm",
+        [
+            _roa_table(st),
+            Plot(plots.sweep_plot(ls, st.feasible.gap_range, st.feasible.current_limit), 0.42),
         ],
     )
-    pdf.add_figure(plots.large_step_figure(ls))
-    pdf.add_figure(plots.sweep_figure(ls, st.feasible.gap_range))
-    pdf.add_text("Why the linear regulator failed the papers' large step", _large_step_text(st, model))
+    pdf.add_page(
+        "Why the linear regulator failed on the rig and not on the twin",
+        [Text(_large_step_text(st, model)), _frozen_table(st)],
+    )
+
+
+def _frozen_table(st: OperatingRegionStudy) -> Table:
+    ls = st.large_step
+    poles = ls.frozen_poles
+    damping = np.min(-poles.real / np.abs(poles), axis=1)
+    slowest = np.max(poles.real, axis=1)
+    rows = [
+        (f"{g * M_TO_MM:g}", f"{z:.2f}", f"{s:.2f}")
+        for g, z, s in zip(ls.frozen_gaps, damping, slowest, strict=True)
+    ]
+    return Table(
+        f"The linear regulator's gains for {_mm(ls.reference.gap)} mm, frozen at other gaps",
+        ("plant linearised at [mm]", "least damping ratio", "slowest pole [1/s]"),
+        rows,
+    )
 
 
 def _large_step_text(st: OperatingRegionStudy, model: StageModel) -> list[str]:
     ls = st.large_step
     k = int(np.argmin(np.abs(ls.sweep_targets - ls.reference.gap)))
 
-    def least(name):
+    def least(name: str) -> str:
         d = ls.sweep.get(name)
-        return "n/a" if d is None else f"{d['min_gap'][k] * 1e3:.2f} mm"
+        return "—" if d is None else f"{d['min_gap'][k] * M_TO_MM:.1f} mm"
 
-    def largest_fail(name):
+    def highest_failing(name: str) -> str:
         d = ls.sweep[name]
-        bad = [g for g, ok in zip(ls.sweep_targets, d["success"], strict=True) if not ok]
-        return f"<= {max(bad) * 1e3:g} mm" if bad else "none in the sweep"
+        bad = ls.sweep_targets[~d["success"]]
+        return f"{bad.max() * M_TO_MM:g} mm and below" if bad.size else "none"
 
-    poles = ls.frozen_poles
-    damping = np.min(-poles.real / np.abs(poles), axis=1)
-    kd = int(np.argmin(np.abs(ls.frozen_gaps - ls.reference.gap)))
-    gmin = ls.sweep["linear regulator"]["min_gap"][k]
+    gmin = ls.sweep[LINEAR]["min_gap"][k]
     lin = axis_linearizations(model, [gmin, ls.reference.gap, ls.start[0]])
     stiff = lin.stiffness_v / lin.stiffness_v[1]
     l1 = lin.gain_h / lin.gain_h[1]
+    poles = ls.frozen_poles
+    damping = np.min(-poles.real / np.abs(poles), axis=1)
+    kd = int(np.argmin(np.abs(ls.frozen_gaps - ls.reference.gap)))
     names = list(ls.sweep)
-    noff = ls.sweep.get("linear regulator (no feedforward)")
-    edge = ""
-    if noff is not None and k > 0 and noff["success"][k] and not noff["success"][k - 1]:
-        edge = (
-            "Without equilibrium feedforward the papers' target is the last one that works from 26 mm: "
-            f"{ls.sweep_targets[k - 1] * 1e3:g} mm already fails, and in the start x target map the edge of "
-            "the failure region passes right under the large step. On the rig, where the model is wrong "
-            "below 15 mm, the step may well have been on the other side. "
-        )
     return [
-        "The papers saw the linear regulator go unstable on the large step 26 -> 18 mm (with 20 mm "
-        "horizontally) "
-        "while the FL regulator settled (001 Fig. 9, 002 Fig. 12). On the sampled ideal twin the same step "
-        "gives "
-        "least gaps of " + "; ".join(f"{n}: {least(n)}" for n in names) + ", and every controller settles.",
+        "On the rig the linear regulator went unstable on the step 26 → 18 mm (with 0 → 20 mm horizontally) "
+        "while the FL regulator settled (001 Fig. 9, 002 Fig. 12). On the sampled ideal twin every "
+        "controller settles; the least gaps are " + "; ".join(f"{n}: {least(n)}" for n in names) + ".",
         "Certified regions of attraction cannot settle the question: for the linear regulators they are a "
-        "few "
-        "tenths of a millimetre (V(start)/c = "
-        + ", ".join(f"{_fmt(x.large_step_ratio)} for the {x.controller}" for x in ls.linear)
-        + "). A Lyapunov level set loses orders of magnitude here because the nonlinearity is large over the "
-        f"step: the vertical stiffness dx2'/dx1 is {stiff[0]:.2f} times its set-point value at the least gap "
-        f"({gmin * 1e3:.1f} mm) and {stiff[2]:.2f} times at the start, the horizontal gain L1 {l1[0]:.2f} "
-        "and "
-        f"{l1[2]:.2f} times, and one quadratic V must absorb every combination of them.",
-        "The sampled estimate and a frozen-gain analysis explain the failure instead. From 26 mm the targets "
-        "that fail are "
-        + "; ".join(f"{n}: {largest_fail(n)}" for n in names)
-        + ". "
-        + edge
-        + f"Along the step the linear regulator keeps the gains designed at {ls.reference.gap * 1e3:g} mm; "
-        "frozen at other gaps they give vertical poles with least damping ratio "
-        + ", ".join(f"{z:.2f} at {g * 1e3:g} mm" for g, z in zip(ls.frozen_gaps, damping, strict=True))
-        + f" (designed: {damping[kd]:.2f}). Away from the set-point the loop is much less damped, so the "
-        "overshoot grows where the model is worst: the least gap of the linear regulator, "
-        f"{least('linear regulator')}, "
-        "is below the 15 mm where 000/002 found the model to stop predicting the rig because of the cogging "
-        "force "
-        "(more than 1 N); without equilibrium feedforward the internal model must first build up the holding "
-        f"current and the least gap is {least('linear regulator (no feedforward)')}, near the lower stopper. "
-        "Add the rig's unmodelled force below 15 mm, the 9 A limit, the amplifier lag and the observers' "
-        "noise "
-        "to a trajectory that already enters that region and the instability the papers saw is plausible. "
-        "The "
-        "FL regulator cancels the stiffness change exactly, keeps its designed damping, and a certified set "
-        "(the "
-        "SDP aimed at the start) covers the step.",
-        "What the twin does not reproduce is the rig's failure itself: on the ideal plant the large step "
-        "lies "
-        "inside the sampled region of attraction of every linear regulator. The report therefore does not "
-        "claim "
-        "that the linear regulator is unstable for this step on the nominal model; it shows that the step "
-        "lies "
-        "close to the edge of the sampled basin (the targets a few millimetres lower fail), in the gap range "
-        "where "
-        "the nominal model is known to be wrong.",
+        "few tenths of a millimetre (previous page). One quadratic V must absorb every combination of the "
+        f"nonlinearity over the step: the vertical stiffness dx2'/dx1 is {stiff[0]:.2f} times its set-point "
+        f"value at the least gap ({gmin * M_TO_MM:.1f} mm) and {stiff[2]:.2f} times at the start; the "
+        f"horizontal gain L1 {l1[0]:.2f} and {l1[2]:.2f} times.",
+        "The sampled basin and the frozen-gain picture explain the rig instead. From 26 mm the targets that "
+        "fail are: " + "; ".join(f"{n}: {highest_failing(n)}" for n in names) + f". Along the step the "
+        f"linear regulator keeps the gains designed at {_mm(ls.reference.gap)} mm; frozen at smaller gaps "
+        f"they give vertical poles with less damping (table: {damping[kd]:.2f} at the design gap, "
+        f"{damping[0]:.2f} at {_mm(ls.frozen_gaps[0])} mm), so its overshoot grows where the model is "
+        f"worst. Its least gap, {least(LINEAR)}, is below the 15 mm under which 000/002 found the cogging "
+        f"force (more than 1 N) to make the model wrong; without feedforward it reaches {least(names[2])}.",
+        "Add the rig's unmodelled force below 15 mm, the 9 A limit, the amplifiers' lag and the observers' "
+        "noise to a trajectory that already enters that region, a few millimetres from the edge of the "
+        "basin, and the instability the papers saw is plausible. The FL regulator cancels the stiffness "
+        "change exactly, keeps its designed damping, and an SDP aimed at the start certifies the step. "
+        "What the ideal twin does not reproduce is the failure itself: this report does not claim that the "
+        "linear regulator is unstable for this step on the nominal model.",
+    ]
+
+
+def _timing_table(st: OperatingRegionStudy, timings: dict[str, float]) -> Table:
+    rows = [(k, f"{v:.2f}") for k, v in timings.items() if k != "total"]
+    rows.append(("total (study and report)", f"{st.timings['total'] + timings[list(timings)[-1]]:.1f}"))
+    return Table(
+        "",
+        ("step", "wall time [s]"),
+        rows,
+        notes=[
+            "On the machine that wrote this report (2 cores, possibly shared). Monte Carlo runs are the "
+            "closed-loop step generated as C, looped over samples and starts in C on 2 threads; "
+            "bench/region.py times each step on its own.",
+        ],
+    )
+
+
+LEVEL_COLUMNS = (
+    ("margin", "R >= 0"),
+    ("headroom", "9 A"),
+    ("gap_low", "lower gap\nstopper"),
+    ("gap_high", "upper gap\nstopper"),
+    ("position_high", "horizontal\nstopper"),
+)
+
+
+def _levels_table(st: OperatingRegionStudy) -> Table:
+    """Per reference and P: the certified level and, per constraint of F, the least V found where
+    that constraint fails (the stoppers' exact)."""
+    rows = []
+    for rs in st.references:
+        for label, c in (("Lyapunov", rs.lyapunov), ("SDP", rs.sdp.certified if rs.sdp else None)):
+            if c is None:
+                continue
+            rows.append(
+                (_name(rs), label, f"{c.level:.4g}", *(f"{c.levels[k][1]:.4g}" for k, _ in LEVEL_COLUMNS))
+            )
+    return Table(
+        "Least V found where each constraint fails",
+        ("reference", "P", "certified c", *(w for _, w in LEVEL_COLUMNS)),
+        rows,
+        notes=[
+            "The certified c is at most the least of them; the constraint with the least is the binding one. "
+            + _r_beyond_limit(st),
+        ],
+        font_size=7.5,
+    )
+
+
+def _r_beyond_limit(st: OperatingRegionStudy) -> str:
+    """What the R >= 0 and 9 A columns say, in words (computed)."""
+    certs = [c for rs in st.references for c in (rs.lyapunov, rs.sdp.certified if rs.sdp else None) if c]
+    below = sum(c.levels["margin"][1] < c.levels["headroom"][1] for c in certs)
+    i0, _ = st.r_zero_current
+    text = (
+        "The nonlinear columns are the least V a local optimiser found (upper bounds); the stoppers' are "
+        f"exact. On R = 0 the commanded current is at least {i0:.1f} A, so along any path from the "
+        "set-point the 9 A limit is crossed first"
+    )
+    if below:
+        text += (
+            f"; where the R >= 0 value is below the 9 A value ({below} of the {len(certs)} certificates) the "
+            "optimiser's 9 A point is simply not the least one"
+        )
+    return text + "."
+
+
+def _runs_text(st: OperatingRegionStudy) -> list[str]:
+    c = st.config
+    refs = len(st.references)
+    slices = sum(s.n for s in st.slices.get("Lyapunov P", ()))
+    ls = st.large_step
+    pairs = 0 if ls is None else ls.map_starts.size * ls.sweep_targets.size * len(ls.maps)
+    return [
+        f"Runs: {st.inside_totals()['runs']} inside the certified sets ({c.samples} per set, kind and "
+        f"reference, {refs} references, {c.horizon:g} s each), {slices} on slices, "
+        f"{0 if st.quantization is None else st.quantization.n} with the encoder, {pairs} start x target "
+        f"steps ({c.linear_horizon:g} s each). Study status: {st.status.replace('_', ' ')} ({st.message}).",
     ]
 
 

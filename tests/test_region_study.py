@@ -21,16 +21,18 @@ def quick(model):
 def test_quick_report_prints_the_study(tmp_path, model, quick):
     from maglev_oc.analyses import operating_region
 
+    from maglev_oc.reporting.region_plots import BINDING_WORDS
+
     report = operating_region.write_report(tmp_path / "operating_region.pdf", quick, model)
     assert report.path.read_bytes()[:5] == b"%PDF-"
-    table = report.section("Certified sets per reference")
-    lyapunov = [r for r in table.rows if r[1] == "Lyapunov eq."]
+    table = report.section("Certified sets")
+    lyapunov = [r for r in table.rows if r[1] == "Lyapunov"]
     assert len(lyapunov) == len(quick.references)
     for row, rs in zip(lyapunov, quick.references, strict=True):
         c = rs.lyapunov
         assert float(row[2]) == pytest.approx(c.level, rel=1e-3)  # printed to 4 digits
         assert float(row[4]) == pytest.approx(c.tightness, abs=1e-3)  # printed to 0.001
-        assert row[5] == c.binding
+        assert row[5] == BINDING_WORDS[c.binding]  # the constraint in words
 
 
 @pytest.mark.slow

@@ -64,6 +64,30 @@ __all__ = [
 LARGE_STEP_START = (26 * MM_TO_M, 0.0, 0.0, 0.0)
 LARGE_STEP_TARGET = (18 * MM_TO_M, 20 * MM_TO_M)
 """The papers' large step, 001 Sec. VI-A / 002 Sec. 7.1: (0.026, 0, 0, 0) -> (0.018, 0, 0.020, 0)."""
+SETTLED = 1e-4
+"""[m] A start x target run converged when its position error is below this (0.1 mm) at the end."""
+BASIN_OUTCOMES = ("converged", "over the current limit", "R < 0", "stopper", "not settled", "diverged")
+"""How a start x target run ends, the first that applies in this order: diverged (a non-finite
+state), hit a stopper, not settled (position error above 0.1 mm at the end), met R < 0 (the
+transformation had to clip), commanded more than the current limit; else converged. The last
+three converged (the ideal twin does not limit the current)."""
+
+
+def basin_outcomes(d: Mapping[str, np.ndarray]) -> dict[str, int]:
+    """Counts of :data:`BASIN_OUTCOMES` over the pairs of one controller's start x target map."""
+    out = d["outcome"]
+    return {name: int(np.sum(out == k)) for k, name in enumerate(BASIN_OUTCOMES)}
+
+
+def _outcome_codes(finite, stopper, settled, over_limit, negative_margin) -> np.ndarray:
+    """Index into :data:`BASIN_OUTCOMES` per run (arrays of bool, one shape)."""
+    code = np.zeros(np.shape(finite), dtype=int)
+    code[over_limit] = 1
+    code[negative_margin] = 2
+    code[~settled] = 4
+    code[stopper] = 3
+    code[~finite] = 5
+    return code
 
 
 @dataclass(frozen=True)
@@ -152,10 +176,17 @@ class LargeStepStudy:
     linear: tuple[LinearStudy, ...]
     map_starts: np.ndarray  # (n_s,) start gaps [m] (at rest, position 0, internal models empty)
     sweep_targets: np.ndarray  # (n_t,) target gaps [m] (target position 20 mm)
-    maps: dict[str, dict[str, np.ndarray]]  # controller -> success, min_gap, max_current (n_t, n_s)
+    maps: dict[str, dict[str, np.ndarray]]  # controller -> BASIN_FIELDS, each (n_t, n_s)
     sweep: dict[str, dict[str, np.ndarray]]  # the same at the papers' start 26 mm, (n_t,)
     frozen_gaps: np.ndarray  # (m,) [m]
     frozen_poles: np.ndarray  # (m, 5) linear regulator's vertical poles with the 18 mm gains
+    fl_step_range: np.ndarray  # (2, 2) FL error after a unit step at rest: (min, max) per axis (v, h)
+    predicted_stopper: np.ndarray  # (n_t, n_s) bool: the FL loop's linear error dynamics reach a stopper
+    target_position: float = LARGE_STEP_TARGET[1]  # [m] of every pair of the maps
+
+    def outcomes(self, controller: str) -> dict[str, int]:
+        """How the map's start x target pairs of ``controller`` end, by :data:`BASIN_OUTCOMES`."""
+        return basin_outcomes(self.maps[controller])
 
 
 @dataclass(frozen=True)
@@ -180,6 +211,7 @@ class OperatingRegionStudy(Result):
     slices: dict[str, tuple[SliceCheck, ...]]  # "Lyapunov P"/"SDP P" -> FL slices judged against it
     large_step: LargeStepStudy | None
     quantization: CertificateCheck | None
+    r_zero_current: tuple[float, float]  # least |u| [A] where R = 0 over the gap range, and its gap [m]
     timings: Mapping[str, float] = field(default_factory=dict)
 
     def inside_totals(self) -> dict[str, int]:
@@ -336,8 +368,20 @@ def operating_region_study(
         slices,
         large,
         quant,
+        _r_zero_current(model, feasible),
         run.timings,
     )
+
+
+def _r_zero_current(model: StageModel, feasible: FeasibleSet) -> tuple[float, float]:
+    """Least |u| [A] on R = 0 over the gap range, and the gap [m] where it is least. On R = 0 the
+    transformation gives i_d = -L3 / (2 L4) whatever v1, and |u| >= |i_d|."""
+    lo, hi = feasible.gap_range or (5 * MM_TO_M, 35 * MM_TO_M)
+    gaps = np.linspace(lo, hi, 221)
+    _, _, L3, L4 = model.coefficients(gaps)
+    current = np.abs(L3 / (2 * L4))
+    k = int(np.argmin(current))
+    return float(current[k]), float(gaps[k])
 
 
 def _timed(run: _Run, name: str, step: Callable[[], object]):
@@ -523,15 +567,70 @@ def _large_step(run: _Run, proc: Procedure2, builder: PolygonBuilder, sim: Batch
     maps = _timed(
         run,
         "large step: sampled start x target map",
-        lambda: _start_target_maps(run, (sim.controller, *ctrls), starts, targets),
+        lambda: _start_target_maps(run, sim, ctrls, starts, targets),
     )
     j = int(np.argmin(np.abs(starts - x0[0])))
     sweep = {name: {k: v[:, j] for k, v in d.items()} for name, d in maps.items()}
     fg = np.array([10, 12, 14, 16, 18, 22, 26], dtype=float) * MM_TO_M
     fp = frozen_poles(model, ctrls[0], ref, fg)
+    extremes = step_extremes(run.loop)
+    predicted = _predicted_stoppers(run.feasible, extremes, starts, targets)
     return LargeStepStudy(
-        ref, x0, ratio_l, ratio_s, aimed, fl_run, linear, starts, targets, maps, sweep, fg, fp
+        ref,
+        x0,
+        ratio_l,
+        ratio_s,
+        aimed,
+        fl_run,
+        linear,
+        starts,
+        targets,
+        maps,
+        sweep,
+        fg,
+        fp,
+        extremes,
+        predicted,
     )
+
+
+def step_extremes(loop: RegulatorLoop, duration: float = 10.0, dt: float = 1e-3) -> np.ndarray:
+    """The FL loop's error after a unit step from rest with empty internal models, per axis: its
+    least and largest value over ``duration`` [s], (2, 2) = ((v min, v max), (h min, h max)).
+
+    Where the transformation exists the loop is linear in the errors (z~' = A_cl z~), so a step of
+    size d from rest gives the error d times this response: its least value is minus the overshoot."""
+    from scipy.linalg import expm
+
+    step = expm(loop.A * dt)
+    out = np.zeros((2, 2))
+    for axis, k in enumerate((E1, E2)):
+        z = np.zeros(loop.A.shape[0])
+        z[k] = 1.0
+        low = high = 1.0
+        for _ in range(round(duration / dt)):
+            z = step @ z
+            low, high = min(low, z[k]), max(high, z[k])
+        out[axis] = (low, high)
+    return out
+
+
+def _predicted_stoppers(feasible: FeasibleSet, extremes, starts, targets) -> np.ndarray:
+    """(n_t, n_s) bool: the FL loop's linear error dynamics reach a stopper on the step from (start
+    gap, position 0) at rest to (target gap, the target position)."""
+    S, T = np.meshgrid(starts, targets)
+    hit = np.zeros(S.shape, dtype=bool)
+    for rng, start, target, (low, high) in (
+        (feasible.gap_range, S, T, extremes[0]),
+        (feasible.position_range, 0.0, LARGE_STEP_TARGET[1], extremes[1]),
+    ):
+        if rng is None:
+            continue
+        d = start - target  # the initial error
+        least = target + np.minimum(d * low, d * high)
+        largest = target + np.maximum(d * low, d * high)
+        hit |= (least <= rng[0]) | (largest >= rng[1])
+    return hit
 
 
 def _linear_regions(run: _Run, ctrls, ref: Reference, x0: np.ndarray) -> tuple[LinearStudy, ...]:
@@ -545,28 +644,42 @@ def _linear_regions(run: _Run, ctrls, ref: Reference, x0: np.ndarray) -> tuple[L
     return tuple(linear)
 
 
-def _start_target_maps(run: _Run, ctrls, starts: np.ndarray, targets: np.ndarray) -> dict:
+def _start_target_maps(
+    run: _Run, fl_sim: BatchSimulator, ctrls, starts: np.ndarray, targets: np.ndarray
+) -> dict:
     """Sampled estimate: start gap x target gap (start at rest at position 0, target position
-    20 mm), per controller: success, least gap [m], largest |u| [A], each (n_targets, n_starts).
-    The FL regulator (first) must also stay in F."""
-    fl_ctrl = ctrls[0]
+    20 mm), per controller, the FL regulator first: success (converged without a stopper; for the
+    FL regulator also without leaving F), the outcome (:data:`BASIN_OUTCOMES`), least and largest
+    gap [m], largest |u| [A] and least R / (4 L4) [m/s^2], each (n_targets, n_starts)."""
+    limit = run.limit if run.limit is not None else math.inf
+    duration = run.config.linear_horizon
+    sims = [fl_sim.with_duration(duration)]
+    sims += [run.simulator(RigTwin(run.model), ctrl, duration) for ctrl in ctrls]
+    xs = np.vstack([starts, np.zeros((3, starts.size))])
     maps: dict[str, dict[str, np.ndarray]] = {}
-    for ctrl in ctrls:
-        bsim = run.simulator(RigTwin(run.model), ctrl, run.config.linear_horizon)
-        xs = np.vstack([starts, np.zeros((3, starts.size))])
-        c0 = np.vstack([xs, np.zeros((6, starts.size))])
-        ok = np.zeros((targets.size, starts.size), dtype=bool)
-        gmin = np.zeros_like(ok, dtype=float)
-        imax = np.zeros_like(ok, dtype=float)
-        for k, g in enumerate(targets):
+    for k_ctrl, bsim in enumerate(sims):
+        c0 = np.vstack([xs, np.zeros((bsim.controller.n_state - 4, starts.size))])
+        rows = []
+        for g in targets:
             out = bsim.run(xs, c0, np.array([g, 0, 0, LARGE_STEP_TARGET[1], 0, 0]))
             with np.errstate(invalid="ignore"):
                 err = np.hypot(out.final_twin[0] - g, out.final_twin[2] - LARGE_STEP_TARGET[1])
-                good = out.finite & ~out.stopper_hit & (err < 1e-4)
-            if ctrl is fl_ctrl:
-                good &= ~out.violations(run.limit)
-            ok[k], gmin[k], imax[k] = good, out.min_gap, out.max_current
-        maps[ctrl.name] = {"success": ok, "min_gap": gmin, "max_current": imax}
+                negative = out.min_margin < 0  # NaN (no margin) compares False
+                over = out.max_current > limit * (1 + 1e-9)
+            code = _outcome_codes(out.finite, out.stopper_hit, err < SETTLED, over, negative)
+            rows.append((code, out.min_gap, out.max_gap, out.max_current, out.min_margin))
+        code, gmin, gmax, imax, margin = (np.array(x) for x in zip(*rows, strict=True))
+        converged = code <= 2
+        success = (code == 0) if k_ctrl == 0 else converged
+        maps[bsim.controller.name] = {
+            "success": success,
+            "outcome": code,
+            "within_limit": code == 0,
+            "min_gap": gmin,
+            "max_gap": gmax,
+            "max_current": imax,
+            "min_margin": margin,
+        }
     return maps
 
 
