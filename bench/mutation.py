@@ -117,12 +117,11 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool) -> None:
     sources = ", ".join(f'"{p}"' for p in paths)
     selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
     # tests that read the sources as text (exports, README commands) see mutmut's trampolines
-    marker = (
-        ""
-        if tests
-        else 'pytest_add_cli_args = ["-m", "not slow", "-p", "no:cacheprovider", '
-        '"--ignore=tests/test_house.py", "--ignore=tests/test_readme.py"]\n'
+    # one process (-n 0): mutmut's trampolines and test map live in the pytest process
+    quick = (
+        "" if tests else ', "-m", "not slow", "--ignore=tests/test_house.py", "--ignore=tests/test_readme.py"'
     )
+    marker = f'pytest_add_cli_args = ["-n", "0", "-p", "no:cacheprovider"{quick}]\n'
     config = (
         "\n[tool.mutmut]\n"
         f"source_paths = [{sources}]\n"
@@ -246,6 +245,8 @@ def _verify(names: list[str], budget: float, since: str | None) -> set[str]:
             sys.executable,
             "-m",
             "pytest",
+            "-n",
+            "0",
             "-x",
             "-q",
             "-m",
