@@ -261,7 +261,23 @@ def _scorecard_notes(study: ModelStudy) -> list[str]:
         "printed gains are the better record of the papers' controller; the regulators here use them.",
         "3. The five poles lie within a few 1/s of each other, where the roots of the characteristic "
         "polynomial are most sensitive to its coefficients" + (f": {shapes}" if shapes else "") + ". Each "
-        "entry's share: page 5.",
+        "entry's share: under \"The papers' gains, recomputed\".",
+    ]
+
+
+SCORECARD_WIDTHS = (32, 30, 30, 30)
+"""Characters per line of the scorecard's columns (claim, papers, ours, verdict): narrow enough
+for the table to print at a readable size."""
+
+
+def _fit(rows, widths=SCORECARD_WIDTHS) -> list[tuple[str, ...]]:
+    """Each cell re-wrapped to its column's width."""
+    return [
+        tuple(
+            "\n".join(textwrap.wrap(" ".join(str(cell).split()), w))
+            for cell, w in zip(row, widths, strict=True)
+        )
+        for row in rows
     ]
 
 
@@ -282,7 +298,7 @@ def write_report(out: Path, study: ModelStudy) -> ReportContents:
                 Table(
                     "",
                     ("claim (source)", "papers / SPEC", "ours", "verdict"),
-                    scorecard_rows(study),
+                    _fit(scorecard_rows(study)),
                     notes=_scorecard_notes(study),
                 ),
                 Plot(plots.key_figure(s, study.gains, SPEC_EQUILIBRIA), 0.405),

@@ -10,6 +10,7 @@ follow; timings are in the appendix.
 from __future__ import annotations
 
 import math
+import textwrap
 import time
 from pathlib import Path
 
@@ -237,7 +238,7 @@ def _scorecard_notes(st: OperatingRegionStudy) -> list[str]:
     notes += [
         "2. The papers' step overshoots below 15 mm, where 000 found the model to stop predicting the rig "
         "(cogging above 1 N); the ideal twin has no cogging, friction, amplifier lag or sampling noise. "
-        "Page 9 gives the frozen-gain analysis.",
+        "The last section gives the frozen-gain analysis.",
         f"3. Both controllers place the same poles (the linear one at the target's linearization), so both "
         f"overshoot a gap step by about {-ls.fl_step_range[0, 0]:.0%} of its size; the FL loop's error "
         f"dynamics are exactly linear, and a step from rest predicts its stopper hits pair for pair "
@@ -250,6 +251,22 @@ def _scorecard_notes(st: OperatingRegionStudy) -> list[str]:
     return notes
 
 
+SCORECARD_WIDTHS = (30, 19, 36, 32)
+"""Characters per line of the scorecard's columns (claim, papers, ours, verdict): narrow enough
+for the table to print at a readable size."""
+
+
+def _fit(rows, widths=SCORECARD_WIDTHS) -> list[tuple[str, ...]]:
+    """Each cell re-wrapped to its column's width."""
+    return [
+        tuple(
+            "\n".join(textwrap.wrap(" ".join(str(cell).split()), w))
+            for cell, w in zip(row, widths, strict=True)
+        )
+        for row in rows
+    ]
+
+
 # --- the report -------------------------------------------------------------------------------------------
 def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> ReportContents:
     """Write the report of a finished study (``model``: the one it was run on)."""
@@ -259,7 +276,10 @@ def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> Repo
     ) as pdf:
         first = [
             Table(
-                "", ("claim (source)", "papers", "ours", "verdict"), scorecard_rows(st), _scorecard_notes(st)
+                "",
+                ("claim (source)", "papers", "ours", "verdict"),
+                _fit(scorecard_rows(st)),
+                _scorecard_notes(st),
             )
         ]
         if st.large_step is not None:

@@ -54,10 +54,21 @@ def region_report(tmp_path_factory, model):
     return study, analysis.write_report(path, study, model)
 
 
+class _Rows(dict):
+    """Scorecard rows by claim, the cells' line breaks undone; ``rows[prefix]`` is the only row
+    whose claim starts with ``prefix``."""
+
+    def __getitem__(self, prefix: str):
+        found = [row for claim, row in self.items() if claim.startswith(prefix)]
+        assert len(found) == 1, (prefix, list(self))
+        return found[0]
+
+
 def _scorecard(contents):
     table = contents.sections[0]
     assert contents.headings[0].startswith("Scorecard") and table.columns[0] == "claim (source)"
-    return {row[0].split("\n")[0]: row for row in table.rows}, table
+    flat = [tuple(" ".join(cell.split()) for cell in row) for row in table.rows]
+    return _Rows({row[0]: row for row in flat}), table
 
 
 # --- layout -------------------------------------------------------------------------------------------
@@ -108,7 +119,7 @@ def test_model_gains_and_their_poles_by_another_route(model_report):
     for name, paper in PAPER_GAINS.items():
         # SciPy's pole placement (u = -K x) instead of the report's Ackermann formula
         ours = -place_poles(a, b, np.asarray(paper.poles, dtype=complex)).gain_matrix.ravel()
-        key = next(k for k in rows if k.startswith(name.replace("_retuned", " retuned")))
+        key = {"K_h": "K_h (", "K_v": "K_v (", "K_v_retuned": "K_v retuned"}[name]
         shown = _numbers(rows[key][2])
         # printed to 0.01; place_poles' own error grows with the five poles' spread (1e-7 relative)
         np.testing.assert_allclose(shown, ours, atol=0.006, rtol=1e-6)
@@ -196,7 +207,7 @@ def test_region_current_on_r_zero_is_the_largest_vertical_pull(region_report, mo
 def test_region_certified_rectangle_fits_its_set(region_report):
     study, contents = region_report
     rows, _ = _scorecard(contents)
-    row = next(v for k, v in rows.items() if k.startswith("Certified starts at rest"))
+    row = rows["Certified starts at rest"]
     mid = min(
         (r for r in study.references if r.reference.is_setpoint), key=lambda r: abs(r.reference.gap - 0.02)
     )
@@ -269,8 +280,8 @@ def test_region_overshoot_and_stopper_prediction_from_a_step_response(region_rep
             hits[i, j] = min(gaps) <= lo or max(gaps) >= hi or min(pos) <= p_lo or max(pos) >= p_hi
     np.testing.assert_array_equal(hits, ls.predicted_stopper)
     fl_hits = ls.maps["FL regulator"]["outcome"] == BASIN_OUTCOMES.index("stopper")
-    assert f"{int(np.sum(hits & fl_hits))} of the FL's {int(fl_hits.sum())}" in row[3].replace("\n", " ")
+    assert f"{int(np.sum(hits & fl_hits))} of the FL's {int(fl_hits.sum())}" in row[3]
     fl, li = ls.maps["FL regulator"], ls.maps["linear regulator"]
     for d, name in ((fl, "FL"), (li, "linear")):
-        assert f"{name} {100 * np.mean(d['success']):.0f} %" in row[2].replace("\n", " ")
+        assert f"{name} {100 * np.mean(d['success']):.0f} %" in row[2]
     assert math.isclose(np.mean(fl["success"]), np.mean(fl["within_limit"]))  # FL must stay in F anyway

@@ -435,7 +435,7 @@ def basin_maps_plot(ls: LargeStepStudy, names: Sequence[str], title: str, text: 
     def draw(fig: Figure, rect) -> str:
         cols = min(2, len(names))
         rows = math.ceil(len(names) / cols)
-        gs = grid(fig, rect, rows, cols, hspace=0.4, wspace=0.25, top=0.065, bottom=0.085)
+        gs = grid(fig, rect, rows, cols, hspace=0.4, wspace=0.25, top=0.065, bottom=0.072)
         for k, name in enumerate(names):
             ax = fig.add_subplot(gs[k // cols, k % cols])
             _basin_axes(ax, ls, name, predicted=True)
