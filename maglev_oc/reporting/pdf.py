@@ -487,7 +487,11 @@ def check_tables(fig: Figure, where: str = "figure") -> None:
         return
     canvas = FigureCanvasAgg(fig)
     renderer = canvas.get_renderer()
-    fig.draw(renderer)
+    if fig.get_layout_engine() is None:  # only the tables' axes: the page's plots need not be drawn twice
+        for ax in {t.axes for t in tables}:
+            ax.draw(renderer)
+    else:  # a layout engine places every axes at draw time
+        fig.draw(renderer)
     for table in tables:
         for (r, c), cell in table.get_celld().items():
             text = cell.get_text()
