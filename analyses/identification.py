@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_oc.identification.eps_trend import EpsTrend, EpsTrendStudy, eps_trend_study
 from maglev_oc.identification.equation_error import DEFAULT_BANDWIDTH
 from maglev_oc.identification.experiments import FIXED_GAPS, verification_effects
 from maglev_oc.identification.layout import CONSTANT_NAMES
@@ -71,8 +72,9 @@ SCORECARD_COLUMNS = ("claim (000, 002)", "paper", "ours (identification twin)", 
 
 
 def build(out: Path, model: StageModel) -> ReportContents:
-    """Run the identification study on the twin and write its report to ``out``."""
-    return write_report(out, run_study(model))
+    """Run the identification study and the eps-trend study on the twin and write the report to
+    ``out``."""
+    return write_report(out, run_study(model), eps_trend_study(model))
 
 
 # --- numbers the pages share -----------------------------------------------------------------------------
@@ -116,18 +118,6 @@ def _meets_target(errors: dict[str, float]) -> bool:
     return all(abs(v) <= TARGET_PCT[k] for k, v in errors.items())
 
 
-def _paper_changes(table: str, names) -> dict[str, float]:
-    """[%] The papers' change of each constant from eps = 0.001 to 0.05."""
-    lo, hi = (PAPER_CONSTANTS[f"{table}_eps{e:g}"] for e in (PAPER_EPSILONS[0], PAPER_EPSILONS[-1]))
-    return {k: 100 * (getattr(hi, k) / getattr(lo, k) - 1) for k in names}
-
-
-def _our_changes(runs, names) -> dict[str, float]:
-    """[%] Our change of each constant from eps = 0.001 to 0.05."""
-    lo, hi = runs[0], runs[-1]
-    return {k: 100 * (hi.values[k] / lo.values[k] - 1) for k in names}
-
-
 def _changes_text(changes: dict[str, float]) -> str:
     return ", ".join(f"{k}{NBSP}{v:+.{0 if abs(v) >= 1 else 1}f}{NBSP}%" for k, v in changes.items())
 
@@ -138,8 +128,9 @@ def cogging_c2(st: IdentificationStudy) -> tuple[float, float]:
 
 
 # --- page 1: the scorecard -------------------------------------------------------------------------------
-def scorecard_rows(st: IdentificationStudy) -> list[tuple[str, str, str, str]]:
-    """(the papers' claim, their value, ours, verdict) for page 1; every number from ``st``."""
+def scorecard_rows(st: IdentificationStudy, trend: EpsTrendStudy) -> list[tuple[str, str, str, str]]:
+    """(the papers' claim, their value, ours, verdict) for page 1; every number from ``st`` and
+    ``trend``."""
     truth = st.truth_values
     rows = []
 
@@ -173,17 +164,26 @@ def scorecard_rows(st: IdentificationStudy) -> list[tuple[str, str, str, str]]:
 
     # the trend with eps
     moving = ("C1", "C3", "C4")
-    paper_trend = _paper_changes("table3", moving)
-    ours_trend = _our_changes(st.npfsi_observer, moving)
-    same = all(np.sign(paper_trend[k]) == np.sign(ours_trend[k]) for k in moving)
+    paper, ours, rough = (
+        {k: 100 * t.change[k] for k in moving}
+        for t in (trend.papers_table3, trend.default_table3, trend.friction_table3)
+    )
+    same = all(np.sign(paper[k]) == np.sign(ours[k]) for k in moving)
     rows.append(
         (
             "The estimates grow with eps (Tables II, III)",
-            "eps 0.001 → 0.05: " + _changes_text(paper_trend),
-            _changes_text(ours_trend),
+            "Table III, eps 0.001 → 0.05: " + _changes_text(paper),
+            f"{_changes_text(ours)}; with the rig twin's guide friction {_changes_text(rough)}",
             "reproduced"
             if same
-            else "differs: ours fall; the twin's only delayed residual is the observer's lag (page 6)",
+            else "differs: the twin's only delayed residual is the observer's lag, which turns the trend "
+            "down; "
+            + (
+                "with guide friction (damping) every constant of both tables moves the papers' way"
+                if trend.status == "reproduced"
+                else f"with guide friction: {trend.message}"
+            )
+            + " (page 7)",
         )
     )
 
@@ -272,7 +272,7 @@ def _cogging_words() -> str:
     return words[0] + " (000 eq. (9): zero at x3 = 0, largest at x3 = 3 t1/2)"
 
 
-def _key_plot(st: IdentificationStudy) -> plots.Draw:
+def _key_plot(st: IdentificationStudy, trend: EpsTrendStudy) -> plots.Draw:
     return plots.key_plot(
         st.parabola_comparisons,
         PAPER_L1_DISCREPANCY,
@@ -284,14 +284,9 @@ def _key_plot(st: IdentificationStudy) -> plots.Draw:
         st.cogging_xi_true,
         PAPER_COGGING_FORCE,
         {
-            "paper, Table III": (
-                PAPER_EPSILONS,
-                np.array([PAPER_CONSTANTS[f"table3_eps{e:g}"].C1 for e in PAPER_EPSILONS]),
-            ),
-            "ours (observer velocities)": (
-                PAPER_EPSILONS,
-                np.array([r.values["C1"] for r in st.npfsi_observer]),
-            ),
+            "paper, Table III": (trend.papers_table3.eps, trend.papers_table3.values[0]),
+            "ours": (trend.default_table3.eps, trend.default_table3.values[0]),
+            "ours, guide friction": (trend.friction_table3.eps, trend.friction_table3.values[0]),
         },
     )
 
@@ -487,41 +482,57 @@ def table2_rows(st: IdentificationStudy) -> list[list[str]]:
     return rows
 
 
-def trend_rows(st: IdentificationStudy) -> list[list[str]]:
-    """Change from eps = 0.001 to 0.05 of each constant: the papers', ours with observer and with
-    zero-phase velocities (Table III) and with the mover locked (Table II)."""
-    p3, p2 = _paper_changes("table3", CONSTANT_NAMES), _paper_changes("table2", ("C2", "C3", "C4"))
-    o3, z3 = (
-        _our_changes(st.npfsi_observer, CONSTANT_NAMES),
-        _our_changes(st.npfsi_zero_phase, CONSTANT_NAMES),
+TREND_SOURCES = (
+    ("papers", "paper 000"),
+    ("default", "twin"),
+    ("friction", "twin + guide friction"),
+    ("zero_phase", "twin, zero-phase velocities"),
+)
+
+
+def trend_rows(trend: EpsTrendStudy) -> list[list[str]]:
+    """Change of each constant from eps = 0.001 to 0.05 by table and source (the direction in
+    brackets: flat within the band)."""
+    rows = []
+    for table, label in (("table3", "Table III"), ("table2", "Table II")):
+        for source, words in TREND_SOURCES:
+            t: EpsTrend | None = getattr(trend, f"{source}_{table}", None)
+            if t is None:
+                continue
+            d = t.direction(trend.band)
+            cells = [
+                f"{_pct(100 * t.change[k], 2)} ({d[k]})" if k in t.change else "—" for k in CONSTANT_NAMES
+            ]
+            rows.append([f"{label}: {words}", *cells])
+    return rows
+
+
+def _trend_note(trend: EpsTrendStudy) -> str:
+    fr = trend.friction
+    words = "; ".join(
+        f"{axis} {f['coulomb_N']:g} N Coulomb + {f['viscous_N_s_per_m']:g} N s/m" for axis, f in fr.items()
     )
-    o2 = _our_changes(st.table2, ("C2", "C3", "C4"))
-    return [
-        [
-            k,
-            _pct(p3[k], 2),
-            _pct(o3[k], 2),
-            _pct(z3[k], 2),
-            _pct(p2.get(k, math.nan), 2),
-            _pct(o2.get(k, math.nan), 2),
-        ]
+    return (
+        "Twin: the identification study's runs (observer velocities, as the papers). Twin + guide friction: "
+        f"the same runs with the rig twin's guide friction ({words}). Zero-phase: the twin's Table III run "
+        "with Savitzky-Golay velocities."
+    )
+
+
+def _trend_plot(trend: EpsTrendStudy) -> plots.Draw:
+    series = {
+        k: {
+            label: (t.eps, t.values[t.names.index(k)])
+            for label, t in (
+                ("paper, Table III", trend.papers_table3),
+                ("twin", trend.default_table3),
+                ("twin + guide friction", trend.friction_table3),
+                ("twin, zero-phase velocities", trend.zero_phase_table3),
+            )
+        }
         for k in CONSTANT_NAMES
-    ]
-
-
-def _trend_text(st: IdentificationStudy) -> list[str]:
-    o3 = _our_changes(st.npfsi_observer, CONSTANT_NAMES)
-    z3 = _our_changes(st.npfsi_zero_phase, CONSTANT_NAMES)
-    return [
-        "From eps = 0.001 to 0.05 the papers' estimates of C1, C3 and C4 grow; ours on the same kind of "
-        f"log fall (C1 {o3['C1']:+.1f} %). eps is the time constant of the filter through which the state "
-        "error reaches the parameter update, so a larger eps correlates the regressors with a more delayed "
-        "residual. On the twin the delayed residual is the high-gain observer's lag (2 ms): with "
-        f"zero-phase velocities the trend all but disappears (C1 {z3['C1']:+.2f} %). A residual that leads "
-        "the acceleration instead (a force in phase with the velocity, such as guide friction or eddy "
-        "currents) would push the estimates up as eps grows: the papers' trend points to damping the twin "
-        "does not have.",
-    ]
+    }
+    return plots.eps_trend_plot(series, "The Table III estimates against eps, relative to eps = 0.01")
 
 
 # --- verification ----------------------------------------------------------------------------------------
@@ -714,16 +725,19 @@ def timing_rows(st: IdentificationStudy) -> list[list[str]]:
 
 
 # --- the report ------------------------------------------------------------------------------------------
-def write_report(out: Path, st: IdentificationStudy) -> ReportContents:
-    """Write the report of a finished study (nothing is computed here but the figures' curves)."""
+def write_report(out: Path, st: IdentificationStudy, trend: EpsTrendStudy) -> ReportContents:
+    """Write the report of a finished identification study and eps-trend study (nothing is computed
+    here but the figures' curves)."""
     t0 = time.perf_counter()
     truth = st.truth_values
     with PdfReport(out, TITLE, subtitle="reports/identification.pdf from analyses/identification.py") as pdf:
         pdf.add_page(
             "Scorecard: the papers' identification results beside ours",
             [
-                Table("", SCORECARD_COLUMNS, scorecard_rows(st), notes=_scorecard_notes(), font_size=7.5),
-                Plot(_key_plot(st), 0.44),
+                Table(
+                    "", SCORECARD_COLUMNS, scorecard_rows(st, trend), notes=_scorecard_notes(), font_size=7.5
+                ),
+                Plot(_key_plot(st, trend), 0.44),
             ],
             first_page=True,
         )
@@ -801,8 +815,17 @@ def write_report(out: Path, st: IdentificationStudy) -> ReportContents:
             ],
         )
         pdf.add_page(
-            "NPFSI with the mover locked at x3 = 0 (Table II), and the trend with eps",
+            "NPFSI with the mover locked at x3 = 0 (Table II)",
             [
+                Plot(
+                    plots.npfsi_plot(
+                        {"observer velocities": st.table2},
+                        truth,
+                        bands,
+                        "Estimates along the vertical run at each eps",
+                    ),
+                    0.4,
+                ),
                 Table(
                     "",
                     ("", "truth", "eps = 0.001", "eps = 0.01", "eps = 0.05", "equation error"),
@@ -814,47 +837,19 @@ def write_report(out: Path, st: IdentificationStudy) -> ReportContents:
                     ],
                     font_size=7.5,
                 ),
+            ],
+        )
+        pdf.add_page(
+            "The trend with eps (Tables II and III)",
+            [
                 Table(
-                    "Change from eps = 0.001 to 0.05",
-                    (
-                        "",
-                        "Table III,\npaper",
-                        "ours,\nobserver",
-                        "ours,\nzero-phase",
-                        "Table II,\npaper",
-                        "ours,\nlocked",
-                    ),
-                    trend_rows(st),
+                    f"Change from eps = 0.001 to 0.05 (direction; flat: within {100 * trend.band:g} %)",
+                    ("", *CONSTANT_NAMES),
+                    trend_rows(trend),
+                    notes=[_trend_note(trend)],
                 ),
-                Text(_trend_text(st)),
-                Plot(
-                    plots.eps_trend_plot(
-                        {
-                            k: {
-                                "paper, Table III": (
-                                    PAPER_EPSILONS,
-                                    np.array(
-                                        [
-                                            getattr(PAPER_CONSTANTS[f"table3_eps{e:g}"], k)
-                                            for e in PAPER_EPSILONS
-                                        ]
-                                    ),
-                                ),
-                                "ours, observer velocities": (
-                                    PAPER_EPSILONS,
-                                    np.array([r.values[k] for r in st.npfsi_observer]),
-                                ),
-                                "ours, zero-phase velocities": (
-                                    PAPER_EPSILONS,
-                                    np.array([r.values[k] for r in st.npfsi_zero_phase]),
-                                ),
-                            }
-                            for k in CONSTANT_NAMES
-                        },
-                        "The estimates against eps, relative to eps = 0.01 (Table III)",
-                    ),
-                    0.25,
-                ),
+                Text([trend.explanation]),
+                Plot(_trend_plot(trend), 0.26),
             ],
         )
         pdf.add_page(

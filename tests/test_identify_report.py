@@ -61,7 +61,10 @@ def test_verification_in_the_papers_form(study):
 def test_report_prints_the_study(tmp_path, study):
     from maglev_oc.analyses.identification import write_report
 
-    report = write_report(tmp_path / "identification.pdf", study)
+    from maglev_oc.identification.eps_trend import eps_trend_study
+
+    trend = eps_trend_study(study.nominal)
+    report = write_report(tmp_path / "identification.pdf", study, trend)
     assert report.path.read_bytes()[:5] == b"%PDF-"
     table = report.section("Least squares")
     assert table.column("") == CONSTANT_NAMES

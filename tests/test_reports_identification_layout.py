@@ -47,10 +47,12 @@ def _numbers(cell: str) -> list[float]:
 # --- identification ----------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def small_identification(model):
-    """The identification study with shorter runs (about 10 s instead of 30)."""
+    """The identification study and the eps-trend study with shorter runs (about 10 s instead of 50)."""
+    from maglev_oc.identification.eps_trend import eps_trend_study
     from maglev_oc.identification.study import run_study
 
-    return run_study(model, duration=20.0, coverage_seeds=2, coverage_duration=10.0, vertical_duration=15.0)
+    st = run_study(model, duration=12.0, coverage_seeds=2, coverage_duration=8.0, vertical_duration=10.0)
+    return st, eps_trend_study(model, duration=12.0, vertical_duration=10.0)
 
 
 def _truth() -> dict[str, float]:
@@ -59,8 +61,9 @@ def _truth() -> dict[str, float]:
     return dict(zip(("C1", "C2", "C3", "C4"), TWIN_TRUTH.as_array(), strict=True))
 
 
-def check_identification_scorecard(st, rows) -> None:
-    """Every number of the identification scorecard against a recomputation from ``st``."""
+def check_identification_scorecard(st, trend, rows) -> None:
+    """Every number of the identification scorecard against a recomputation from ``st`` (the
+    identification study) and ``trend`` (the eps-trend study on the same runs)."""
     truth = _truth()
 
     row = _row(rows, "NPFSI finds C1..C4")
@@ -83,13 +86,33 @@ def check_identification_scorecard(st, rows) -> None:
     for k, pct in paper.items():  # printed to the unit (to 0.1 below 1 %)
         lo, _, hi = TABLE_III[k]
         assert pct == pytest.approx(100 * (hi / lo - 1), abs=0.51)
-    ours = _pcts(row[2])
+    plain_twin, rough = (_pcts(part) for part in row[2].split(";"))
     lo, hi = (next(r for r in st.npfsi_observer if r.eps == e) for e in (0.001, 0.05))
-    for k, pct in ours.items():
+    for k, pct in plain_twin.items():  # the study's own runs: the trend study repeats them
         assert pct == pytest.approx(100 * (hi.values[k] / lo.values[k] - 1), abs=0.51)
-    assert set(paper) == set(ours) == {"C1", "C3", "C4"}
-    same = all(np.sign(paper[k]) == np.sign(ours[k]) for k in ours)
+    f3 = trend.friction_table3
+    for k, pct in rough.items():
+        values = f3.values[f3.names.index(k)]
+        assert pct == pytest.approx(100 * (values[-1] / values[0] - 1), abs=0.51)
+    assert set(paper) == set(plain_twin) == set(rough) == {"C1", "C3", "C4"}
+    same = all(np.sign(paper[k]) == np.sign(plain_twin[k]) for k in paper)
     assert row[3].startswith("reproduced" if same else "differs")
+
+    # with friction, every constant of both tables moves the papers' way (up, down, or flat within the
+    # band), recomputed from the estimates
+    def direction(values) -> str:
+        change = values[-1] / values[0] - 1
+        return "flat" if abs(change) < trend.band else ("up" if change > 0 else "down")
+
+    agree = all(
+        direction(getattr(trend, f"friction_{t}").values[i])
+        == direction(getattr(trend, f"papers_{t}").values[i])
+        for t in ("table2", "table3")
+        for i in range(len(getattr(trend, f"papers_{t}").names))
+    )
+    if not same:
+        said = "with guide friction (damping) every constant of both tables moves the papers' way" in row[3]
+        assert said == agree
 
     row = _row(rows, "Parabolas and NPFSI agree")
     assert _numbers(row[1]) == pytest.approx(list(L1_PAPER))
@@ -151,15 +174,16 @@ def check_identification_scorecard(st, rows) -> None:
 def test_identification_scorecard_numbers_are_the_studys(small_identification):
     from maglev_oc.analyses.identification import SCORECARD_COLUMNS, scorecard_rows
 
-    rows = scorecard_rows(small_identification)
+    st, trend = small_identification
+    rows = scorecard_rows(st, trend)
     assert all(len(r) == len(SCORECARD_COLUMNS) for r in rows)
-    check_identification_scorecard(small_identification, rows)
+    check_identification_scorecard(st, trend, rows)
 
 
 def test_identification_scorecard_has_no_internal_names(small_identification):
     from maglev_oc.analyses.identification import scorecard_rows
 
-    text = " ".join(c for r in scorecard_rows(small_identification) for c in r)
+    text = " ".join(c for r in scorecard_rows(*small_identification) for c in r)
     assert not re.search(r"\w_\w|mapaccum|table3_eps|\(\)", text), text
 
 
@@ -240,12 +264,12 @@ def identification_report(model, tmp_path_factory):
 
 @pytest.mark.slow
 def test_identification_report_pages_are_used_and_page_1_is_the_scorecard(identification_report):
-    st, contents = identification_report
+    st, trend, contents = identification_report
     assert contents.sparse_pages() == []
     assert contents.pages[0].heading.startswith("Scorecard")
     scorecard = contents.sections[0]
     assert scorecard.columns[0].startswith("claim")
-    check_identification_scorecard(st, scorecard.rows)
+    check_identification_scorecard(st, trend, scorecard.rows)
     assert contents.n_pages <= 12  # 21 before issue 14
     text = contents.text()
     assert not re.search(r"mapaccum|TwinEffects|table3_eps|vertical_force_offset", text)

@@ -134,6 +134,7 @@ def key_plot(
         c.set_ylabel("peak cogging force [N]")
         c.set_title("Cogging: C2 at 3 t1/2 minus C2 at x3 = 0")
         c.legend(fontsize=6.5, loc="upper right")
+        colors = iter(("tab:green", "tab:brown", "tab:purple"))
         for label, (eps, values) in trends.items():
             values = np.asarray(values, dtype=float)
             ref = values[list(eps).index(0.01)]
@@ -142,7 +143,7 @@ def key_plot(
                 eps,
                 100 * (values / ref - 1),
                 "s--" if paper else "o-",
-                color=PAPER_COLOR if paper else "tab:green",
+                color=PAPER_COLOR if paper else next(colors),
                 ms=4,
                 label=label,
             )
@@ -326,7 +327,7 @@ def eps_trend_plot(
 
     def draw(fig: Figure, rect) -> str:
         gs = grid(fig, rect, 1, len(panels), wspace=0.35, top=0.06 if text else 0.04, bottom=0.06)
-        colors = ["tab:green", "tab:purple", "tab:brown", "tab:cyan"]
+        colors = ["tab:green", "tab:brown", "tab:purple", "tab:cyan"]
         handles: dict[str, Line2D] = {}
         for j, (name, series) in enumerate(panels.items()):
             ax = fig.add_subplot(gs[0, j])
