@@ -89,7 +89,7 @@ def main() -> None:
             RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0, threads=args.threads
         )
     )
-    print(f"Monte Carlo build (mapaccum 5000 steps, JIT {sim.compiled}):  {fmt(t)}")
+    print(f"Monte Carlo build (step as C, C loop: {sim.compiled}):    {fmt(t)}")
     c = sdp.certified
     z = uniform_in_ellipsoid(c.P, c.level, args.runs, np.random.default_rng(1))
     chk, t = timed(lambda: check_error_states(sim, loop, ref, c.P, c.level, z))
