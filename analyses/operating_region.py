@@ -23,6 +23,7 @@ from maglev_oc.region.study import (
     OperatingRegionStudy,
     ReferenceStudy,
     StudyConfig,
+    certificate_rows,
     operating_region_study,
 )
 from maglev_oc.reporting import region_plots as plots
@@ -407,30 +408,24 @@ def _binding_sentence(st: OperatingRegionStudy) -> str:
 
 
 def _certificate_rows(st: OperatingRegionStudy) -> list[tuple[str, ...]]:
-    rows = []
-    for rs in st.references:
-        items = [("Lyapunov", rs.lyapunov)]
-        if rs.sdp is not None and rs.sdp.certified is not None:
-            items.append(("SDP", rs.sdp.certified))
-        for label, c in items:
-            s = c.initial_conditions.semi_axes
-            a, b = c.initial_conditions.rectangle
-            rows.append(
-                (
-                    _name(rs),
-                    label,
-                    f"{c.level:.4g}",
-                    f"{c.level_upper:.4g}",
-                    f"{c.tightness:.3f}",
-                    plots.BINDING_WORDS.get(c.binding, c.binding),
-                    f"{s['e1'] * M_TO_MM:.2f}",
-                    f"{s['e1_rate'] * M_TO_MM:.0f}",
-                    f"{s['e2'] * M_TO_MM:.1f}",
-                    f"{s['e2_rate'] * M_TO_MM:.0f}",
-                    f"{a * M_TO_MM:.2f} x {b * M_TO_MM:.2f}",
-                )
-            )
-    return rows
+    """The study's certificate rows as printed (plain words for the reference, P and binding)."""
+    words = {"sinusoid": "ellipse", "Lyapunov eq.": "Lyapunov"}
+    return [
+        (
+            words.get(ref, ref),
+            words.get(label, label),
+            f"{level:.4g}",
+            f"{upper:.4g}",
+            f"{tight:.3f}",
+            plots.BINDING_WORDS.get(binding, binding),
+            f"{e1:.2f}",
+            f"{e1_rate:.0f}",
+            f"{e2:.1f}",
+            f"{e2_rate:.0f}",
+            rect,
+        )
+        for ref, label, level, upper, tight, binding, e1, e1_rate, e2, e2_rate, rect in certificate_rows(st)
+    ]
 
 
 def _certificate_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:

@@ -5,8 +5,10 @@ One call, :func:`operating_region_study`, runs (for the papers' gains unless tol
 1. the feasible set F on slices through the set-point and the sinusoid (exact boundaries);
 2. the adapted Procedure 2 with the Lyapunov equation's P, and with P from the SDP, for
    set-points across 15-25 mm and the papers' sinusoid;
-3. the linear regulators' certified regions of attraction, their sampled estimates, and the
-   papers' large step for every controller;
+3. the linear regulators' certified regions of attraction, and the papers' large step for every
+   controller; the sampled basins (start gap x target gap) with how each step ends (stopper,
+   over the current limit, R < 0, ...), and the FL loop's stopper hits predicted from its linear
+   error dynamics (:func:`step_extremes`);
 4. Monte Carlo on the sampled ideal twin inside each certified set (violations must be zero),
    on grids of slices for the conservativeness figure, and with the quantising encoder.
 
@@ -49,6 +51,7 @@ from maglev_oc.sim.twin import RigTwin
 from maglev_oc.units import M_TO_MM, MM_TO_M
 
 __all__ = [
+    "BASIN_OUTCOMES",
     "LARGE_STEP_START",
     "LARGE_STEP_TARGET",
     "Enlargement",
@@ -57,8 +60,10 @@ __all__ = [
     "OperatingRegionStudy",
     "ReferenceStudy",
     "StudyConfig",
+    "basin_outcomes",
     "certificate_rows",
     "operating_region_study",
+    "step_extremes",
 ]
 
 LARGE_STEP_START = (26 * MM_TO_M, 0.0, 0.0, 0.0)
