@@ -56,13 +56,16 @@ def _plain_source(c: LumpedConstants) -> str:
 
 TWINS: dict[str, NamedTwin] = {
     "ideal twin": NamedTwin(
-        "ideal twin", DEFAULT_CONSTANTS, TwinEffects.ideal(), "the design check (the controllers' own model)"
+        "ideal twin",
+        DEFAULT_CONSTANTS,
+        TwinEffects.ideal(),
+        "the design check and the operating region's simulations (the controllers' own model)",
     ),
     "rig twin": NamedTwin(
         "rig twin",
         PAPER_CONSTANTS[RIG_CONSTANTS],
         TwinEffects.rig(),
-        "the controller comparison and the operating region's simulations",
+        "the controller comparison on a plant like the papers' rig",
     ),
     "identification twin": NamedTwin(
         "identification twin",
