@@ -256,16 +256,18 @@ _VERDICT_NOTE = (
 )
 
 
-def _pack(pdf: PdfReport, parts: Sequence[tuple[str, Sequence[Text | Table | Plot]]]) -> None:
-    """Pages of ``parts`` (heading, blocks), the blocks in order: of every way to cut them into pages
-    that fit, the one with the fewest near-empty pages, then the fewest pages, then the fewest parts
-    cut in two, then the fullest emptiest page. A page is headed by the part of its first block
-    ("(continued)" when that part began on an earlier page)."""
+Part = tuple[str, Sequence[Text | Table | Plot]]
+
+
+def _plan(parts: Sequence[Part]):
+    """(key, pages) for ``parts`` (heading, blocks), the blocks in order: of every way to cut them into
+    pages that fit, the one with the fewest near-empty pages, then the fewest pages, then the fewest
+    parts cut in two, then the fullest emptiest page (the key compares plans)."""
     blocks = [(j, k, block) for j, (_, bl) in enumerate(parts) for k, block in enumerate(bl)]
     heights = [block_height(b) for *_, b in blocks]
     room, heading = page_room(), 0.032  # the page's heading takes 0.032 of its fill
     n = len(blocks)
-    best, best_key = None, None
+    best, best_key = [(i, i + 1) for i in range(n)], (math.inf,)  # one block a page if none fits
     for mask in range(1 << max(0, n - 1)):
         cuts = [0, *(i + 1 for i in range(n - 1) if mask >> i & 1), n]
         pages = list(itertools.pairwise(cuts))
@@ -274,14 +276,21 @@ def _pack(pdf: PdfReport, parts: Sequence[tuple[str, Sequence[Text | Table | Plo
             continue
         inside = sum(1 for a, _ in pages[1:] if blocks[a][1] > 0)
         key = (sum(f < MIN_FILL for f in fills), len(pages), inside, -min(fills))
-        if best_key is None or key < best_key:
+        if key < best_key:
             best, best_key = pages, key
-    if best is None:  # a block taller than a page: one block a page (add_page says what is wrong)
-        best = [(i, i + 1) for i in range(n)]
-    for a, b in best:
-        j, k, _ = blocks[a]
-        title = parts[j][0] if k == 0 else f"{parts[j][0]} (continued)"
-        pdf.add_page(title, [block for *_, block in blocks[a:b]])
+    return best_key, [
+        (parts[blocks[a][0]][0] + ("" if blocks[a][1] == 0 else " (continued)"), [b for *_, b in blocks[a:b]])
+        for a, b in best
+    ]
+
+
+def _pack(pdf: PdfReport, orders: Sequence[Sequence[Part]]) -> None:
+    """The pages of the best plan (:func:`_plan`) of any of ``orders`` (the same parts in orders a
+    reader can follow); a page is headed by the part of its first block ("(continued)" when that
+    part began on an earlier page)."""
+    _, pages = min((_plan(parts) for parts in orders), key=lambda plan: plan[0])
+    for heading, blocks in pages:
+        pdf.add_page(heading, blocks)
 
 
 def write_diagnosis_report(
@@ -357,16 +366,21 @@ def write_diagnosis_report(
         held_out.append(Plot(plots.timeseries_plot(diag), 0.36))
         if study is not None:
             held_out += [Text([_control_paragraph(study)]), Plot(plots.compensation_plot(study), 0.42)]
+        found_part: Part = ("What was found, in words", [*found, constants])
+        residual_part: Part = (
+            "Where the base model's residual lives",
+            [Plot(plots.spectrum_plot(diag), 0.3), Plot(plots.dependence_plot(diag), 0.56)],
+        )
+        held_part: Part = (
+            "Held-out data" + (", and the closed loop before and after" if study else ""),
+            held_out,
+        )
+        verdict_part: Part = ("Every candidate and its verdict", [verdicts])
         _pack(
             pdf,
             [
-                ("What was found, in words", [*found, constants]),
-                (
-                    "Where the base model's residual lives",
-                    [Plot(plots.spectrum_plot(diag), 0.3), Plot(plots.dependence_plot(diag), 0.56)],
-                ),
-                ("Held-out data" + (", and the closed loop before and after" if study else ""), held_out),
-                ("Every candidate and its verdict", [verdicts]),
+                [found_part, residual_part, held_part, verdict_part],
+                [found_part, verdict_part, residual_part, held_part],
             ],
         )
         times = {
