@@ -22,11 +22,12 @@ from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
 
-def _runs(model, backend, duration):
+def _runs(model, backend, duration, cache=None):
     twin = RigTwin(model, TwinEffects.rig())  # encoder, delay, amplifier: every input path used
     scenario = dataclasses.replace(paper_scenarios()["large_step"], duration=duration)
     online = ClosedLoop(twin, NonlinearMPC(model, preview=False)).run(scenario)
-    causal = CompiledNMPC(NonlinearMPC(model, preview=False), backend=backend)
+    causal = CompiledNMPC(NonlinearMPC(model, preview=False), backend=backend, cache=cache)
+    assert not causal.cached
     return online, ClosedLoop(twin, causal, backend=backend).run(scenario)
 
 
@@ -45,8 +46,15 @@ def test_the_virtual_machine_loop_is_the_python_stepped_nmpc(model):
 
 @pytest.mark.slow
 @pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
-def test_the_generated_c_loop_is_the_python_stepped_nmpc(model):
-    _assert_same(*_runs(model, "c", 0.3))
+def test_the_generated_c_loop_is_the_python_stepped_nmpc(model, tmp_path):
+    online, fused = _runs(model, "c", 0.3, cache=tmp_path)
+    _assert_same(online, fused)
+    # a second NMPC with the same settings finds its library in the cache and runs the same
+    again = CompiledNMPC(NonlinearMPC(model, preview=False), cache=tmp_path)
+    assert again.cached and again.library.parent == tmp_path
+    twin = RigTwin(model, TwinEffects.rig())
+    scenario = dataclasses.replace(paper_scenarios()["large_step"], duration=0.3)
+    assert_allclose(ClosedLoop(twin, again, backend="c").run(scenario).u, fused.u, rtol=0, atol=0)
 
 
 def test_only_a_causal_rti_nmpc_is_an_expression(model):

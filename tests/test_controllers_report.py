@@ -240,7 +240,9 @@ def test_scorecard_linear_against_nonlinear(quick):
 
     _, _, ours, verdict = _row(contents, "Large step")
     large = study.result("linear regulator (no feedforward)", "large_step", "rig")
-    assert ours.startswith("survives" if large.success else "hits the stopper")
+    assert ours.startswith("without feedforward: " + ("survives" if large.success else "hits the stopper"))
+    with_ff = study.result("linear regulator", "large_step", "rig")
+    assert ours.endswith("with feedforward: " + ("survives" if with_ff.success else "hits the stopper"))
     assert _numbers(ours)[0] == pytest.approx(np.min(large.x[0]) * 1e3, abs=0.051)
     sweep = study.sweeps["rig"]
     fails = sweep.target_gaps[~sweep.success[sweep.controllers.index("linear regulator (no feedforward)")]]

@@ -76,7 +76,7 @@ def _error_axis(ax, limit: float = ERROR_VIEW) -> None:
 def _current_axis(ax, peaks: Sequence[float], low: float = 0.0) -> None:
     """y from ``low`` to just above the signal; the 9 A rating drawn where the signal comes near it."""
     top = max(max(peaks), 1e-3)
-    if top > 0.6 * PEAK_CURRENT_LIMIT:
+    if top > 0.75 * PEAK_CURRENT_LIMIT:
         ax.axhline(PEAK_CURRENT_LIMIT, color="tab:red", ls=":", lw=0.9)
         top = max(top, PEAK_CURRENT_LIMIT)
     ax.set_ylim(low, 1.08 * top)
@@ -91,8 +91,7 @@ def key_plot(result: SimulationResult, metrics: RunMetrics, limits: dict[str, fl
         "Top: reading − set-point, clipped to ±0.3 mm. Bottom: the largest |error| from then on; a step has "
         "settled where it enters the band for good. Shaded: 0.1 mm and 10 µm. Dashed: the papers' "
         f"{limits['vertical']:g} s (vertical) and {limits['horizontal']:g} s (horizontal); dotted: their "
-        "fifth "
-        f"step's {limits['horizontal_fifth']:g} s."
+        f"fifth step's {limits['horizontal_fifth']:g} s."
     )
 
     def draw(fig: Figure, rect) -> str:
@@ -127,7 +126,7 @@ def key_plot(result: SimulationResult, metrics: RunMetrics, limits: dict[str, fl
             ax.axvline(limits["horizontal"], color="k", ls="--", lw=0.8)
             ax.axvline(limits["horizontal_fifth"], color="k", ls=":", lw=0.8)
         top[0].set_ylabel("error [mm]")
-        low[0].set_ylabel("largest |error|\nfrom then on [mm]")
+        low[0].set_ylabel("|error| from\nthen on [mm]", fontsize=7.5)
         handles, labels = top[0].get_legend_handles_labels()
         _legend_below(fig, rect, handles, labels, ncol=5)
         return caption(
@@ -166,7 +165,7 @@ def setpoint_plot(result: SimulationResult, title: str, text: str):
             axes[3][j].set_ylabel(("i_d [A]", "i_q [A]")[j])
             peak = float(np.nanmax(np.abs(current)))
             axes[3][j].set_ylim(-1.08 * peak, 1.08 * peak)
-            if peak > 0.6 * PEAK_CURRENT_LIMIT:
+            if peak > 0.75 * PEAK_CURRENT_LIMIT:
                 for sign in (1, -1):
                     axes[3][j].axhline(sign * PEAK_CURRENT_LIMIT, color="tab:red", ls=":", lw=0.9)
                 axes[3][j].set_ylim(-1.08 * max(peak, 9), 1.08 * max(peak, 9))
@@ -194,8 +193,8 @@ def controller_steps_plot(
     every panel."""
 
     text = (
-        "One row per controller, its colour over the FL regulator's grey; errors are readings − set-point on "
-        f"±{ERROR_VIEW:g} mm with the 0.1 mm and 10 µm bands shaded."
+        "One row per controller, its colour over the FL regulator's grey; errors are readings − set-point "
+        f"on ±{ERROR_VIEW:g} mm with the 0.1 mm and 10 µm bands shaded."
     )
 
     def draw(fig: Figure, rect) -> str:
@@ -262,8 +261,7 @@ def currents_plot(results: Sequence[SimulationResult], metrics: Sequence[RunMetr
 
     text = (
         f"The magnitude of the commanded (i_q, i_d) over the first {window * 1e3:.0f} ms after each change; "
-        "the "
-        "peaks come in the first milliseconds. The rig twin's amplifier clips what is above 9 A."
+        "the peaks come in the first milliseconds. The rig twin's amplifier clips what is above 9 A."
     )
 
     def draw(fig: Figure, rect) -> str:
@@ -453,9 +451,8 @@ def ellipse_plot(results: Sequence[SimulationResult], metrics: Sequence[RunMetri
     """The sinusoids: the x3-x1 plane from ``start`` on (one panel per run, the reference in black),
     and each run's errors over time, vertical and horizontal."""
     text = (
-        "Left: the platform in the x3-x1 plane, the reference in black (the gap axis is stretched six "
-        "times). "
-        "Right: reading − reference; dashed: ± the mean |error|; shaded: the 0.1 mm and 10 µm bands."
+        "Left: the platform in the x3-x1 plane, the reference in black (axes not to scale). Right: reading "
+        "− reference; dashed: ± the mean |error|; shaded: the 0.1 mm and 10 µm bands."
     )
 
     def draw(fig: Figure, rect) -> str:
@@ -466,7 +463,7 @@ def ellipse_plot(results: Sequence[SimulationResult], metrics: Sequence[RunMetri
             2 * n,
             2,
             wspace=0.22,
-            hspace=0.22,
+            hspace=0.42,
             bottom=0.045,
             top=_room(text),
             width_ratios=(1, 1.6),
@@ -518,8 +515,7 @@ def calibrated_plot(panels: Sequence[tuple[str, object, object, float, float]], 
     reference at 1 kHz); the rig twin grey, the calibrated twin in the controller's colour."""
     text = (
         f"Gap on the rig twin (grey) and on {twin} (colour), from the calibration's runs. Dash-dotted: the "
-        "gap "
-        "stopper; a run that reaches it ends there."
+        "gap stopper; touching it fails the run (the stopper holds the mover; the run goes on)."
     )
 
     def draw(fig: Figure, rect) -> str:

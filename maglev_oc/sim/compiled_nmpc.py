@@ -16,6 +16,11 @@ library's symbols carry a digest of the generated source, so that two different 
 loaded in one process without one binding to the other's code. Without a C compiler (or with a
 QP solver whose C is not generated) the step calls the RTI Function itself, in CasADi's virtual
 machine.
+
+Given a ``cache`` directory, the compiled library is kept there under a digest of everything it is
+built from (the generated source, the flags, the compiler, CasADi's version, whose HPIPM it links)
+and reused by later runs: the same source compiled the same way is the same library. The
+directory is created private to the user; :func:`user_cache` is the usual place.
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import hashlib
+import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -36,13 +43,21 @@ from maglev_oc.control.nmpc import NonlinearMPC
 from maglev_oc.errors import InputError
 from maglev_oc.numerics import c_compiler
 
-__all__ = ["COMPILE_FLAGS", "CompiledNMPC"]
+__all__ = ["COMPILE_FLAGS", "CompiledNMPC", "user_cache"]
 
 COMPILE_FLAGS = ("-O1",)
 """gcc flags of the RTI step's library. The generated source is about 1.3 MB: -O1 compiles in
 about a third of -O2's time and runs within 25 % of it, which over the comparison's 6e5 samples
 is the faster total (measured on the 2-core test machine: 11 s + 5.0 s against 27 s + 4.1 s for
 one 25 s run)."""
+
+
+def user_cache() -> Path:
+    """``$MAGLEV_OC_CACHE``, else ``$XDG_CACHE_HOME/maglev_oc``, else ``~/.cache/maglev_oc``."""
+    if os.environ.get("MAGLEV_OC_CACHE"):
+        return Path(os.environ["MAGLEV_OC_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "maglev_oc"
 
 
 class CompiledNMPC:
@@ -56,6 +71,8 @@ class CompiledNMPC:
         Compiler flags of the RTI step's library.
     backend : {"c", "vm"}, optional
         "c" (default where a C compiler is found and the QP solver's C is generated) or "vm".
+    cache : path-like, optional
+        Directory of compiled libraries to reuse and add to (module docstring); none by default.
 
     Attributes
     ----------
@@ -69,10 +86,17 @@ class CompiledNMPC:
         "c" (the generated library) or "vm" (the RTI Function in CasADi's virtual machine).
     build_time : float
         [s] generating and compiling the library (0 in the virtual machine).
+    cached : bool
+        The library came from the cache (it was not compiled).
     """
 
     def __init__(
-        self, controller: NonlinearMPC, *, cflags: tuple[str, ...] = COMPILE_FLAGS, backend: str | None = None
+        self,
+        controller: NonlinearMPC,
+        *,
+        cflags: tuple[str, ...] = COMPILE_FLAGS,
+        backend: str | None = None,
+        cache: str | os.PathLike | None = None,
     ) -> None:
         if not isinstance(controller, NonlinearMPC):
             raise TypeError(f"controller must be a NonlinearMPC, got {type(controller).__name__}")
@@ -95,8 +119,9 @@ class CompiledNMPC:
                 f"got {backend!r}"
             )
         self.backend = backend
+        self.cached = False
         t0 = time.perf_counter()
-        rti = self._compiled(controller, cflags) if backend == "c" else controller.rti_step
+        rti = self._compiled(controller, cflags, cache) if backend == "c" else controller.rti_step
         self.build_time = time.perf_counter() - t0 if backend == "c" else 0.0
         c = ca.MX.sym("memory", self.n_state)
         y = ca.MX.sym("y", N_MEASUREMENTS)
@@ -106,7 +131,7 @@ class CompiledNMPC:
             "nmpc_step", [c, y, r], [u, c_next, diag], ["c", "y", "r"], ["u", "c_next", "diag"]
         )
 
-    def _compiled(self, controller: NonlinearMPC, cflags) -> ca.Function:
+    def _compiled(self, controller: NonlinearMPC, cflags, cache) -> ca.Function:
         """The RTI step as a ``casadi.external`` of its generated library, loaded globally so that
         the closed loop's generated C finds it by name."""
         self._directory = tempfile.TemporaryDirectory(prefix="maglev_oc_nmpc_")
@@ -116,7 +141,18 @@ class CompiledNMPC:
         # every symbol of the library starts with the function's name (its _work, _incref, ...)
         code.source.write_text(text.replace(FUNCTION_NAME, name))
         code = dataclasses.replace(code, function=name)
-        library = compile_shared(code, cflags=tuple(cflags))
+        key = hashlib.sha1("\0".join([text, *cflags, str(c_compiler()), ca.__version__]).encode()).hexdigest()
+        kept = Path(cache) / f"nmpc_rti_{key[:24]}.so" if cache is not None else None
+        if kept is not None and kept.is_file():
+            library, self.cached = kept, True
+        else:
+            library = compile_shared(code, cflags=tuple(cflags))
+            if kept is not None:
+                kept.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+                partial = kept.with_suffix(f".{os.getpid()}.part")
+                shutil.copyfile(library, partial)
+                os.replace(partial, kept)  # whole or not at all, also with reports running at once
+        self._library = library
         ctypes.CDLL(str(library), mode=ctypes.RTLD_GLOBAL)
         return ca.external(name, str(library))
 
@@ -127,9 +163,7 @@ class CompiledNMPC:
     @property
     def library(self) -> Path | None:
         """Where the compiled RTI step is (None in the virtual machine)."""
-        if self.backend != "c":
-            return None
-        return next(Path(self._directory.name).glob("*.so"))
+        return self._library if self.backend == "c" else None
 
 
 def _node_references(r: ca.MX, controller: NonlinearMPC) -> ca.MX:
