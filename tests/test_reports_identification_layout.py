@@ -256,10 +256,11 @@ def test_effect_names_are_plain_words():
 def identification_report(model, tmp_path_factory):
     from maglev_oc.analyses.identification import write_report
 
+    from maglev_oc.identification.eps_trend import eps_trend_study
     from maglev_oc.identification.study import run_study
 
-    st = run_study(model)
-    return st, write_report(tmp_path_factory.mktemp("ident") / "identification.pdf", st)
+    st, trend = run_study(model), eps_trend_study(model)
+    return st, trend, write_report(tmp_path_factory.mktemp("ident") / "identification.pdf", st, trend)
 
 
 @pytest.mark.slow
