@@ -713,8 +713,11 @@ def fit_statistics_rows(st: IdentificationStudy) -> list[list[str]]:
     return rows
 
 
-def timing_rows(st: IdentificationStudy) -> list[list[str]]:
-    rows = [[k, f"{v:.2f}"] for k, v in st.timings.items()]
+def timing_rows(st: IdentificationStudy, trend: EpsTrendStudy) -> list[list[str]]:
+    rows = [[k, f"{v:.2f}"] for k, v in st.timings.items() if k != "report"]
+    rows += [[f"eps trend: {k}", f"{v:.2f}"] for k, v in trend.timings.items() if k != "total"]
+    if "report" in st.timings:
+        rows.append(["report (figures and PDF)", f"{st.timings['report']:.2f}"])
     rows.append(
         [
             "NPFSI on the 60 s log, per eps (observer velocities)",
@@ -915,7 +918,7 @@ def write_report(out: Path, st: IdentificationStudy, trend: EpsTrendStudy) -> Re
                     ("", "equation error", "output error"),
                     fit_statistics_rows(st),
                 ),
-                Table("Wall times [s] (2-core machine)", ("step", "wall time [s]"), timing_rows(st)),
+                Table("Wall times [s] (2-core machine)", ("step", "wall time [s]"), timing_rows(st, trend)),
             ],
         )
     return pdf.contents
