@@ -463,7 +463,7 @@ def ellipse_plot(results: Sequence[SimulationResult], metrics: Sequence[RunMetri
             2 * n,
             2,
             wspace=0.22,
-            hspace=0.42,
+            hspace=0.3,
             bottom=0.045,
             top=_room(text),
             width_ratios=(1, 1.6),
@@ -475,7 +475,16 @@ def ellipse_plot(results: Sequence[SimulationResult], metrics: Sequence[RunMetri
             ax.plot(r.reference[3, late] * M_TO_MM, r.reference[0, late] * M_TO_MM, color="k", lw=0.8)
             ax.plot(r.x[2, late] * M_TO_MM, r.x[0, late] * M_TO_MM, color=c, lw=0.8)
             ax.set_ylabel("gap x1 [mm]")
-            ax.set_title(f"{r.controller}, from {start:g} s", fontsize=8.5, color=c)
+            ax.text(
+                0.5,
+                0.5,
+                f"{r.controller}\nfrom {start:g} s",
+                transform=ax.transAxes,
+                ha="center",
+                va="center",
+                fontsize=8,
+                color=c,
+            )
             if i == n - 1:
                 ax.set_xlabel("horizontal x3 [mm]")
             err = _error(r)
