@@ -336,7 +336,8 @@ class TwinEffects:
         if m := self.misalignment:
             words.append(
                 f"guide misalignment ({m.tilt * 1e3:g} mrad tilt, {m.waviness * 1e6:g} µm waviness "
-                f"over {m.waviness_period * 1e3:g} mm)"
+                f"over {m.waviness_period * 1e3:g} mm, guides {m.level_tilt * 1e3:g} mrad off level, "
+                f"binding {m.binding:g} N/m)"
             )
         if a := self.amplifier:
             words.append(
