@@ -21,7 +21,7 @@ from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.stage import StageModel
 from maglev_oc.model.summary import ModelSummary, equilibrium_table_rows, summarize_model
 from maglev_oc.reporting import model_plots as plots
-from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text
+from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text, wrap_cells
 from maglev_oc.units import M_TO_MM
 
 __all__ = [
@@ -272,13 +272,7 @@ for the table to print at a readable size."""
 
 def _fit(rows, widths=SCORECARD_WIDTHS) -> list[tuple[str, ...]]:
     """Each cell re-wrapped to its column's width."""
-    return [
-        tuple(
-            "\n".join(textwrap.wrap(" ".join(str(cell).split()), w))
-            for cell, w in zip(row, widths, strict=True)
-        )
-        for row in rows
-    ]
+    return wrap_cells(rows, widths)
 
 
 # --- the report -------------------------------------------------------------------------------------------

@@ -10,7 +10,6 @@ follow; timings are in the appendix.
 from __future__ import annotations
 
 import math
-import textwrap
 import time
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from maglev_oc.region.study import (
     operating_region_study,
 )
 from maglev_oc.reporting import region_plots as plots
-from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text
+from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text, wrap_cells
 from maglev_oc.reporting.twins import twin_sentence
 from maglev_oc.sim.effects import Encoder, TwinEffects
 from maglev_oc.units import M_TO_MM
@@ -259,13 +258,7 @@ for the table to print at a readable size."""
 
 def _fit(rows, widths=SCORECARD_WIDTHS) -> list[tuple[str, ...]]:
     """Each cell re-wrapped to its column's width."""
-    return [
-        tuple(
-            "\n".join(textwrap.wrap(" ".join(str(cell).split()), w))
-            for cell, w in zip(row, widths, strict=True)
-        )
-        for row in rows
-    ]
+    return wrap_cells(rows, widths)
 
 
 # --- the report -------------------------------------------------------------------------------------------

@@ -134,12 +134,7 @@ def _v73_struct_strings(group, source: str) -> dict[str, str]:
         elif data is not None and data.dtype.kind in "biuf" and data.size == 1:
             out[key] = f"{float(data.ravel()[0]):.17g}"
         else:
-            raise LogError(
-                source,
-                f"field {key!r} is neither a string nor a number",
-                where="variable 'metadata'",
-                column="metadata",
-            )
+            raise _not_text(source, key)
     return out
 
 
@@ -192,10 +187,14 @@ def _mat_metadata(value: object, source: str) -> dict[str, str]:
         elif item.dtype.kind in "biuf" and item.size == 1:
             out[key] = f"{float(item.ravel()[0]):.17g}"
         else:
-            raise LogError(
-                source,
-                f"field {key!r} is neither a string nor a number",
-                where="variable 'metadata'",
-                column="metadata",
-            )
+            raise _not_text(source, key)
     return out
+
+
+def _not_text(source: str, key: str) -> LogError:
+    return LogError(
+        source,
+        f"field {key!r} is neither a string nor a number",
+        where="variable 'metadata'",
+        column="metadata",
+    )

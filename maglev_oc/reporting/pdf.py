@@ -204,6 +204,18 @@ _TOP, _BOTTOM = 0.955, 0.03
 _LEFT = 0.06
 
 
+def wrap_cells(rows: Sequence[Sequence[object]], widths: Sequence[int]) -> list[tuple[str, ...]]:
+    """Each cell's text re-wrapped to its column's width in characters (for tables whose columns
+    should stay narrow enough to print at a readable size)."""
+    return [
+        tuple(
+            "\n".join(textwrap.wrap(" ".join(str(cell).split()), w))
+            for cell, w in zip(row, widths, strict=True)
+        )
+        for row in rows
+    ]
+
+
 def grid(fig: Figure, rect, nrows: int, ncols: int, *, bottom: float = 0.05, top: float = 0.02, **kw):
     """A grid of axes inside ``rect`` (page fractions), ``bottom`` and ``top`` left free, room for
     the y labels on the left."""
