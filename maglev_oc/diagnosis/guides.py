@@ -22,6 +22,7 @@ from maglev_oc.diagnosis.candidate import (
     within,
 )
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import NumpyCall
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.terms import (
     AccelerationTerm,
@@ -301,7 +302,7 @@ def refine_waviness_period(
     x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
     along = (ctx.weight("horizontal") - ctx.normal_force(x, u)) / ctx.mass("horizontal")
     fn = ca.Function("wav_parts", [x, u], [ctx.gap_sensitivity(x, u), along])
-    sens, along_v = (np.asarray(v) for v in fn.map(data.n)(data.x, data.u))
+    sens, along_v = NumpyCall(fn.map(data.n))(data.x, data.u)
     x3 = data.x[2]
     best, best_sse = guess, np.inf
     y = (residual * weights[:, None])[:, fit].reshape(-1)

@@ -132,8 +132,7 @@ def _axes(candidate: Candidate, moving: np.ndarray) -> np.ndarray:
 
 
 def _holdout_residual(design: Design, fit: SubsetFit) -> np.ndarray:
-    ho = design.holdout
-    return design.target[:, ho] - np.einsum("p,pan->an", fit.coef, design.columns[fit.index][:, :, ho])
+    return design.held_out_target - np.tensordot(fit.coef, design.held_out_columns[fit.index], axes=1)
 
 
 def holdout_significance(

@@ -50,6 +50,7 @@ from maglev_oc.estimation.differentiate import HighGainDifferentiator, SavitzkyG
 from maglev_oc.identification.layout import CONSTANT_NAMES
 from maglev_oc.identification.result import NpfsiResult
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import NumpyCall
 
 __all__ = [
     "CHUNK",
@@ -277,8 +278,8 @@ def stage_regression(
     n = log.n
     positions = log.x[[0, 2]]
     x = np.vstack([positions[0], der.velocity[0], positions[1], der.velocity[1]])
-    phi, b = model.regressor.map(n)(x, log.u)
-    phi = np.asarray(phi).reshape(2, n, 4).transpose(1, 0, 2)  # (n, 2, 4)
+    phi, b = NumpyCall(model.regressor.map(n))(x, log.u)
+    phi = phi.reshape(2, n, 4).transpose(1, 0, 2)  # (n, 2, 4)
     b = np.broadcast_to(np.asarray(b).reshape(2, n).T, (n, 2)).copy()
     idx = [CONSTANT_NAMES.index(c) for c in estimate]
     fixed = [k for k in range(4) if k not in idx]

@@ -26,12 +26,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
 
 from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import NumpyCall
 from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.terms import AccelerationTerm
@@ -90,6 +92,17 @@ class Design:
     @property
     def n_parameters(self) -> int:
         return len(self.names)
+
+    @cached_property
+    def held_out_columns(self) -> np.ndarray:
+        """(P, 2, n_hold) the columns on the held-out samples, copied once (selection computes
+        held-out residuals of hundreds of subsets)."""
+        return self.columns[:, :, self.holdout]
+
+    @cached_property
+    def held_out_target(self) -> np.ndarray:
+        """(2, n_hold) the target on the held-out samples."""
+        return self.target[:, self.holdout]
 
     @property
     def moving(self) -> np.ndarray:
@@ -267,14 +280,14 @@ def _held_out_normal_equations(columns: np.ndarray, target: np.ndarray, holdout:
 def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int):
     """``fn`` over every sample, ``_CHUNK`` samples per mapped call into preallocated arrays:
     columns (P, 2, n), known (2, n), sensitivities (m, n). (One map over all samples would hold
-    CasADi's output and its NumPy copy, each of the size of the columns, at once.)"""
+    its output and the rearranged copy, each of the size of the columns, at once.)"""
     n = prep.n
     cols, known, sens = np.empty((P, 2, n)), np.empty((2, n)), np.empty((m, n))
-    mapped: dict[int, ca.Function] = {}
+    mapped: dict[int, NumpyCall] = {}
     for a in range(0, n, _CHUNK):
         b = min(a + _CHUNK, n)
-        f = mapped.setdefault(b - a, fn.map(b - a))
-        c, k, s = (np.asarray(v) for v in f(prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b]))
+        f = mapped.setdefault(b - a, NumpyCall(fn.map(b - a)))
+        c, k, s = f(prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b])
         # mapped outputs are concatenated sample by sample: (2, k P) -> (P, 2, k)
         cols[:, :, a:b] = c.reshape(2, b - a, P).transpose(2, 0, 1)
         known[:, a:b] = k
