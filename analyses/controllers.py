@@ -146,9 +146,13 @@ def _controllers(model: StageModel, nmpc: bool) -> tuple[list, list[str], dict[s
     return built, skipped, times
 
 
-def compare_controllers(model: StageModel, *, nmpc: bool = True, calibration: bool = True) -> ControllerStudy:
+def compare_controllers(
+    model: StageModel, *, nmpc: bool = True, calibration: bool | PaperCalibration = True
+) -> ControllerStudy:
     """Build the controllers for ``model``, run them on the papers' scenarios on both twins, sweep
-    the regulators' large step, and calibrate the twin to the papers' step experiments."""
+    the regulators' large step, and calibrate the twin to the papers' step experiments
+    (``calibration``: True to run it, False to leave it out, or a calibration of ``model`` already
+    run, which is used as it is)."""
     t_start = time.perf_counter()
     controllers, skipped, build_times = _controllers(model, nmpc)
     t_built = time.perf_counter()
@@ -160,7 +164,10 @@ def compare_controllers(model: StageModel, *, nmpc: bool = True, calibration: bo
     swept = [c for c in controllers if c.name in SWEPT]
     sweeps = {name: step_sweep(swept, twin, SWEEP_TARGETS, loops=loops) for name, twin in twins.items()}
     t_sweeps = time.perf_counter()
-    cal = calibrate_to_paper(model) if calibration else None
+    if isinstance(calibration, PaperCalibration):
+        cal = calibration
+    else:
+        cal = calibrate_to_paper(model) if calibration else None
     t_cal = time.perf_counter()
     timings = {f"build {name}": t for name, t in build_times.items()}
     timings.update(

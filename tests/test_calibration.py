@@ -20,6 +20,7 @@ from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
 from maglev_oc.control.gains import OMEGA0, PAPER_K_V
 from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium_currents
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.results import check_result
 from maglev_oc.sim.calibration import (
@@ -38,6 +39,7 @@ from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.metrics import evaluate
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence
 from maglev_oc.sim.twin import RigTwin
+from tests.test_controllers_report import _numbers, _peak, _row
 
 PAPER = PaperTargets.from_papers()
 
@@ -238,9 +240,15 @@ def test_coupling_route_reproduces_both_claims_too(model, candidates):
 
 
 # --- the whole calibration -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def calibration(model):
+    """The calibration, run once for its own checks and for the whole controller report."""
+    return calibrate_to_paper(model)
+
+
 @pytest.mark.slow
-def test_calibration_end_to_end(model, candidates):
-    cal = calibrate_to_paper(model)
+def test_calibration_end_to_end(calibration):
+    cal = calibration
     check_result(cal)
     assert cal.status == "implausible_only" and not cal.success
     assert not cal.nominal.reproduces and not cal.plausible.reproduces
@@ -264,3 +272,34 @@ def test_calibration_end_to_end(model, candidates):
         assert tr.t.shape == tr.gap.shape == tr.reference.shape and tr.t.size > 1000
     assert cal.required.metrics.linear_unstopped == "settles"
     assert "overshoot at t = 5 s" in cal.report()
+
+
+# --- the whole controller report, on this calibration --------------------------------------------------
+@pytest.mark.slow
+def test_the_whole_report_with_nmpc_and_the_calibrated_twin(tmp_path, model, calibration):
+    from maglev_oc.analyses import controllers as analysis
+
+    study = analysis.compare_controllers(model, calibration=calibration)
+    assert study.calibration is calibration
+    contents = analysis.write_report(tmp_path / "controllers.pdf", study)
+    assert contents.sparse_pages() == []
+    assert "NMPC" in study.comparison.controllers
+    cal = study.calibration
+    fit = cal.required if cal.required is not None else cal.plausible
+    # the calibrated twin's overshoot at t = 5 s, recomputed from the calibration's own gap trace
+    # (true gap at 1 kHz: within a few points of the encoder-based figure)
+    tr = cal.trace("papers_step", fit.name, "FL regulator")
+    seg = (tr.t >= 5.0) & (tr.t < 10.0)
+    before = tr.reference[np.searchsorted(tr.t, 5.0) - 1]
+    step = tr.reference[seg][0] - before
+    over = max(float(np.max(np.sign(step) * (tr.gap[seg] - tr.reference[seg]))), 0.0) / abs(step) * 100
+    _, paper, ours, _ = _row(contents, "Calibrated twin: 114 %")
+    assert paper == "114 %"
+    assert _numbers(ours)[0] == pytest.approx(over, abs=3.0)
+    _, paper, ours, _ = _row(contents, "Calibrated twin: the linear")
+    linear = cal.trace("large_step", fit.name, "linear regulator (no feedforward)")
+    assert paper == "unstable"
+    assert ours.startswith("linear " + ("survives" if linear.status == "completed" else "hits the stopper"))
+    # the NMPC stays within its current polytope (inside 9 A)
+    for sc in study.comparison.scenarios:
+        assert _peak(study.result("NMPC", sc, "rig")) <= PEAK_CURRENT_LIMIT + 1e-6

@@ -6,8 +6,8 @@ printed strings to their printed precision. The papers' column is checked agains
 001 Sec. VI as SPEC 4 quotes them.
 
 The quick study leaves out the NMPC (its C library takes 5-10 s to compile) and the calibration
-(about a minute); the slow test builds the whole report and checks the calibrated twin's rows
-against the calibration's own runs.
+(about 40 s); the whole report, with both, is built in tests/test_calibration.py, beside the
+calibration's own tests, from the one calibration they share.
 """
 
 from __future__ import annotations
@@ -340,32 +340,3 @@ def test_amplifier_table_names_the_commands_over_9_a(quick):
         assert _numbers(" ".join(row[2:6])) == pytest.approx([_peak(r) for r in runs], abs=0.051), row
         above = sum(int(np.sum(np.hypot(r.u[0], r.u[1]) > PEAK_CURRENT_LIMIT)) for r in runs)
         assert float(row[6]) == pytest.approx(above * runs[0].sample_time * 1e3, abs=0.051), row
-
-
-@pytest.mark.slow
-def test_the_whole_report_with_nmpc_and_the_calibrated_twin(tmp_path, model):
-    from maglev_oc.analyses import controllers as analysis
-
-    study = analysis.compare_controllers(model)
-    contents = analysis.write_report(tmp_path / "controllers.pdf", study)
-    assert contents.sparse_pages() == []
-    assert "NMPC" in study.comparison.controllers
-    cal = study.calibration
-    fit = cal.required if cal.required is not None else cal.plausible
-    # the calibrated twin's overshoot at t = 5 s, recomputed from the calibration's own gap trace
-    # (true gap at 1 kHz: within a few points of the encoder-based figure)
-    tr = cal.trace("papers_step", fit.name, "FL regulator")
-    seg = (tr.t >= 5.0) & (tr.t < 10.0)
-    before = tr.reference[np.searchsorted(tr.t, 5.0) - 1]
-    step = tr.reference[seg][0] - before
-    over = max(float(np.max(np.sign(step) * (tr.gap[seg] - tr.reference[seg]))), 0.0) / abs(step) * 100
-    _, paper, ours, _ = _row(contents, "Calibrated twin: 114 %")
-    assert paper == "114 %"
-    assert _numbers(ours)[0] == pytest.approx(over, abs=3.0)
-    _, paper, ours, _ = _row(contents, "Calibrated twin: the linear")
-    linear = cal.trace("large_step", fit.name, "linear regulator (no feedforward)")
-    assert paper == "unstable"
-    assert ours.startswith("linear " + ("survives" if linear.status == "completed" else "hits the stopper"))
-    # the NMPC stays within its current polytope (inside 9 A)
-    for sc in study.comparison.scenarios:
-        assert _peak(study.result("NMPC", sc, "rig")) <= PEAK_CURRENT_LIMIT + 1e-6
