@@ -17,8 +17,8 @@ import numpy as np
 
 from maglev_oc.identification.eps_trend import EpsTrend, EpsTrendStudy, eps_trend_study
 from maglev_oc.identification.equation_error import DEFAULT_BANDWIDTH
-from maglev_oc.identification.experiments import FIXED_GAPS, verification_effects
-from maglev_oc.identification.layout import CONSTANT_NAMES
+from maglev_oc.identification.experiments import FIXED_GAPS, excitation_log, verification_effects
+from maglev_oc.identification.layout import CONSTANT_NAMES, GAP_OFFSET
 from maglev_oc.identification.npfsi import DEFAULT_Q0_SECONDS, PAPER_EPSILONS, PAPER_GAMMA
 from maglev_oc.identification.study import (
     COMMAND_TO_CURRENT_DELAY,
@@ -29,10 +29,13 @@ from maglev_oc.identification.study import (
 from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import prepare
 from maglev_oc.reporting import identification_plots as plots
-from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text
+from maglev_oc.reporting import validation_plots
+from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text, wrap_cells
 from maglev_oc.reporting.twins import twin_sentence
 from maglev_oc.units import M_TO_MM, M_TO_UM
+from maglev_oc.validation import Validation, validate
 
 __all__ = [
     "ORDER",
@@ -728,11 +731,43 @@ def timing_rows(st: IdentificationStudy, trend: EpsTrendStudy) -> list[list[str]
 
 
 # --- the report ------------------------------------------------------------------------------------------
-def write_report(out: Path, st: IdentificationStudy, trend: EpsTrendStudy) -> ReportContents:
+HELD_OUT_SEED, HELD_OUT_DURATION = 101, 20.0
+"""The validation's held-out run: the same excitation with other phases and noise, 20 s [s]."""
+
+
+def validation_runs(st: IdentificationStudy) -> dict[str, Validation]:
+    """The output-error fit and the papers' constants (the estimators' start) validated on a held-out
+    run of the same experiment (:mod:`maglev_oc.validation`)."""
+    log = excitation_log(
+        st.truth, duration=HELD_OUT_DURATION, seed=HELD_OUT_SEED, controller_model=st.nominal
+    )
+    data = prepare([log], bandwidth=DEFAULT_BANDWIDTH)
+    where = f"held-out run, seed {HELD_OUT_SEED}, {HELD_OUT_DURATION:g} s"
+    oe = st.output_error
+    return {
+        "output-error fit": validate(
+            data,
+            data.valid,
+            oe.model(st.nominal),
+            description="output-error fit",
+            data_description=where,
+            gap_offset=oe.values.get(GAP_OFFSET, 0.0),
+        ),
+        "papers' constants": validate(
+            data, data.valid, st.nominal, description="Table III (eps = 0.01)", data_description=where
+        ),
+    }
+
+
+def write_report(
+    out: Path, st: IdentificationStudy, trend: EpsTrendStudy, validations: dict[str, Validation] | None = None
+) -> ReportContents:
     """Write the report of a finished identification study and eps-trend study (nothing is computed
-    here but the figures' curves)."""
+    here but the figures' curves, and the validation on a held-out run unless ``validations`` are
+    given: :func:`validation_runs`)."""
     t0 = time.perf_counter()
     truth = st.truth_values
+    validations = validation_runs(st) if validations is None else validations
     with PdfReport(out, TITLE, subtitle="reports/identification.pdf from analyses/identification.py") as pdf:
         pdf.add_page(
             "Scorecard: the papers' identification results beside ours",
@@ -785,6 +820,20 @@ def write_report(out: Path, st: IdentificationStudy, trend: EpsTrendStudy) -> Re
                     ],
                 ),
                 Plot(plots.coverage_plot(cov.names, cov.z, cov.z_naive), 0.3),
+            ],
+        )
+        pdf.add_page(
+            "Validation on a held-out run: residual whiteness and fit",
+            [
+                Text(validation_plots.verdict_rows(validations), font_size=8.0),
+                Plot(validation_plots.correlation_plot(validations), 0.42),
+                Table(
+                    "",
+                    validation_plots.FIT_COLUMNS,
+                    wrap_cells(validation_plots.fit_rows(validations), (18, 10, 34, 22, 26)),
+                    notes=[validation_plots.FIT_NOTE],
+                    font_size=7.5,
+                ),
             ],
         )
         bands = {"C1": 10, "C2": 2, "C3": 5, "C4": 25}

@@ -69,7 +69,9 @@ OUTCOME_KEYS = {
     "status",
     "message",
     "timings",
+    "validation",  # residual whiteness and fit % of the best fit (maglev_oc.validation)
 }
+CLI_KEYS = OUTCOME_KEYS | {"stage"}  # the file also holds the stage file it amounts to
 FIT_KEYS = {
     "method",
     "parameters",
@@ -209,7 +211,7 @@ def _slower(log: Log, source: str) -> Log:
 
 # --- the JSON contract ----------------------------------------------------------------------------------
 def test_identify_json_has_the_schema_a_script_reads(cli_json):
-    assert set(cli_json) == OUTCOME_KEYS
+    assert set(cli_json) == CLI_KEYS
     assert cli_json["success"] is True and cli_json["status"] == "converged"
     for method in ("equation_error", "output_error"):
         fit = cli_json[method]
@@ -233,7 +235,10 @@ def test_identify_json_has_the_schema_a_script_reads(cli_json):
         assert set(run["values"]) == set(run["theta0"]) == set(CONSTANT_NAMES)
         assert set(run["settings"]) >= NPFSI_SETTINGS
         assert set(run["timings"]) == {"total"}
-    assert set(cli_json["timings"]) == {"equation_error", "output_error", "npfsi", "total"}
+    assert set(cli_json["timings"]) == {"equation_error", "output_error", "npfsi", "validation", "total"}
+    v = cli_json["validation"]  # no held-out log given: validated in-sample, and the file says so
+    assert "in-sample" in v["data"] or "training" in v["data"], v["data"]
+    assert set(v["whiteness"]) == set(v["input_independence"]) == set(AXES)
     json.dumps(cli_json, allow_nan=False)  # plain JSON, no NaN tokens
 
 
@@ -272,7 +277,8 @@ def test_identify_json_numbers_are_the_results_attributes(outcome, model):
     assert d["identified_constants"]["source"].startswith("identified (output_error)")
     assert d["estimate"] == list(CONSTANT_NAMES)
     t = d["timings"]
-    assert t["total"] == pytest.approx(t["equation_error"] + t["output_error"] + t["npfsi"], rel=1e-12)
+    parts = ("equation_error", "output_error", "npfsi", "validation")
+    assert t["total"] == pytest.approx(sum(t[k] for k in parts), rel=1e-12)
 
 
 def _same_but_timings(a: dict, b: dict) -> bool:
@@ -288,6 +294,11 @@ def test_cli_json_equals_to_dict_except_wall_times(outcome, cli_json):
     # Both fits are deterministic (one linear solve; Gauss-Newton from it), so the file the command
     # line wrote and the in-process result agree to the last bit except for the wall times.
     d = json.loads(json.dumps(outcome.to_dict()))
+    cli_json = dict(cli_json)  # a module-scoped fixture: other tests read the stage
+    stage = cli_json.pop("stage")  # the stage file: what identify found, read back by --params
+    assert [stage["constants"][k] for k in CONSTANT_NAMES] == [
+        d["identified_constants"][k] for k in CONSTANT_NAMES
+    ]
     assert _same_but_timings(d, cli_json)
     for method in ("equation_error", "output_error"):
         assert set(d[method]["timings"]) == set(cli_json[method]["timings"])
@@ -344,7 +355,7 @@ def test_identify_passes_its_options_to_every_method(model, twin_log):
     by_hand = npfsi(shifted, model, eps=0.05, gamma=1.2)
     assert_array_equal(run.trajectory, by_hand.trajectory)
     assert not np.array_equal(run.trajectory, npfsi(twin_log, model, eps=0.05, gamma=1.2).trajectory)
-    assert set(out.timings) == {"equation_error", "npfsi", "total"}
+    assert set(out.timings) == {"equation_error", "npfsi", "validation", "total"}
 
 
 # --- NpfsiResult ----------------------------------------------------------------------------------------

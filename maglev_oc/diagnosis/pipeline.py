@@ -20,7 +20,10 @@ Steps:
 6. :mod:`~maglev_oc.diagnosis.unexplained` — structure left in the residual that no candidate
    explains, reported with its signature;
 7. the refit of base constants and effects together; held-out error per axis before and after,
-   and the short-horizon output error (the model simulated over 50 ms windows).
+   and the short-horizon output error (the model simulated over 50 ms windows);
+8. :mod:`maglev_oc.validation` — the base model and the model with the effects validated on the
+   held-out block: whiteness of the prediction residuals, their independence from past
+   currents, fit % of long simulations.
 """
 
 from __future__ import annotations
@@ -67,6 +70,7 @@ from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_subset, predicted, residuals
 from maglev_oc.results import AXES, Estimate, PerAxis
+from maglev_oc.validation import Validation, validate
 
 __all__ = [
     "DEFAULT_BANDWIDTH",
@@ -168,6 +172,7 @@ def diagnose(
     effects = clock("effects", _effects, session, fitted, library, design, sel)
     final = fitted_model(model, sel.final, data.moving, "diagnose: refit with the effects")
     oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects)
+    val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
     timings["total"] = sum(timings.values())
     status, success, message = _outcome(effects, not_sep, unexplained, sel, data)
     return Diagnosis(
@@ -199,13 +204,15 @@ def diagnose(
             **data.settings,
         },
         timings=timings,
+        validation_before=val_before,
+        validation_after=val_after,
     )
 
 
 class _Clock:
     """Runs a step and adds its wall time to its name's; shows the step on a terminal."""
 
-    STEPS = 7  # prepare, base_fit, selection, waviness, unexplained, effects, output_error
+    STEPS = 8  # prepare, base_fit, selection, waviness, unexplained, effects, output_error, validation
 
     def __init__(self, timings: dict[str, float]) -> None:
         self.timings = timings
@@ -220,7 +227,7 @@ class _Clock:
         if name not in self.seen:
             self.seen.add(name)
             self.bar.update(1)
-        if name == "output_error":
+        if name == "validation":
             self.bar.close()
         return out
 
@@ -399,6 +406,22 @@ def _output_errors(session: _Session, fitted: StageModel, final: StageModel, eff
     """Step 8: the short-horizon output error before (base fit) and after (with the effects)."""
     before = output_error(session.data, session.hold, session.model.with_constants(fitted.constants), [])
     after = output_error(session.data, session.hold, final, [(e.candidate, e.coefficients) for e in effects])
+    return before, after
+
+
+def _validations(
+    session: _Session, fitted: StageModel, final: StageModel, effects: list[Effect]
+) -> tuple[Validation, Validation]:
+    """Last step: the base model and the model with the effects validated on the held-out block."""
+    base = session.model.with_constants(fitted.constants)
+    before = validate(
+        session.data, session.hold, base, description="base model (C1..C4 refitted, no effects)"
+    )
+    terms = [(e.candidate.term, e.coefficients) for e in effects]
+    words = ", ".join(e.name for e in effects) or "none found"
+    after = validate(
+        session.data, session.hold, final, terms, description=f"model with the effects ({words})"
+    )
     return before, after
 
 

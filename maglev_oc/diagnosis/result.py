@@ -14,6 +14,7 @@ from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
+from maglev_oc.validation import Validation
 
 __all__ = ["ERROR_METRIC", "Diagnosis", "Effect", "NotSeparable"]
 
@@ -98,6 +99,8 @@ class Diagnosis(Result):
     holdout: np.ndarray = field(repr=False)
     settings: dict = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    validation_before: Validation | None = None  # the base model on the held-out block
+    validation_after: Validation | None = None  # the model with the effects
 
     @property
     def ranking(self) -> list[tuple[str, float]]:
@@ -141,6 +144,10 @@ class Diagnosis(Result):
             "output_error_metric": "RMS position error of the model simulated over 50 ms windows "
             "from the estimated state with the logged currents, held-out "
             "block, per axis, in m",
+            "validation": {
+                "before": None if self.validation_before is None else self.validation_before.to_dict(),
+                "after": None if self.validation_after is None else self.validation_after.to_dict(),
+            },
             "constants_base": phys_full(self.constants_base),
             "constants_final": phys_full(self.constants_final),
             "rejected": [

@@ -4,8 +4,11 @@
 reading problem is a :class:`~maglev_oc.data.logs.LogError`). :func:`identify` refuses logs
 that cannot identify what is asked (too short, no excitation on an axis whose constants are
 estimated) with a ``LogError`` naming the file and what is missing, then runs the
-equation-error fit, the multiple-shooting output-error fit and the NPFSI estimator, and returns
-an :class:`IdentificationOutcome` (``to_dict()`` for JSON, ``report()`` for text).
+equation-error fit, the multiple-shooting output-error fit and the NPFSI estimator, validates
+the best fit (:mod:`maglev_oc.validation`: residual whiteness, independence from past currents,
+fit % of long simulations) on ``validation_logs`` held out from the fit, or in-sample on the
+fitted logs when none are given, and returns an :class:`IdentificationOutcome` (``to_dict()``
+for JSON, ``report()`` for text).
 
 This is what ``maglev-oc identify`` runs.
 """
@@ -32,9 +35,10 @@ from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.data import as_log_list, delayed_inputs
+from maglev_oc.regression.data import as_log_list, delayed_inputs, prepare
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Result
+from maglev_oc.validation import Validation, validate
 
 __all__ = [
     "HORIZONTAL",
@@ -48,6 +52,9 @@ __all__ = [
 ]
 
 METHODS = ("equation_error", "output_error", "npfsi")
+VALIDATION_BANDWIDTH = 10.0
+"""[Hz] Band of the differentiator that estimates the initial states of the validation's
+simulations (the diagnosis's band: the regulators' poles pass, the encoder steps do not)."""
 MIN_DURATION = 5.0
 """[s] Shortest log accepted for identification: the sum-of-sines excitation's lowest
 frequencies (0.1-0.4 Hz) need a period or more to separate C2 from C3 and C4, and the
@@ -138,6 +145,8 @@ class IdentificationOutcome(Result):
     sources : tuple of str
     timings : mapping method -> s
         Wall times of each method and ``total``.
+    validation : Validation or None
+        The best fit validated (held-out logs when given, else in-sample; see ``data``).
     success, status, message
         From the fits: ``"converged"`` when the best fit did, ``"npfsi_only"`` when only NPFSI
         ran (and stayed well posed), else ``"failed"`` with the solver's reason.
@@ -150,6 +159,7 @@ class IdentificationOutcome(Result):
     estimate: tuple[str, ...]
     sources: tuple[str, ...]
     timings: dict[str, float] = field(default_factory=dict)
+    validation: Validation | None = None
 
     @property
     def success(self) -> bool:
@@ -212,6 +222,7 @@ class IdentificationOutcome(Result):
             "status": self.status,
             "message": self.message,
             "timings": dict(self.timings),
+            "validation": None if self.validation is None else self.validation.to_dict(),
         }
 
 
@@ -228,6 +239,7 @@ def identify(
     window_duration: float = DEFAULT_WINDOW,
     input_delay: float = 0.0,
     min_duration: float = MIN_DURATION,
+    validation_logs: Sequence[Log] = (),
 ) -> IdentificationOutcome:
     """Check the logs, then run the chosen methods.
 
@@ -250,6 +262,9 @@ def identify(
         [s] Delay applied to the logged currents (by every method, NPFSI included).
     min_duration : float
         [s] Shortest log accepted.
+    validation_logs : sequence of Log
+        Logs held out from the fit, to validate it on (default: none; the validation then runs
+        on the fitted logs and says it is in-sample).
 
     Returns
     -------
@@ -301,7 +316,50 @@ def identify(
         for eps in npfsi_eps:
             runs.append(npfsi(log0, model, estimate=constants, eps=eps, gamma=npfsi_gamma))
         times["npfsi"] = time.perf_counter() - t0
-    times["total"] = sum(times.values())
-    return IdentificationOutcome(
+    outcome = IdentificationOutcome(
         ee, oe, tuple(runs), model.constants, estimate, tuple(log.source for log in logs), times
+    )
+    t0 = time.perf_counter()
+    held_out = as_log_list(validation_logs) if validation_logs else []
+    checked = _validation(outcome, model, logs, held_out, tuple(terms), input_delay)
+    times["validation"] = time.perf_counter() - t0
+    times["total"] = sum(v for k, v in times.items() if k != "total")
+    return dataclasses.replace(outcome, timings=times, validation=checked)
+
+
+def _validation(
+    outcome: IdentificationOutcome,
+    model: StageModel,
+    logs: list[Log],
+    held_out: list[Log],
+    terms: tuple[AccelerationTerm, ...],
+    input_delay: float,
+) -> Validation:
+    """The best fit (its constants, terms and gap offset) validated on ``held_out``, or in-sample on
+    ``logs`` when there are none."""
+    use = held_out or logs
+    if input_delay:
+        use = [dataclasses.replace(log, u=delayed_inputs(log, input_delay)) for log in use]
+    data = prepare(use, bandwidth=VALIDATION_BANDWIDTH)
+    fit = outcome.best
+    fitted = model.with_constants(outcome.constants())
+    fitted_terms, offset = [], 0.0
+    if fit is not None:
+        offset = fit.values.get(GAP_OFFSET, 0.0)
+        for term in terms:
+            fitted_terms.append((term, [fit.values[f"{term.name}.{p}"] for p in term.parameter_names]))
+    where = (
+        "held-out logs " + ", ".join(log.source for log in held_out)
+        if held_out
+        else "the fitted logs (in-sample: no held-out log was given)"
+    )
+    method = fit.method if fit is not None else "NPFSI"
+    return validate(
+        data,
+        data.valid,
+        fitted,
+        fitted_terms,
+        description=f"identified constants ({method})",
+        data_description=where,
+        gap_offset=offset,
     )

@@ -21,6 +21,7 @@ import numpy as np
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.reporting import diagnosis_plots as plots
+from maglev_oc.reporting import validation_plots
 from maglev_oc.reporting.diagnosis_plots import plain
 from maglev_oc.reporting.pdf import (
     MIN_FILL,
@@ -31,6 +32,7 @@ from maglev_oc.reporting.pdf import (
     Text,
     block_height,
     page_room,
+    wrap_cells,
 )
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
@@ -376,13 +378,11 @@ def write_diagnosis_report(
             held_out,
         )
         verdict_part: Part = ("Every candidate and its verdict", [verdicts])
-        _pack(
-            pdf,
-            [
-                [found_part, residual_part, held_part, verdict_part],
-                [found_part, verdict_part, residual_part, held_part],
-            ],
-        )
+        parts = [found_part, residual_part, held_part, verdict_part]
+        checks = _validation_part(diag)
+        if checks is not None:
+            parts.append(checks)
+        _pack(pdf, [parts, [found_part, verdict_part, residual_part, held_part, *parts[4:]]])
         times = {
             **(timings or {}),
             **{f"diagnosis: {k.replace('_', ' ')}": v for k, v in diag.timings.items()},
@@ -404,6 +404,31 @@ def write_diagnosis_report(
             ],
         )
     return pdf.contents
+
+
+def _validation_part(diag: Diagnosis) -> Part | None:
+    """The validation page: residual correlations with their bands and the fit % table, base model
+    and model with the effects, on the held-out block."""
+    runs = {
+        "base model": diag.validation_before,
+        "with the effects": diag.validation_after,
+    }
+    runs = {k: v for k, v in runs.items() if v is not None}
+    if not runs:
+        return None
+    return (
+        "Validation on the held-out block: residual whiteness and fit",
+        [
+            Plot(validation_plots.correlation_plot(runs), 0.42),
+            Table(
+                "",
+                validation_plots.FIT_COLUMNS,
+                wrap_cells(validation_plots.fit_rows(runs), (18, 10, 34, 22, 26)),
+                notes=[validation_plots.FIT_NOTE],
+                font_size=7.5,
+            ),
+        ],
+    )
 
 
 _SETTING_WORDS = {
