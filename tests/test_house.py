@@ -19,6 +19,7 @@ LAYERS = {
     "results": 0,
     "units": 0,
     "numerics": 0,
+    "expressions": 0,
     "fileio": 0,
     "progress": 0,
     "model": 1,
@@ -27,6 +28,7 @@ LAYERS = {
     "control": 4,
     "sim": 5,
     "regression": 6,
+    "validation": 6.5,  # residual tests on the regression layer's data; used by identification, diagnosis
     "identification": 7,
     "region": 7,
     "diagnosis": 8,

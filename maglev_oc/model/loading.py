@@ -1,5 +1,7 @@
-"""The model a user names: a stage file (JSON, :func:`~maglev_oc.model.parameters.save_json`) or
-the papers' parameters, optionally with one of the papers' constant sets."""
+"""The model a user names: a stage file (:mod:`maglev_oc.model.stagefile`, or the output of
+``identify``/``diagnose --json`` that holds one), the older stage/constants JSON
+(:func:`~maglev_oc.model.parameters.save_json`), or the papers' parameters, optionally with one of
+the papers' constant sets."""
 
 from __future__ import annotations
 
@@ -19,7 +21,10 @@ def load_model(params_path: str | os.PathLike | None = None, constants: str | No
     Parameters
     ----------
     params_path : path, optional
-        JSON with optional sections ``stage`` (fields of StageParameters, SI) and ``constants``.
+        A stage file (``format: maglev_oc.stage``; its geometry and constants, the effects are
+        read by :func:`maglev_oc.model.stagefile.stage_effects`), a command's ``--json`` output with one
+        under ``stage``, or the older JSON with optional sections ``stage`` (fields of
+        StageParameters, SI) and ``constants``.
     constants : str, optional
         One of the papers' constant sets by name (replaces the file's constants).
 
@@ -37,7 +42,13 @@ def load_model(params_path: str | os.PathLike | None = None, constants: str | No
             raise InputError(f"{params_path}: is a directory; --params takes a stage file (JSON)")
         if not Path(params_path).is_file():
             raise InputError(f"{params_path}: no such file")
-        params, consts = load_json(params_path)
+        from maglev_oc.model.stagefile import StageFile, holds_stage_file
+
+        if holds_stage_file(params_path):
+            stage = StageFile.read(params_path)
+            params, consts = stage.geometry, stage.constants
+        else:
+            params, consts = load_json(params_path)
     else:
         params, consts = StageParameters(), DEFAULT_CONSTANTS
     if constants is not None:
