@@ -1,0 +1,183 @@
+"""Experiment design (issue 15, part 3): signals, feasibility, files, D-optimality, the twin check."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import scipy.io
+from numpy.testing import assert_allclose
+
+from maglev_oc.cli import main
+from maglev_oc.identification.design import (
+    CurrentBudget,
+    ExperimentDesigner,
+    MultisineShape,
+    check_on_twin,
+    crest_factor,
+    design_experiment,
+    multisine,
+    papers_reference,
+    prbs,
+    read_reference,
+    write_design,
+)
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
+
+DURATION = 20.0
+"""[s] Short designs for the quick tests (a 20 s twin run costs about 1 s)."""
+SMALL_GRID = (MultisineShape((0.1, 3.0), 6, 0.5), MultisineShape((0.2, 2.0), 8, 1.0))
+
+
+@pytest.fixture(scope="module")
+def designer(model) -> ExperimentDesigner:
+    return ExperimentDesigner(model)
+
+
+@pytest.fixture(scope="module")
+def doptimal(model, designer):
+    return design_experiment("doptimal", DURATION, model=model, designer=designer, grid=SMALL_GRID)
+
+
+@pytest.mark.parametrize("n", [4, 8, 16, 32, 64])
+def test_schroeder_crest_factor_below_bound_where_zero_phases_give_sqrt_2n(n):
+    h = np.arange(1, n + 1)
+    a = np.ones(n)
+    # cosines in phase (sin + pi/2) all peak at t = 0: peak n, RMS sqrt(n / 2), crest sqrt(2 n)
+    _, cf_aligned = multisine(h, a, phases=np.full(n, math.pi / 2))
+    assert_allclose(cf_aligned, math.sqrt(2 * n), rtol=1e-9)  # closed form; grid hits t = 0 exactly
+    _, cf_schroeder = multisine(h, a)
+    # Schroeder's phases keep the crest factor near 1.7 whatever n (measured 1.71-1.89 for n = 4-64;
+    # small n are the worst): far below sqrt(2 n) = 2.8-11.3
+    assert cf_schroeder < 1.95
+    # the clipping passes the designs use (4-6) bring every n below 1.8 (measured 1.64-1.71)
+    _, cf_clipped = multisine(h, a, clip_passes=6)
+    assert cf_clipped < 1.8
+    assert cf_clipped <= cf_schroeder + 1e-12  # the passes keep the best phases
+    assert crest_factor(np.sin(np.linspace(0, 2 * math.pi, 10001)[:-1])) == pytest.approx(
+        math.sqrt(2), rel=1e-6
+    )
+
+
+@pytest.mark.parametrize("order", [5, 7, 10])
+def test_prbs_period_and_flat_spectrum(order):
+    seq = prbs(order, seed=3)
+    n = 2**order - 1
+    assert seq.shape == (n,) and set(np.unique(seq)) == {-1.0, 1.0}
+    # periodic autocorrelation of a maximum-length sequence: n at lag 0, -1 elsewhere
+    acf = np.array([seq @ np.roll(seq, k) for k in range(n)])
+    assert acf[0] == n and np.all(acf[1:] == -1)
+    # hence |DFT|^2 = n + 1 off zero frequency and 1 at zero (exact in integers: rounding only)
+    power = np.abs(np.fft.fft(seq)) ** 2
+    assert_allclose(power[0], 1.0, atol=1e-8)
+    assert_allclose(power[1:], n + 1, rtol=1e-10)
+
+
+def test_doptimal_inside_feasibility_set_and_budget(doptimal, designer):
+    ref = doptimal.reference
+    fs = designer.feasible
+    assert fs.gap[0] <= ref.values[0].min() and ref.values[0].max() <= fs.gap[1]
+    assert fs.position[0] <= ref.values[3].min() and ref.values[3].max() <= fs.position[1]
+    pred = doptimal.prediction
+    assert pred.success, pred.message
+    assert pred.peak_current[0] <= doptimal.budget.horizontal * (1 + 1e-9)
+    assert pred.peak_current[1] <= doptimal.budget.vertical * (1 + 1e-9)
+    assert np.all(pred.peak_current < PEAK_CURRENT_LIMIT)
+
+
+def test_doptimal_log_det_at_least_papers(doptimal):
+    """Same duration, same current budget (the papers' excitation's own peaks). The papers'
+    excitation is in the searched family (the incumbent), so this checks that the search and the
+    scaling to the budget never return a worse design."""
+    assert doptimal.baseline is not None
+    assert doptimal.prediction.log_det >= doptimal.baseline.log_det
+    assert doptimal.budget.vertical == pytest.approx(doptimal.baseline.peak_current[1])
+    assert doptimal.budget.horizontal == pytest.approx(doptimal.baseline.peak_current[0])
+
+
+def test_gap_sweep_stays_feasible_on_rig_twin_under_9_A(model, designer):
+    design = design_experiment("gap_sweep", DURATION, model=model, designer=designer)
+    assert "constant_force_vertical.force" in design.targets and "C2" in design.targets
+    assert design.prediction.success, design.prediction.message
+    assert (
+        design.reference.values[0].min() >= 10e-3 - 1e-12
+        and design.reference.values[0].max() <= 25e-3 + 1e-12
+    )
+    check = check_on_twin(design.reference, design.prediction, model=model, seeds=(0,))
+    assert check.success, check.message
+    assert np.all(check.peak_current < PEAK_CURRENT_LIMIT)
+    # the sweep separates the force from C2 better than the papers' excitation (predicted)
+    ratio = design.improvement()
+    assert ratio["constant_force_vertical.force"] < 1 and ratio["C2"] < 1
+
+
+def test_reference_files_round_trip(doptimal, tmp_path):
+    paths = write_design(tmp_path / "out", doptimal)
+    ref = doptimal.reference
+    for kind in ("csv", "mat"):
+        back = read_reference(paths[kind])
+        assert_allclose(back.t, ref.t, rtol=0, atol=0)  # %.17g and float64 .mat are exact
+        assert_allclose(back.values, ref.values, rtol=0, atol=0)
+    lines = paths["csv"].read_text().splitlines()
+    assert any(line.startswith("# units: SI") for line in lines)
+    assert "t,r_gap,r_position" in next(line for line in lines if not line.startswith("#"))
+    mat = scipy.io.loadmat(paths["mat"])
+    assert mat["__header__"].startswith(b"MATLAB 5.0")
+    assert_allclose(mat["r_gap"].ravel(), ref.values[0], rtol=0, atol=0)
+    summary = json.loads(paths["json"].read_text())
+    assert summary["targets"] == ["C1", "C2", "C3", "C4"]
+    assert set(summary["predicted"]["stderr"]) == {"C1", "C2", "C3", "C4"}
+    assert not list((tmp_path / "out").glob(".*"))  # no temporary files left
+
+
+def test_cli_bad_options_are_clear_errors(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["design-experiment", "--kind", "chirp", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
+    assert main(["design-experiment", "--duration", "-5", "--out", str(tmp_path / "d")]) == 2
+    assert "--duration must be between" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["design-experiment", "--out", str(tmp_path / "file")]) == 2
+    assert "is a file" in capsys.readouterr().err
+
+
+def test_cli_writes_reference_mat_and_json(tmp_path):
+    out = tmp_path / "design"
+    assert main(["design-experiment", "--kind", "multisine", "--duration", "15", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["design.json", "reference.csv", "reference.mat"]
+    assert read_reference(out / "reference.csv").duration == pytest.approx(15.0)
+
+
+def test_budget_validation():
+    with pytest.raises(ValueError, match=r"CurrentBudget\.vertical"):
+        CurrentBudget(vertical=12.0)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        design_experiment("chirp", 20.0)
+    with pytest.raises(ValueError, match="duration"):
+        papers_reference(1.0)
+
+
+@pytest.mark.slow
+def test_designed_experiment_beats_papers_on_twin(model, designer):
+    """On the rig twin (encoders, amplifiers, TWIN_TRUTH), 60 s, the papers' current budget: the
+    D-optimal design's achieved (HAC) standard errors, averaged over three seeds, are below the
+    papers' excitation's.
+
+    bench/README (60 s, 3 seeds) measured ratios 0.75 (C1), 0.50 (C2), 0.60 (C3), 0.63 (C4). The HAC
+    standard error of one 60 s log scatters by about 20 % (2 m = 30 degrees of freedom,
+    maglev_oc/regression/covariance.py), about 12 % for a mean of three: C2..C4 are held to 0.85,
+    C1 (the smallest gain) only to 1.0. The grid is cut to the bench's winning shapes (speed).
+    """
+    grid = (MultisineShape((0.1, 3.0), 6, 0.5), MultisineShape((0.2, 4.0), 8, 1.0))
+    design = design_experiment("doptimal", 60.0, model=model, designer=designer, grid=grid)
+    assert design.settings["vertical"] != "papers' sum of sines"
+    seeds = (0, 1, 2)
+    mine = check_on_twin(design.reference, design.prediction, model=model, seeds=seeds)
+    papers = check_on_twin(papers_reference(60.0), design.baseline, model=model, seeds=seeds)
+    ratio = {n: mine.achieved[n] / papers.achieved[n] for n in design.targets}
+    assert ratio["C1"] < 1.0, ratio
+    for name in ("C2", "C3", "C4"):
+        assert ratio[name] < 0.85, ratio
