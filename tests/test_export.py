@@ -1,0 +1,265 @@
+"""The C export of the controllers (maglev_oc.control.export, ``maglev-oc export``).
+
+Each exported directory is compiled here as a user would (C99, warnings as errors on the
+interface), loaded with ctypes, and replayed against the Python controller on the same readings
+and references: the same operations in the same order in IEEE arithmetic, so the commands agree
+to round-off (1e-9 A absolute, far below the amplifiers' resolution). The objects are checked to
+call nothing beyond libm and the C library's memory functions: no heap allocation, no printing.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import json
+import subprocess
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from maglev_oc.cli import main
+from maglev_oc.control.export import export_controller, initial_state_map
+from maglev_oc.control.registry import build_controller
+from maglev_oc.errors import InputError
+from maglev_oc.numerics import c_compiler
+from maglev_oc.sim.engine import ClosedLoop
+from maglev_oc.sim.scenarios import paper_scenarios
+from maglev_oc.sim.twin import RigTwin
+
+pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler to build the export")
+
+ALLOWED_UNDEFINED = {
+    # libm
+    *"atan atan2 cos cosh exp fabs floor ceil fmax fmin fmod log pow sin sinh sqrt tan tanh".split(),
+    # the C library's memory functions (the compiler may call them for struct copies)
+    "memcpy",
+    "memset",
+    "memmove",
+}
+TOLERANCE_A = 1e-9
+
+
+def _build(export, tmp_path, flags=("-O1",)) -> ctypes.CDLL:
+    cc = c_compiler()
+    objects = []
+    for src in export.sources:
+        obj = tmp_path / (src.stem + ".o")
+        # -std=c99 -Wall -Werror on every file (the issue's bar); the interface also -Wextra
+        # -pedantic (CasADi's generated code has unused parameters by design)
+        extra = ["-Wextra", "-pedantic"] if src.name == f"{export.prefix}.c" else []
+        cmd = [cc, "-std=c99", "-Wall", "-Werror", *extra]
+        cmd += [*flags, "-fPIC", "-c", str(src), "-o", str(obj)]
+        subprocess.run(cmd, check=True, capture_output=True)
+        objects.append(obj)
+    undefined = set()
+    for obj in objects:
+        out = subprocess.run(["nm", "-u", str(obj)], check=True, capture_output=True, text=True).stdout
+        undefined |= {line.split()[-1] for line in out.splitlines() if line.strip()}
+    undefined -= {f"{export.prefix}_start", f"{export.prefix}_update"}
+    assert undefined <= ALLOWED_UNDEFINED, undefined - ALLOWED_UNDEFINED
+    lib = tmp_path / f"lib{export.prefix}.so"
+    link = [cc, "-shared", *map(str, objects), "-o", str(lib), "-lm"]
+    subprocess.run(link, check=True, capture_output=True)
+    return ctypes.CDLL(str(lib))
+
+
+class _Exported:
+    """The exported controller through its C interface."""
+
+    def __init__(self, lib: ctypes.CDLL, prefix: str):
+        self.size = getattr(lib, f"{prefix}_mem_size")
+        self.size.restype = ctypes.c_size_t
+        self.mem = ctypes.create_string_buffer(self.size())
+        dbl = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
+        self._init = getattr(lib, f"{prefix}_init")
+        self._init.argtypes = [ctypes.c_void_p, dbl, dbl, dbl]
+        self._step = getattr(lib, f"{prefix}_step")
+        self._step.argtypes = [ctypes.c_void_p, dbl, dbl, dbl]
+
+    def init(self, y0, r0, u0) -> int:
+        return self._init(self.mem, *(np.ascontiguousarray(v, dtype=float) for v in (y0, r0, u0)))
+
+    def step(self, y, r) -> tuple[int, np.ndarray]:
+        u = np.zeros(2)
+        y, r = (np.ascontiguousarray(v, dtype=float) for v in (y, r))
+        flag = self._step(self.mem, y, r, u)
+        return flag, u
+
+
+class _InTheLoop:
+    """The exported C as the engine's online controller: stepped through ctypes each sample."""
+
+    def __init__(self, exported: _Exported, ctrl):
+        self.c, self.name = exported, f"{ctrl.name} (exported C)"
+        self.sample_time, self.diag_names = ctrl.sample_time, ctrl.diag_names
+        self._diag_offset = 2 * ctrl.n_state * 8  # after c and c_next in the memory struct
+
+    def reset(self, y0, r0, u0) -> None:
+        assert self.c.init(y0, r0, u0) == 0
+
+    def control(self, k, y, reference):
+        flag, u = self.c.step(y, reference[:, k])
+        assert flag == 0
+        n = len(self.diag_names)
+        return u, np.frombuffer(self.c.mem, dtype=np.float64, count=n, offset=self._diag_offset).copy()
+
+
+@pytest.mark.parametrize("name", ["fl", "pid"])
+def test_exported_controller_in_closed_loop_with_the_twin_tracks_like_python(model, tmp_path, name):
+    # the export drives the rig twin (noise, 10 um encoders, amplifier limits, friction) through
+    # ctypes; the runs agree with the Python controller's: the same commands to round-off, so the
+    # same trajectory (1e-9 m: round-off grown through 1.5 s of a stable loop) and diagnostics
+    ctrl = build_controller(name, model)
+    export = export_controller(ctrl, tmp_path / "export")
+    c = _Exported(_build(export, tmp_path), export.prefix)
+    sc = dataclasses.replace(paper_scenarios()["setpoint_steps"], duration=1.5)
+    py = ClosedLoop(RigTwin(model), ctrl).run(sc)
+    cc = ClosedLoop(RigTwin(model), _InTheLoop(c, ctrl)).run(sc)
+    assert py.success and cc.success
+    assert np.max(np.abs(cc.u - py.u)) < 1e-6
+    assert np.max(np.abs(cc.x - py.x)) < 1e-9
+    np.testing.assert_allclose(cc.diag, py.diag, atol=1e-6)
+
+
+def _recorded(ctrl, model, seconds: float):
+    """Readings and references of a closed-loop run of ``ctrl`` on the rig twin (the papers'
+    set-point steps: transients, steps and the encoder's quantized readings)."""
+    sc = dataclasses.replace(paper_scenarios()["setpoint_steps"], duration=seconds)
+    res = ClosedLoop(RigTwin(model), ctrl).run(sc)
+    return res.y, res.reference
+
+
+def _python_commands(ctrl, y, r, c0):
+    c, out = np.asarray(c0, dtype=float), []
+    for k in range(y.shape[1]):
+        u, c, _ = ctrl.step(c, y[:, k], r[:, k])
+        out.append(np.asarray(u).ravel())
+        c = np.asarray(c).ravel()
+    return np.array(out).T
+
+
+@pytest.mark.parametrize("name", ["fl", "linear", "lqr", "pid"])
+def test_exported_controller_gives_the_python_commands(model, tmp_path, name):
+    ctrl = build_controller(name, model)
+    export = export_controller(ctrl, tmp_path / "export")
+    lib = _build(export, tmp_path)
+    c = _Exported(lib, export.prefix)
+    assert c.size() == export.memory_bytes  # the struct's size as the export reports it
+    y, r = _recorded(ctrl, model, 1.5)  # 7500 samples at 5 kHz, through the step at t = 1 s
+    u0 = np.array([0.3, 1.2])
+    assert c.init(y[:, 0], r[:, 0], u0) == 0
+    got = np.array([c.step(y[:, k], r[:, k])[1] for k in range(y.shape[1])]).T
+    want = _python_commands(ctrl, y, r, ctrl.initial_state(y[:, 0], r[:, 0], u0))
+    assert np.max(np.abs(got - want)) < TOLERANCE_A
+    # reset starts over: the same first commands again, no state left from the run
+    assert c.init(y[:, 0], r[:, 0], u0) == 0
+    again = np.array([c.step(y[:, k], r[:, k])[1] for k in range(50)]).T
+    np.testing.assert_array_equal(again, got[:, :50])
+
+
+def test_the_start_map_is_the_controllers_initial_state(model):
+    ctrl = build_controller("pid", model)
+    A, b = initial_state_map(ctrl)
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        y0, r0, u0 = rng.normal(size=2) * 0.02, rng.normal(size=6) * 0.02, rng.normal(size=2) * 3
+        np.testing.assert_allclose(A @ np.r_[y0, r0, u0] + b, ctrl.initial_state(y0, r0, u0), atol=1e-15)
+
+
+def test_a_start_that_is_not_affine_is_refused(model):
+    ctrl = build_controller("fl", model)
+
+    class Squared:
+        name, n_state, diag_names, step, sample_time = (
+            ctrl.name,
+            ctrl.n_state,
+            ctrl.diag_names,
+            ctrl.step,
+            ctrl.sample_time,
+        )
+
+        def initial_state(self, y0, r0, u0):
+            return ctrl.initial_state(np.asarray(y0) ** 2, r0, u0)
+
+    with pytest.raises(InputError, match="not affine"):
+        initial_state_map(Squared())
+
+
+def test_export_is_written_whole_and_refuses_foreign_directories(model, tmp_path):
+    ctrl = build_controller("pid", model)
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep me")
+    with pytest.raises(InputError, match="not an export directory"):
+        export_controller(ctrl, foreign)
+    assert (foreign / "notes.txt").read_text() == "keep me"
+    out = tmp_path / "pid"
+    export_controller(ctrl, out)
+    first = (out / f"{json.loads((out / 'export.json').read_text())['prefix']}.c").read_text()
+    export_controller(ctrl, out)  # an export is replaced by a new one, whole
+    manifest = json.loads((out / "export.json").read_text())
+    assert manifest["format"] == "maglev_oc.export" and manifest["sample_time"] == ctrl.sample_time
+    assert (out / f"{manifest['prefix']}.c").read_text() == first
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # no leftovers
+
+
+def test_cli_exports_and_refuses_unknown_controllers(tmp_path, capsys):
+    assert main(["export", "pid", "--out", str(tmp_path / "pid")]) == 0
+    assert (tmp_path / "pid" / "README.md").is_file()
+    assert "maglev_pid_step" in capsys.readouterr().out
+    assert main(["export", "nope", "--out", str(tmp_path / "x")]) == 2
+    assert "unknown controller" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_cli_export_params_and_prefix_are_the_controller_and_its_names(model, tmp_path, capsys):
+    # --params: the exported LQR is the one designed on the file's constants (here C3 20 % low:
+    # other equilibrium currents and gains), step for step; --prefix names every symbol.
+    from maglev_oc.model.loading import load_model
+    from maglev_oc.model.parameters import StageParameters, save_json
+
+    weak = model.constants.replace(C3=0.8 * model.constants.C3, source="test: C3 20 % low")
+    stage = save_json(tmp_path / "weak.json", StageParameters(), weak)
+    out = tmp_path / "rig"
+    assert main(["export", "lqr", "--out", str(out), "--params", str(stage), "--prefix", "rig_lqr"]) == 0
+    capsys.readouterr()
+    manifest = json.loads((out / "export.json").read_text())
+    assert manifest["prefix"] == "rig_lqr" and (out / "rig_lqr.c").is_file()
+    assert "maglev_lqr" not in "".join(p.read_text() for p in out.iterdir() if p.suffix in (".c", ".h"))
+    export = SimpleNamespace(prefix="rig_lqr", sources=[out / name for name in manifest["sources"]])
+    c = _Exported(_build(export, tmp_path), "rig_lqr")
+    ctrl = build_controller("lqr", load_model(stage))
+    y, r = _recorded(ctrl, load_model(stage), 0.2)
+    u0 = np.array([0.0, 1.9])
+    assert c.init(y[:, 0], r[:, 0], u0) == 0
+    got = np.array([c.step(y[:, k], r[:, k])[1] for k in range(y.shape[1])]).T
+    want = _python_commands(ctrl, y, r, ctrl.initial_state(y[:, 0], r[:, 0], u0))
+    assert np.max(np.abs(got - want)) < TOLERANCE_A
+    papers = build_controller("lqr", model)  # what an ignored --params would have exported
+    other = _python_commands(papers, y, r, papers.initial_state(y[:, 0], r[:, 0], u0))
+    assert np.max(np.abs(other - want)) > 0.1  # the holding current alone differs by 0.4 A
+
+
+@pytest.mark.slow
+def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, tmp_path):
+    # The NMPC's real-time iteration with qrqp, exported self-contained (1.3 MB of C), against the
+    # same Function in CasADi's virtual machine on the large step's first 0.1 s: the current
+    # constraints are active there, so the QP's active set is exercised, not only its solution.
+    from maglev_oc.control.nmpc import NonlinearMPC
+    from maglev_oc.sim.compiled_nmpc import CompiledNMPC
+
+    ctrl = CompiledNMPC(NonlinearMPC(model, preview=False, qp_solver="qrqp"), backend="vm")
+    export = export_controller(ctrl, tmp_path / "nmpc")
+    lib = _build(export, tmp_path)
+    c = _Exported(lib, export.prefix)
+    sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.1)
+    res = ClosedLoop(RigTwin(model), ctrl).run(sc)
+    active = res.diagnostic("active_constraints")
+    assert np.max(active) > 0
+    y, r = res.y, res.reference
+    u0 = np.zeros(2)
+    assert c.init(y[:, 0], r[:, 0], u0) == 0
+    got = np.array([c.step(y[:, k], r[:, k])[1] for k in range(y.shape[1])]).T
+    want = _python_commands(ctrl, y, r, ctrl.initial_state(y[:, 0], r[:, 0], u0))
+    assert np.max(np.abs(got - want)) < TOLERANCE_A

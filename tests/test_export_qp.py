@@ -1,0 +1,210 @@
+"""Exact QP answers (issue 20, item 3): the first current of the NMPC's QP solution against an
+independent solver, on every QP of the large step's constrained samples.
+
+The QPs are recorded along the default NMPC's run on the rig twin (the large step, first 0.1 s):
+at each sample, the QP data the RTI step forms from its memory, the reading and the reference
+(``Transcription.qp_data_function`` at the observer's estimate, as in
+:func:`maglev_oc.control.nmpc.rti.rti_step_function`), kept where the unconstrained Riccati
+step violates a bound, i.e. where the step calls the QP solver (54 of the 500 samples: the
+first 54).
+
+The reference solution is qpOASES's (an active-set method, through ``casadi.conic``): checked
+here against the QP's optimality conditions in numpy (stationarity, feasibility, multiplier
+signs), and cross-checked by Clarabel (an interior point method, another code base) called
+directly. Compared in the first current u_0 [A] (the only part of the solution applied):
+
+=============================================  ========================  =====================
+solver (recorded 54 QPs, CasADi 3.8.2)         max |u_0 - u_0 qpOASES|   QPs off by > 1e-4 A
+=============================================  ========================  =====================
+qrqp, as in the export (``qp_solver="qrqp"``)  3.4e-14 A                 0
+Clarabel 0.11, tolerances 1e-9                 3.8e-5 A                  0
+HPIPM, default NonlinearMPC options, cold      0.070 A (sample 49)       21
+=============================================  ========================  =====================
+
+HPIPM's answer (mode "speed_abs", the default the rest of the code relies on) is off by up to
+0.07 A (samples 48-52: 0.031-0.070 A), more than the 0.037 A the issue measured; its default
+settings are not changed here, and its test is an expected failure until they are. Measured
+alternatives on the same QPs: mode "robust" is within 4.6e-5 A of the exact answer (about 6
+iterations against 5) but runs into the 30-iteration limit on a QP of tests/test_nmpc.py
+(status "qp_accepted"); mode "balance" is within 5.5e-4 A (one QP above 1e-4 A). The lasting fix
+is scaling the first interval's input, whose small weight meets the absolute tolerance early.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from maglev_oc.control.nmpc import NonlinearMPC
+from maglev_oc.control.nmpc.rti import qp_solver_function, rti_parts
+from maglev_oc.sim.engine import ClosedLoop
+from maglev_oc.sim.scenarios import paper_scenarios
+from maglev_oc.sim.twin import RigTwin
+
+TOLERANCE_A = 1e-4  # the issue's bar on the first current
+_QP = ("h", "g", "a", "lba", "uba", "lbx", "ubx")
+
+
+class _Recorder:
+    """The controller in the loop, its memory, reading and node references kept at every sample."""
+
+    def __init__(self, ctrl: NonlinearMPC):
+        self.ctrl, self.name, self.sample_time = ctrl, ctrl.name, ctrl.sample_time
+        self.diag_names = ctrl.diag_names
+        self.samples: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def reset(self, y0, r0, u0) -> None:
+        self.ctrl.reset(y0, r0, u0)
+
+    def control(self, k, y, reference):
+        self.samples.append(
+            (self.ctrl.memory, np.array(y, dtype=float), self.ctrl.node_references(k, reference))
+        )
+        return self.ctrl.control(k, y, reference)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Recorded:
+    qps: list[dict[str, ca.DM]]  # the QPs the step solved, inputs of casadi.conic
+    u_scale: np.ndarray  # the first current's scale in the QP's variables [A per unit]
+    nmpc: NonlinearMPC
+    qp_data: ca.Function
+
+
+@pytest.fixture(scope="module")
+def recorded(model) -> _Recorded:
+    nmpc = NonlinearMPC(model)  # the defaults: HPIPM, the Riccati shortcut
+    rec = _Recorder(nmpc)
+    sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.1)
+    assert ClosedLoop(RigTwin(model), rec).run(sc).success
+    # the RTI step's QP data and shortcut test, from the controller's own parts (private: the
+    # step itself is one Function that does not expose its QP)
+    ocp, observer, layout = nmpc._ocp, nmpc._observer, nmpc._layout
+    parts = rti_parts(ocp, observer, nmpc.shift)
+    mem = ca.MX.sym("memory", nmpc.n_memory)
+    y = ca.MX.sym("y", 2)
+    ref = ca.MX.sym("ref", 6, nmpc.grid.horizon + 1)
+    x0 = observer.state_estimate(mem[layout.observer], y)
+    data = parts.qp_data(mem[layout.plan], x0, mem[layout.disturbance], ref)
+    _, feasible = parts.riccati(*data[:7])
+    record = ca.Function("record", [mem, y, ref], [*data[:7], feasible])
+    qps = []
+    for sample in rec.samples:
+        *qp, shortcut = record(*sample)
+        if not float(shortcut):
+            qps.append(dict(zip(_QP, qp, strict=True)))
+    return _Recorded(qps, ocp.z_scale[:2], nmpc, parts.qp_data)
+
+
+def _solve(conic: ca.Function, qp: dict[str, ca.DM]) -> dict[str, np.ndarray]:
+    nz, na = qp["g"].numel(), qp["lba"].numel()
+    # cold start, as in the RTI step
+    sol = conic(**qp, x0=ca.DM.zeros(nz), lam_x0=ca.DM.zeros(nz), lam_a0=ca.DM.zeros(na))
+    return {key: np.array(sol[key]).ravel() for key in ("x", "lam_x", "lam_a")}
+
+
+def _reference(recorded: _Recorded) -> list[dict[str, np.ndarray]]:
+    sparsity = {"h": recorded.qp_data.sparsity_out("H"), "a": recorded.qp_data.sparsity_out("A")}
+    qpoases = ca.conic("reference", "qpoases", sparsity, {"printLevel": "none", "error_on_fail": False})
+    return [_solve(qpoases, qp) for qp in recorded.qps]
+
+
+def _dense(qp: dict[str, ca.DM]) -> dict[str, np.ndarray]:
+    out = {key: np.array(ca.DM(v).full()) for key, v in qp.items()}
+    return {key: (v if key in ("h", "a") else v.ravel()) for key, v in out.items()}
+
+
+def _assert_optimal(qp: dict[str, np.ndarray], sol: dict[str, np.ndarray]) -> None:
+    """The KKT conditions of min 1/2 x'Hx + g'x s.t. lba <= Ax <= uba, lbx <= x <= ubx in
+    CasADi's convention (a positive multiplier: the upper bound is active, negative: the lower):
+    stationarity, feasibility and complementarity to 1e-9 of the data's scale (qpOASES reaches
+    1e-14: an active-set method solves the KKT system of its final active set directly)."""
+    h, g, a = qp["h"], qp["g"], qp["a"]
+    x, lam_x, lam_a = sol["x"], sol["lam_x"], sol["lam_a"]
+    scale = max(1.0, np.max(np.abs(g)), np.max(np.abs(h @ x)))
+    assert np.max(np.abs(h @ x + g + a.T @ lam_a + lam_x)) < 1e-9 * scale
+    ax = a @ x
+    assert np.all(ax >= qp["lba"] - 1e-9) and np.all(ax <= qp["uba"] + 1e-9)
+    assert np.all(x >= qp["lbx"] - 1e-9) and np.all(x <= qp["ubx"] + 1e-9)
+    tol = 1e-9 * max(1.0, np.max(np.abs(lam_a)), np.max(np.abs(lam_x)))
+    for value, lam, lo, up in ((ax, lam_a, qp["lba"], qp["uba"]), (x, lam_x, qp["lbx"], qp["ubx"])):
+        assert np.all(np.abs(value - up)[lam > tol] < 1e-9)
+        assert np.all(np.abs(value - lo)[lam < -tol] < 1e-9)
+
+
+def _clarabel(qp: dict[str, np.ndarray]) -> np.ndarray:
+    """Clarabel on the same QP: equality rows in the zero cone, the finite one-sided rows in the
+    nonnegative cone (tolerances 1e-9: at 1e-12 it stalls on these QPs, InsufficientProgress)."""
+    import clarabel
+
+    n = qp["g"].size
+    eq = qp["lba"] == qp["uba"]
+    blocks, rhs = [qp["a"][eq]], [qp["uba"][eq]]
+    for m, lo, up in ((qp["a"][~eq], qp["lba"][~eq], qp["uba"][~eq]), (np.eye(n), qp["lbx"], qp["ubx"])):
+        has_up, has_lo = np.abs(up) < 1e19, np.abs(lo) < 1e19  # the QP writes "no bound" as 1e20
+        blocks += [m[has_up], -m[has_lo]]
+        rhs += [up[has_up], -lo[has_lo]]
+    a, b = sp.csc_matrix(np.vstack(blocks)), np.concatenate(rhs)
+    cones = [clarabel.ZeroConeT(int(eq.sum())), clarabel.NonnegativeConeT(b.size - int(eq.sum()))]
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-9
+    p = sp.triu(sp.csc_matrix(0.5 * (qp["h"] + qp["h"].T))).tocsc()
+    sol = clarabel.DefaultSolver(p, qp["g"], a, b, cones, settings).solve()
+    assert str(sol.status) in ("Solved", "AlmostSolved"), sol.status
+    return np.array(sol.x)
+
+
+def _first_current_errors(recorded: _Recorded, solutions, reference) -> np.ndarray:
+    """|u_0 - u_0 reference| [A] per QP (the larger of the two currents)."""
+    return np.array(
+        [
+            np.max(np.abs(s[:2] - r["x"][:2]) * recorded.u_scale)
+            for s, r in zip(solutions, reference, strict=True)
+        ]
+    )
+
+
+def test_the_recorded_qps_are_the_constrained_samples_and_the_reference_is_optimal(recorded):
+    # the large step starts with the currents at their limits: the QP is solved on 54 of the
+    # first 500 samples (0.1 s), and those QPs have active inequalities
+    assert len(recorded.qps) >= 40
+    reference = _reference(recorded)
+    active = [np.sum(np.abs(r["lam_x"]) > 1e-9) for r in reference]
+    assert max(active) > 0
+    for qp, r in zip(recorded.qps, reference, strict=True):
+        _assert_optimal(_dense(qp), r)
+
+
+def test_clarabel_agrees_with_the_reference(recorded):
+    # two independent solvers (active set, interior point) agree to 3.8e-5 A: the reference's
+    # first current is right to well within the bar
+    reference = _reference(recorded)
+    clarabel_x = [_clarabel(_dense(qp)) for qp in recorded.qps]
+    assert np.max(_first_current_errors(recorded, clarabel_x, reference)) < TOLERANCE_A
+
+
+def test_qrqp_first_current_is_the_exact_qp_solution(recorded):
+    # qrqp with the options the exported NMPC uses (NonlinearMPC(qp_solver="qrqp")): an active-set
+    # method like the reference, so the same solution to round-off (3.4e-14 A measured)
+    qrqp = qp_solver_function("qrqp", {}, recorded.nmpc.grid.horizon, recorded.qp_data)
+    reference = _reference(recorded)
+    errors = _first_current_errors(recorded, [_solve(qrqp, qp)["x"] for qp in recorded.qps], reference)
+    assert np.max(errors) < TOLERANCE_A
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 20 item 3: HPIPM speed_abs (the default NMPC's QP solver) is up to 0.07 A off the "
+    "exact QP solution on the large step's constrained samples; its settings are not changed here",
+)
+def test_hpipm_first_current_is_the_exact_qp_solution(recorded):
+    nmpc = recorded.nmpc
+    hpipm = qp_solver_function("hpipm", nmpc.qp_options, nmpc.grid.horizon, recorded.qp_data)
+    reference = _reference(recorded)
+    errors = _first_current_errors(recorded, [_solve(hpipm, qp)["x"] for qp in recorded.qps], reference)
+    assert np.max(errors) < TOLERANCE_A
