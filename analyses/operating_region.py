@@ -1,8 +1,9 @@
 """Operating-region report: where the FL regulator's feedback transformation stays defined and the
 currents fit the amplifiers. Page 1 is the scorecard (the feasible set, the certified Procedure 2,
 the basins of the FL and linear regulators, the papers' large step) with its key figure; the method,
-the feasible set, the certificates and their Monte Carlo checks, the basins and the large step
-follow; timings are in the appendix.
+the feasible set, the certificates and their Monte Carlo checks, the certificates on sampled plants
+whose constants differ from the controller's, the basins and the large step follow; timings are in
+the appendix.
 
     python analyses/operating_region.py [--out reports/operating_region.pdf] [--params stage.json] [--quick]
 """
@@ -21,12 +22,22 @@ from maglev_oc.region.study import (
     BASIN_OUTCOMES,
     OperatingRegionStudy,
     ReferenceStudy,
+    RobustStudy,
     StudyConfig,
     certificate_rows,
     operating_region_study,
 )
 from maglev_oc.reporting import region_plots as plots
-from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text, wrap_cells
+from maglev_oc.reporting.pdf import (
+    PdfReport,
+    Plot,
+    ReportContents,
+    Table,
+    Text,
+    block_height,
+    page_room,
+    wrap_cells,
+)
 from maglev_oc.reporting.twins import twin_sentence
 from maglev_oc.sim.effects import Encoder, TwinEffects
 from maglev_oc.units import M_TO_MM
@@ -50,13 +61,26 @@ QUICK = StudyConfig(
     map_targets_mm=(10.0, 14.0, 18.0),
     quantization_samples=60,
     map_points=41,
+    robust_runs=20,
+    robust_probe_runs=8,
 )
 """A small configuration for smoke tests (coarse figures, few runs)."""
 
 
-def build(out: Path, model: StageModel, config: StudyConfig | None = None) -> ReportContents:
-    """Run the operating-region study (the full one unless ``config``) and write its report."""
-    return write_report(out, operating_region_study(model, config or StudyConfig()), model)
+def build(
+    out: Path,
+    model: StageModel,
+    config: StudyConfig | None = None,
+    *,
+    covariance=None,
+    covariance_source: str = "",
+) -> ReportContents:
+    """Run the operating-region study (the full one unless ``config``) and write its report.
+    ``covariance`` (4, 4) of the model's C1..C4 for the robust page (default: an assumed one)."""
+    study = operating_region_study(
+        model, config or StudyConfig(), covariance=covariance, covariance_source=covariance_source
+    )
+    return write_report(out, study, model)
 
 
 # --- the numbers as printed -------------------------------------------------------------------------------
@@ -164,6 +188,8 @@ def scorecard_rows(st: OperatingRegionStudy) -> list[tuple[str, str, str, str]]:
             f"new; {tot['runs']} runs inside\nthe certified sets, {tot['violations']} left F",
         )
     )
+    if st.robust is not None:
+        rows.append(_robust_scorecard_row(st.robust))
     if st.large_step is None:
         return rows
     ls = st.large_step
@@ -222,6 +248,26 @@ def scorecard_rows(st: OperatingRegionStudy) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _robust_scorecard_row(rb: RobustStudy) -> tuple[str, str, str, str]:
+    """The certified sets on plants whose constants differ from the controller's (sampled)."""
+    level = "0.95" if "0.95" in rb.plant_sets() else rb.plant_sets()[-2]
+    tot = rb.totals(level)
+    n_sp = len(rb.certificates)
+    whose = "an ASSUMED" if rb.assumed else "the stage file's"
+    first = _first_broken(rb)
+    verdict = "new; sampled, not certified"
+    if first is not None:
+        bracket = f"{_sigma(first.safe_radius)}-{_sigma(first.broken_radius)} σ"
+        verdict += f"; first runs leave F at {bracket} ({first.reference})"
+    return (
+        "The certified sets hold on plants whose C1..C4 differ (the rig is not the model)",
+        "not addressed",
+        f"plants in the {level} set of {whose} covariance: {tot['violations']} of {tot['runs']} runs "
+        f"from the sets at {n_sp} set-points left F",
+        verdict,
+    )
+
+
 def _scorecard_notes(st: OperatingRegionStudy) -> list[str]:
     f = st.feasible
     i0, _ = st.r_zero_current
@@ -251,6 +297,9 @@ def _scorecard_notes(st: OperatingRegionStudy) -> list[str]:
     return notes
 
 
+ROBUST_TABLE = "Per set-point: runs that left F / runs, and the share that stayed in F"
+KEY_FIGURE_HEIGHT = 0.36
+"""[page fraction] The key figure's height under the scorecard when the page has room."""
 SCORECARD_WIDTHS = (30, 19, 36, 32)
 """Characters per line of the scorecard's columns (claim, papers, ours, verdict): narrow enough
 for the table to print at a readable size."""
@@ -277,13 +326,17 @@ def write_report(out: Path, st: OperatingRegionStudy, model: StageModel) -> Repo
             )
         ]
         if st.large_step is not None:
-            first.append(Plot(_key_figure(st), 0.36))
+            # the key figure takes what the scorecard leaves, up to its designed 0.36 of the page
+            room = page_room(first_page=True) - block_height(first[0]) - 0.01
+            first.append(Plot(_key_figure(st), min(KEY_FIGURE_HEIGHT, room)))
         pdf.add_page("Scorecard: the papers' operating region beside ours", first, first_page=True)
         pdf.add_page("How the region is found", [Text(_method(st)), _parts_table(st)])
         _feasible_page(pdf, st)
         _certificate_page(pdf, st)
         _montecarlo_page(pdf, st)
         _slices_page(pdf, st)
+        if st.robust is not None:
+            _robust_page(pdf, st, model)
         if st.large_step is not None:
             _basins_page(pdf, st)
             _large_step_pages(pdf, st, model)
@@ -359,6 +412,16 @@ def _parts_table(st: OperatingRegionStudy) -> Table:
         ("coverage on slices", f"{sum(x.n for x in slices)} starts on {len(slices)} slices", "sampled"),
         ("encoder check", f"{0 if st.quantization is None else st.quantization.n} runs", "sampled"),
     ]
+    if st.robust is not None:
+        rb = st.robust
+        rows.append(
+            (
+                "on sampled plants",
+                f"{sum(r.runs for r in rb.rows)} runs; {len(rb.radii)} bisections, "
+                f"{rb.probe_runs} runs per probe",
+                "sampled",
+            )
+        )
     if ls is not None:
         n = ls.map_starts.size * ls.sweep_targets.size
         rows += [
@@ -567,6 +630,175 @@ def _slices_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
         "How much of the safe region the certificates cover",
         [table, Plot(plots.slices_plot(lyap, st.slices.get("SDP P", ()), certs), 0.64)],
     )
+
+
+def _sigma(r: float) -> str:
+    """A radius in standard deviations as printed."""
+    return f"{r:.3g}" if math.isfinite(r) else "inf"
+
+
+def _level_of(tail: float) -> str:
+    """A confidence level 1 - tail as printed (the tail itself when it is tiny)."""
+    return f"{1 - tail:.3f}" if tail > 1e-3 else f"1 − {tail:.0e}"
+
+
+def _first_broken(rb: RobustStudy):
+    """The bisection whose runs left F at the least radius (None: none did)."""
+    broken = [c for c in rb.radii if math.isfinite(c.broken_radius)]
+    return min(broken, key=lambda c: c.broken_radius) if broken else None
+
+
+def _dof(rb: RobustStudy) -> int:
+    eig = np.linalg.eigvalsh(rb.covariance)
+    return int(np.sum(eig > 1e-12 * max(eig.max(), 1e-300)))
+
+
+def _plant_set_name(rb: RobustStudy, name: str) -> str:
+    from scipy.stats import chi2
+
+    if name == "nominal":
+        return "nominal (the\ncontroller's C)"
+    if name == "box":
+        return "papers' Tables\nII-III box"
+    return f"{name} confidence\n(radius {math.sqrt(chi2.ppf(float(name), _dof(rb))):.2f} σ)"
+
+
+def robust_rows(st: OperatingRegionStudy) -> list[tuple[str, ...]]:
+    """The robust table as printed: per plant set, per set-point 'left F / runs' and the share
+    of runs that stayed in F, then the largest |u| [A] and the least room to a gap stopper [mm]
+    over the set-points."""
+    rb = st.robust
+    lo, hi = st.feasible.gap_range or (-math.inf, math.inf)
+    rows = []
+    for name in rb.plant_sets():
+        cells, imax, room = [], 0.0, math.inf
+        for ref in rb.certificates:
+            r = rb.row(ref, name)
+            cells.append(f"{r.violations} / {r.runs}\n{100 * r.share_feasible:.1f} %")
+            imax = max(imax, float(np.nanmax(r.sweep.max_current)))
+            room = min(room, float(np.nanmin(r.sweep.min_gap)) - lo, hi - float(np.nanmax(r.sweep.max_gap)))
+        rows.append((_plant_set_name(rb, name), *cells, f"{imax:.2f}", f"{room * M_TO_MM:.2f}"))
+    return rows
+
+
+def _radius_rows(rb: RobustStudy) -> list[tuple[str, ...]]:
+    rows = []
+    for c in rb.radii:
+        cert = rb.certificates.get(c.reference)
+        rows.append(
+            (
+                c.reference,
+                "the papers' start" if cert is None else cert.removesuffix(" P"),
+                str(c.runs),
+                _sigma(c.safe_radius),
+                _sigma(c.broken_radius)
+                if math.isfinite(c.broken_radius)
+                else f"none up to {_sigma(c.safe_radius)}",
+                f"{_level_of(c.safe_tail)} … {_level_of(c.broken_tail)}"
+                if math.isfinite(c.broken_radius)
+                else "—",
+            )
+        )
+    return rows
+
+
+def _robust_text(st: OperatingRegionStudy, model: StageModel) -> list[str]:
+    rb = st.robust
+    c = np.asarray(model.constants.as_array(), dtype=float)
+    sd = np.sqrt(np.diag(rb.covariance))
+    sds = ", ".join(f"C{k + 1} {100 * x / ck:.3g} %" for k, (x, ck) in enumerate(zip(sd, c, strict=True)))
+    if rb.assumed:
+        cov = (
+            f"The covariance is ASSUMED: independent constants with standard errors {sds} of their "
+            "values (no identification's covariance was given). Pass a stage file that has one "
+            "(identify writes it) with --params to this report's script and this page uses it."
+        )
+    else:
+        cov = f"The covariance of C1..C4 is read from {rb.covariance_source} (standard errors {sds})."
+    names = ", ".join(rb.certificates)
+    kinds = sorted(set(rb.certificates.values()))
+    text = [
+        "The FL regulator inverts the nominal constants C1..C4; the rig's lie somewhere in a confidence "
+        "set around them. Each run here starts uniformly in a set-point's certified set {V ≤ c} "
+        f"({' or '.join(k.removesuffix(' P') for k in kinds)} P, as on the previous pages) on a plant whose "
+        f"constants are drawn uniformly from the row's set, and runs {st.config.horizon:g} s on the rig "
+        "twin (no effects) with the controller's nominal constants; it fails when it leaves F (R < 0, "
+        "|u| over the limit, a stopper). Every plant set sees the same starts. " + cov,
+        "These are samples, never certificates: no violation in n runs says only that the share of "
+        "failing start-and-plant pairs is probably (95 %) below about 3/n "
+        f"({100 * 3 / rb.runs:.1f} % for the {rb.runs} runs per cell), not that there is none.",
+    ]
+    level = "0.95" if "0.95" in rb.plant_sets() else rb.plant_sets()[-2]
+    tot, box = rb.totals(level), rb.totals("box")
+    summary = (
+        f"Over the {len(rb.certificates)} set-points ({names}): on plants within the {level} confidence set "
+        f"{tot['violations']} of {tot['runs']} runs left F; within the papers' Tables II-III box "
+        f"{box['violations']} of {box['runs']}."
+    )
+    first = _first_broken(rb)
+    if first is not None:
+        top = first.broken_radius * sd / c
+        summary += (
+            f" Growing the confidence set, runs first leave F at {first.reference}, between "
+            f"{_sigma(first.safe_radius)} and {_sigma(first.broken_radius)} σ (confidence "
+            f"{_level_of(first.safe_tail)} to {_level_of(first.broken_tail)}): there one constant alone may "
+            "be off by " + ", ".join(f"C{k + 1} ±{100 * x:.2g} %" for k, x in enumerate(top)) + "."
+        )
+    elif rb.radii:
+        summary += " No bisection found a violation up to its largest radius."
+    text.append(summary)
+    return text
+
+
+def _robust_page(pdf: PdfReport, st: OperatingRegionStudy, model: StageModel) -> None:
+    rb = st.robust
+    box = ", ".join(
+        f"C{k + 1} {lo:.4g}-{hi:.4g}"
+        for k, (lo, hi) in enumerate(zip(rb.box.lower, rb.box.upper, strict=True))
+    )
+    table = Table(
+        ROBUST_TABLE,
+        (
+            "plants",
+            *(f"{ref}" for ref in rb.certificates),
+            "largest\n|u| [A]",
+            "least room to a\ngap stopper [mm]",
+        ),
+        robust_rows(st),
+        notes=[
+            "Confidence sets: the ellipsoid (C − C0)' Σ⁻¹ (C − C0) ≤ r² with r² the chi-square quantile of "
+            f"the level ({_dof(rb)} degrees of freedom), C0 the controller's constants, Σ the covariance. "
+            "Papers' "
+            f"box: every column of Tables II and III of 000 ({box}). Largest |u| and least room: over every "
+            "run of the row's set-points.",
+        ],
+        font_size=7.5,
+    )
+    blocks = [Text(_robust_text(st, model)), table]
+    if rb.radii:
+        blocks.append(
+            Table(
+                "Where runs first leave F as the confidence set grows (bisection on the radius)",
+                (
+                    "reference",
+                    "starts",
+                    "runs per\nprobe",
+                    "no violation\nup to [σ]",
+                    "first violation\nat [σ]",
+                    "confidence level\nof the bracket",
+                ),
+                _radius_rows(rb),
+                notes=[
+                    "Radius r in standard deviations of the covariance (the set above with r² free). A "
+                    "bracket is only as good as its probes: more runs per probe find violations at smaller "
+                    "radii, so the first-violation radius is an upper estimate. Large step: every run "
+                    f"from the papers' start (26, 0, 0, 0) mm to (18, 20) mm at rest, "
+                    f"{st.config.linear_horizon:g} s.",
+                ],
+                font_size=7.5,
+            )
+        )
+    pdf.add_page("Robust to the plant's uncertainty (sampled)", blocks)
 
 
 def _basins_page(pdf: PdfReport, st: OperatingRegionStudy) -> None:
@@ -801,7 +1033,14 @@ def _runs_text(st: OperatingRegionStudy) -> list[str]:
         f"Runs: {st.inside_totals()['runs']} inside the certified sets ({c.samples} per set, kind and "
         f"reference, {refs} references, {c.horizon:g} s each), {slices} on slices, "
         f"{0 if st.quantization is None else st.quantization.n} with the encoder, {pairs} start x target "
-        f"steps ({c.linear_horizon:g} s each). Study status: {st.status.replace('_', ' ')} ({st.message}).",
+        f"steps ({c.linear_horizon:g} s each)"
+        + (
+            ""
+            if st.robust is None
+            else f", {sum(r.runs for r in st.robust.rows)} on sampled plants and "
+            f"{len(st.robust.radii)} bisections of {st.robust.probe_runs} runs per probe"
+        )
+        + f". Study status: {st.status.replace('_', ' ')} ({st.message}).",
     ]
 
 
@@ -813,8 +1052,31 @@ def main(argv: list[str] | None = None) -> int:
     parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--quick", action="store_true", help="small sample counts (smoke test)")
     args = parser.parse_args(argv)
-    print(f"wrote {build(args.out, load_model(args.params), QUICK if args.quick else None).path}")
+    covariance, source = _stage_covariance(args.params)
+    contents = build(
+        args.out,
+        load_model(args.params),
+        QUICK if args.quick else None,
+        covariance=covariance,
+        covariance_source=source,
+    )
+    print(f"wrote {contents.path}")
     return 0
+
+
+def _stage_covariance(params: Path | None) -> tuple[np.ndarray | None, str]:
+    """The covariance of C1..C4 of a stage file given with --params, and where it came from
+    ((None, "") when there is none: the robust page then assumes one and says so)."""
+    if params is None:
+        return None, ""
+    from maglev_oc.model.stagefile import StageFile, holds_stage_file
+
+    if not holds_stage_file(params):
+        return None, ""
+    stage = StageFile.read(params)
+    if stage.covariance is None:
+        return None, ""
+    return np.asarray(stage.covariance, dtype=float), f"the stage file {Path(params).name}"
 
 
 if __name__ == "__main__":

@@ -285,3 +285,62 @@ def test_region_overshoot_and_stopper_prediction_from_a_step_response(region_rep
     for d, name in ((fl, "FL"), (li, "linear")):
         assert f"{name} {100 * np.mean(d['success']):.0f} %" in row[2]
     assert math.isclose(np.mean(fl["success"]), np.mean(fl["within_limit"]))  # FL must stay in F anyway
+
+
+def test_region_robust_row_recomputed_from_the_runs(region_report):
+    """The robust page's 0.95 row and its box row from the runs' own arrays: which runs left F by
+    F's definition (not the sweep's flag), the plants inside the chi-square ellipsoid of the
+    covariance (written out here) or the box of the papers' Tables II-III, the starts inside the
+    certified sets; the text's counts and the scorecard's against them."""
+    from scipy.stats import chi2
+
+    from maglev_oc.model.parameters import PAPER_CONSTANTS
+
+    study, contents = region_report
+    rb = study.robust
+    table = contents.section("Per set-point: runs that left F")
+    text = " ".join(" ".join(p.split()) for p in contents.section("Robust to the plant").paragraphs)
+    limit = study.feasible.current_limit
+    c0 = np.asarray(study.robust.rows[0].sweep.spec.constants)
+    cov = np.asarray(rb.covariance)
+    assert rb.assumed and "ASSUMED" in text
+    # the assumed covariance: 2/2/2/10 % standard errors of C1..C4
+    np.testing.assert_allclose(np.sqrt(np.diag(cov)) / c0, [0.02, 0.02, 0.02, 0.10], rtol=1e-12)
+    papers = np.array([c.as_array() for c in PAPER_CONSTANTS.values()])
+    sets = {"0.95": "0.95 confidence", "box": "papers' Tables"}
+    totals = {}
+    for name, first_cell in sets.items():
+        printed = next(r for r in table.rows if r[0].startswith(first_cell))
+        n_all = bad_all = 0
+        for k, ref in enumerate(rb.certificates):
+            sw = rb.row(ref, name).sweep
+            with np.errstate(invalid="ignore"):
+                bad = ~sw.finite | sw.stopper_hit | (sw.min_margin < 0) | (sw.max_current > limit)
+            np.testing.assert_array_equal(bad, sw.violating)
+            assert printed[1 + k] == f"{bad.sum()} / {bad.size}\n{100 * (1 - bad.mean()):.1f} %"
+            assert np.all(sw.start_ratio <= 1 + 1e-12)  # every start inside the certified set
+            d = sw.constants - c0[:, None]
+            if name == "box":
+                lo, hi = papers.min(axis=0)[:, None], papers.max(axis=0)[:, None]
+                assert np.all((sw.constants >= lo) & (sw.constants <= hi))
+            else:  # (C - C0)' cov^-1 (C - C0) <= the chi-square quantile, 4 dof
+                m = np.einsum("in,in->n", d, np.linalg.solve(cov, d))
+                q = chi2.ppf(0.95, 4)
+                assert np.all(m <= q * (1 + 1e-9)) and np.max(m) > chi2.ppf(0.5, 4)
+                assert f"radius {math.sqrt(q):.2f} σ" in printed[0]
+            n_all, bad_all = n_all + bad.size, bad_all + int(bad.sum())
+        largest = max(float(np.max(rb.row(ref, name).sweep.max_current)) for ref in rb.certificates)
+        assert printed[-2] == f"{largest:.2f}"
+        totals[name] = (bad_all, n_all)
+    assert f"0.95 confidence set {totals['0.95'][0]} of {totals['0.95'][1]} runs left F" in text
+    assert f"Tables II-III box {totals['box'][0]} of {totals['box'][1]}" in text
+    rows, _ = _scorecard(contents)
+    assert f"{totals['0.95'][0]} of {totals['0.95'][1]} runs" in rows["The certified sets hold on"][2]
+    # the bracket table and the text's first violation agree with the bisections
+    radii = contents.section("Where runs first leave F")
+    for c in rb.radii:
+        shown = radii.row(c.reference)
+        assert _numbers(shown[3])[0] == pytest.approx(c.safe_radius, rel=5e-3)  # 3 digits
+        assert _numbers(shown[4])[0] == pytest.approx(c.broken_radius, rel=5e-3)
+    first = min(rb.radii, key=lambda c: c.broken_radius)
+    assert f"first leave F at {first.reference}, between {first.safe_radius:.3g} and" in text

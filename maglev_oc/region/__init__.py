@@ -13,6 +13,10 @@
 * :mod:`~maglev_oc.region.roa` — regions of attraction of the linear regulators (:func:`certify_roa`).
 * :mod:`~maglev_oc.region.montecarlo` — vectorised runs of the sampled twin (:class:`BatchSimulator`).
 * :mod:`~maglev_oc.region.study` — everything the report shows (:func:`operating_region_study`).
+* :mod:`~maglev_oc.region.sweep` — Monte Carlo over sampled plants (the constants from a confidence
+  set or a box, the controller nominal) as Dask tasks, the same numbers on any number of workers.
+* :mod:`~maglev_oc.region.robust` — what the nominal certificate is worth on those plants
+  (sampled, never certified): feasible shares by confidence level, where runs first leave F.
 """
 
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop

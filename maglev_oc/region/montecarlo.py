@@ -199,7 +199,7 @@ class BatchSimulator:
         )
         return ca.Function("acc_step", [z, r, w], [ca.vertcat(z_next, ext_next)])
 
-    def run(self, x0, c0, reference, noise=None) -> BatchOutcome:
+    def run(self, x0, c0, reference, noise=None, twin_states=None) -> BatchOutcome:
         """Simulate n runs over the horizon at once.
 
         Parameters
@@ -213,6 +213,9 @@ class BatchSimulator:
         noise : (2, n_steps) array, optional
             Encoder noise in standard deviations, shared by all runs (default zero; only twins
             with an encoder use it).
+        twin_states : (n_twin_state, n) array, optional
+            The twin's whole starting states (default ``twin.initial_state`` of each ``x0``): for
+            twins that carry more than the mechanics, e.g. each run's plant constants.
 
         Returns
         -------
@@ -231,7 +234,12 @@ class BatchSimulator:
             ref = np.repeat(ref.reshape(6, 1), self.n_steps, axis=1)
         if ref.shape != (6, self.n_steps):
             raise InputError(f"reference must have shape (6, {self.n_steps}) or (6,), got {ref.shape}")
-        s0 = np.column_stack([self.twin.initial_state(x0[:, k]) for k in range(n)])
+        if twin_states is None:
+            s0 = np.column_stack([self.twin.initial_state(x0[:, k]) for k in range(n)])
+        else:
+            s0 = np.asarray(twin_states, dtype=float)
+            if s0.shape != (self.twin.n_state, n):
+                raise InputError(f"twin_states must have shape ({self.twin.n_state}, {n}), got {s0.shape}")
         ext0 = np.tile(np.array([[np.inf], [0.0], [0.0], [np.inf], [-np.inf], [0.0]]), (1, n))
         z0 = np.vstack([s0, c0, ext0])
         w = np.zeros((2, self.n_steps)) if noise is None else np.asarray(noise, dtype=float)

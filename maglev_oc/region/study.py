@@ -10,7 +10,12 @@ One call, :func:`operating_region_study`, runs (for the papers' gains unless tol
    over the current limit, R < 0, ...), and the FL loop's stopper hits predicted from its linear
    error dynamics (:func:`step_extremes`);
 4. Monte Carlo on the sampled ideal twin inside each certified set (violations must be zero),
-   on grids of slices for the conservativeness figure, and with the quantising encoder.
+   on grids of slices for the conservativeness figure, and with the quantising encoder;
+5. optionally (``StudyConfig.robust_runs``) the nominal certificates on sampled plants whose
+   C1..C4 differ from the controller's (:mod:`~maglev_oc.region.robust`): runs from each
+   set-point's certified set on plants from confidence ellipsoids of the constants' covariance
+   and from the papers' Tables II-III box, and the radius where runs first leave F. Sampled,
+   never a certificate (:class:`RobustStudy`).
 
 It returns frozen results with their timings; plotting and PDF writing live elsewhere.
 """
@@ -25,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.control.gains import OMEGA0, PAPER_K_H, PAPER_K_V
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.control.lqr import lqr_regulator
 from maglev_oc.errors import InputError
@@ -44,7 +50,17 @@ from maglev_oc.region.montecarlo import (
 )
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa, frozen_poles
+from maglev_oc.region.robust import (
+    CONFIDENCE_LEVELS,
+    CriticalRadius,
+    RobustnessRow,
+    assumed_covariance,
+    critical_radius,
+    paper_tables_box,
+    robustness_table,
+)
 from maglev_oc.region.sdp import PolygonBuilder, SdpResult, enlarge
+from maglev_oc.region.sweep import PlantSet, SweepSpec
 from maglev_oc.results import Result
 from maglev_oc.sim.effects import Encoder, TwinEffects
 from maglev_oc.sim.twin import RigTwin
@@ -59,6 +75,7 @@ __all__ = [
     "LinearStudy",
     "OperatingRegionStudy",
     "ReferenceStudy",
+    "RobustStudy",
     "StudyConfig",
     "basin_outcomes",
     "certificate_rows",
@@ -100,6 +117,8 @@ class StudyConfig:
     """What the study computes and how much (the defaults are the report's).
 
     ``samples`` runs per certificate and kind (full error state, and at rest) per reference.
+    ``robust_runs`` runs per set-point and plant set of the robust part (0: none; :class:`RobustStudy`),
+    ``robust_probe_runs`` per probe of its critical-radius bisection.
     """
 
     setpoints_mm: tuple[float, ...] = (15.0, 17.5, 20.0, 22.5, 25.0)
@@ -119,6 +138,8 @@ class StudyConfig:
     threads: int = 2
     compile: bool = True
     seed: int = 0
+    robust_runs: int = 150
+    robust_probe_runs: int = 40
 
     def __post_init__(self) -> None:
         if not self.setpoints_mm:
@@ -128,6 +149,10 @@ class StudyConfig:
                 raise InputError(f"set-point gaps are in millimetres in [5, 40], got {g!r}")
         if self.samples < 0 or self.slice_points < 0 or self.quantization_samples < 0:
             raise InputError("sample counts must be >= 0")
+        if self.robust_runs < 0 or self.robust_probe_runs < 0:
+            raise InputError(
+                f"robust run counts must be >= 0, got {self.robust_runs!r}, {self.robust_probe_runs!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -195,6 +220,54 @@ class LargeStepStudy:
 
 
 @dataclass(frozen=True)
+class RobustStudy:
+    """The nominal certificates on sampled plants (:mod:`~maglev_oc.region.robust`): the FL
+    regulator keeps the nominal C1..C4, the plant's are drawn uniformly from a set. Sampled,
+    never a certificate.
+
+    ``rows``: per set-point (starts uniform in its best certified set, ``certificates`` says
+    which P), the nominal plant, the confidence ellipsoids of ``covariance`` at ``levels`` and
+    ``box``, ``runs`` runs each, the same starts for every plant set (one seed). ``radii``: per
+    set-point and, when the study has the large step, for it (from its one start), the bracket in
+    standard deviations of ``covariance`` where runs first leave F, ``probe_runs`` runs per probe
+    of the bisection (an upper estimate: more runs per probe can only find violations sooner).
+    """
+
+    covariance: np.ndarray  # (4, 4) of (C1, C2, C3, C4) [their units squared]
+    covariance_source: str
+    assumed: bool  # True: no identification's covariance was given (assumed_covariance)
+    levels: tuple[float, ...]
+    box: PlantSet
+    certificates: dict[str, str]  # set-point label -> "SDP P" or "Lyapunov P"
+    rows: tuple[RobustnessRow, ...]
+    radii: tuple[CriticalRadius, ...]
+    runs: int
+    probe_runs: int
+
+    def plant_sets(self) -> tuple[str, ...]:
+        """The plant sets in table order: ``"nominal"``, the levels (``"0.95"``), ``"box"``."""
+        return ("nominal", *(f"{p:g}" for p in self.levels), "box")
+
+    def plant_set(self, row: RobustnessRow) -> str:
+        """Which of :meth:`plant_sets` ``row`` ran on."""
+        if math.isfinite(row.confidence):
+            return f"{row.confidence:g}"
+        return "box" if row.plants == self.box.label else "nominal"
+
+    def row(self, reference: str, plant_set: str) -> RobustnessRow:
+        """The row of set-point ``reference`` (e.g. ``"20 mm"``) on ``plant_set``."""
+        found = [r for r in self.rows if r.reference == reference and self.plant_set(r) == plant_set]
+        if len(found) != 1:
+            raise KeyError(f"no row ({reference!r}, {plant_set!r}); plant sets: {self.plant_sets()}")
+        return found[0]
+
+    def totals(self, plant_set: str) -> dict[str, int]:
+        """Runs and violations over the set-points on ``plant_set``."""
+        rows = [r for r in self.rows if self.plant_set(r) == plant_set]
+        return {"runs": sum(r.runs for r in rows), "violations": sum(r.violations for r in rows)}
+
+
+@dataclass(frozen=True)
 class OperatingRegionStudy(Result):
     """Everything the operating-region report shows (module docstring).
 
@@ -217,6 +290,7 @@ class OperatingRegionStudy(Result):
     large_step: LargeStepStudy | None
     quantization: CertificateCheck | None
     r_zero_current: tuple[float, float]  # least |u| [A] where R = 0 over the gap range, and its gap [m]
+    robust: RobustStudy | None = None  # None: robust_runs 0, or gains other than the sweeps' (papers')
     timings: Mapping[str, float] = field(default_factory=dict)
 
     def inside_totals(self) -> dict[str, int]:
@@ -319,8 +393,11 @@ def operating_region_study(
     loop: RegulatorLoop | None = None,
     feasible: FeasibleSet | None = None,
     progress: Callable[[str], None] | None = None,
+    covariance=None,
+    covariance_source: str = "",
 ) -> OperatingRegionStudy:
-    """Run the whole study (module docstring) for ``model`` (plant = controller model).
+    """Run the whole study (module docstring) for ``model`` (plant = controller model; in the
+    robust part, plants around it).
 
     Parameters
     ----------
@@ -333,6 +410,11 @@ def operating_region_study(
         F (default: 9 A and the stoppers).
     progress : callable, optional
         Called with a line of text as each step starts.
+    covariance : (4, 4) array, optional
+        Of the model's (C1, C2, C3, C4) [their units squared], e.g. a stage file's, for the robust
+        part (default: :func:`~maglev_oc.region.robust.assumed_covariance`, said to be assumed).
+    covariance_source : str
+        Where ``covariance`` comes from, as the report prints it.
 
     Returns
     -------
@@ -362,6 +444,7 @@ def operating_region_study(
     if config.linear:
         run.say("large step and linear regulators")
         large = _large_step(run, proc, builder, sim)
+    robust = _robust(run, ref_studies, covariance, covariance_source)
     run.timings["total"] = time.perf_counter() - t_all
     return OperatingRegionStudy(
         *_verdict(ref_studies, slices),
@@ -374,7 +457,87 @@ def operating_region_study(
         large,
         quant,
         _r_zero_current(model, feasible),
+        robust,
         run.timings,
+    )
+
+
+def _robust(run: _Run, ref_studies: list[ReferenceStudy], covariance, source: str) -> RobustStudy | None:
+    """The robust part (:class:`RobustStudy`), or None when it is off or the loop's gains are not
+    the papers' (the sweeps build the FL regulator with those)."""
+    config, loop, model = run.config, run.loop, run.model
+    papers = np.array_equal(loop.K_h, PAPER_K_H) and np.array_equal(loop.K_v, PAPER_K_V)
+    if not config.robust_runs or not (papers and loop.omega0 == OMEGA0):
+        return None
+    constants = tuple(float(c) for c in model.constants.as_array())
+    assumed = covariance is None
+    if assumed:
+        covariance = assumed_covariance(model.constants)
+        source = source or "assumed"
+    covariance = np.asarray(covariance, dtype=float)
+    if covariance.shape != (4, 4):
+        raise InputError(f"covariance must be 4 x 4 over (C1, C2, C3, C4), got {covariance.shape}")
+    nominal = PlantSet.point(constants)
+    specs: dict[str, SweepSpec] = {}
+    certificates: dict[str, str] = {}
+    for rs in ref_studies:
+        cert = rs.best
+        if not (rs.reference.is_setpoint and cert.success):
+            continue
+        label = _short(rs.reference)
+        certificates[label] = "SDP P" if cert is not rs.lyapunov else "Lyapunov P"
+        specs[label] = SweepSpec(
+            nominal,
+            rs.reference,
+            constants=constants,
+            params=model.params,
+            P=tuple(map(tuple, cert.P)),
+            level=float(cert.level),
+            duration=config.horizon,
+            current_limit=run.limit,
+        )
+    if not specs:
+        return None
+    box = paper_tables_box()
+    run.say("robust: nominal certificates on sampled plants")
+    rows = _timed(
+        run,
+        "robust: runs on sampled plants (table)",
+        lambda: robustness_table(specs, covariance, box=box, runs=config.robust_runs, seed=config.seed),
+    )
+    radii: list[CriticalRadius] = []
+    if config.robust_probe_runs:
+        probes = dict(specs)
+        if config.linear:
+            probes["large step"] = SweepSpec(
+                nominal,
+                Reference.setpoint(*LARGE_STEP_TARGET),
+                constants=constants,
+                params=model.params,
+                start=LARGE_STEP_START,
+                duration=config.linear_horizon,
+                current_limit=run.limit,
+            )
+        run.say("robust: radius where runs first leave F")
+        radii = _timed(
+            run,
+            "robust: critical radii (bisection)",
+            lambda: [
+                critical_radius(k, spec, covariance, runs=config.robust_probe_runs, seed=config.seed)
+                for k, spec in probes.items()
+            ],
+        )
+    return RobustStudy(
+        covariance,
+        source,
+        assumed,
+        tuple(CONFIDENCE_LEVELS),
+        box,
+        certificates,
+        tuple(rows),
+        tuple(radii),
+        config.robust_runs,
+        config.robust_probe_runs,
     )
 
 

@@ -1,0 +1,178 @@
+"""Monte Carlo sweeps over sampled plants (maglev_oc.region.sweep) and `region --robust`."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from maglev_oc.cli import main
+from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.errors import InputError
+from maglev_oc.model.stage import StageModel
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibleSet
+from maglev_oc.region.montecarlo import BatchSimulator, check_error_states
+from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.region.sweep import PlantSet, SweepSpec, dask_client, run_sweep
+from maglev_oc.sim.twin import RigTwin
+
+FIELDS = ("violating", "constants", "start_ratio", "min_margin", "max_current", "stopper_hit", "min_gap")
+
+
+@pytest.fixture(scope="module")
+def model():
+    return StageModel()
+
+
+@pytest.fixture(scope="module")
+def spec20(model):
+    """Starts in the nominal certificate at 20 mm (Lyapunov P), on the nominal plant."""
+    ref = Reference.setpoint(0.020)
+    cert = Procedure2(FeasibleSet(model), RegulatorLoop()).run(ref)
+    assert cert.success
+    C = model.constants.as_array()
+    return SweepSpec(PlantSet.point(C), ref, P=tuple(map(tuple, cert.P)), level=cert.level)
+
+
+def _same(a, b):
+    for k in FIELDS:
+        assert_array_equal(getattr(a, k), getattr(b, k), err_msg=k)
+
+
+def test_one_worker_and_a_local_cluster_of_two_give_bit_identical_numbers(model, spec20):
+    C = np.asarray(model.constants.as_array())
+    spec = spec20.with_plants(PlantSet.box(0.8 * C, 1.2 * C))  # wide enough for some violations
+    local = run_sweep(spec, 300, seed=4, task_size=100)
+    with dask_client(workers=2) as client:
+        dask = run_sweep(spec, 300, seed=4, task_size=100, client=client)
+    assert "2 workers" in dask.workers and local.workers == "this process"
+    _same(local, dask)
+    assert local.violations == dask.violations > 0
+
+
+def test_a_planted_plant_far_outside_the_set_is_flagged(model, spec20):
+    # C2 x 1.5 pulls the mover onto the upper stopper from every start (C2 x 0.5 stays feasible:
+    # the internal model absorbs the missing attraction within 9 A)
+    C = np.asarray(model.constants.as_array())
+    far = C * np.array([1.0, 1.5, 1.0, 1.0])
+    ellipsoid = PlantSet.confidence(C, np.diag((0.02 * C) ** 2), 0.99)
+    assert not ellipsoid.contains(far[:, None])[0]
+    res = run_sweep(spec20.with_plants(PlantSet.point(far)), 100, seed=0, task_size=50)
+    assert res.status == "violations" and res.violations == 100
+    assert np.all(res.stopper_hit)
+    inside = run_sweep(spec20.with_plants(ellipsoid), 100, seed=0, task_size=50)
+    assert np.all(ellipsoid.contains(inside.constants)) and inside.violations == 0
+
+
+def test_a_zero_size_set_reproduces_the_nominal_monte_carlo(model, spec20):
+    zero = PlantSet.confidence(model.constants, np.zeros((4, 4)), 0.95)
+    res = run_sweep(spec20.with_plants(zero), 200, seed=3, task_size=200)
+    assert_allclose(res.constants, np.repeat(np.asarray(model.constants.as_array())[:, None], 200, 1))
+    # the same starts through the nominal Monte Carlo (RigTwin, montecarlo.check_error_states)
+    _, z = spec20.draw(200, np.random.SeedSequence(3).spawn(1)[0])
+    sim = BatchSimulator(RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0)
+    chk = check_error_states(sim, RegulatorLoop(), spec20.reference, np.asarray(spec20.P), spec20.level, z)
+    assert_array_equal(res.violating, chk.violating)
+    # L_theta(y, C) and L(y) are the same products C_i l_i(y): equal to rounding
+    assert_allclose(res.min_margin, chk.outcome.min_margin, rtol=1e-12)
+    assert_allclose(res.max_current, chk.outcome.max_current, rtol=1e-12)
+    assert_allclose(res.start_ratio, chk.start_ratio, rtol=1e-12)
+
+
+def test_seeds_change_the_samples_and_repeat_them(model, spec20):
+    C = np.asarray(model.constants.as_array())
+    spec = spec20.with_plants(PlantSet.box(0.95 * C, 1.05 * C))
+    a, b, c = (run_sweep(spec, 40, seed=s, task_size=20) for s in (0, 0, 1))
+    _same(a, b)
+    assert not np.any(a.constants == c.constants)
+    assert not np.any(a.start_ratio == c.start_ratio)
+    # the task stream does not depend on how many runs follow: the first task is the same
+    longer = run_sweep(spec, 60, seed=0, task_size=20)
+    assert_array_equal(longer.constants[:, :40], a.constants)
+
+
+def test_confidence_sets_scale_with_the_chi_square_quantile(model):
+    C = np.asarray(model.constants.as_array())
+    cov = np.diag((0.02 * C) ** 2)
+    rng = np.random.default_rng(0)
+    small, large = (PlantSet.confidence(C, cov, p).sample(4000, rng) for p in (0.5, 0.99))
+    r = [np.sqrt(np.sum(((s - C[:, None]) / (0.02 * C[:, None])) ** 2, axis=0)).max() for s in (small, large)]
+    # chi2(4) quantiles 3.357 and 13.28: radii 1.832 and 3.644 sigma (max of 4000 uniform draws: within 1 %)
+    assert_allclose(r, [1.832, 3.644], rtol=0.01)
+
+
+def test_missing_dask_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    with pytest.raises(InputError, match=r"maglev_oc\[sweeps\]"):
+        with dask_client(workers=2):
+            pass
+    with dask_client(workers=1) as client:  # one worker needs no Dask
+        assert client is None
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--robust", "--box", "C9=1:2"], "--box"),
+        (["--robust", "--box", "C2=800:700"], "LO <= HI"),
+        (["--robust", "--confidence", "1.5"], "--confidence"),
+        (["--robust", "--confidence", "0.9", "--box", "C2=700:800"], "contradict"),
+        (["--workers", "2"], "only apply with --robust"),
+        (["--robust", "--workers", "0"], "--workers"),
+        (["--robust", "--samples", "0"], "--samples"),
+    ],
+)
+def test_region_robust_rejects_bad_options(args, needle, capsys):
+    assert main(["region", "--gaps", "20", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+
+
+def test_region_robust_writes_its_table(tmp_path, capsys):
+    out = tmp_path / "robust.json"
+    code = main(["region", "--robust", "--gaps", "20", "--samples", "200", "--seed", "1", "--json", str(out)])
+    assert code == 0
+    doc = json.loads(out.read_text())
+    (row,) = doc["setpoints"]
+    assert row["runs"] == 200 and row["nominal_violations"] == 0
+    assert "ASSUMED" in doc["plants_source"] and "not a certificate" in doc["note"]
+    assert "sampled, not certified" in capsys.readouterr().out
+
+
+def test_region_robust_takes_the_covariance_of_a_stage_file(tmp_path, capsys):
+    # --params with a stage file that has a covariance: the plants are drawn from it, and the
+    # output says so (not ASSUMED). A covariance 100x smaller than the assumed one keeps every
+    # run of the nominal set feasible, like the nominal plant.
+    from maglev_oc.model.parameters import StageParameters
+    from maglev_oc.model.stage import StageModel
+    from maglev_oc.model.stagefile import Provenance, StageFile
+    from maglev_oc.region.robust import assumed_covariance
+
+    model = StageModel()
+    cov = assumed_covariance(model.constants) * 1e-4
+    stage = StageFile(
+        StageParameters(),
+        model.constants,
+        cov,
+        {},
+        (),
+        {
+            "geometry": Provenance.now((), "Table I of paper 000"),
+            "constants": Provenance.now(("run.csv",), "output_error"),
+            "effects": Provenance.now((), "none"),
+        },
+    )
+    path = tmp_path / "stage.json"
+    stage.write(path)
+    out = tmp_path / "robust.json"
+    argv = ["region", "--robust", "--params", str(path), "--gaps", "20", "--samples", "100"]
+    assert main([*argv, "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["plants_source"] == f"covariance of {path}"
+    (row,) = doc["setpoints"]
+    assert row["runs"] == 100 and row["nominal_violations"] == 0
+    capsys.readouterr()
