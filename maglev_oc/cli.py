@@ -16,6 +16,9 @@
     maglev-oc identify LOG... --json OUT.json [--report OUT.pdf]
                                                      C1..C4 by NLS (equation/output error) and NPFSI
 
+Both ``--json`` outputs hold a stage file under ``stage`` (:mod:`maglev_oc.model.stagefile`); every
+``--params`` reads a stage file or such an output as it is.
+
 Errors in what the user hands in (files, values: :class:`~maglev_oc.errors.MaglevError`) and
 in reading or writing files are reported in one line on stderr with exit status 2; nothing is
 written in that case. Anything else is a bug of maglev_oc: a short "internal error" line and
@@ -92,6 +95,27 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from maglev_oc.control.export import export_controller
+
+    model = load_model(args.params)
+    if args.controller == "nmpc":  # the registry's NMPC uses HPIPM, which is not generated into C
+        # the NMPC's real-time iteration with qrqp: CasADi generates its QP solver into the file
+        from maglev_oc.control.nmpc import NonlinearMPC
+        from maglev_oc.sim.compiled_nmpc import CompiledNMPC
+
+        ctrl = CompiledNMPC(NonlinearMPC(model, preview=False, qp_solver="qrqp"), backend="vm")
+    else:  # the FL regulator compensates the effects of a stage file given with --params
+        ctrl = _controller_with_effects(args.controller, model, args.params)
+    e = export_controller(ctrl, args.out, prefix=args.prefix)
+    print(
+        f"{e.name}: {e.directory} ({', '.join(p.name for p in e.sources)}); "
+        f"{e.prefix}_init / {e.prefix}_step / {e.prefix}_reset, {e.memory_bytes} bytes of memory, "
+        f"{e.sample_time * 1e6:g} us sample time"
+    )
+    return 0
+
+
 def cmd_model(args: argparse.Namespace) -> int:
     from maglev_oc.model.summary import TABLE_GAPS, equilibrium_table_rows, summarize_model
 
@@ -151,7 +175,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate_two_dof(args: argparse.Namespace) -> int:
-    from maglev_oc.control.registry import build_controller
     from maglev_oc.data.logs import write_log
     from maglev_oc.sim.effects import TwinEffects
     from maglev_oc.sim.engine import ClosedLoop
@@ -174,9 +197,11 @@ def _simulate_two_dof(args: argparse.Namespace) -> int:
     else:
         scenario = paper_scenarios()[name]
         if args.duration is not None:
-            scenario = dataclasses.replace(scenario, duration=args.duration)
+            # a run that ends before the scenario's tracking window is scored from its start
+            start = scenario.evaluate_from if args.duration > scenario.evaluate_from else 0.0
+            scenario = dataclasses.replace(scenario, duration=args.duration, evaluate_from=start)
     effects = TwinEffects.rig() if args.twin == "rig" else TwinEffects.ideal()
-    controller = build_controller(args.controller or "fl", model)
+    controller = _controller_with_effects(args.controller or "fl", model, args.params)
     result = ClosedLoop(RigTwin(plant, effects), controller).run(scenario, seed=args.seed)
     metrics = evaluate(result, scenario)
     log = result_to_log(result, rate_hz=args.rate, describe_twin=args.describe_twin)
@@ -192,6 +217,30 @@ def _simulate_two_dof(args: argparse.Namespace) -> int:
     )
     print(f"  wrote {args.out} ({log.n} samples at {1 / log.sample_time:g} Hz)")
     return 0 if result.success else 1
+
+
+def _controller_with_effects(name: str, model, params_path):
+    """The controller; the FL regulator compensates the state-dependent effects of a stage file
+    given with ``--params`` (the other controllers use its geometry and constants only)."""
+    from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+    from maglev_oc.control.registry import build_controller
+    from maglev_oc.model.stagefile import StageFile, holds_stage_file
+
+    stage = StageFile.read(params_path) if params_path and holds_stage_file(params_path) else None
+    if stage is None or not stage.effects:
+        return build_controller(name, model)
+    if name != "fl" or stage.compensation() is None:
+        print(f"  not compensated by {name}: {', '.join(e.name for e in stage.effects)} (from {params_path})")
+        return build_controller(name, model)
+    rest = [e.name for e in stage.effects if not e.compensable]
+    print(
+        f"  FL regulator compensating {', '.join(e.name for e in stage.effects if e.compensable)}"
+        + (f" (not {', '.join(rest)}: they depend on the currents)" if rest else "")
+        + f" from {params_path}"
+    )
+    return FeedbackLinearizingRegulator(
+        model, compensation=stage.compensation(), name="FL regulator, stage-file effects compensated"
+    )
 
 
 def _simulate_microstepper(args: argparse.Namespace) -> int:
@@ -257,10 +306,23 @@ def cmd_region(args: argparse.Namespace) -> int:
                 "--sinusoid": args.sinusoid,
                 "--sdp": args.sdp,
                 "--samples": args.samples is not None,
+                "--robust": args.robust,
             },
         )
         return _region_microstepper(args, limit)
     _refuse("two_dof", {"--setpoint": args.setpoint is not None})
+    if args.robust:
+        return _region_robust(args, limit)
+    only_robust = {
+        "--confidence": args.confidence is not None,
+        "--box": args.box is not None,
+        "--scheduler": args.scheduler is not None,
+        "--workers": args.workers is not None,
+        "--seed": args.seed is not None,
+    }
+    given = [name for name, is_given in only_robust.items() if is_given]
+    if given:
+        raise InputError(f"{', '.join(given)} only apply with --robust")
     return _region_two_dof(args, limit)
 
 
@@ -322,6 +384,139 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
         write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"wrote {args.json}")
     ok = all(r["certified"] and r["monte_carlo"]["violations"] == 0 for r in records)
+    return 0 if ok else EXIT_NOT_CERTIFIED
+
+
+def _robust_plants(args: argparse.Namespace, model):
+    """The plant set of ``region --robust``: --box, else the confidence ellipsoid of the
+    --params stage file's covariance (or of the assumed one) at --confidence (default 0.95)."""
+    from maglev_oc.region.robust import ASSUMED_RELATIVE_STDERR, assumed_covariance
+    from maglev_oc.region.sweep import CONSTANT_NAMES, PlantSet
+
+    if args.box is not None and args.confidence is not None:
+        raise InputError("--box and --confidence contradict each other: give one")
+    nominal = np.asarray(model.constants.as_array(), dtype=float)
+    if args.box is not None:
+        lower, upper = nominal.copy(), nominal.copy()
+        for item in args.box.split(","):
+            name, sep, rng = item.strip().partition("=")
+            lo_s, sep2, hi_s = rng.partition(":")
+            if not sep or not sep2 or name not in CONSTANT_NAMES:
+                names = ", ".join(CONSTANT_NAMES)
+                raise InputError(f"--box takes C1=LO:HI,... with names among {names}; got {item!r}")
+            try:
+                lo, hi = float(lo_s), float(hi_s)
+            except ValueError:
+                raise InputError(f"--box {item!r}: LO and HI must be numbers") from None
+            if not (0 < lo <= hi and math.isfinite(hi)):
+                raise InputError(f"--box {item!r}: need 0 < LO <= HI")
+            k = CONSTANT_NAMES.index(name)
+            lower[k], upper[k] = lo, hi
+        return PlantSet.box(lower, upper), "box given by --box"
+    level = 0.95 if args.confidence is None else args.confidence
+    if not (0 < level < 1):
+        raise InputError(f"--confidence must be in (0, 1), got {level}")
+    cov, source = None, ""
+    if args.params is not None:
+        from maglev_oc.model.stagefile import StageFile, holds_stage_file
+
+        if holds_stage_file(args.params):
+            cov = StageFile.read(args.params).covariance
+            source = f"covariance of {args.params}"
+    if cov is None:
+        rel = "/".join(f"{100 * r:g}" for r in ASSUMED_RELATIVE_STDERR)
+        cov = assumed_covariance(model.constants)
+        source = f"no covariance given: ASSUMED standard errors {rel} % of C1..C4"
+    return PlantSet.confidence(nominal, cov, level), source
+
+
+def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
+    """``region --robust``: the nominal certificates on sampled plants (empirical, not certified)."""
+    import json
+
+    from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+    from maglev_oc.region.feasibility import FeasibleSet
+    from maglev_oc.region.procedure2 import Procedure2
+    from maglev_oc.region.robust import empirical_robust_level
+    from maglev_oc.region.sweep import PlantSet, SweepSpec, dask_client, run_sweep
+
+    _refuse("two_dof", {"--sinusoid": args.sinusoid, "--sdp": args.sdp})  # not in the robust sweep yet
+    model = load_model(args.params)
+    plants, source = _robust_plants(args, model)
+    gaps = [float(g) for g in (DEFAULT_REGION_GAPS if args.gaps is None else args.gaps)]
+    bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
+    if bad:
+        raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
+    runs = 2000 if args.samples is None else args.samples
+    if runs < 1:
+        raise InputError(f"--samples must be >= 1 with --robust, got {runs}")
+    workers = 1 if args.workers is None else args.workers
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {workers}")
+    seed = 0 if args.seed is None else args.seed
+    if seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    position = (0.0 if args.position is None else args.position) * MM_TO_M
+    feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
+    proc = Procedure2(feasible, RegulatorLoop())
+    for g in gaps:
+        feasible.check_setpoint(g * MM_TO_M, position)
+    print(f"plants: {plants.label} ({source}); controller: FL regulator with the nominal constants")
+    print("sampled, not certified: runs start uniformly in the nominal certified set {z~' P z~ <= c}")
+    print(
+        f"{'set-point':>9s} {'level c':>9s} {'nominal viol.':>14s} {'robust viol.':>13s} "
+        f"{'feasible':>9s} {'empirical c_rob/c':>18s}"
+    )
+    records, ok = [], True
+    with dask_client(args.scheduler, workers) as client:
+        for g in gaps:
+            ref = Reference.setpoint(g * MM_TO_M, position)
+            cert = proc.run(ref)
+            if not cert.success:
+                ok = False
+                print(f"{g:7.4g} mm  not certified nominally: {cert.message}")
+                continue
+            spec = SweepSpec(
+                PlantSet.point(model.constants),
+                ref,
+                constants=tuple(model.constants.as_array()),
+                params=model.params,
+                P=tuple(map(tuple, cert.P)),
+                level=cert.level,
+                current_limit=limit,
+            )
+            nominal = run_sweep(spec, runs, seed=seed, client=client)
+            robust = run_sweep(spec.with_plants(plants), runs, seed=seed, client=client)
+            shrunk = empirical_robust_level(f"{g:g} mm", spec, plants, runs=runs, seed=seed, client=client)
+            ok &= nominal.success and shrunk.check.success
+            ratio = f"{shrunk.ratio:.3f}" if shrunk.check.success else "not found"
+            print(
+                f"{g:6.4g} mm {cert.level:9.4g} {f'{nominal.violations}/{runs}':>14s} "
+                f"{f'{robust.violations}/{runs}':>13s} {robust.share_feasible:9.2%} {ratio:>18s}"
+            )
+            records.append(
+                {
+                    "setpoint_mm": [g, position * M_TO_MM],
+                    "level": cert.level,
+                    "runs": runs,
+                    "nominal_violations": nominal.violations,
+                    "robust_violations": robust.violations,
+                    "robust_share_feasible": robust.share_feasible,
+                    "empirical_robust_level": shrunk.level if shrunk.check.success else None,
+                    "empirical_robust_ratio": shrunk.ratio if shrunk.check.success else None,
+                }
+            )
+    if args.json:
+        doc = {
+            "plants": plants.label,
+            "plants_source": source,
+            "seed": seed,
+            "note": "Monte Carlo over sampled plants and starts: empirical, not a certificate",
+            "setpoints": records,
+        }
+        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {args.json}")
     return 0 if ok else EXIT_NOT_CERTIFIED
 
 
@@ -448,7 +643,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     from maglev_oc.data.logs import check_excitation, read_log
     from maglev_oc.diagnosis.pipeline import diagnose
+    from maglev_oc.diagnosis.stage_file import diagnosis_stage_file
     from maglev_oc.fileio import write_text_atomic
+    from maglev_oc.model.stagefile import StageFile
 
     model = load_model(args.params)
     logs = []
@@ -459,7 +656,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         _excited_axes(log, check_excitation)
         logs.append(log)
     diag = diagnose(logs, model, holdout_fraction=args.holdout)
-    write_text_atomic(args.json, json.dumps(diag.to_dict(), indent=2) + "\n")
+    doc = diag.to_dict()
+    geometry = StageFile.geometry_provenance(args.params)
+    doc["stage"] = diagnosis_stage_file(diag, model, geometry).to_dict()
+    write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
     print(diag.message)
     for a, before in diag.error_before.items():
         if math.isfinite(before):
@@ -486,6 +686,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     from maglev_oc.fileio import write_text_atomic
     from maglev_oc.identification.pipeline import identify, load_logs
+    from maglev_oc.model.stagefile import StageFile
 
     model = load_model(args.params)
     for path in args.logs:
@@ -501,7 +702,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         input_delay=args.input_delay,
     )
     print(outcome.report())
-    write_text_atomic(args.json, json.dumps(outcome.to_dict(), indent=2) + "\n")
+    doc = outcome.to_dict()
+    geometry = StageFile.geometry_provenance(args.params)
+    doc["stage"] = StageFile.from_identification(outcome, model, geometry).to_dict()
+    write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
     print(f"wrote {args.json}")
     if args.report:
         from maglev_oc.reporting.identification_plots import write_outcome_report
@@ -510,6 +714,22 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"wrote {args.report}")
     fits = [f for f in (outcome.equation_error, outcome.output_error) if f is not None]
     return 0 if all(f.success for f in fits) and all(r.success for r in outcome.npfsi) else 1
+
+
+def cmd_design_experiment(args: argparse.Namespace) -> int:
+    from maglev_oc.identification.design import design_experiment, write_design
+
+    if args.out.exists() and not args.out.is_dir():
+        raise OutputError(
+            f"{args.out}: is a file; --out takes the folder for reference.csv, reference.mat, design.json"
+        )
+    if not (math.isfinite(args.duration) and 10.0 <= args.duration <= 3600.0):
+        raise InputError(f"--duration must be between 10 and 3600 s, got {args.duration:g}")
+    design = design_experiment(args.kind, args.duration, model=load_model(args.params), seed=args.seed)
+    print(design.report())
+    for path in write_design(args.out, design).values():
+        print(f"wrote {path}")
+    return 0 if design.success else 1
 
 
 def _version() -> str:
@@ -540,13 +760,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=cmd_report)
 
+    from maglev_oc.control.registry import CONTROLLERS
+
+    p = sub.add_parser("export", help="write a controller as plain C99 for the rig (no heap, libm only)")
+    p.add_argument("controller", help=f"one of {', '.join(CONTROLLERS)}")
+    p.add_argument("--out", type=Path, required=True, help="directory to write (replaced whole)")
+    p.add_argument("--params", type=Path, help="stage/constants JSON of the controller (default: papers)")
+    p.add_argument("--prefix", help="C prefix of the exported symbols (default maglev_<controller>)")
+    p.set_defaults(func=cmd_export)
+
     p = sub.add_parser("model", help="print the equilibrium table")
     p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
     p.add_argument("--constants", help="a named set of the papers' constants, e.g. table3_eps0.05")
     p.add_argument("--gaps", nargs="+", type=float, metavar="MM", help="gaps in millimetres")
     p.set_defaults(func=cmd_model)
-
-    from maglev_oc.control.registry import CONTROLLERS
 
     p = sub.add_parser("simulate", help="closed loop on the rig twin, written as a log")
     p.add_argument(
@@ -630,6 +857,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", type=Path, help="write the certificates (P, levels, sizes) here")
     p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.add_argument(
+        "--robust",
+        action="store_true",
+        help="two_dof: Monte Carlo of the nominal certificates on sampled plants and an empirical "
+        "robust level (--samples runs each, default 2000)",
+    )
+    p.add_argument(
+        "--confidence",
+        type=float,
+        metavar="P",
+        help="--robust: plants in the P confidence ellipsoid of --params' covariance (default 0.95)",
+    )
+    p.add_argument("--box", metavar="C1=LO:HI,...", help="--robust: plants in this box (others nominal)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="--robust: a Dask scheduler (tcp://host:port)")
+    p.add_argument(
+        "--workers", type=int, metavar="N", help="--robust: local Dask worker processes (default 1)"
+    )
+    p.add_argument("--seed", type=int, metavar="S", help="--robust: seed of the samples (default 0)")
     p.set_defaults(func=cmd_region)
 
     p = sub.add_parser("diagnose", help="find what the model misses in logs and add it (SPEC 3)")
@@ -663,6 +908,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--eps", nargs="+", type=float, default=[0.001, 0.01, 0.05], help="NPFSI eps values [s]")
     p.add_argument("--input-delay", type=float, default=0.0, help="delay of the applied currents [s]")
     p.set_defaults(func=cmd_identify)
+
+    p = sub.add_parser(
+        "design-experiment", help="references for identification: multisine, PRBS, gap sweep, D-optimal"
+    )
+    p.add_argument("--kind", choices=["multisine", "prbs", "gap_sweep", "doptimal"], default="doptimal")
+    p.add_argument("--duration", type=float, default=60.0, help="length of the experiment [s] (10-3600)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="folder: reference.csv, reference.mat, design.json"
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="phases of the papers' excitation compared with; PRBS shift"
+    )
+    p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.set_defaults(func=cmd_design_experiment)
     return parser
 
 

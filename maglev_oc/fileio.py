@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 from maglev_oc.errors import OutputError
 
-__all__ = ["atomic_path", "write_text_atomic"]
+__all__ = ["atomic_path", "replace_directory", "write_text_atomic"]
 
 
 @contextlib.contextmanager
@@ -48,3 +49,25 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return Path(path)
+
+
+def replace_directory(built: str | os.PathLike, path: str | os.PathLike) -> Path:
+    """Move the finished directory ``built`` onto ``path`` (same file system), replacing an old
+    ``path``: the old one is renamed aside first and removed only once the new one is in place
+    (and put back if that fails). ``path`` is never a half-written directory: it is the old one,
+    the new one, or for the instant between the two renames absent."""
+    built, path = Path(built), Path(path)
+    old = None
+    try:
+        if path.exists():
+            old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.old."))
+            os.replace(path, old / path.name)
+        os.replace(built, path)
+    except OSError as err:
+        if old is not None and not path.exists():
+            os.replace(old / path.name, path)  # put the old one back
+        raise OutputError(f"{path}: cannot write here ({err.strerror or err})") from None
+    finally:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    return path

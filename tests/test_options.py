@@ -47,6 +47,8 @@ from maglev_oc.units import MM_TO_M
 ROOT = Path(__file__).resolve().parents[1]
 HERE = "tests/test_options.py"
 
+DESIGN_PICKS = "test_design_experiment_kind_duration_and_seed_pick_the_reference"
+EXPORT_NAMES = "test_cli_export_params_and_prefix_are_the_controller_and_its_names"
 OPTION_TESTS: dict[str, str] = {
     "--debug": f"{HERE}::test_debug_shows_the_traceback_of_a_bug_only",
     "--version": f"{HERE}::test_version_names_the_package_and_casadi",
@@ -86,6 +88,12 @@ OPTION_TESTS: dict[str, str] = {
     "region --params": f"{HERE}::test_region_params_is_the_model",
     "region --stage": f"{HERE}::test_region_stage_microstepper_certifies_the_3dof_loop",
     "region --setpoint": f"{HERE}::test_region_setpoint_places_each_axis",
+    "region --robust": "tests/test_region_sweep.py::test_region_robust_writes_its_table",
+    "region --confidence": f"{HERE}::test_region_robust_confidence_scales_the_ellipsoid",
+    "region --box": f"{HERE}::test_region_robust_box_is_the_plant_set",
+    "region --seed": f"{HERE}::test_region_robust_seed_reaches_every_sweep",
+    "region --workers": f"{HERE}::test_region_robust_workers_and_scheduler_choose_where_the_tasks_run",
+    "region --scheduler": f"{HERE}::test_region_robust_workers_and_scheduler_choose_where_the_tasks_run",
     # diagnose
     "diagnose --json": "tests/test_diagnose.py::test_json_follows_the_spec_contract",
     "diagnose --report": f"{HERE}::test_diagnose_report_is_written_with_the_findings",
@@ -100,6 +108,16 @@ OPTION_TESTS: dict[str, str] = {
     "identify --methods": "tests/test_identify_pipeline.py::test_cli_writes_json",
     "identify --eps": "tests/test_identify_pipeline.py::test_cli_writes_json",
     "identify --input-delay": f"{HERE}::test_identify_input_delay_matches_a_late_amplifier",
+    # design-experiment
+    "design-experiment --kind": f"{HERE}::{DESIGN_PICKS}",
+    "design-experiment --duration": f"{HERE}::{DESIGN_PICKS}",
+    "design-experiment --seed": f"{HERE}::{DESIGN_PICKS}",
+    "design-experiment --out": "tests/test_experiment_design.py::test_cli_writes_reference_mat_and_json",
+    "design-experiment --params": f"{HERE}::test_design_experiment_params_is_the_model_designed_for",
+    # export
+    "export --out": "tests/test_export.py::test_cli_exports_and_refuses_unknown_controllers",
+    "export --params": f"tests/test_export.py::{EXPORT_NAMES}",
+    "export --prefix": f"tests/test_export.py::{EXPORT_NAMES}",
 }
 """Every option of ``maglev-oc`` -> the test that fails when its effect is ignored or inverted."""
 
@@ -769,6 +787,110 @@ def test_feasible_set_position_range_is_the_only_place_x3_enters(model):
     assert free.level == pytest.approx(centre.level, rel=1e-9)
 
 
+# --- region --robust ----------------------------------------------------------------------------------
+@pytest.fixture
+def sweeps(monkeypatch):
+    """Every sweep ``region --robust`` runs and every Dask client it opens, recorded (the real
+    functions still run): the plant set, the seed and where the tasks went."""
+    import contextlib
+
+    import maglev_oc.region.robust as robust
+    import maglev_oc.region.sweep as sweep
+
+    calls = SimpleNamespace(sweeps=[], clients=[])
+    run, client = sweep.run_sweep, sweep.dask_client
+
+    def recording_run(spec, n, **kw):
+        calls.sweeps.append(SimpleNamespace(spec=spec, n=n, **kw))
+        return run(spec, n, **kw)
+
+    @contextlib.contextmanager
+    def recording_client(scheduler=None, workers=1):
+        with client(scheduler, workers) as c:
+            n = None if c is None else len(c.scheduler_info()["workers"])
+            calls.clients.append((scheduler, workers, n))
+            yield c
+
+    monkeypatch.setattr(sweep, "run_sweep", recording_run)
+    monkeypatch.setattr(robust, "run_sweep", recording_run)
+    monkeypatch.setattr(sweep, "dask_client", recording_client)
+    return calls
+
+
+def _robust(tmp_path: Path, *options: str) -> dict:
+    out = tmp_path / f"robust{len(list(tmp_path.glob('robust*.json')))}.json"
+    argv = ["region", "--robust", "--gaps", "20", "--samples", "40", *options, "--json", str(out)]
+    assert main(argv) == 0
+    return json.loads(out.read_text())
+
+
+def _robust_plants(calls) -> set:
+    """The plant sets the sweeps drew from, apart from the nominal point."""
+    return {c.spec.plants for c in calls.sweeps if c.spec.plants.label != "the nominal plant"}
+
+
+def test_region_robust_confidence_scales_the_ellipsoid(tmp_path, sweeps, model):
+    from scipy.stats import chi2
+
+    from maglev_oc.region.robust import assumed_covariance
+
+    _robust(tmp_path, "--confidence", "0.5")
+    (plants,) = _robust_plants(sweeps)
+    # the assumed covariance (no stage file) times the chi-square quantile of 0.5 with 4 dof
+    # (3.36, against 9.49 at the default 0.95): a level ignored or read as 1 - level fails
+    assert plants.kind == "ellipsoid"
+    assert_allclose(plants.shape, chi2.ppf(0.5, 4) * assumed_covariance(model.constants), rtol=1e-12)
+    assert_allclose(plants.center, model.constants.as_array(), rtol=0)
+
+
+def test_region_robust_box_is_the_plant_set(tmp_path, sweeps, model):
+    _robust(tmp_path, "--box", "C2=700:800,C4=0.06:0.08")
+    (plants,) = _robust_plants(sweeps)
+    nominal = np.asarray(model.constants.as_array())
+    assert plants.kind == "box"
+    # the named constants span their ranges, LO below HI; the others stay at the nominal value
+    assert_allclose(plants.lower, [nominal[0], 700.0, nominal[2], 0.06], rtol=0)
+    assert_allclose(plants.upper, [nominal[0], 800.0, nominal[2], 0.08], rtol=0)
+
+
+def test_region_robust_seed_reaches_every_sweep(tmp_path, sweeps):
+    doc = _robust(tmp_path, "--seed", "7")
+    assert doc["seed"] == 7
+    assert sweeps.sweeps and {c.seed for c in sweeps.sweeps} == {7}  # nominal, robust and the level search
+    sweeps.sweeps.clear()
+    _robust(tmp_path)
+    assert {c.seed for c in sweeps.sweeps} == {0}  # the default
+
+
+def test_region_robust_workers_and_scheduler_choose_where_the_tasks_run(tmp_path, sweeps):
+    # The numbers do not depend on where the tasks run (a seed per task: the bit-identity test of
+    # tests/test_region_sweep.py), so the options are checked by where they send the work: one
+    # worker stays in this process; --workers 2 starts a LocalCluster of two; --scheduler
+    # connects to a running scheduler (here a threaded cluster in this process), whose
+    # scheduler must then have run the sweep's tasks.
+    distributed = pytest.importorskip("distributed")
+    alone = _robust(tmp_path)
+    assert sweeps.clients[-1] == (None, 1, None)  # no client: this process
+    two = _robust(tmp_path, "--workers", "2")
+    assert sweeps.clients[-1] == (None, 2, 2)  # a cluster with two workers
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        remote = _robust(tmp_path, "--scheduler", cluster.scheduler_address)
+        assert sweeps.clients[-1] == (cluster.scheduler_address, 1, 1)
+        assert cluster.scheduler.transition_counter > 0  # the tasks ran there
+    assert alone["setpoints"] == two["setpoints"] == remote["setpoints"]
+
+
+def test_region_robust_refuses_an_unreachable_scheduler(capsys, monkeypatch):
+    pytest.importorskip("distributed")
+    import maglev_oc.region.sweep as sweep
+
+    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1.0)  # port 9 refuses at once; Dask retries
+    argv = ["region", "--robust", "--gaps", "20", "--samples", "10", "--scheduler", "tcp://127.0.0.1:9"]
+    assert main(argv) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "cannot connect to the Dask scheduler 'tcp://127.0.0.1:9'" in err
+
+
 # --- diagnose ---------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def twin_csv(tmp_path_factory, model) -> dict[str, Path]:
@@ -991,6 +1113,41 @@ def test_identify_terms_are_fitted(model, twin_csv):
     assert with_term.values["bias_horizontal.acceleration"] == pytest.approx(bias, abs=0.002)
     assert "bias_horizontal.acceleration" not in without.values
     assert with_term.residual_rms["horizontal"] < without.residual_rms["horizontal"]
+
+
+# --- design-experiment ----------------------------------------------------------------------------
+def _design(folder: Path, *options: str):
+    from maglev_oc.identification.design import read_reference
+
+    assert main(["design-experiment", *options, "--out", str(folder)]) == 0
+    return json.loads((folder / "design.json").read_text()), read_reference(folder / "reference.csv")
+
+
+def test_design_experiment_kind_duration_and_seed_pick_the_reference(tmp_path, model):
+    from maglev_oc.identification.design import design_experiment
+
+    doc, ref = _design(tmp_path / "a", "--kind", "prbs", "--duration", "12", "--seed", "3")
+    want = design_experiment("prbs", 12.0, model=model, seed=3)
+    assert doc["kind"] == "prbs" and doc["settings"]["seed"] == 3 and doc["settings"]["duration_s"] == 12
+    # 12 s at 1 kHz; the file holds the library's reference (CSV with 17 significant digits)
+    assert ref.t.size == 12000 and ref.t[-1] == pytest.approx(11.999, abs=1e-12)
+    assert_allclose(ref.values, want.reference.values, rtol=1e-15, atol=1e-18)
+    # another seed shifts the PRBS (a different reference); another kind is another shape
+    other_seed = design_experiment("prbs", 12.0, model=model, seed=0).reference.values
+    other_kind = design_experiment("multisine", 12.0, model=model, seed=3).reference.values
+    for other in (other_seed, other_kind):
+        assert np.max(np.abs(ref.values[0] - other[0])) > 1e-4  # > 0.1 mm of gap set-point
+
+
+def test_design_experiment_params_is_the_model_designed_for(tmp_path, stage_file):
+    # 20 % less force per ampere of i_d (WEAK_C3): the papers' excitation, whose peaks are the
+    # budget every design gets, needs more i_d on that stage (1.90 against 1.50 A to hold 20 mm)
+    weak, _ = _design(
+        tmp_path / "weak", "--kind", "multisine", "--duration", "12", "--params", str(stage_file)
+    )
+    papers, _ = _design(tmp_path / "papers", "--kind", "multisine", "--duration", "12")
+    assert weak["budget_A"]["i_d"] > 1.15 * papers["budget_A"]["i_d"]
+    assert weak["budget_A"]["i_d"] == pytest.approx(papers["budget_A"]["i_d"] * 1.90 / 1.50, rel=0.1)
 
 
 # --- the tables are complete and point at real tests ----------------------------------------------

@@ -23,6 +23,7 @@ A reading within a band by round-off (a 10 um error read as 1.0000000000000003e-
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -128,8 +129,9 @@ def evaluate(result: SimulationResult, scenario: Scenario) -> RunMetrics:
         status=result.status,
         message=result.message,
         steps=steps,
-        mean_error=PerAxis.of(np.nanmean(e_win, axis=1)),
-        peak_error=PerAxis.of(np.nanmax(e_win, axis=1)),
+        # a run shorter than the scenario's tracking window has no tracking figures (NaN)
+        mean_error=PerAxis.of(np.nanmean(e_win, axis=1)) if e_win.size else PerAxis(math.nan, math.nan),
+        peak_error=PerAxis.of(np.nanmax(e_win, axis=1)) if e_win.size else PerAxis(math.nan, math.nan),
         rms_current=float(np.sqrt(np.nanmean(mag**2))),
         peak_current=float(np.nanmax(mag)),
         min_margin=float(np.nanmin(margin)) if np.any(np.isfinite(margin)) else float("nan"),
