@@ -689,9 +689,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from maglev_oc.model.stagefile import StageFile
 
     model = load_model(args.params)
-    for path in args.logs:
+    held = args.validate or []
+    for path in [*args.logs, *held]:
         if not Path(path).is_file():
             raise InputError(f"{path}: no such file")
+    both = {Path(p).resolve() for p in args.logs} & {Path(p).resolve() for p in held}
+    if both:
+        names = ", ".join(sorted(str(p) for p in both))
+        raise InputError(f"--validate: {names} is also fitted; a held-out log must not be one of LOG")
     logs = load_logs(args.logs, params=model.params)
     outcome = identify(
         logs,
@@ -700,6 +705,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         methods=args.methods,
         npfsi_eps=args.eps,
         input_delay=args.input_delay,
+        validation_logs=load_logs(held, params=model.params) if held else (),
     )
     print(outcome.report())
     doc = outcome.to_dict()
@@ -907,6 +913,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--eps", nargs="+", type=float, default=[0.001, 0.01, 0.05], help="NPFSI eps values [s]")
     p.add_argument("--input-delay", type=float, default=0.0, help="delay of the applied currents [s]")
+    p.add_argument(
+        "--validate",
+        nargs="+",
+        type=Path,
+        metavar="LOG",
+        help="held-out logs the fit is validated on (default: in-sample, on the fitted logs)",
+    )
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser(
