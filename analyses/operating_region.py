@@ -18,6 +18,7 @@ import numpy as np
 
 from maglev_oc.control.linear_regulator import axis_linearizations
 from maglev_oc.model.stage import StageModel
+from maglev_oc.model.stagefile import stage_covariance
 from maglev_oc.region.study import (
     BASIN_OUTCOMES,
     OperatingRegionStudy,
@@ -72,11 +73,15 @@ def build(
     model: StageModel,
     config: StudyConfig | None = None,
     *,
+    params: Path | None = None,
     covariance=None,
     covariance_source: str = "",
 ) -> ReportContents:
     """Run the operating-region study (the full one unless ``config``) and write its report.
-    ``covariance`` (4, 4) of the model's C1..C4 for the robust page (default: an assumed one)."""
+    ``covariance`` (4, 4) of the model's C1..C4 for the robust page: given, else the one of the
+    stage file ``params`` (the file ``model`` was read from), else an assumed one."""
+    if covariance is None:
+        covariance, covariance_source = stage_covariance(params)
     study = operating_region_study(
         model, config or StudyConfig(), covariance=covariance, covariance_source=covariance_source
     )
@@ -1052,31 +1057,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = analysis_parser(__doc__, REPORT)
     parser.add_argument("--quick", action="store_true", help="small sample counts (smoke test)")
     args = parser.parse_args(argv)
-    covariance, source = _stage_covariance(args.params)
-    contents = build(
-        args.out,
-        load_model(args.params),
-        QUICK if args.quick else None,
-        covariance=covariance,
-        covariance_source=source,
-    )
+    contents = build(args.out, load_model(args.params), QUICK if args.quick else None, params=args.params)
     print(f"wrote {contents.path}")
     return 0
-
-
-def _stage_covariance(params: Path | None) -> tuple[np.ndarray | None, str]:
-    """The covariance of C1..C4 of a stage file given with --params, and where it came from
-    ((None, "") when there is none: the robust page then assumes one and says so)."""
-    if params is None:
-        return None, ""
-    from maglev_oc.model.stagefile import StageFile, holds_stage_file
-
-    if not holds_stage_file(params):
-        return None, ""
-    stage = StageFile.read(params)
-    if stage.covariance is None:
-        return None, ""
-    return np.asarray(stage.covariance, dtype=float), f"the stage file {Path(params).name}"
 
 
 if __name__ == "__main__":

@@ -309,6 +309,37 @@ def test_report_params_is_the_model_the_analyses_get(tmp_path, fake_analyses, st
     assert out == tmp_path / "first.pdf" and repr(WEAK_C3.C3) in out.read_text()
 
 
+def test_report_params_reaches_the_region_robust_page_as_a_covariance(tmp_path, monkeypatch):
+    # The operating-region report's robust page draws plants from the stage file's covariance:
+    # `report --params` must hand the file (not only the model read from it) to that analysis.
+    # The study itself is stubbed here (minutes); what reaches it is the point.
+    import importlib
+
+    from maglev_oc.model.stagefile import Provenance, StageFile
+    from maglev_oc.reporting import runner
+
+    region = importlib.import_module("maglev_oc.analyses.operating_region")
+    seen = {}
+
+    def study(model, config, *, covariance=None, covariance_source=""):
+        seen.update(covariance=covariance, source=covariance_source, C2=model.constants.C2)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(region, "operating_region_study", study)
+    model = StageModel()
+    cov = np.diag([1e-4, 0.25, 4e-4, 1e-8])
+    provenance = {k: Provenance.now((), "test") for k in ("geometry", "constants", "effects")}
+    path = tmp_path / "stage.json"
+    StageFile(StageParameters(), model.constants.replace(C2=780.0), cov, {}, (), provenance).write(path)
+    (run,) = runner.run_reports(["operating_region"], tmp_path / "out", params=path, jobs=1)
+    assert "stop here" in run.error  # the stubbed study ran, with
+    assert_allclose(seen["covariance"], cov, rtol=0)  # the file's covariance, not the assumed one
+    assert seen["source"] == "the stage file stage.json" and seen["C2"] == 780.0
+    seen.clear()
+    runner.run_reports(["operating_region"], tmp_path / "papers", jobs=1)
+    assert seen["covariance"] is None and seen["source"] == ""  # no file: the page assumes one
+
+
 def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, stage_file):
     from maglev_oc.reporting.runner import run_reports
 

@@ -61,6 +61,7 @@ __all__ = [
     "StageFile",
     "holds_stage_file",
     "known_effect",
+    "stage_covariance",
     "stage_effects",
 ]
 
@@ -609,3 +610,14 @@ def stage_effects(path: str | os.PathLike) -> tuple[StageEffect, ...]:
     if not holds_stage_file(path):
         return ()
     return StageFile.read(path).effects
+
+
+def stage_covariance(path: str | os.PathLike | None) -> tuple[np.ndarray | None, str]:
+    """The covariance (4, 4) of C1..C4 of a stage file and where it came from, or (None, "") for
+    no file, a file of the older stage/constants form, or a stage file without a covariance."""
+    if path is None or not holds_stage_file(path):
+        return None, ""
+    stage = StageFile.read(path)
+    if stage.covariance is None:
+        return None, ""
+    return np.asarray(stage.covariance, dtype=float), f"the stage file {Path(path).name}"

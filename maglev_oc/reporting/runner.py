@@ -9,6 +9,7 @@ does not stop the others; its error is returned, not raised.
 from __future__ import annotations
 
 import importlib
+import inspect
 import multiprocessing
 import os
 import pkgutil
@@ -62,7 +63,11 @@ def _build(name: str, out: str, params: str | None, package: str) -> ReportRun:
     path = Path(out)
     try:
         module = analysis_modules(package)[name]
-        module.build(path, load_model(Path(params) if params else None))
+        stage = Path(params) if params else None
+        # an analysis that reads more of the stage file than the model (the operating region: the
+        # constants' covariance) takes the file too
+        takes_file = "params" in inspect.signature(module.build).parameters
+        module.build(path, load_model(stage), **({"params": stage} if takes_file else {}))
     except Exception as err:  # one failing report must not stop the others
         detail = "".join(traceback.format_exception_only(err)).strip()
         return ReportRun(name, path, time.perf_counter() - t0, detail)
