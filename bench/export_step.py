@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_oc.cli import QP_ITERATION_BUDGET
 from maglev_oc.control.export import export_controller
 from maglev_oc.control.nmpc import NonlinearMPC
 from maglev_oc.control.registry import build_controller
@@ -77,6 +78,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calls", type=int, default=100_000, help="at least this many timed calls")
     ap.add_argument("--cpu", type=int, default=None, help="pin the driver to this core")
     ap.add_argument("--only", nargs="+", default=["fl", "linear", "lqr", "pid", "nmpc"])
+    ap.add_argument(
+        "--qp-iterations",
+        type=int,
+        default=QP_ITERATION_BUDGET,
+        help="the NMPC's QP iteration budget, as `maglev-oc export nmpc --qp-iterations` (default theirs)",
+    )
     args = ap.parse_args(argv)
     cc = c_compiler()
     if cc is None:
@@ -89,7 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     print("{:<12s} {:>8s} {:>9s} {:>9s} {:>9s} {:>9s} {:>9s} {:>11s}".format(*head))
     for name in args.only:
         if name == "nmpc":
-            ctrl = CompiledNMPC(NonlinearMPC(model, preview=False, qp_solver="qrqp"), backend="vm")
+            budget = {"max_iter": args.qp_iterations}
+            nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options=budget)
+            ctrl = CompiledNMPC(nmpc, backend="vm")
+            print(f"NMPC: qrqp with a budget of {args.qp_iterations} iterations")
             rows = _run(ctrl, model, "large_step", 0.5)
         else:
             ctrl = build_controller(name, model)

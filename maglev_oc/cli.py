@@ -95,17 +95,30 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+QP_ITERATION_BUDGET = 20
+"""Default iteration budget of the exported NMPC's QP solver (qrqp). The papers' large step, the
+hardest of their scenarios for the NMPC, needs at most 7 iterations on its constrained samples;
+when the budget runs out the step applies the saturated Riccati step (status "fallback"), so the
+work of one step is bounded by construction (bench/export_step.py)."""
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from maglev_oc.control.export import export_controller
 
+    if not 1 <= args.qp_iterations <= 1000:
+        raise InputError(f"--qp-iterations must be in [1, 1000], got {args.qp_iterations}")
     model = load_model(args.params)
     if args.controller == "nmpc":  # the registry's NMPC uses HPIPM, which is not generated into C
         # the NMPC's real-time iteration with qrqp: CasADi generates its QP solver into the file
         from maglev_oc.control.nmpc import NonlinearMPC
         from maglev_oc.sim.compiled_nmpc import CompiledNMPC
 
-        ctrl = CompiledNMPC(NonlinearMPC(model, preview=False, qp_solver="qrqp"), backend="vm")
+        budget = {"max_iter": args.qp_iterations}  # bounds the step's work; a failure falls back
+        nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options=budget)
+        ctrl = CompiledNMPC(nmpc, backend="vm")
     else:  # the FL regulator compensates the effects of a stage file given with --params
+        if args.qp_iterations != QP_ITERATION_BUDGET:
+            raise InputError("--qp-iterations applies to the NMPC only")
         ctrl = _controller_with_effects(args.controller, model, args.params)
     e = export_controller(ctrl, args.out, prefix=args.prefix)
     print(
@@ -773,6 +786,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="directory to write (replaced whole)")
     p.add_argument("--params", type=Path, help="stage/constants JSON of the controller (default: papers)")
     p.add_argument("--prefix", help="C prefix of the exported symbols (default maglev_<controller>)")
+    p.add_argument(
+        "--qp-iterations",
+        type=int,
+        default=QP_ITERATION_BUDGET,
+        metavar="K",
+        help=f"nmpc: iteration budget of the QP solver; when it runs out the step applies the "
+        f"saturated Riccati step and says so (default {QP_ITERATION_BUDGET})",
+    )
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("model", help="print the equilibrium table")

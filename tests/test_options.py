@@ -119,6 +119,7 @@ OPTION_TESTS: dict[str, str] = {
     "export --out": "tests/test_export.py::test_cli_exports_and_refuses_unknown_controllers",
     "export --params": f"tests/test_export.py::{EXPORT_NAMES}",
     "export --prefix": f"tests/test_export.py::{EXPORT_NAMES}",
+    "export --qp-iterations": f"{HERE}::test_export_qp_iterations_is_the_nmpc_solvers_budget",
 }
 """Every option of ``maglev-oc`` -> the test that fails when its effect is ignored or inverted."""
 
@@ -1162,6 +1163,32 @@ def test_identify_terms_are_fitted(model, twin_csv):
     assert with_term.values["bias_horizontal.acceleration"] == pytest.approx(bias, abs=0.002)
     assert "bias_horizontal.acceleration" not in without.values
     assert with_term.residual_rms["horizontal"] < without.residual_rms["horizontal"]
+
+
+# --- export ---------------------------------------------------------------------------------------
+def test_export_qp_iterations_is_the_nmpc_solvers_budget(monkeypatch, capsys):
+    # The budget reaches the exported NMPC's QP solver (what a budget does to the loop: the
+    # budget test of tests/test_nmpc.py).
+    # The NMPC is stopped once built: its export takes 15 s and is tested in tests/test_export.py.
+    import maglev_oc.control.nmpc as nmpc
+
+    built = []
+
+    def recording(model, **options):
+        built.append(options)
+        raise RuntimeError("built")
+
+    monkeypatch.setattr(nmpc, "NonlinearMPC", recording)
+    for options, budget in (([], cli.QP_ITERATION_BUDGET), (["--qp-iterations", "3"], 3)):
+        assert main(["export", "nmpc", "--out", "/nonexistent/x", *options]) == cli.EXIT_INTERNAL
+        assert built.pop()["qp_options"] == {"max_iter": budget}
+    assert cli.QP_ITERATION_BUDGET >= 10  # the large step needs up to 7 iterations
+    for argv, needle in (
+        (["nmpc", "--qp-iterations", "0"], "--qp-iterations must be in [1, 1000]"),
+        (["pid", "--qp-iterations", "5"], "--qp-iterations applies to the NMPC only"),
+    ):
+        assert main(["export", *argv, "--out", "/nonexistent/x"]) == cli.EXIT_USAGE
+        assert needle in capsys.readouterr().err
 
 
 # --- design-experiment ----------------------------------------------------------------------------

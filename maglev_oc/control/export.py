@@ -189,7 +189,10 @@ def export_controller(controller, out: str | os.PathLike, *, prefix: str | None 
         cg.add(upd)
         cg.add(start)
         cg.generate(str(work) + os.sep)
-        source = (work / f"{prefix}_generated.c").read_text()
+        source = _qp_failures_checked_after_the_call(
+            (work / f"{prefix}_generated.c").read_text(), controller.name
+        )
+        (work / f"{prefix}_generated.c").write_text(source)
         _check_self_contained(source, controller.name)
         fields = _fields(prefix, controller, nc, nd, sizes)
         (work / f"{prefix}.h").write_text(_HEADER.format(**fields))
@@ -215,6 +218,46 @@ def export_controller(controller, out: str | os.PathLike, *, prefix: str | None 
     return ExportedController(
         out, prefix, controller.name, controller.sample_time, nc, tuple(controller.diag_names), sizes, memory
     )
+
+
+_QP_STATUS_RETURN = re.compile(
+    r"  if \(d\.status == QP_SUCCESS\) \{;\n"
+    r"    return 0;\n"
+    r"  \} else if \(d\.status == QP_NO_SEARCH_DIR\) \{\n"
+    r"    return 4;\n"
+    r"  \} else \{\n"
+    r"    return -1;\n"
+    r"  \}\n"
+)
+
+
+def _qp_failures_checked_after_the_call(source: str, name: str) -> str:
+    """The generated QP solver (qrqp) returns 0 whatever its status, as ``error_on_fail=False``
+    does in CasADi's virtual machine.
+
+    CasADi's code generator ignores that option: a QP the solver did not finish (its iteration
+    budget ran out, no search direction) makes the whole step return an error, and the fallback
+    the step computes (the saturated Riccati step, :mod:`maglev_oc.control.nmpc.rti`) is never
+    applied. The step checks the QP's solution itself after the call (finite, constraint
+    violation below tolerance) and reports a failure in ``solver_ok``, so the solver's status is
+    not needed as a return code. Raises if CasADi's generated code no longer has the expected
+    form (a bounded CasADi version, ``pyproject.toml``).
+    """
+    if "casadi_qrqp_iterate(" not in source:
+        return source
+    patched, count = _QP_STATUS_RETURN.subn(
+        "  /* maglev_oc export: an unfinished QP (iteration budget, no search direction) is not an\n"
+        "     error of the step: its solution is checked after the call, the fallback applied and\n"
+        "     solver_ok = 0 reported */\n"
+        "  return 0;\n",
+        source,
+    )
+    if count == 0:
+        raise InputError(
+            f"{name}: the generated QP solver's status return has an unknown form (a CasADi version "
+            "this export was not written for); a QP failure would stop the step instead of falling back"
+        )
+    return patched
 
 
 _STANDARD_HEADERS = {"math.h", "string.h", "stdio.h", "stdarg.h", "stdlib.h", "stddef.h", "stdint.h"}
@@ -497,4 +540,13 @@ _DIAG_MEANING = {
     "clipped": "1 when the controller clipped (R < 0 replaced by 0), else 0",
     "v1": "virtual input, vertical [m/s^2]",
     "v2": "virtual input, horizontal [m/s^2]",
+    "solver_ok": "1: the QP's solution (or the unconstrained step, when it satisfied every bound) was "
+    "applied; 0: fallback, the QP solver failed or ran out of its iteration budget and the saturated "
+    "unconstrained (Riccati) step was applied",
+    "qp_iterations": "0: unconstrained step, no QP solved; -1: a QP was solved (no count in C)",
+    "cost": "cost of the applied plan [-]",
+    "d_v": "disturbance estimate, vertical [m/s^2]",
+    "d_h": "disturbance estimate, horizontal [m/s^2]",
+    "active_constraints": "inequalities active in the solution (-1: fallback)",
+    "qp_status": "-1: no QP solved; NaN: a QP was solved (its status is solver_ok)",
 }

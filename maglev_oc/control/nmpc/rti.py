@@ -31,10 +31,14 @@ QP solver and the unconstrained shortcut
     sample.
 
 A failed QP never raises: the solution is checked inside the Function (finite, dynamics
-residual and constraint violation below tolerance); when it fails the controller applies the
-shifted previous plan (or the feedforward current of the reference, projected on the current
-polytope), keeps the previous plan as the next linearization point and reports
-``solver_ok = 0`` (status ``"fallback"``, :mod:`.status`).
+residual and constraint violation below tolerance); when it fails (also when the solver runs
+out of its iteration budget, ``qp_options={"max_iter": K}``: the bound on the step's work) the
+controller applies the unconstrained (Riccati) step of the same QP with its currents projected
+onto the current polytope (a saturated LQ step around the plan: still feedback, where the
+shifted previous plan alone would be open loop and, applied sample after sample, dropped the
+stage on the large step), shifts that plan into the next linearization point and reports
+``solver_ok = 0`` (status ``"fallback"``, :mod:`.status`). If the Riccati step is not finite,
+the shifted previous plan (or the feedforward current of the reference) is applied.
 """
 
 from __future__ import annotations
@@ -132,6 +136,7 @@ def _post_function(
     y = ca.SX.sym("y", N_MEASUREMENTS)
     hess = ca.SX.sym("H", qp_data.sparsity_out("H"))
     z_ref = ca.SX.sym("z_ref", nz)
+    dz_lq = ca.SX.sym("dz_lq", nz)
 
     adz = ca.mtimes(a, dz)
     viol = ca.vertcat(lba - adz, adz - uba, lbx - dz, dz - ubx)
@@ -141,10 +146,15 @@ def _post_function(
     z_qp = zb + dz * ca.DM(ocp.z_scale)
     plan_finite = ca.sum1(ca.fabs(zb)) < 1e20
     ref_finite = ca.sum1(ca.fabs(z_ref)) < 1e20
-    # fallback: the shifted previous plan, else the reference plan (its first input is the
-    # feedforward current of the reference), else no current at all
+    # fallback: the unconstrained (Riccati) step of this QP, its currents projected onto the
+    # limits below (it keeps the loop's feedback when the QP solver runs out of iterations; the
+    # shifted previous plan alone is open loop and, applied sample after sample, drops the
+    # stage); if that step is not finite, the shifted previous plan, else the reference plan (its
+    # first input is the feedforward current of the reference), else no current at all
+    lq_finite = ca.logic_and(data_ok, ca.sum1(ca.fabs(dz_lq)) < 1e20)
+    z_lq = zb + dz_lq * ca.DM(ocp.z_scale)
     z_keep = ca.if_else(plan_finite, zb, ca.if_else(ref_finite, z_ref, ca.DM.zeros(nz)))
-    z_new = ca.if_else(ok, z_qp, z_keep)
+    z_new = ca.if_else(ok, z_qp, ca.if_else(lq_finite, z_lq, z_keep))
     u = ocp.project_current(z_new[0:NU])
     z_next = ca.mtimes(ca.DM(ca.sparsify(ca.DM(shift))), z_new)
     e = (z_new - z_ref) / ca.DM(ocp.z_scale)
@@ -159,9 +169,9 @@ def _post_function(
     names = ["z_bar", "dz", "lam_x", "lam_a", "A", "lba", "uba", "lbx", "ubx", "data_ok", "H", "z_ref"]
     return ca.Function(
         "nmpc_post",
-        [zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y],
+        [zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y, dz_lq],
         [u, memory_next, diag, z_new],
-        [*names, "obs", "d", "y"],
+        [*names, "obs", "d", "y", "dz_lq"],
         ["u", "memory_next", "diag", "plan"],
     )
 
@@ -267,18 +277,21 @@ def rti_step_function(
     data = qp_data(zb, x0, d, ref)
     _, _, a, lba, uba, lbx, ubx, data_ok, _ = data
     qp_in, solve_qp = _solve_qp_function(qp, qp_data, nz, na)
+    # the unconstrained step: the answer when it satisfies every bound (shortcut), and the
+    # fallback when the QP solver fails (its iteration budget, qp_options max_iter, runs out)
+    dz_lq, lq_feasible = parts.riccati(*data[:7])
     if shortcut:
         take_lq = ca.Function("nmpc_take_lq", qp_in, [qp_in[7], ca.DM.zeros(nz), ca.DM.zeros(na)])
         # only the selected branch runs (a CasADi Switch, also in the generated C)
         step = ca.Function.if_else("nmpc_lq_or_qp", take_lq, solve_qp)
-        dz_lq, feasible = parts.riccati(*data[:7])
+        feasible = lq_feasible
         dz, lam_x, lam_a = step(feasible, *data[:7], dz_lq)
     else:
         feasible = ca.MX(0)
         dz, lam_x, lam_a = solve_qp(*data[:7], ca.DM.zeros(nz))
     hess, z_ref = data[0], data[8]
     u, mem_next, diag, _ = parts.post(
-        zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y
+        zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y, dz_lq
     )
     # qp_iterations: 0 when the unconstrained step was taken, -1 (filled in from the solver's
     # statistics in Python) when the QP was solved; qp_status: -1 no QP, NaN until filled in

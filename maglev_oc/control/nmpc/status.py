@@ -37,7 +37,9 @@ STATUSES: Mapping[str, str] = MappingProxyType(
         "qp_accepted": "the QP solver reported a failure but its solution passed the checks",
         "qp_unreported": "the QP solution passed the checks; the solver's statistics were not available",
         "converged": "IPOPT converged",
-        "fallback": "no solution passed the checks; the shifted previous plan was applied",
+        "fallback": "no solution passed the checks (the solver failed or ran out of its iteration "
+        "budget); the real-time iteration applied the unconstrained (Riccati) step, its currents "
+        "projected onto the limits, the converged mode the shifted previous plan",
     }
 )
 """The status words of :class:`NMPCStep` and what each means."""
