@@ -32,7 +32,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import prepare
 from maglev_oc.reporting import identification_plots as plots
 from maglev_oc.reporting import validation_plots
-from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text, wrap_cells
+from maglev_oc.reporting.pdf import PdfReport, Plot, ReportContents, Table, Text
 from maglev_oc.reporting.twins import twin_sentence
 from maglev_oc.units import M_TO_MM, M_TO_UM
 from maglev_oc.validation import Validation, validate
@@ -826,14 +826,7 @@ def write_report(
             "Validation on a held-out run: residual whiteness and fit",
             [
                 Text(validation_plots.verdict_rows(validations), font_size=8.0),
-                Plot(validation_plots.correlation_plot(validations), 0.42),
-                Table(
-                    "",
-                    validation_plots.FIT_COLUMNS,
-                    wrap_cells(validation_plots.fit_rows(validations), (18, 10, 34, 22, 26)),
-                    notes=[validation_plots.FIT_NOTE],
-                    font_size=7.5,
-                ),
+                *validation_plots.page_blocks(validations),
             ],
         )
         bands = {"C1": 10, "C2": 2, "C3": 5, "C4": 25}

@@ -105,7 +105,7 @@ work of one step is bounded by construction (bench/export_step.py)."""
 def cmd_export(args: argparse.Namespace) -> int:
     from maglev_oc.control.export import export_controller
 
-    if not 1 <= args.qp_iterations <= 1000:
+    if args.qp_iterations is not None and not 1 <= args.qp_iterations <= 1000:
         raise InputError(f"--qp-iterations must be in [1, 1000], got {args.qp_iterations}")
     model = load_model(args.params)
     if args.controller == "nmpc":  # the registry's NMPC uses HPIPM, which is not generated into C
@@ -113,11 +113,11 @@ def cmd_export(args: argparse.Namespace) -> int:
         from maglev_oc.control.nmpc import NonlinearMPC
         from maglev_oc.sim.compiled_nmpc import CompiledNMPC
 
-        budget = {"max_iter": args.qp_iterations}  # bounds the step's work; a failure falls back
+        budget = {"max_iter": args.qp_iterations or QP_ITERATION_BUDGET}  # a failure falls back
         nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options=budget)
         ctrl = CompiledNMPC(nmpc, backend="vm")
     else:  # the FL regulator compensates the effects of a stage file given with --params
-        if args.qp_iterations != QP_ITERATION_BUDGET:
+        if args.qp_iterations is not None:
             raise InputError("--qp-iterations applies to the NMPC only")
         ctrl = _controller_with_effects(args.controller, model, args.params)
     e = export_controller(ctrl, args.out, prefix=args.prefix)
@@ -339,6 +339,15 @@ def cmd_region(args: argparse.Namespace) -> int:
     return _region_two_dof(args, limit)
 
 
+def _region_gaps(args: argparse.Namespace) -> list[float]:
+    """The set-point gaps [mm] of ``region`` (--gaps, else the default ones), checked."""
+    gaps = [float(g) for g in (DEFAULT_REGION_GAPS if args.gaps is None else args.gaps)]
+    bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
+    if bad:
+        raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
+    return gaps
+
+
 def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     import json
 
@@ -348,10 +357,7 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     from maglev_oc.region.procedure2 import Procedure2
 
     model = load_model(args.params)
-    gaps = [float(g) for g in (DEFAULT_REGION_GAPS if args.gaps is None else args.gaps)]
-    bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
-    if bad:
-        raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
+    gaps = _region_gaps(args)
     samples = 0 if args.samples is None else args.samples
     if samples < 0:
         raise InputError(f"--samples must be >= 0, got {samples}")
@@ -457,10 +463,7 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
     _refuse("two_dof", {"--sinusoid": args.sinusoid, "--sdp": args.sdp})  # not in the robust sweep yet
     model = load_model(args.params)
     plants, source = _robust_plants(args, model)
-    gaps = [float(g) for g in (DEFAULT_REGION_GAPS if args.gaps is None else args.gaps)]
-    bad = [g for g in gaps if not (5.0 <= g <= 40.0)]
-    if bad:
-        raise InputError(f"--gaps are millimetres in [5, 40], got {bad}")
+    gaps = _region_gaps(args)
     runs = 2000 if args.samples is None else args.samples
     if runs < 1:
         raise InputError(f"--samples must be >= 1 with --robust, got {runs}")
@@ -789,7 +792,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--qp-iterations",
         type=int,
-        default=QP_ITERATION_BUDGET,
         metavar="K",
         help=f"nmpc: iteration budget of the QP solver; when it runs out the step applies the "
         f"saturated Riccati step and says so (default {QP_ITERATION_BUDGET})",

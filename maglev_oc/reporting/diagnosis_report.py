@@ -32,7 +32,6 @@ from maglev_oc.reporting.pdf import (
     Text,
     block_height,
     page_room,
-    wrap_cells,
 )
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
@@ -418,16 +417,7 @@ def _validation_part(diag: Diagnosis) -> Part | None:
         return None
     return (
         "Validation on the held-out block: residual whiteness and fit",
-        [
-            Plot(validation_plots.correlation_plot(runs), 0.42),
-            Table(
-                "",
-                validation_plots.FIT_COLUMNS,
-                wrap_cells(validation_plots.fit_rows(runs), (18, 10, 34, 22, 26)),
-                notes=[validation_plots.FIT_NOTE],
-                font_size=7.5,
-            ),
-        ],
+        validation_plots.page_blocks(runs),
     )
 
 

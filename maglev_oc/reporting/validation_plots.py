@@ -10,11 +10,11 @@ from collections.abc import Callable, Mapping
 import numpy as np
 from matplotlib.figure import Figure
 
-from maglev_oc.reporting.pdf import grid
+from maglev_oc.reporting.pdf import Plot, Table, grid, wrap_cells
 from maglev_oc.results import AXES
 from maglev_oc.validation import Validation
 
-__all__ = ["FIT_COLUMNS", "FIT_NOTE", "correlation_plot", "fit_rows", "verdict_rows"]
+__all__ = ["FIT_COLUMNS", "FIT_NOTE", "correlation_plot", "fit_rows", "page_blocks", "verdict_rows"]
 
 Draw = Callable[[Figure, tuple[float, float, float, float]], str]
 FIT_COLUMNS = ("model", "axis", "fit % by horizon", "whiteness (Ljung-Box p)", "independence (largest ccf)")
@@ -116,3 +116,18 @@ def _fit_cell(value: float) -> str:
     if not np.isfinite(value):
         return "diverged"
     return f"{value:.1f} %"
+
+
+def page_blocks(validations: Mapping[str, Validation]) -> list:
+    """The validation page's figure (residual correlations) and fit table, as the identification
+    and diagnosis reports both print them."""
+    return [
+        Plot(correlation_plot(validations), 0.42),
+        Table(
+            "",
+            FIT_COLUMNS,
+            wrap_cells(fit_rows(validations), (18, 10, 34, 22, 26)),
+            notes=[FIT_NOTE],
+            font_size=7.5,
+        ),
+    ]
