@@ -17,6 +17,8 @@
   set or a box, the controller nominal) as Dask tasks, the same numbers on any number of workers.
 * :mod:`~maglev_oc.region.robust` — what the nominal certificate is worth on those plants
   (sampled, never certified): feasible shares by confidence level, where runs first leave F.
+* :mod:`~maglev_oc.region.robust_certificate` — a level set certified forward invariant in F for
+  every plant of a box or confidence ellipsoid (:class:`RobustCertifier`, interval branch and bound).
 """
 
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
@@ -32,6 +34,12 @@ from maglev_oc.region.montecarlo import (
 )
 from maglev_oc.region.procedure2 import Procedure2, Procedure2Result
 from maglev_oc.region.roa import LinearizedLoop, RoaResult, certify_roa
+from maglev_oc.region.robust_certificate import (
+    RobustCertificate,
+    RobustCertifier,
+    certify_robust,
+    robust_lyapunov_matrix,
+)
 from maglev_oc.region.sdp import SdpResult, enlarge
 from maglev_oc.region.study import OperatingRegionStudy, StudyConfig, operating_region_study
 
@@ -48,14 +56,18 @@ __all__ = [
     "Reference",
     "RegulatorLoop",
     "RoaResult",
+    "RobustCertificate",
+    "RobustCertifier",
     "SdpResult",
     "SliceCheck",
     "StudyConfig",
     "certify_roa",
+    "certify_robust",
     "check_error_states",
     "enlarge",
     "feasibility_map",
     "fl_slice",
     "operating_region_study",
+    "robust_lyapunov_matrix",
     "uniform_in_ellipsoid",
 ]
