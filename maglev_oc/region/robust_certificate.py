@@ -176,7 +176,7 @@ class _Geometry:
     T: np.ndarray  # (10, 5) least-V preimage z~ = T w
     Z: np.ndarray  # (10, 5) basis of null(N)
     Q: np.ndarray  # (10, 10) -(A'P + PA)
-    alphas: np.ndarray  # (k,)
+    alphas: np.ndarray  # (k,) effective alphas (lowered for rounding, see _geometry)
     R: np.ndarray  # (k, 5, 5) chol' R_alpha chol (per unit level)
     lift: np.ndarray  # (k, 5, 10) eta = lift z0: the null-space part maximising -z'Hz
     spare: np.ndarray  # (10,) a null-space direction with V = 1 (when that part is zero)
@@ -198,16 +198,22 @@ def _geometry(loop: RegulatorLoop, P: np.ndarray) -> _Geometry:
     spare = Z @ vec[:, 0]
     spare = spare / math.sqrt(spare @ P @ spare)
     alphas = alpha_max * np.asarray(ALPHA_FRACTIONS)
-    R, lift = [], []
+    R, lift, effective = [], [], []
     for a in alphas:
         H = Q - a * P
         ZH = Z.T @ H
         G = np.linalg.solve(ZH @ Z, ZH)  # (Z'HZ)^-1 Z'H
         Ra = -T.T @ (H - H @ Z @ G) @ T
+        Ra = 0.5 * (Ra + Ra.T)
+        # the bound needs H + N'R N >= 0 (PSD with a 5-D kernel by construction); rounding is
+        # absorbed by lowering alpha by the pencil's most negative eigenvalue (plus a hair)
+        M = H + N.T @ Ra @ N
+        lowest = float(eigh(0.5 * (M + M.T), P, eigvals_only=True)[0])
+        effective.append(a - max(0.0, -lowest) - 1e-12 * abs(alpha_max))
         Rt = chol.T @ Ra @ chol
         R.append(0.5 * (Rt + Rt.T))
         lift.append(-G)
-    return _Geometry(N, chol, T, Z, Q, alphas, np.array(R), np.array(lift), spare)
+    return _Geometry(N, chol, T, Z, Q, np.array(effective), np.array(R), np.array(lift), spare)
 
 
 @dataclass(frozen=True)
