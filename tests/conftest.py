@@ -2,6 +2,16 @@
 
 from __future__ import annotations
 
+import os
+
+# One BLAS thread per process, set before NumPy loads here and in the xdist workers this process
+# starts (they inherit the environment): pytest-xdist already runs one worker per core, and
+# OpenBLAS's own threads then spin against the other worker (measured on 2 cores: a diagnosis
+# 2.2x slower with 2 BLAS threads than with 1; a 200-column block Gram 13x). A count the user set
+# is kept.
+if not any(os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")):
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+
 import matplotlib
 import pytest
 
@@ -35,3 +45,7 @@ def twin_log(model: StageModel, truth_model: StageModel) -> Log:
     """6 s of the papers' excitation on the twin (encoder + amplifier; identification needs 5 s),
     controlled with the nominal model."""
     return excitation_log(truth_model, duration=6.0, seed=7, controller_model=model)
+
+
+# the independent generator's logs and their diagnoses, shared by the diagnosis test files
+from tests.diagnosis_support import diagnosed, generated  # noqa: E402, F401

@@ -7,8 +7,10 @@ misalignment, the papers' FL regulator at 5 kHz logged at 1 kHz, 10 um encoders,
 CSV. Scores use ``tests/independent/scoring.py`` (true effect first, no false claim, size within
 30 %: the issue's criteria).
 
-The quick tests run a handful of logs; the whole sets (20 clean seeds, every effect alone at two
-sizes, pairs) are marked slow (about six minutes on two cores; CI runs them).
+The quick tests run a handful of logs; the whole sets are marked slow (CI runs them) and live in
+files of their own so that pytest-xdist spreads them over the cores: the twenty clean seeds in
+``test_diagnose_clean_seeds.py``, every effect alone at two sizes and the pairs in
+``test_diagnose_effects.py``. Logs and diagnoses are shared through ``tests/diagnosis_support.py``.
 """
 
 from __future__ import annotations
@@ -29,59 +31,10 @@ from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.recording import result_to_log
 from maglev_oc.sim.scenarios import excitation_scenario
 from maglev_oc.sim.twin import RigTwin
-from tests.independent import write_log
-from tests.independent.scoring import score
+from tests.diagnosis_support import diagnose_path, relative_errors
 from tests.independent.sets import named_set
-from tests.independent.simulate import simulate
 
 SHARED_CLEAN = Path(__file__).resolve().parents[2] / "shared" / "logs" / "independent_clean.csv"
-
-
-@pytest.fixture(scope="session")
-def generated(tmp_path_factory):
-    """Logs of the independent generator by (set, stem), written once per session: (csv, truth)."""
-    root = tmp_path_factory.mktemp("independent")
-    cache: dict[tuple[str, str], tuple[Path, dict]] = {}
-
-    def get(set_name: str, stem: str) -> tuple[Path, dict]:
-        key = (set_name, stem)
-        if key not in cache:
-            scenario = dict(named_set(set_name))[stem]
-            csv, truth_path = write_log(simulate(scenario), root / set_name, stem=stem)
-            truth = json.loads(truth_path.read_text())
-            # the generator's own sanity, on every log a test here diagnoses: its loop never had
-            # to clip (R >= 0 throughout, currents inside the amplifiers' range)
-            assert truth["run"]["samples_with_R_clipped"] == 0, stem
-            assert truth["run"]["samples_with_current_clipped"] == 0, stem
-            cache[key] = (csv, truth)
-        return cache[key]
-
-    return get
-
-
-@pytest.fixture(scope="session")
-def diagnosed(generated):
-    """The default diagnosis of a generated log by (set, stem), run once per session (the quick
-    clean tests and the twenty-seed test share theirs): (diagnosis, truth)."""
-    cache: dict[tuple[str, str], tuple] = {}
-
-    def get(set_name: str, stem: str):
-        key = (set_name, stem)
-        if key not in cache:
-            path, truth = generated(set_name, stem)
-            cache[key] = (_diagnose(path), truth)
-        return cache[key]
-
-    return get
-
-
-def _diagnose(path: Path, **kw):
-    return diagnose([read_log(path)], **kw)
-
-
-def _relative_errors(d, truth: dict) -> dict[str, float]:
-    true = truth["plant"]["constants_true"]
-    return {k: d.constants_final[k].value / true[k] - 1 for k in true}
 
 
 # --- logs recorded outside this repository ------------------------------------------------------
@@ -89,7 +42,7 @@ def _relative_errors(d, truth: dict) -> dict[str, float]:
 def test_shared_clean_log_claims_nothing():
     # ../shared/logs/README.md: "no missing effect". The issue measured a 9 N vertical force
     # offset claimed here with confidence 1.00; now nothing is claimed and nothing is confounded.
-    d = _diagnose(SHARED_CLEAN)
+    d = diagnose_path(SHARED_CLEAN)
     j = d.to_dict()
     assert j["effects"] == []
     assert j["not_separable"] == []
@@ -103,102 +56,11 @@ def test_shared_clean_log_claims_nothing():
 def test_clean_logs_claim_nothing_and_recover_the_constants(diagnosed, stem):
     d, truth = diagnosed("clean", stem)
     assert d.effects == []
-    err = _relative_errors(d, truth)
+    err = relative_errors(d, truth)
     # the base model robust to real logging (issue: C1..C3 within 1 %, C4 within 10 % on clean
     # logs of a loop faster than its logging)
     assert max(abs(err[k]) for k in ("C1", "C2", "C3")) < 0.01, err
     assert abs(err["C4"]) < 0.10, err
-
-
-@pytest.mark.slow
-def test_at_most_one_claim_in_twenty_clean_seeds(diagnosed):
-    claims, worst = 0, {}
-    for stem, _ in named_set("clean"):
-        d, truth = diagnosed("clean", stem)
-        claims += len(d.effects)
-        for k, v in _relative_errors(d, truth).items():
-            worst[k] = max(worst.get(k, 0.0), abs(v))
-    assert claims <= 1  # the issue: at most 1 claim in 20 seeds
-    assert max(worst["C1"], worst["C2"], worst["C3"]) < 0.01, worst
-    assert worst["C4"] < 0.10, worst
-
-
-# --- each effect alone, two sizes ----------------------------------------------------------------
-def _single_stems() -> list[tuple[str, str]]:
-    return [(stem, scenario.name) for stem, scenario in named_set("single")]
-
-
-QUICK = {"guide_friction_horizontal_small", "normal_cogging_large", "cable_carrier_small"}
-FIELD_SHAPE = pytest.mark.xfail(
-    strict=True,
-    reason="not identifiable from a closed-loop log: the constants absorb it (see test_field_shape_...)",
-)
-
-
-def _marks(name: str) -> list:
-    marks = [] if name in QUICK else [pytest.mark.slow]
-    return marks + ([FIELD_SHAPE] if name.startswith("field_shape") else [])
-
-
-@pytest.mark.parametrize(
-    ("stem", "name"),
-    [pytest.param(stem, name, marks=_marks(name), id=name) for stem, name in _single_stems()],
-)
-def test_each_effect_alone_is_found_first_and_sized(generated, stem, name):
-    path, truth = generated("single", stem)
-    d = _diagnose(path)
-    s = score(stem, truth, d.to_dict()["effects"])
-    assert s.no_false_claim, s.claimed
-    assert s.true_first, (s.claimed, s.notes)
-    assert s.size_right, s.notes  # within 30 % of the truth (the issue's bound)
-
-
-KNOWN_PAIR_FAILURES = {
-    "pairs_02": FIELD_SHAPE,
-    "pairs_03": pytest.mark.xfail(
-        strict=True,
-        reason="a 1.5 % end effect beside a 4 mrad misalignment with 8 um waviness at 60 mm: the waviness's "
-        "along-guide force is named a detent force at the pole pitch (57 mm) and the end effect is not found",
-    ),
-    "pairs_05": pytest.mark.xfail(
-        strict=True,
-        reason="the amplifier lag next to vertical friction: the lag fits the training part (1.6 ms against "
-        "1.3 ms) but worsens the held-out error, confounded with the sticking guides",
-    ),
-}
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "stem",
-    [pytest.param(stem, marks=KNOWN_PAIR_FAILURES.get(stem, ()), id=stem) for stem, _ in named_set("pairs")],
-)
-def test_two_effects_together_are_both_found(generated, stem):
-    path, truth = generated("pairs", stem)
-    d = _diagnose(path)
-    s = score(stem, truth, d.to_dict()["effects"])
-    assert s.true_first, s.claimed
-    assert s.no_false_claim, s.claimed
-    assert s.size_right, (s.claimed, s.notes)  # both found, each within 30 %
-
-
-@pytest.mark.slow
-def test_field_shape_is_absorbed_by_the_constants_and_nothing_is_claimed(generated):
-    # A field weaker/stronger with the gap (B times exp(-k1 d - k2 d^2)) multiplies the attraction
-    # by a smooth function of the gap. On a closed-loop log the levitation current follows the
-    # gap (it is the equilibrium current plus small transients), so C3 l3(g) i_d(g) and
-    # C4 l4(g) i_d(g)^2 span the same smooth functions of the gap: the base fit absorbs the field
-    # shape into C3, C4 and the model still predicts the held-out data to its noise. Nothing is
-    # claimed, nothing false either; the experiment that shows it is the papers' equilibrium
-    # currents over 10-25 mm (000 Sec. V-B), where the gap is swept with the current held.
-    stem = next(s for s, sc in named_set("single") if sc.name == "field_shape_large")
-    path, truth = generated("single", stem)
-    d = _diagnose(path)
-    assert d.effects == []
-    before, after = d.error_before["vertical"], d.error_after["vertical"]
-    assert after == pytest.approx(before)
-    err = _relative_errors(d, truth)
-    assert abs(err["C4"]) > 0.2  # the field shape went into C4 (measured +145 %)
 
 
 # --- effects outside the library ------------------------------------------------------------------
@@ -208,14 +70,14 @@ def test_an_effect_outside_the_library_goes_to_unexplained(generated):
     # part of it) but report a residual that depends on the position.
     stem = next(s for s, sc in named_set("single") if sc.name == "cable_carrier_large")
     path, _ = generated("single", stem)
-    d = _diagnose(path, exclude=["cable_carrier_force"])
+    d = diagnose_path(path, exclude=["cable_carrier_force"])
     assert d.effects == []
     assert [(u.axis, u.depends_on) for u in d.unexplained] == [("horizontal", "position")]
     u = d.unexplained[0]
     # 12 N/m over the logged +-35 mm and a 0.26 N offset: about 0.27 N RMS of force
     assert 0.15 < u.force_rms < 0.4
     with pytest.raises(ValueError, match="unknown candidate"):
-        _diagnose(path, exclude=["spring"])
+        diagnose_path(path, exclude=["spring"])
 
 
 # --- the command line, the contract, bad input ----------------------------------------------------

@@ -28,6 +28,7 @@ import importlib
 import inspect
 import json
 import math
+import os
 import re
 from pathlib import Path
 from types import SimpleNamespace
@@ -341,8 +342,11 @@ def test_report_params_reaches_the_region_robust_page_as_a_covariance(tmp_path, 
     assert seen["covariance"] is None and seen["source"] == ""  # no file: the page assumes one
 
 
-def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, stage_file):
-    from maglev_oc.reporting.runner import run_reports
+def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, stage_file, monkeypatch):
+    from maglev_oc.reporting.runner import BLAS_THREAD_VARIABLES, run_reports
+
+    for k in BLAS_THREAD_VARIABLES:  # as on a user's shell: the runner then sets cores / workers
+        monkeypatch.delenv(k, raising=False)
 
     names = ["slow", "slower", "broken"]
     kwargs = dict(params=stage_file, package="tests.fake_analyses")
@@ -355,6 +359,12 @@ def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, st
     assert texts[0]["pid"] != texts[1]["pid"]
     start, end = [float(t["started"]) for t in texts], [float(t["ended"]) for t in texts]
     assert max(start) < min(end)
+    # each worker got its share of the cores as BLAS threads; this process's environment is as it was
+    assert [t["blas"] for t in texts] == [str(max(1, len(os.sched_getaffinity(0)) // 2))] * 2
+    assert not any(k in os.environ for k in BLAS_THREAD_VARIABLES)
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")  # a count the user set is kept
+    runs = run_reports(names[:2], tmp_path / "user", jobs=2, **kwargs)
+    assert [r.path.read_text().splitlines()[-1] for r in runs] == ["blas = 3"] * 2
     # one job: one after the other, in this process
     runs = run_reports(names[:2], tmp_path / "one", jobs=1, **kwargs)
     texts = [dict(line.split(" = ") for line in r.path.read_text().splitlines()) for r in runs]

@@ -13,4 +13,5 @@ def build(out, model):
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(
         f"C3 = {model.constants.C3!r}\npid = {os.getpid()}\nstarted = {started!r}\nended = {time.time()!r}\n"
+        f"blas = {os.environ.get('OPENBLAS_NUM_THREADS')}\n"
     )

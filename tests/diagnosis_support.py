@@ -1,0 +1,68 @@
+"""Logs of the independent generator and their diagnoses, shared by the diagnosis tests.
+
+The fixtures are registered in ``tests/conftest.py``; the test files are split (clean seeds, the
+effects, the rest) so that pytest-xdist, which keeps a file on one worker, spreads them over the
+cores.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis.pipeline import diagnose
+from tests.independent import write_log
+from tests.independent.sets import named_set
+from tests.independent.simulate import simulate
+
+__all__ = ["diagnose_path", "diagnosed", "generated", "relative_errors"]
+
+
+@pytest.fixture(scope="session")
+def generated(tmp_path_factory):
+    """Logs of the independent generator by (set, stem), written once per session: (csv, truth)."""
+    root = tmp_path_factory.mktemp("independent")
+    cache: dict[tuple[str, str], tuple[Path, dict]] = {}
+
+    def get(set_name: str, stem: str) -> tuple[Path, dict]:
+        key = (set_name, stem)
+        if key not in cache:
+            scenario = dict(named_set(set_name))[stem]
+            csv, truth_path = write_log(simulate(scenario), root / set_name, stem=stem)
+            truth = json.loads(truth_path.read_text())
+            # the generator's own sanity, on every log a test here diagnoses: its loop never had
+            # to clip (R >= 0 throughout, currents inside the amplifiers' range)
+            assert truth["run"]["samples_with_R_clipped"] == 0, stem
+            assert truth["run"]["samples_with_current_clipped"] == 0, stem
+            cache[key] = (csv, truth)
+        return cache[key]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def diagnosed(generated):
+    """The default diagnosis of a generated log by (set, stem), run once per session (the quick
+    clean tests and the twenty-seed test share theirs): (diagnosis, truth)."""
+    cache: dict[tuple[str, str], tuple] = {}
+
+    def get(set_name: str, stem: str):
+        key = (set_name, stem)
+        if key not in cache:
+            path, truth = generated(set_name, stem)
+            cache[key] = (diagnose_path(path), truth)
+        return cache[key]
+
+    return get
+
+
+def diagnose_path(path: Path, **kw):
+    return diagnose([read_log(path)], **kw)
+
+
+def relative_errors(d, truth: dict) -> dict[str, float]:
+    true = truth["plant"]["constants_true"]
+    return {k: d.constants_final[k].value / true[k] - 1 for k in true}
