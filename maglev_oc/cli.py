@@ -111,10 +111,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.controller == "nmpc":  # the registry's NMPC uses HPIPM, which is not generated into C
         # the NMPC's real-time iteration with qrqp: CasADi generates its QP solver into the file
         from maglev_oc.control.nmpc import NonlinearMPC
+        from maglev_oc.model.stagefile import StageFile, holds_stage_file
         from maglev_oc.sim.compiled_nmpc import CompiledNMPC
 
         budget = {"max_iter": args.qp_iterations or QP_ITERATION_BUDGET}  # a failure falls back
-        nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options=budget)
+        # a stage file's effects go into the prediction model, as in simulate
+        stage = StageFile.read(args.params) if args.params and holds_stage_file(args.params) else None
+        effects = stage.plant_effects() if stage is not None else None
+        nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options=budget, effects=effects)
         ctrl = CompiledNMPC(nmpc, backend="vm")
     else:  # the FL regulator compensates the effects of a stage file given with --params
         if args.qp_iterations is not None:
@@ -233,15 +237,21 @@ def _simulate_two_dof(args: argparse.Namespace) -> int:
 
 
 def _controller_with_effects(name: str, model, params_path):
-    """The controller; the FL regulator compensates the state-dependent effects of a stage file
-    given with ``--params`` (the other controllers use its geometry and constants only)."""
+    """The controller; with a stage file given with ``--params`` the FL regulator compensates its
+    state-dependent effects and the NMPC predicts with all of them (the other controllers use its
+    geometry and constants only)."""
     from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
-    from maglev_oc.control.registry import build_controller
+    from maglev_oc.control.registry import build_controller, nmpc_controller
     from maglev_oc.model.stagefile import StageFile, holds_stage_file
 
     stage = StageFile.read(params_path) if params_path and holds_stage_file(params_path) else None
     if stage is None or not stage.effects:
         return build_controller(name, model)
+    if name == "nmpc":
+        print(f"  NMPC predicting with {', '.join(e.name for e in stage.effects)} from {params_path}")
+        return nmpc_controller(
+            model, effects=stage.plant_effects(), name="NMPC, stage-file effects in the model"
+        )
     if name != "fl" or stage.compensation() is None:
         print(f"  not compensated by {name}: {', '.join(e.name for e in stage.effects)} (from {params_path})")
         return build_controller(name, model)

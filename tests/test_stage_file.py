@@ -324,7 +324,7 @@ def test_identify_json_is_a_stage_file_for_params(rig_log, tmp_path, capsys):
     assert f"C1={doc['identified_constants']['C1']:g}" in printed
 
 
-def test_diagnose_json_is_a_stage_file_with_effects_for_params(rig_log, tmp_path, capsys):
+def test_diagnose_json_is_a_stage_file_with_effects_for_params(rig_log, tmp_path, capsys, monkeypatch):
     out = tmp_path / "diag.json"
     assert main(["diagnose", str(rig_log), "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
@@ -336,7 +336,26 @@ def test_diagnose_json_is_a_stage_file_with_effects_for_params(rig_log, tmp_path
     for e, spec in zip(stage.effects, doc["effects"], strict=True):
         assert {k: p.value for k, p in e.parameters.items()} == spec["parameters"]
     assert stage.provenance["effects"].sources == (str(rig_log),)
+    # the constants' covariance is the final joint fit's (effects estimated beside them): its
+    # diagonal gives the standard errors the diagnosis printed, and a robust region can use it
+    assert stage.covariance is not None
+    np.testing.assert_allclose(
+        np.sqrt(np.diag(stage.covariance)),
+        [doc["constants_final"][k]["stderr"] for k in ("C1", "C2", "C3", "C4")],
+        rtol=1e-12,
+    )
+    assert np.all(np.linalg.eigvalsh(stage.covariance) > 0)
     assert stage_effects(out) == stage.effects
     assert stage.compensation() is not None and stage.plant_effects() is not None
     printed = _params_accepted(out, tmp_path, capsys)
     assert "FL regulator compensating" in printed
+    # the NMPC predicts with every found effect (in the VM: no JIT build in a test)
+    from maglev_oc import cli
+    from maglev_oc.control import registry
+
+    monkeypatch.setattr(registry, "c_compiler", lambda: None)
+    nmpc = cli._controller_with_effects("nmpc", load_model(out), out)
+    assert nmpc.settings.effects is not None and "effects in the model" in nmpc.name
+    x, i = np.array([18e-3, 0.0, 0.01, 0.05]), np.array([0.5, 2.0])
+    np.testing.assert_array_equal(nmpc.settings.effects(x, i), stage.plant_effects()(x, i))
+    assert "NMPC predicting with" in capsys.readouterr().out

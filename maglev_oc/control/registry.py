@@ -12,16 +12,18 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import c_compiler
 
-__all__ = ["CONTROLLERS", "build_controller"]
+__all__ = ["CONTROLLERS", "build_controller", "nmpc_controller"]
 
 
-def _nmpc(model: StageModel):
+def nmpc_controller(model: StageModel, **options):
+    """The NMPC of the comparisons; ``options``: further :class:`NMPCSettings` fields (e.g.
+    ``effects`` of a stage file)."""
     from maglev_oc.control.nmpc import NonlinearMPC  # imported only when asked for
 
     # causal (no reference preview), like the papers' regulators, so that settling times are
     # comparable; JIT-compiled when a C compiler exists (2-3x faster per step after a 10-25 s
     # build, which a comparison of several scenarios recovers many times over)
-    return NonlinearMPC(model, preview=False, compile=c_compiler() is not None)
+    return NonlinearMPC(model, preview=False, compile=c_compiler() is not None, **options)
 
 
 CONTROLLERS: dict[str, tuple[str, Callable[[StageModel], object]]] = {
@@ -33,7 +35,7 @@ CONTROLLERS: dict[str, tuple[str, Callable[[StageModel], object]]] = {
     ),
     "lqr": ("LQR with internal model on the Jacobian linearization", lqr_regulator),
     "pid": ("the papers' PID excitation regulators", paper_pid),
-    "nmpc": ("nonlinear MPC, real-time iteration", _nmpc),
+    "nmpc": ("nonlinear MPC, real-time iteration", nmpc_controller),
 }
 """Short name -> (description, factory taking the controller's model)."""
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from maglev_oc.diagnosis.feedback import _effects_acceleration, _state_only
 from maglev_oc.diagnosis.result import Diagnosis
 from maglev_oc.expressions import function_to_data
@@ -30,14 +32,16 @@ def diagnosis_stage_file(diagnosis: Diagnosis, model: StageModel, geometry: Prov
     Returns
     -------
     StageFile
-        C1..C4 with standard errors (the diagnosis keeps no covariance), the effects with their
+        C1..C4 with the long-run covariance of the final joint fit (the effects' coefficients
+        estimated beside them; standard errors only when an axis did not move), the effects with their
         physical parameters, accelerations (x, i) -> (x2', x4') with current rates taken as zero,
         and compensable parts (x) -> (x2', x4') for the state-dependent ones.
     """
     final = diagnosis.constants_final
     moved = {k: math.isfinite(final[k].value) and final[k].value > 0 for k in CONSTANT_NAMES}
     values = {k: final[k].value if moved[k] else getattr(model.constants, k) for k in CONSTANT_NAMES}
-    stderr = {k: final[k].stderr for k in CONSTANT_NAMES if moved[k]}
+    covariance = _constants_covariance(diagnosis) if all(moved.values()) else None
+    stderr = {} if covariance is not None else {k: final[k].stderr for k in CONSTANT_NAMES if moved[k]}
     sources = tuple(diagnosis.sources)
     constants = LumpedConstants(
         **values, source=f"diagnose: refitted with the found effects on {', '.join(sources)}"
@@ -58,7 +62,7 @@ def diagnosis_stage_file(diagnosis: Diagnosis, model: StageModel, geometry: Prov
     return StageFile(
         model.params,
         constants,
-        None,
+        covariance,
         stderr,
         effects,
         {
@@ -67,3 +71,14 @@ def diagnosis_stage_file(diagnosis: Diagnosis, model: StageModel, geometry: Prov
             "effects": Provenance.now(sources, "diagnose: forward selection from the candidate library"),
         },
     )
+
+
+def _constants_covariance(diagnosis: Diagnosis) -> np.ndarray | None:
+    """The (4, 4) block of C1..C4 in the final fit's long-run covariance (None when the fit does not
+    hold all four)."""
+    fit = diagnosis.selection.final
+    if not all(k in fit.names for k in CONSTANT_NAMES):
+        return None
+    k = [fit.names.index(n) for n in CONSTANT_NAMES]
+    cov = np.array(fit.covariance, dtype=float)[np.ix_(k, k)]
+    return 0.5 * (cov + cov.T) if np.all(np.isfinite(cov)) else None

@@ -73,6 +73,9 @@ class ExtendedHighGainObserver:
         w_d [rad/s] of the disturbance estimate; 0 switches it off (d stays at its start).
     limit : float
         |d| clip [m/s^2].
+    effects : casadi.Function, optional
+        (x (4), i (2)) -> (x2', x4') [m/s^2] added to the model's accelerations (found effects
+        that the model carries, so that the disturbance estimate is only what remains).
 
     Attributes
     ----------
@@ -89,6 +92,7 @@ class ExtendedHighGainObserver:
         epsilon: float = DEFAULT_EPSILON,
         bandwidth: float = DEFAULT_DISTURBANCE_BANDWIDTH,
         limit: float = DEFAULT_DISTURBANCE_LIMIT,
+        effects: ca.Function | None = None,
     ) -> None:
         if not (bandwidth >= 0 and math.isfinite(bandwidth)):
             raise InputError(f"bandwidth must be >= 0 [rad/s], got {bandwidth!r}")
@@ -96,6 +100,7 @@ class ExtendedHighGainObserver:
             raise InputError(f"limit must be positive [m/s^2], got {limit!r}")
         self.observer = HighGainObserver(sample_time, epsilon)
         self.model = model
+        self.effects = effects
         self.limit = limit
         a1, a2 = self.observer.alpha
         self.gain = bandwidth * a2 / epsilon**2
@@ -159,6 +164,9 @@ class ExtendedHighGainObserver:
         """
         x_hat = self.state_estimate(obs, y)
         acc = self.model.f(x_hat, u)
+        if self.effects is not None:
+            e = self.effects(x_hat, u)
+            acc = acc + ca.vertcat(0, e[0], 0, e[1])
         a_v = acc[1] + d[0]
         a_h = acc[3] + d[1]
         pv = self.observer.step(obs[0:2], y[0], a_v)

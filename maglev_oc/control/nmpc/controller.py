@@ -79,10 +79,15 @@ class NonlinearMPC:
         self.name = s.controller_name
         self.diag_names = DIAG_NAMES
         self._ocp = Transcription(
-            model, self.grid, s.weights, s.current_limit, s.gap_bounds, s.position_bounds
+            model, self.grid, s.weights, s.current_limit, s.gap_bounds, s.position_bounds, s.effects
         )
         self._observer = ExtendedHighGainObserver(
-            model, self.sample_time, s.observer_epsilon, s.disturbance_bandwidth, s.disturbance_limit
+            model,
+            self.sample_time,
+            s.observer_epsilon,
+            s.disturbance_bandwidth,
+            s.disturbance_limit,
+            effects=s.effects,
         )
         self.shift = shift_matrix(self.grid)
         self.nz = self._ocp.nz

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from maglev_oc.control.nmpc.grid import ShootingGrid
@@ -149,6 +150,10 @@ class NMPCSettings:
         VM. The C export (:mod:`maglev_oc.control.codegen`) does not use it.
     name : str, optional
         Default "NMPC" (the name the comparison plots know), "NMPC (converged, IPOPT)".
+    effects : casadi.Function, optional
+        (x (4), i (2)) -> (x2', x4') [m/s^2]: accelerations added to the model's in the
+        prediction, the observer and the feedforward (the model augmented with found effects,
+        e.g. ``StageFile.plant_effects()`` of a diagnosis). Default none.
 
     Attributes
     ----------
@@ -183,6 +188,7 @@ class NMPCSettings:
     unconstrained_shortcut: bool = True
     compile: bool = False
     name: str | None = None
+    effects: ca.Function | None = None
     grid: ShootingGrid = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -190,6 +196,7 @@ class NMPCSettings:
         self._check_timing()
         self._check_bounds()
         self._check_disturbance()
+        self._check_effects()
         weights = NMPCWeights() if self.weights is None else self.weights
         if not isinstance(weights, NMPCWeights):
             raise TypeError(f"weights must be NMPCWeights, got {type(weights).__name__}")
@@ -234,6 +241,21 @@ class NMPCSettings:
                 raise InputError(f"{label} must be (lower, upper) with lower < upper [m], got {b!r}")
         if self.gap_bounds[1] > 0.1 or self.gap_bounds[0] <= 0:
             raise InputError(f"gap_bounds must be positive and in metres, got {self.gap_bounds!r}")
+
+    def _check_effects(self) -> None:
+        f = self.effects
+        if f is None:
+            return
+        if not isinstance(f, ca.Function):
+            raise InputError(
+                f"effects must be a casadi.Function (x, i) -> (x2', x4'), got {type(f).__name__}"
+            )
+        shapes = [(f.size1_in(k), f.size2_in(k)) for k in range(f.n_in())]
+        if shapes != [(4, 1), (2, 1)] or f.n_out() != 1 or (f.size1_out(0), f.size2_out(0)) != (2, 1):
+            raise InputError(
+                f"effects must map x (4) and i (2) to (x2', x4') (2), got inputs {shapes} "
+                f"and {f.n_out()} output(s)"
+            )
 
     def _check_disturbance(self) -> None:
         w_d, limit, eps = self.disturbance_bandwidth, self.disturbance_limit, self.observer_epsilon

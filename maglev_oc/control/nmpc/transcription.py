@@ -79,6 +79,7 @@ class Transcription:
         current_limit: float,
         gap_bounds: tuple[float, float],
         position_bounds: tuple[float, float],
+        effects: ca.Function | None = None,
     ) -> None:
         self.model = model
         self.grid = grid
@@ -94,7 +95,8 @@ class Transcription:
         u = ca.SX.sym("u", NU)
         d = ca.SX.sym("d", N_DISTURBANCE)
         h = ca.SX.sym("h")
-        xdot = model.f(x, u) + ca.vertcat(0, d[0], 0, d[1])
+        e = effects(x, u) if effects is not None else ca.SX.zeros(2, 1)
+        xdot = model.f(x, u) + ca.vertcat(0, d[0] + e[0], 0, d[1] + e[1])
         fd = ca.Function("f_d", [x, u, d], [xdot])
         x_next = rk4_step(fd, x, h, u, d)
         self.rk4 = ca.Function("rk4", [x, u, d, h], [x_next], ["x", "u", "d", "h"], ["x_next"])
@@ -108,6 +110,13 @@ class Transcription:
         # feedforward current of the reference with the disturbance removed (SPEC 1, reading 5)
         r = ca.SX.sym("r", N_REFERENCE)
         _, _, u_ff = transformation_expressions(model, r[0], ca.vertcat(r[5] - d[1], r[2] - d[0]))
+        if effects is not None:
+            # the effects at the reference state, at the feedforward without them (one fixed-point
+            # step: an effect that depends on the current is evaluated at the current it nearly is)
+            e_r = effects(ca.vertcat(r[0], r[1], r[3], r[4]), u_ff)
+            _, _, u_ff = transformation_expressions(
+                model, r[0], ca.vertcat(r[5] - d[1] - e_r[1], r[2] - d[0] - e_r[0])
+            )
         self.feedforward = ca.Function("feedforward", [r, d], [u_ff], ["r", "d"], ["u"])
         self.terminal: TerminalCostTable = terminal_cost_table(model, self.rk4_lin, weights, grid.interval)
 
