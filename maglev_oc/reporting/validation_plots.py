@@ -70,7 +70,8 @@ def correlation_plot(validations: Mapping[str, Validation]) -> Draw:
                 ax.set_ylabel(f"{what} [-]")
                 ax.set_title(f"{axis} position residual", fontsize=8.5)
             if col == 0:
-                top.legend(loc="upper right", fontsize=7)
+                if top.get_legend_handles_labels()[1]:  # none when no residual was validated
+                    top.legend(loc="upper right", fontsize=7)
                 bottom.plot([], [], "k-", label="i_q")
                 bottom.plot([], [], "k--", label="i_d")
                 bottom.legend(loc="upper right", fontsize=7)
