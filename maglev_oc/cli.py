@@ -62,6 +62,12 @@ SCENARIOS = {
 }
 """``simulate --scenario`` per stage; the first is the default."""
 DEFAULT_REGION_GAPS = (15.0, 17.5, 20.0, 22.5, 25.0)
+CERTIFY_BOXES = 100_000
+"""``region --robust``: box budget per level of the certified robust level (an undecided level
+costs ~3 s on one core; certifying the nominal level at 25 mm takes ~25 000, at 22.5 mm ~70 000)."""
+CERTIFY_LADDER = (1.0, 0.6, 0.3)
+"""``region --robust``: fractions of the nominal level the certificate tries (a short ladder keeps an
+undecided set-point to ~10 s)."""
 """``region --gaps`` when not given [mm]."""
 
 
@@ -342,6 +348,7 @@ def cmd_region(args: argparse.Namespace) -> int:
         "--scheduler": args.scheduler is not None,
         "--workers": args.workers is not None,
         "--seed": args.seed is not None,
+        "--certify-boxes": args.certify_boxes is not None,
     }
     given = [name for name, is_given in only_robust.items() if is_given]
     if given:
@@ -468,6 +475,7 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
     from maglev_oc.region.feasibility import FeasibleSet
     from maglev_oc.region.procedure2 import Procedure2
     from maglev_oc.region.robust import empirical_robust_level
+    from maglev_oc.region.robust_certificate import RobustCertifier, certificate_words, robust_lyapunov_matrix
     from maglev_oc.region.sweep import PlantSet, SweepSpec, dask_client, run_sweep
 
     _refuse("two_dof", {"--sinusoid": args.sinusoid, "--sdp": args.sdp})  # not in the robust sweep yet
@@ -483,16 +491,28 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
     seed = 0 if args.seed is None else args.seed
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
+    boxes = CERTIFY_BOXES if args.certify_boxes is None else args.certify_boxes
+    if boxes < 1000:
+        raise InputError(f"--certify-boxes must be >= 1000, got {boxes}")
     position = (0.0 if args.position is None else args.position) * MM_TO_M
     feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
     proc = Procedure2(feasible, RegulatorLoop())
+    certifier = RobustCertifier(feasible, proc.loop, max_boxes=boxes, ladder=CERTIFY_LADDER)
     for g in gaps:
         feasible.check_setpoint(g * MM_TO_M, position)
     print(f"plants: {plants.label} ({source}); controller: FL regulator with the nominal constants")
-    print("sampled, not certified: runs start uniformly in the nominal certified set {z~' P z~ <= c}")
+    print(
+        "empirical (sampled, not certified): runs start uniformly in the nominal certified set "
+        "{z~' P z~ <= c}, P of the Lyapunov equation"
+    )
+    ladder = "/".join(f"{f:g}" for f in CERTIFY_LADDER)
+    print(
+        f"certified: a level set of V invariant for every plant of the set, P of the robust SDP; "
+        f"levels {ladder} of the nominal one, {boxes} boxes each"
+    )
     print(
         f"{'set-point':>9s} {'level c':>9s} {'nominal viol.':>14s} {'robust viol.':>13s} "
-        f"{'feasible':>9s} {'empirical c_rob/c':>18s}"
+        f"{'feasible':>9s} {'empirical c_rob/c':>18s} {'certified c_rob/c':>18s}  certificate"
     )
     records, ok = [], True
     with dask_client(args.scheduler, workers) as client:
@@ -517,9 +537,17 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
             shrunk = empirical_robust_level(f"{g:g} mm", spec, plants, runs=runs, seed=seed, client=client)
             ok &= nominal.success and shrunk.check.success
             ratio = f"{shrunk.ratio:.3f}" if shrunk.check.success else "not found"
+            P_rob, sdp_message = robust_lyapunov_matrix(certifier, cert, plants)
+            robust_cert = None if P_rob is None else certifier.run(proc.run(ref, P_rob), plants)
+            if robust_cert is None:
+                words, share = f"failed: robust SDP: {sdp_message}", "-"
+            else:
+                words, share = certificate_words(robust_cert), f"{robust_cert.ratio:.2f}"
             print(
                 f"{g:6.4g} mm {cert.level:9.4g} {f'{nominal.violations}/{runs}':>14s} "
-                f"{f'{robust.violations}/{runs}':>13s} {robust.share_feasible:9.2%} {ratio:>18s}"
+                f"{f'{robust.violations}/{runs}':>13s} {robust.share_feasible:9.2%} {ratio:>18s} "
+                f"{share:>18s}  {words}",
+                flush=True,
             )
             records.append(
                 {
@@ -531,6 +559,7 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
                     "robust_share_feasible": robust.share_feasible,
                     "empirical_robust_level": shrunk.level if shrunk.check.success else None,
                     "empirical_robust_ratio": shrunk.ratio if shrunk.check.success else None,
+                    "certified": _certified_record(robust_cert, words, sdp_message),
                 }
             )
     if args.json:
@@ -539,11 +568,34 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
             "plants_source": source,
             "seed": seed,
             "note": "Monte Carlo over sampled plants and starts: empirical, not a certificate",
+            "certified_note": (
+                "certified: a level set of V = z~' P z~ (P of the robust SDP) invariant in F for every "
+                "plant of the set (continuous-time FL loop, constant C); level and nominal_level in V units"
+            ),
+            "certify_boxes": boxes,
+            "certify_ladder": list(CERTIFY_LADDER),
             "setpoints": records,
         }
         write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"wrote {args.json}")
     return 0 if ok else EXIT_NOT_CERTIFIED
+
+
+def _certified_record(certificate, words: str, sdp_message: str) -> dict:
+    """The ``certified`` entry of a set-point in ``region --robust --json``."""
+    if certificate is None:
+        return {"status": "failed", "words": words, "level": None, "nominal_level": None, "ratio": None}
+    plant = certificate.witness_plant
+    return {
+        "status": certificate.status,
+        "words": words,
+        "level": certificate.level,
+        "nominal_level": certificate.nominal_level,
+        "ratio": certificate.ratio,
+        "refuted_at_level": None if plant is None else certificate.level_upper,
+        "refuting_plant": None if plant is None else [float(c) for c in plant],
+        "robust_sdp": sdp_message,
+    }
 
 
 def _region_microstepper(args: argparse.Namespace, limit: float | None) -> int:
@@ -914,6 +966,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers", type=int, metavar="N", help="--robust: local Dask worker processes (default 1)"
     )
     p.add_argument("--seed", type=int, metavar="S", help="--robust: seed of the samples (default 0)")
+    p.add_argument(
+        "--certify-boxes",
+        type=int,
+        metavar="N",
+        help=f"--robust: box budget per level of the certified robust level (default {CERTIFY_BOXES})",
+    )
     p.set_defaults(func=cmd_region)
 
     p = sub.add_parser("diagnose", help="find what the model misses in logs and add it (SPEC 3)")

@@ -95,6 +95,7 @@ OPTION_TESTS: dict[str, str] = {
     "region --seed": f"{HERE}::test_region_robust_seed_reaches_every_sweep",
     "region --workers": f"{HERE}::test_region_robust_workers_and_scheduler_choose_where_the_tasks_run",
     "region --scheduler": f"{HERE}::test_region_robust_workers_and_scheduler_choose_where_the_tasks_run",
+    "region --certify-boxes": "tests/test_region_cli.py::test_region_robust_certify_boxes_is_the_budget",
     # diagnose
     "diagnose --json": "tests/test_diagnose.py::test_json_follows_the_spec_contract",
     "diagnose --report": f"{HERE}::test_diagnose_report_is_written_with_the_findings",

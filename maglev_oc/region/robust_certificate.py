@@ -105,6 +105,7 @@ __all__ = [
     "RobustCertificate",
     "RobustCertifier",
     "RobustSearch",
+    "certificate_words",
     "certify_robust",
     "coverage",
     "mismatch_expressions",
@@ -772,6 +773,26 @@ def coverage(sweep, nominal_level: float, robust_level: float) -> Coverage:
         bad_nom,
         bad_rob,
         {"sweep": float(sweep.timings.get("total", 0.0))},
+    )
+
+
+def certificate_words(certificate: RobustCertificate) -> str:
+    """The outcome of :meth:`RobustCertifier.run` in plain words: "certified", "not certified:
+    refuted by plant C=(...) at level c (share of the nominal level)", or "undecided within the
+    budget" when no rung was certified and none refuted (every box budget spent)."""
+    if certificate.status == "certified":
+        return "certified"
+    if certificate.status == "failed":
+        return "failed: " + certificate.message
+    if not certificate.nominal_level > 0:
+        return "not certified: no nominal level"
+    if certificate.witness_plant is None:
+        return "undecided within the budget"
+    plant = ", ".join(f"{c:.4g}" for c in certificate.witness_plant)
+    upper = certificate.level_upper
+    return (
+        f"not certified: refuted by plant C=({plant}) at level {upper:.4g} "
+        f"({upper / certificate.nominal_level:.2f} of the nominal one)"
     )
 
 
