@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -59,6 +59,7 @@ from maglev_oc.region.robust import (
     paper_tables_box,
     robustness_table,
 )
+from maglev_oc.region.robust_certificate import RobustCertificate, RobustCertifier, robust_lyapunov_matrix
 from maglev_oc.region.sdp import PolygonBuilder, SdpResult, enlarge
 from maglev_oc.region.sweep import PlantSet, SweepSpec
 from maglev_oc.results import Result
@@ -70,6 +71,8 @@ __all__ = [
     "BASIN_OUTCOMES",
     "LARGE_STEP_START",
     "LARGE_STEP_TARGET",
+    "CertifiedRobustRow",
+    "CertifiedRobustStudy",
     "Enlargement",
     "LargeStepStudy",
     "LinearStudy",
@@ -140,6 +143,9 @@ class StudyConfig:
     seed: int = 0
     robust_runs: int = 150
     robust_probe_runs: int = 40
+    certify_boxes: int = 100_000  # box budget per level of the certified robust level (0: no certificate)
+    certify_ladder: tuple[float, ...] = (1.0, 0.5)  # its fractions of the nominal level
+    certify_runs: int = 2000  # Monte Carlo runs inside one certified robust set
 
     def __post_init__(self) -> None:
         if not self.setpoints_mm:
@@ -220,6 +226,45 @@ class LargeStepStudy:
 
 
 @dataclass(frozen=True)
+class CertifiedRobustRow:
+    """One set-point of :class:`CertifiedRobustStudy`: the nominal certificate with the robust
+    SDP's P (``nominal``, None when the SDP failed: ``sdp_message``) and the robust certificates
+    per confidence level, in order, up to and including the first not certified."""
+
+    reference: str  # "20 mm"
+    nominal: Procedure2Result | None
+    sdp_message: str
+    certificates: tuple[RobustCertificate, ...]
+
+
+@dataclass(frozen=True)
+class CertifiedRobustStudy:
+    """The certified robust operating region (:mod:`~maglev_oc.region.robust_certificate`) for the
+    confidence ellipsoids at ``levels`` of :class:`RobustStudy`'s covariance: per set-point a P
+    chosen by the robust SDP for the ``design_level`` set, then the robust level per confidence
+    level (``boxes`` per level of ``ladder``), and ``runs`` runs of the sampled loop inside one
+    certified robust set (``checked``: (set-point, confidence), None when nothing was certified)."""
+
+    levels: tuple[float, ...]
+    design_level: float
+    boxes: int
+    ladder: tuple[float, ...]
+    rows: tuple[CertifiedRobustRow, ...]
+    checked: tuple[str, float] | None
+    runs: int
+    violations: int
+
+    def highest_certified(self, row: CertifiedRobustRow) -> float | None:
+        """The highest of :attr:`levels` certified for ``row`` (with every lower one), or None."""
+        best = None
+        for level, c in zip(self.levels, row.certificates, strict=False):
+            if not c.success:
+                break
+            best = level
+        return best
+
+
+@dataclass(frozen=True)
 class RobustStudy:
     """The nominal certificates on sampled plants (:mod:`~maglev_oc.region.robust`): the FL
     regulator keeps the nominal C1..C4, the plant's are drawn uniformly from a set. Sampled,
@@ -243,6 +288,7 @@ class RobustStudy:
     radii: tuple[CriticalRadius, ...]
     runs: int
     probe_runs: int
+    certified: CertifiedRobustStudy | None = None  # None: config.certify_boxes 0
 
     def plant_sets(self) -> tuple[str, ...]:
         """The plant sets in table order: ``"nominal"``, the levels (``"0.95"``), ``"box"``."""
@@ -527,6 +573,12 @@ def _robust(run: _Run, ref_studies: list[ReferenceStudy], covariance, source: st
                 for k, spec in probes.items()
             ],
         )
+    certified = None
+    if config.certify_boxes:
+        run.say("robust: certified robust levels")
+        certified = _timed(
+            run, "robust: certified robust levels", lambda: _certified(run, ref_studies, covariance, specs)
+        )
     return RobustStudy(
         covariance,
         source,
@@ -538,6 +590,58 @@ def _robust(run: _Run, ref_studies: list[ReferenceStudy], covariance, source: st
         tuple(radii),
         config.robust_runs,
         config.robust_probe_runs,
+        certified,
+    )
+
+
+CERTIFY_DESIGN_LEVEL = 0.9
+"""The confidence set the robust SDP chooses P for (bench/region_robust_certificate.py)."""
+
+
+def _certified(run: _Run, ref_studies, covariance, specs: dict[str, SweepSpec]) -> CertifiedRobustStudy:
+    """:class:`CertifiedRobustStudy` for the set-points of ``specs`` (labels as in the robust part)."""
+    from maglev_oc.region.sweep import run_sweep
+
+    config = run.config
+    constants = np.asarray(run.model.constants.as_array(), dtype=float)
+    sets = {p: PlantSet.confidence(constants, covariance, p) for p in CONFIDENCE_LEVELS}
+    proc = Procedure2(run.feasible, run.loop)
+    certifier = RobustCertifier(
+        run.feasible, run.loop, max_boxes=config.certify_boxes, ladder=config.certify_ladder
+    )
+    rows = []
+    for rs in ref_studies:
+        label = _short(rs.reference)
+        if label not in specs:
+            continue
+        P, message = robust_lyapunov_matrix(certifier, rs.lyapunov, sets[CERTIFY_DESIGN_LEVEL])
+        nominal = None if P is None else proc.run(rs.reference, P)
+        certs: list[RobustCertificate] = []
+        if nominal is not None and nominal.success:
+            for plants in sets.values():
+                certs.append(certifier.run(nominal, plants))
+                if not certs[-1].success:
+                    break  # a larger set (same ellipsoid, larger radius) is not certified either
+        rows.append(CertifiedRobustRow(label, nominal, message, tuple(certs)))
+    checked, violations, runs = None, 0, 0
+    candidates = [
+        (r.certificates[0], r.reference) for r in rows if r.certificates and r.certificates[0].success
+    ]
+    if candidates and config.certify_runs:
+        cert, label = max(candidates, key=lambda c: c[0].level)  # the largest certified set at 0.5
+        level = CONFIDENCE_LEVELS[0]
+        spec = replace(specs[label], plants=sets[level], P=tuple(map(tuple, cert.P)), level=float(cert.level))
+        sweep = run_sweep(spec, config.certify_runs, seed=config.seed, progress=False)
+        checked, violations, runs = (label, level), int(sweep.violations), int(sweep.n)
+    return CertifiedRobustStudy(
+        tuple(CONFIDENCE_LEVELS),
+        CERTIFY_DESIGN_LEVEL,
+        config.certify_boxes,
+        tuple(config.certify_ladder),
+        tuple(rows),
+        checked,
+        runs,
+        violations,
     )
 
 
