@@ -799,8 +799,9 @@ def _certified_robust_text(st: OperatingRegionStudy) -> list[str]:
         "P is chosen for robustness by a semidefinite program that treats the model error as a "
         f"bounded disturbance, for the {cr.design_level:g} confidence set; the nominal level is then "
         "Procedure 2's for that P. With the Lyapunov equation's P nothing is certified: V decays so "
-        "slowly (0.67 1/s) that the model error of even the 0.5 set pushes it up on every level set.",
-        f"Each cell tries the nominal level and {ladder} of it with at most {cr.boxes:,} boxes "
+        "slowly under it that the model error of even the 0.5 set pushes it up on every level set "
+        "(bench/region_robust_certificate.py).",
+        f"Each cell tries {ladder} times the nominal level with at most {cr.boxes:,} boxes "
         "each; 'undecided' means that budget ran out (neither proved nor refuted), 'refuted' that a "
         "plant of the set leaves the level. Higher confidence levels are not tried after the first "
         "that fails (their sets contain it).",

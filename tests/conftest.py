@@ -49,3 +49,11 @@ def twin_log(model: StageModel, truth_model: StageModel) -> Log:
 
 # the independent generator's logs and their diagnoses, shared by the diagnosis test files
 from tests.diagnosis_support import diagnosed, generated  # noqa: E402, F401
+
+
+def pytest_collection_modifyitems(config, items):
+    """Files with slow tests first (stable otherwise): pytest-xdist's ``--dist loadfile`` hands
+    files to the workers in collection order, so the long files start first and the many short
+    ones fill in at the end instead of one long file running alone at the end of the suite."""
+    heavy = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in heavy)
