@@ -127,9 +127,10 @@ def run_reports(
     order = sorted(names, key=lambda n: LONGEST_FIRST.index(n) if n in LONGEST_FIRST else len(LONGEST_FIRST))
     context = multiprocessing.get_context("spawn")
     workers = min(jobs, len(names))
-    with _blas_threads(max(1, len(os.sched_getaffinity(0)) // workers)), ProcessPoolExecutor(
-        workers, mp_context=context
-    ) as pool:
+    with (
+        _blas_threads(max(1, len(os.sched_getaffinity(0)) // workers)),
+        ProcessPoolExecutor(workers, mp_context=context) as pool,
+    ):
         pending = {pool.submit(_build, n, targets[n], param_text, package): n for n in order}
         try:
             while pending:
