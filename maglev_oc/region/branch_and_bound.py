@@ -24,7 +24,7 @@ from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, transformation_
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
-__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest"]
+__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest", "initial_boxes"]
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class LevelCertifier:
         par_l = lmat.ravel(order="F")[:, None]
         par_f = self.loop.offset_coefficients(reference).ravel(order="F")[:, None]
         periodic = not reference.is_setpoint
-        lo, hi = _initial_boxes(periodic, phase_cells)
+        lo, hi = initial_boxes(periodic, phase_cells)
         scale = np.array([1.0, 1.0, 1.0, 1.0 / math.pi])  # phase widths count per pi
         boxes = 0
         while lo.shape[1] > 0:
@@ -169,14 +169,13 @@ class LevelCertifier:
         return img.Pinv_Mt @ np.linalg.solve(img.S, ell)
 
 
-def _initial_boxes(periodic: bool, phase_cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) (4, k): a 4 x 4 x 4 grid over the cube [-1, 1]^3 of zeta, times ``phase_cells``
-    cells over [0, 2 pi) for a sinusoid (the phase pinned at 0 for a set-point)."""
+def initial_boxes(periodic: bool, phase_cells: int, dims: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (dims + 1, k): a 4^dims grid over the cube [-1, 1]^dims of zeta, times
+    ``phase_cells`` cells over [0, 2 pi) for a sinusoid (the phase pinned at 0 for a set-point)."""
     n0 = 4
     edges = np.linspace(-1, 1, n0 + 1)
-    g = np.array(np.meshgrid(range(n0), range(n0), range(n0), indexing="ij")).reshape(3, -1)
-    lo = edges[g]
-    hi = edges[g + 1]
+    g = np.array(np.meshgrid(*[range(n0)] * dims, indexing="ij")).reshape(dims, -1)
+    lo, hi = edges[g], edges[g + 1]
     if periodic:
         pe = np.linspace(0, 2 * math.pi, phase_cells + 1)
         k = np.arange(phase_cells)

@@ -89,7 +89,7 @@ import numpy as np
 from scipy.linalg import eigh, null_space
 
 from maglev_oc.errors import InputError
-from maglev_oc.region.branch_and_bound import bisect_widest
+from maglev_oc.region.branch_and_bound import bisect_widest, initial_boxes
 from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import InitialConditionSet, checked_p, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
@@ -421,7 +421,7 @@ class RobustCertifier:
         par_r = np.concatenate([(level * geo.R[j]).ravel(order="F") for j in range(k)])[:, None]
         par_a = (level * geo.alphas)[:, None]
         periodic = not reference.is_setpoint
-        lo, hi = _initial_boxes(periodic, self.phase_cells)
+        lo, hi = initial_boxes(periodic, self.phase_cells, N_IMAGE)
         scale = np.ones(N_IMAGE + 1)
         scale[-1] = 1.0 / math.pi if periodic else 0.0
         boxes = 0
@@ -817,24 +817,6 @@ def _certificate(status, message, base, level, upper, witness, attempts, timings
         base["nominal"],
         {k: float(v) for k, v in timings.items()},
     )
-
-
-def _initial_boxes(periodic: bool, phase_cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) (6, k): a 4^5 grid over the cube [-1, 1]^5 of zeta, times ``phase_cells`` cells over
-    [0, 2 pi) for a sinusoid (the phase pinned at 0 for a set-point)."""
-    n0 = 4
-    edges = np.linspace(-1, 1, n0 + 1)
-    g = np.array(np.meshgrid(*[range(n0)] * N_IMAGE, indexing="ij")).reshape(N_IMAGE, -1)
-    lo, hi = edges[g], edges[g + 1]
-    if periodic:
-        pe = np.linspace(0, 2 * math.pi, phase_cells + 1)
-        k = np.arange(phase_cells)
-        lo = np.vstack([np.repeat(lo, phase_cells, axis=1), np.tile(pe[k], lo.shape[1])])
-        hi = np.vstack([np.repeat(hi, phase_cells, axis=1), np.tile(pe[k + 1], hi.shape[1])])
-    else:
-        lo = np.vstack([lo, np.zeros(lo.shape[1])])
-        hi = np.vstack([hi, np.zeros(hi.shape[1])])
-    return lo, hi
 
 
 def certify_robust(
