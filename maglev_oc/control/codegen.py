@@ -17,9 +17,10 @@ QP solvers and code generation (CasADi 3.8.2)
       the IPM arguments are copied from a struct in which five fields of this HPIPM version
       (dual_gap_max, lam0_min, t0_min, t0_init, update_fact_exit) are left uninitialized (the
       copy is replaced by HPIPM's own ``d_ocp_qp_ipm_arg_set_default`` for the same mode plus
-      the iteration limit), and a solver status other than 0 makes the whole generated
-      function return an error before the fallback runs (that early return is removed: the
-      solution check inside the step decides). It also calls ``malloc`` five times per solve.
+      the two options the NMPC sets, the iteration limit and the initial barrier mu0), and a
+      solver status other than 0 makes the whole generated function return an error before the
+      fallback runs (that early return is removed: the solution check inside the step decides).
+      It also calls ``malloc`` five times per solve.
     * ``osqp`` is not supported here (its generated code needs the OSQP sources).
 
 Instance file format (little endian), shared with the harness:
@@ -78,7 +79,8 @@ REPO_HARNESS = Path(__file__).resolve().parents[2] / "bench" / "nmpc_c" / "harne
 _HPIPM_ARG_COPY = "memcpy(&myarg, &p->hpipm_options, sizeof(struct d_ocp_qp_ipm_arg));"
 _HPIPM_ARG_DEFAULT = (
     "d_ocp_qp_ipm_arg_set_default((enum hpipm_mode) p->hpipm_options.mode, &myarg);\n"
-    "    d_ocp_qp_ipm_arg_set_iter_max((int*) &p->hpipm_options.iter_max, &myarg);"
+    "    d_ocp_qp_ipm_arg_set_iter_max((int*) &p->hpipm_options.iter_max, &myarg);\n"
+    "    d_ocp_qp_ipm_arg_set_mu0(&p->hpipm_options.mu0, &myarg);"
 )
 _HPIPM_EARLY_RETURN = "  if (d.return_status!=0) {\n    return -1;\n  }\n"
 

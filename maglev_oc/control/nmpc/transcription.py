@@ -67,6 +67,8 @@ class Transcription:
     terminal : TerminalCostTable
     nz, na : int
         Entries of z and rows of the constraint matrix (both 6 N, by :mod:`.layout`).
+    cost_scale : float
+        c [-]: the QP's cost is c times the OCP's (:meth:`qp_data_function`, Notes).
     radius : float
         Inscribed radius of the current octagon [A].
     """
@@ -90,6 +92,11 @@ class Transcription:
         self.radius = current_limit * math.cos(math.pi / 8)  # inscribed octagon
         self.gap_bounds = gap_bounds
         self.position_bounds = position_bounds
+        # the QP's cost is multiplied by this so that the Hessian's smallest entry, the first
+        # (one-sample) interval's input weight 2 h_0 min(R), is 1 (see qp_data_function)
+        self.cost_scale = 1.0 / (
+            2.0 * float(grid.intervals[0]) * float(np.min(np.diag(weights.input_weight)))
+        )
 
         x = ca.SX.sym("x", NX)
         u = ca.SX.sym("u", NU)
@@ -195,8 +202,22 @@ class Transcription:
         casadi.Function
             (z_bar, x0, d, ref) -> (H, g, A, lba, uba, lbx, ubx, data_ok, z_ref), with bounds
             made finite where the data are not (``data_ok`` 0), and the reference plan z_ref
-            (SI): the cost is (z - z_ref)' W (z - z_ref) = 1/2 e_s' H e_s with
-            e_s = (z - z_ref) / s (see :attr:`z_scale`).
+            (SI): the cost is (z - z_ref)' W (z - z_ref) = 1/2 e_s' H e_s / c with
+            e_s = (z - z_ref) / s (see :attr:`z_scale`) and c = :attr:`cost_scale`.
+
+        Notes
+        -----
+        Two scalings make HPIPM's absolute tolerances mean the same precision on every entry.
+        Positions are in mm (variables and dynamics rows). The cost is multiplied by
+        c = 1 / (2 h_0 min(R)) (2500 with the defaults), which makes the smallest Hessian entry,
+        the first interval's input weight (h_0 = one sample, 0.2 ms), equal to 1: HPIPM in mode
+        "speed_abs" stops when the duality measure mu (the mean of multiplier times slack) is
+        below an absolute 1e-8, so the slack of a bound whose multiplier is small stays about
+        1e-8 / multiplier away from zero; the first current's bound has the smallest multipliers
+        and, unscaled, its value was up to 0.07 A off the exact solution on the large step
+        (tests/test_export_qp.py). A scaling of the variables alone cannot help: the product
+        multiplier times slack of a bound does not change with the variable's unit. The QP's
+        solution does not depend on c; its multipliers are c times those of the unscaled cost.
         """
         n, nz = self.N, self.nz
         zb = ca.SX.sym("z_bar", nz)
@@ -207,12 +228,12 @@ class Transcription:
         hess = 2 * self.cost_weight(p)
         grad = ca.mtimes(hess, zb - z_ref)
         a, lba, uba = self._linearized_constraints(zb, x0, d)
-        # scaling: positions in mm in the QP (rows of the position dynamics likewise), so that the
-        # Hessian's blocks are O(1e-3..10) instead of O(1e-3..1e7) in SI; HPIPM's absolute
-        # stationarity tolerance (1e-6) is then reachable on every sample
-        sz, ta = self.z_scale, self.row_scale
-        hess = ca.mtimes([ca.diag(ca.DM(sz)), hess, ca.diag(ca.DM(sz))])
-        grad = grad * ca.DM(sz)
+        # scaling (Notes): positions in mm in the QP (rows of the position dynamics likewise), so
+        # that the Hessian's blocks are O(1e-3..10) instead of O(1e-3..1e7) in SI, and the cost
+        # times c, so that they are O(1..3e4) with the smallest, the first input's, equal to 1
+        sz, ta, c = self.z_scale, self.row_scale, self.cost_scale
+        hess = c * ca.mtimes([ca.diag(ca.DM(sz)), hess, ca.diag(ca.DM(sz))])
+        grad = c * grad * ca.DM(sz)
         a = ca.mtimes([ca.diag(ca.DM(ta)), a, ca.diag(ca.DM(sz))])
         lba = lba * ca.DM(ta)
         uba = uba * ca.DM(ta)
