@@ -14,10 +14,13 @@ from maglev_oc.control.nmpc.converged import ConvergedSolver
 from maglev_oc.control.nmpc.grid import node_references, shift_matrix
 from maglev_oc.control.nmpc.layout import NU, NX, MemoryLayout, u_index, x_index
 from maglev_oc.control.nmpc.rti import (
+    PreparedLayout,
     python_entry,
     qp_solver_function,
     read_qp_statistics,
+    rti_feedback_function,
     rti_parts,
+    rti_prepare_function,
     rti_step_function,
 )
 from maglev_oc.control.nmpc.settings import NMPCSettings
@@ -49,6 +52,13 @@ class NonlinearMPC:
     rti_step : casadi.Function
         The whole RTI update, (memory, y (2), ref (6, N + 1)) -> (u (2), memory_next, diag (7)),
         as exported to C by :mod:`maglev_oc.control.codegen`.
+    rti_prepare, rti_feedback : casadi.Function
+        The same update split at the reading (:func:`~.rti.rti_prepare_function`,
+        :func:`~.rti.rti_feedback_function`): (memory, ref) -> prepared, then (memory, prepared,
+        y) -> (u, memory_next, diag); the QP linearized at the predicted initial state (initial
+        value embedding), where :attr:`rti_step` linearizes at the estimate itself.
+    n_prepared : int
+        Entries of the prepared vector.
     grid : ShootingGrid
     shift : (6N, 6N) array
         The warm-start shift.
@@ -96,6 +106,14 @@ class NonlinearMPC:
         self.n_memory = self._layout.size
         parts = rti_parts(self._ocp, self._observer, self.shift)
         self.rti_step, self._rti_qp = self._rti_step(parts)
+        self.rti_prepare = rti_prepare_function(parts, self._observer, horizon=self.grid.horizon)
+        self.rti_feedback = rti_feedback_function(
+            parts,
+            qp_solver_function(s.qp_solver, s.qp_options, self.grid.horizon, parts.qp_data),
+            self._observer,
+            horizon=self.grid.horizon,
+        )
+        self.n_prepared = PreparedLayout.of(parts.qp_data).size
         # the controller's own copy (JIT-compiled parts if asked), with its own QP solver instance
         # so that the solver statistics read after each call are those of that call
         step, self._step_qp = self._rti_step(parts.compiled() if self.compiled else parts)

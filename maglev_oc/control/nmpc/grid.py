@@ -37,13 +37,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 
 from maglev_oc.control.base import N_REFERENCE
 from maglev_oc.control.nmpc.layout import NU, NX, STAGE_SIZE, u_index, x_index
 from maglev_oc.errors import InputError
 
-__all__ = ["ShootingGrid", "node_references", "shift_matrix"]
+__all__ = ["ShootingGrid", "extrapolated_reference", "node_references", "shift_matrix"]
 
 _AXIS_ROWS = (0, 3)
 """First row (position) of each axis's (position, velocity, acceleration) in a reference sample."""
@@ -186,3 +187,19 @@ def _extrapolate(r: np.ndarray, dt: np.ndarray) -> np.ndarray:
         out[row + 1] = v + a * dt
         out[row + 2] = a
     return out
+
+
+def extrapolated_reference(r, dt: np.ndarray):
+    """:func:`_extrapolate` for a CasADi reference sample r (6): (6, dt.size), symbolic.
+
+    The causal NMPC's node references are ``extrapolated_reference(r, grid.node_offsets * Ts)``
+    (:func:`node_references` without preview); the exported NMPC's preparation predicts the next
+    sample's reference as ``extrapolated_reference(r, [Ts])``.
+    """
+    dt = ca.DM(np.asarray(dt, dtype=float)).T
+    ones = ca.DM.ones(1, dt.numel())
+    rows = []
+    for row in _AXIS_ROWS:
+        p, v, a = r[row], r[row + 1], r[row + 2]
+        rows += [p + v * dt + 0.5 * a * dt**2, v + a * dt, a * ones]
+    return ca.vertcat(*rows)

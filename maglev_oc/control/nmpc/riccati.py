@@ -11,7 +11,7 @@ import casadi as ca
 
 from maglev_oc.control.nmpc.layout import N_POLYTOPE_ROWS, NU, NX, STAGE_ROWS, u_index, x_index
 
-__all__ = ["riccati_function"]
+__all__ = ["riccati_function", "satisfies_inequalities"]
 
 
 def riccati_function(qp_data: ca.Function, horizon: int) -> ca.Function:
@@ -50,10 +50,7 @@ def riccati_function(qp_data: ca.Function, horizon: int) -> ca.Function:
         cs.append(-lba[row : row + NX])
     gains = _backward_pass(hess, grad, as_, bs, cs, n)
     dz = _forward_pass(gains, as_, bs, cs, n)
-    adz = ca.mtimes(a, dz)
-    rows = [STAGE_ROWS * j + NX + i for j in range(n) for i in range(N_POLYTOPE_ROWS)]
-    slack = ca.vertcat(dz - lbx, ubx - dz, adz[rows] - lba[rows], uba[rows] - adz[rows])
-    feasible = ca.mmin(slack) >= 0
+    feasible = satisfies_inequalities(dz, a, lba, uba, lbx, ubx, n)
     return ca.Function(
         "nmpc_riccati",
         [hess, grad, a, lba, uba, lbx, ubx],
@@ -61,6 +58,27 @@ def riccati_function(qp_data: ca.Function, horizon: int) -> ca.Function:
         ["H", "g", "A", "lba", "uba", "lbx", "ubx"],
         ["dz", "feasible"],
     )
+
+
+def satisfies_inequalities(dz, a, lba, uba, lbx, ubx, horizon: int):
+    """1 if the step dz satisfies every simple bound and polytope row of the QP, else 0.
+
+    Parameters
+    ----------
+    dz : CasADi column (nz)
+    a, lba, uba, lbx, ubx : CasADi
+        The QP's constraint matrix and bounds (:meth:`~.transcription.Transcription.qp_data_function`).
+    horizon : int
+        N.
+
+    Returns
+    -------
+    CasADi scalar
+    """
+    rows = [STAGE_ROWS * j + NX + i for j in range(horizon) for i in range(N_POLYTOPE_ROWS)]
+    adz = ca.mtimes(a[rows, :], dz)
+    slack = ca.vertcat(dz - lbx, ubx - dz, adz - lba[rows], uba[rows] - adz)
+    return ca.mmin(slack) >= 0
 
 
 def _block(m, r, c, nr, nc):

@@ -30,6 +30,19 @@ QP solver and the unconstrained shortcut
     samples of the papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every
     sample.
 
+Preparation and feedback (initial value embedding)
+    The same update split at the reading, for the exported controller's latency
+    (:func:`rti_prepare_function`, :func:`rti_feedback_function`): the preparation linearizes
+    at the predicted initial state x0_pred (the observer's state before the reading) and
+    computes the QP data, the Riccati step there and its exact sensitivity to the initial
+    state; the feedback corrects the step affinely by x0 - x0_pred, checks it against the bounds
+    and solves the QP (the prepared data, the first dynamics rows' bounds corrected) only when
+    it violates one. What differs from :func:`rti_step_function`: the linearization point of the
+    first interval's dynamics (x0_pred instead of x0); with x0 = x0_pred the two are the same
+    arithmetic; otherwise their currents differ by the first interval's Jacobians' change over
+    x0 - x0_pred times the QP's step (about 0.5 mA at 10 um off and 0.5 mm from the plan;
+    tests/test_nmpc.py).
+
 A failed QP never raises: the solution is checked inside the Function (finite, dynamics
 residual and constraint violation below tolerance); when it fails (also when the solver runs
 out of its iteration budget, ``qp_options={"max_iter": K}``: the bound on the step's work) the
@@ -52,7 +65,7 @@ import numpy as np
 
 from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.nmpc.layout import N_POLYTOPE_ROWS, NU, NX, STAGE_ROWS, MemoryLayout
-from maglev_oc.control.nmpc.riccati import riccati_function
+from maglev_oc.control.nmpc.riccati import riccati_function, satisfies_inequalities
 from maglev_oc.control.nmpc.status import DIAG_NAMES
 from maglev_oc.control.nmpc.transcription import Transcription
 from maglev_oc.estimation.extended_high_gain import N_DISTURBANCE, N_OBSERVER_STATE, ExtendedHighGainObserver
@@ -60,11 +73,14 @@ from maglev_oc.numerics import jit
 
 __all__ = [
     "SOLUTION_TOLERANCE",
+    "PreparedLayout",
     "RTIParts",
     "python_entry",
     "qp_solver_function",
     "read_qp_statistics",
+    "rti_feedback_function",
     "rti_parts",
+    "rti_prepare_function",
     "rti_step_function",
 ]
 
@@ -281,31 +297,222 @@ def rti_step_function(
     x0 = observer.state_estimate(obs, y)
     data = qp_data(zb, x0, d, ref)
     _, _, a, lba, uba, lbx, ubx, data_ok, _ = data
-    qp_in, solve_qp = _solve_qp_function(qp, qp_data, nz, na)
     # the unconstrained step: the answer when it satisfies every bound (shortcut), and the
     # fallback when the QP solver fails (its iteration budget, qp_options max_iter, runs out)
     dz_lq, lq_feasible = parts.riccati(*data[:7])
     if shortcut:
-        take_lq = ca.Function("nmpc_take_lq", qp_in, [qp_in[7], ca.DM.zeros(nz), ca.DM.zeros(na)])
-        # only the selected branch runs (a CasADi Switch, also in the generated C)
-        step = ca.Function.if_else("nmpc_lq_or_qp", take_lq, solve_qp)
         feasible = lq_feasible
-        dz, lam_x, lam_a = step(feasible, *data[:7], dz_lq)
+        dz, lam_x, lam_a = _step_or_qp(qp, qp_data, nz, na)(feasible, *data[:7], dz_lq)
     else:
         feasible = ca.MX(0)
+        _, solve_qp = _solve_qp_function(qp, qp_data, nz, na)
         dz, lam_x, lam_a = solve_qp(*data[:7], ca.DM.zeros(nz))
     hess, z_ref = data[0], data[8]
     u, mem_next, diag, _ = parts.post(
         zb, dz, lam_x, lam_a, a, lba, uba, lbx, ubx, data_ok, hess, z_ref, obs, d, y, dz_lq
     )
-    # qp_iterations: 0 when the unconstrained step was taken, -1 (filled in from the solver's
-    # statistics in Python) when the QP was solved; qp_status: -1 no QP, NaN until filled in
-    diag = ca.vertcat(diag[0], ca.if_else(feasible, 0, -1), diag[2:], ca.if_else(feasible, -1, np.nan))
+    diag = _step_diagnostics(diag, feasible)
     return ca.Function(
         "nmpc_rti_step",
         [mem, y, ref],
         [u, mem_next, diag],
         ["memory", "y", "ref"],
+        ["u", "memory_next", "diag"],
+    )
+
+
+def _step_diagnostics(diag, feasible):
+    """The post-processing's diagnostics with the QP's entries of the step.
+
+    qp_iterations: 0 when the unconstrained step was taken, -1 (filled in from the solver's
+    statistics in Python) when the QP was solved; qp_status: -1 no QP, NaN until filled in.
+    """
+    return ca.vertcat(diag[0], ca.if_else(feasible, 0, -1), diag[2:], ca.if_else(feasible, -1, np.nan))
+
+
+def _step_or_qp(qp: ca.Function, qp_data: ca.Function, nz: int, na: int) -> ca.Function:
+    """(feasible, H, ..., ubx, dz_lq) -> (dz, lam_x, lam_a): the unconstrained step dz_lq when it is
+    feasible, else the QP's solution (a CasADi Switch: only the selected branch runs, also in the
+    generated C)."""
+    qp_in, solve_qp = _solve_qp_function(qp, qp_data, nz, na)
+    take_lq = ca.Function("nmpc_take_lq", qp_in, [qp_in[7], ca.DM.zeros(nz), ca.DM.zeros(na)])
+    return ca.Function.if_else("nmpc_lq_or_qp", take_lq, solve_qp)
+
+
+# ------------------------------------------------------------------------------------------
+# Preparation and feedback: the RTI step split at the measurement (initial value embedding)
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PreparedLayout:
+    """Where the prepared QP sits in the vector the preparation hands to the feedback.
+
+    Entries, in this order: H and A (their nonzeros), g, lba, uba, lbx, ubx, data_ok, z_ref
+    (:meth:`Transcription.qp_data_function <.transcription.Transcription.qp_data_function>` at
+    the predicted initial state), the predicted initial state x0_pred (4), the Riccati step
+    there dz_pred (nz), its sensitivity to the initial state S (nz, 4, column-major) and the
+    sensitivity of the first dynamics rows' bounds to the initial state J (4, 4, column-major).
+    """
+
+    sizes: tuple[tuple[str, int], ...]
+
+    @classmethod
+    def of(cls, qp_data: ca.Function) -> PreparedLayout:
+        nz, na = qp_data.size1_out("g"), qp_data.size1_out("lba")
+        return cls(
+            (
+                ("H", qp_data.nnz_out("H")),
+                ("A", qp_data.nnz_out("A")),
+                ("g", nz),
+                ("lba", na),
+                ("uba", na),
+                ("lbx", nz),
+                ("ubx", nz),
+                ("data_ok", 1),
+                ("z_ref", nz),
+                ("x0_pred", NX),
+                ("dz_pred", nz),
+                ("S", nz * NX),
+                ("J", NX * NX),
+            )
+        )
+
+    @property
+    def size(self) -> int:
+        """Entries of the prepared vector."""
+        return sum(n for _, n in self.sizes)
+
+    def split(self, v) -> dict[str, Any]:
+        """The named parts of a prepared vector (CasADi column)."""
+        out, k = {}, 0
+        for name, n in self.sizes:
+            out[name] = v[k : k + n]
+            k += n
+        return out
+
+
+def _predicted_initial_state(observer: ExtendedHighGainObserver, obs):
+    """The estimate before the reading: the observer's estimate at the reading it predicts (its
+    positions p_v, p_h), i.e. its own state."""
+    return observer.state_estimate(obs, ca.vertcat(obs[0], obs[2]))
+
+
+def rti_prepare_function(parts: RTIParts, observer: ExtendedHighGainObserver, *, horizon: int) -> ca.Function:
+    """The preparation of the RTI step: everything that does not need the new reading.
+
+    In the RTI with initial value embedding (Diehl et al.) the QP is linearized at the predicted
+    initial state x0_pred; the initial state x0 (the observer's estimate once the reading is in)
+    then enters the QP only through the bounds of the first dynamics rows, affinely:
+    ``lba_0(x0) = lba_0(x0_pred) + J (x0 - x0_pred)`` with J = -A_0 (the first interval's state
+    Jacobian, scaled), and the Riccati step of the equality-constrained QP is affine in them:
+    ``dz(x0) = dz_pred + S (x0 - x0_pred)``. Both J and S are computed here (S by forward AD
+    through the Riccati recursion: exact, the step is affine).
+
+    Parameters
+    ----------
+    parts : RTIParts
+    observer : ExtendedHighGainObserver
+    horizon : int
+        N.
+
+    Returns
+    -------
+    casadi.Function
+        ``nmpc_rti_prepare``: (memory, ref (6, N + 1)) -> prepared (:class:`PreparedLayout`).
+    """
+    qp_data = parts.qp_data
+    nz = qp_data.size1_out("g")
+    layout = MemoryLayout(nz)
+    mem = ca.SX.sym("memory", layout.size)
+    ref = ca.SX.sym("ref", N_REFERENCE, horizon + 1)
+    obs, d, zb = mem[layout.observer], mem[layout.disturbance], mem[layout.plan]
+    x0_pred = ca.SX.sym("x0_pred", NX)
+    h, g, a, lba, uba, lbx, ubx, data_ok, z_ref = qp_data(zb, x0_pred, d, ref)
+    jac = ca.jacobian(lba[0:NX], x0_pred)
+    delta = ca.SX.sym("delta", NX)  # x0 - x0_pred
+    shifted = ca.vertcat(lba[0:NX] + ca.mtimes(jac, delta), lba[NX:])
+    dz, _ = parts.riccati(h, g, a, shifted, ca.vertcat(uba[0:NX] + ca.mtimes(jac, delta), uba[NX:]), lbx, ubx)
+    sens = ca.substitute(ca.jacobian(dz, delta), delta, ca.DM.zeros(NX))  # constant: dz is affine
+    dz_pred = ca.substitute(dz, delta, ca.DM.zeros(NX))
+    prepared = ca.vertcat(
+        ca.vertcat(*h.nonzeros()),
+        ca.vertcat(*a.nonzeros()),
+        g,
+        lba,
+        uba,
+        lbx,
+        ubx,
+        data_ok,
+        z_ref,
+        x0_pred,
+        dz_pred,
+        ca.vec(ca.densify(sens)),
+        ca.vec(ca.densify(jac)),
+    )
+    prepared = ca.substitute(prepared, x0_pred, _predicted_initial_state(observer, obs))
+    return ca.Function(
+        "nmpc_rti_prepare", [mem, ref], [prepared], ["memory", "ref"], ["prepared"], {"cse": True}
+    )
+
+
+def rti_feedback_function(
+    parts: RTIParts, qp: ca.Function, observer: ExtendedHighGainObserver, *, horizon: int
+) -> ca.Function:
+    """The feedback of the RTI step: what needs the reading, on a prepared QP.
+
+    The observer's estimate x0 from the reading; the Riccati step ``dz_pred + S (x0 - x0_pred)``
+    and the first dynamics rows' bounds ``lba_0 + J (x0 - x0_pred)``
+    (:func:`rti_prepare_function`); the check of that step against every bound; the QP (with
+    the same data) only when it violates one; then the post-processing of :func:`rti_parts`
+    (check of the QP's solution, fallback, shift, observer update) as in the one-Function step.
+
+    Parameters
+    ----------
+    parts : RTIParts
+    qp : casadi.Function
+        The QP solver (:func:`qp_solver_function`).
+    observer : ExtendedHighGainObserver
+    horizon : int
+        N.
+
+    Returns
+    -------
+    casadi.Function
+        ``nmpc_rti_feedback``: (memory, prepared, y (2)) -> (u (2), memory_next, diag (7)).
+    """
+    qp_data = parts.qp_data
+    nz, na = qp_data.size1_out("g"), qp_data.size1_out("lba")
+    layout = MemoryLayout(nz)
+    prep_layout = PreparedLayout.of(qp_data)
+    mem = ca.MX.sym("memory", layout.size)
+    prepared = ca.MX.sym("prepared", prep_layout.size)
+    y = ca.MX.sym("y", N_MEASUREMENTS)
+    p = prep_layout.split(prepared)
+    obs, d, zb = mem[layout.observer], mem[layout.disturbance], mem[layout.plan]
+    delta = observer.state_estimate(obs, y) - p["x0_pred"]
+    # a reading that is not finite: no correction, and the data flagged (the post-processing then
+    # keeps the shifted plan, as the one-Function step does with a non-finite estimate)
+    delta_ok = ca.sum1(ca.fabs(delta)) < 1e20
+    data_ok = ca.logic_and(p["data_ok"], delta_ok)
+    delta = ca.if_else(delta_ok, delta, ca.DM.zeros(NX))
+    jac = ca.reshape(p["J"], NX, NX)
+    shift0 = ca.if_else(p["data_ok"], ca.mtimes(jac, delta), ca.DM.zeros(NX))
+    lba = ca.vertcat(p["lba"][0:NX] + shift0, p["lba"][NX:])
+    uba = ca.vertcat(p["uba"][0:NX] + shift0, p["uba"][NX:])
+    hess = ca.MX(qp_data.sparsity_out("H"), p["H"])
+    a = ca.MX(qp_data.sparsity_out("A"), p["A"])
+    dz_lq = p["dz_pred"] + ca.mtimes(ca.reshape(p["S"], nz, NX), delta)
+    feasible = satisfies_inequalities(dz_lq, a, lba, uba, p["lbx"], p["ubx"], horizon)
+    dz, lam_x, lam_a = _step_or_qp(qp, qp_data, nz, na)(
+        feasible, hess, p["g"], a, lba, uba, p["lbx"], p["ubx"], dz_lq
+    )
+    u, mem_next, diag, _ = parts.post(
+        zb, dz, lam_x, lam_a, a, lba, uba, p["lbx"], p["ubx"], data_ok, hess, p["z_ref"], obs, d, y, dz_lq
+    )
+    return ca.Function(
+        "nmpc_rti_feedback",
+        [mem, prepared, y],
+        [u, mem_next, _step_diagnostics(diag, feasible)],
+        ["memory", "prepared", "y"],
         ["u", "memory_next", "diag"],
     )
 
