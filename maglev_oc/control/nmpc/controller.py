@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 import warnings
 
@@ -106,13 +107,7 @@ class NonlinearMPC:
         self.n_memory = self._layout.size
         parts = rti_parts(self._ocp, self._observer, self.shift)
         self.rti_step, self._rti_qp = self._rti_step(parts)
-        self.rti_prepare = rti_prepare_function(parts, self._observer, horizon=self.grid.horizon)
-        self.rti_feedback = rti_feedback_function(
-            parts,
-            qp_solver_function(s.qp_solver, s.qp_options, self.grid.horizon, parts.qp_data),
-            self._observer,
-            horizon=self.grid.horizon,
-        )
+        self._parts = parts
         self.n_prepared = PreparedLayout.of(parts.qp_data).size
         # the controller's own copy (JIT-compiled parts if asked), with its own QP solver instance
         # so that the solver statistics read after each call are those of that call
@@ -132,6 +127,18 @@ class NonlinearMPC:
             parts, qp, self._observer, horizon=self.grid.horizon, shortcut=s.unconstrained_shortcut
         )
         return step, qp
+
+    @functools.cached_property
+    def rti_prepare(self) -> ca.Function:
+        """(memory, ref (6, N + 1)) -> prepared (built on first use: the export's)."""
+        return rti_prepare_function(self._parts, self._observer, horizon=self.grid.horizon)
+
+    @functools.cached_property
+    def rti_feedback(self) -> ca.Function:
+        """(memory, prepared, y (2)) -> (u (2), memory_next, diag (7)) (built on first use)."""
+        s = self.settings
+        qp = qp_solver_function(s.qp_solver, s.qp_options, self.grid.horizon, self._parts.qp_data)
+        return rti_feedback_function(self._parts, qp, self._observer, horizon=self.grid.horizon)
 
     # ------------------------------------------------------------------------------------
     @property
