@@ -336,6 +336,7 @@ def cmd_region(args: argparse.Namespace) -> int:
                 "--sdp": args.sdp,
                 "--samples": args.samples is not None,
                 "--robust": args.robust,
+                "--without-effects": args.without_effects,
             },
         )
         return _region_microstepper(args, limit)
@@ -379,7 +380,19 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     if samples < 0:
         raise InputError(f"--samples must be >= 0, got {samples}")
     position = 0.0 if args.position is None else args.position
-    feasible = FeasibleSet(model, current_limit=limit, **({"gap_range": None} if args.no_stoppers else {}))
+    effects = _region_effects(args)
+    if effects.compensation is not None and args.sdp:
+        raise InputError(
+            "--sdp: the SDP enlargement is for the loop without compensated effects; add "
+            "--without-effects, or leave --sdp out to certify the compensated loop"
+        )
+    feasible = FeasibleSet(
+        model,
+        current_limit=limit,
+        compensation=effects.compensation,
+        compensated=effects.compensated,
+        **({"gap_range": None} if args.no_stoppers else {}),
+    )
     proc = Procedure2(feasible, RegulatorLoop())
     for g in gaps:
         feasible.check_setpoint(g * MM_TO_M, position * MM_TO_M)
@@ -387,11 +400,13 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     if args.sinusoid:
         refs.append(Reference.paper_sinusoid())
     print(f"feasible set: {feasible.label}; gains: printed K_h, K_v (001/002)")
+    for line in effects.notes:
+        print(f"  {line}")
     print(
         f"{'reference':>10s} {'P':>9s} {'level':>10s} {'c/upper':>8s} {'binding':>13s} "
         f"{'e1 [mm]':>8s} {'e1dot [mm/s]':>12s} {'e2 [mm]':>8s} {'e2dot [mm/s]':>12s} {'runs/viol.':>11s}"
     )
-    check = _region_checker(model, proc.loop, samples, limit)
+    check = _region_checker(model, proc.loop, samples, limit, effects.compensation)
     records = []
     for ref in refs:
         for label, cert in _certificates(proc, ref, sdp=args.sdp):
@@ -414,6 +429,8 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
     if args.json:
         doc = {
             "feasible_set": feasible.label,
+            "effects_compensated": list(effects.compensated),
+            "effects_not_covered": list(effects.not_covered),
             "semi_axes": "largest deviation of e1 [m], e1_rate [m/s], e2 [m], e2_rate [m/s] alone, at rest",
             "certificates": records,
         }
@@ -421,6 +438,45 @@ def _region_two_dof(args: argparse.Namespace, limit: float | None) -> int:
         print(f"wrote {args.json}")
     ok = all(r["certified"] and r["monte_carlo"]["violations"] == 0 for r in records)
     return 0 if ok else EXIT_NOT_CERTIFIED
+
+
+@dataclasses.dataclass(frozen=True)
+class _RegionEffects:
+    """A stage file's effects as the region analysis uses them."""
+
+    compensation: object = None  # casadi.Function x (4) -> (x2', x4'), or None
+    compensated: tuple[str, ...] = ()
+    not_covered: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+
+def _region_effects(args: argparse.Namespace) -> _RegionEffects:
+    """The --params stage file's state-dependent effects, compensated by the FL regulator as in
+    ``simulate --params`` and so part of the feasible set; none with --without-effects."""
+    from maglev_oc.model.stagefile import StageFile, holds_stage_file
+
+    if args.params is None or not holds_stage_file(args.params):
+        return _RegionEffects()
+    stage = StageFile.read(args.params)
+    if not stage.effects:
+        return _RegionEffects()
+    names = ", ".join(e.name for e in stage.effects)
+    if args.without_effects:
+        return _RegionEffects(notes=(f"not included (--without-effects): {names} from {args.params}",))
+    compensated = tuple(e.name for e in stage.effects if e.compensable)
+    rest = tuple(e.name for e in stage.effects if not e.compensable)
+    notes = []
+    if compensated:
+        notes.append(
+            f"compensated by the FL regulator, so part of the feasible set: {', '.join(compensated)} "
+            f"(from {args.params}); the certificate assumes the plant has them as identified"
+        )
+    if rest:
+        notes.append(
+            f"NOT covered by the certificate: {', '.join(rest)} (they depend on the currents, "
+            "so the regulator cannot cancel them; the Monte Carlo runs leave them out too)"
+        )
+    return _RegionEffects(stage.compensation(), compensated, rest, tuple(notes))
 
 
 def _robust_plants(args: argparse.Namespace, model):
@@ -501,6 +557,10 @@ def _region_robust(args: argparse.Namespace, limit: float | None) -> int:
     for g in gaps:
         feasible.check_setpoint(g * MM_TO_M, position)
     print(f"plants: {plants.label} ({source}); controller: FL regulator with the nominal constants")
+    effects = _region_effects(args)
+    if effects.compensation is not None or effects.not_covered:
+        names = ", ".join((*effects.compensated, *effects.not_covered))
+        print(f"  the stage file's effects ({names}) are not part of --robust: its constants only")
     print(
         "empirical (sampled, not certified): runs start uniformly in the nominal certified set "
         "{z~' P z~ <= c}, P of the Lyapunov equation"
@@ -672,16 +732,15 @@ def _certificates(proc, ref, *, sdp: bool) -> list[tuple[str, object]]:
     return certs
 
 
-def _region_checker(model, loop, samples: int, limit):
+def _region_checker(model, loop, samples: int, limit, compensation=None):
     """(ref, cert) -> (runs, violations) of a Monte Carlo check inside the certified ellipsoid
-    on the rig twin (no runs when ``samples`` is 0)."""
+    on the twin (no runs when ``samples`` is 0); with a ``compensation``, the twin has that
+    effect and the FL regulator compensates it (the certificate's premise)."""
     if not samples:
         return lambda ref, cert: (0, 0)
-    from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
-    from maglev_oc.region.montecarlo import BatchSimulator, check_error_states, uniform_in_ellipsoid
-    from maglev_oc.sim.twin import RigTwin
+    from maglev_oc.region.montecarlo import check_error_states, fl_batch_simulator, uniform_in_ellipsoid
 
-    sim = BatchSimulator(RigTwin(model), FeedbackLinearizingRegulator(model), duration=1.0)
+    sim = fl_batch_simulator(model, compensation=compensation, duration=1.0)
 
     def check(ref, cert) -> tuple[int, int]:
         z = uniform_in_ellipsoid(cert.P, cert.level, samples, np.random.default_rng(0))
@@ -948,6 +1007,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", type=Path, help="write the certificates (P, levels, sizes) here")
     p.add_argument("--params", type=Path, help="stage/constants JSON (default: papers)")
+    p.add_argument(
+        "--without-effects",
+        action="store_true",
+        help="two_dof: a stage file's constants only, its effects neither compensated nor in the set",
+    )
     p.add_argument(
         "--robust",
         action="store_true",

@@ -87,6 +87,7 @@ OPTION_TESTS: dict[str, str] = {
     "region --samples": f"{HERE}::test_region_samples_runs_monte_carlo_inside",
     "region --json": "tests/test_region_cli.py::test_region_writes_certificates",
     "region --params": f"{HERE}::test_region_params_is_the_model",
+    "region --without-effects": "tests/test_region_compensation.py::test_region_compensates_stage_effects",
     "region --stage": f"{HERE}::test_region_stage_microstepper_certifies_the_3dof_loop",
     "region --setpoint": f"{HERE}::test_region_setpoint_places_each_axis",
     "region --robust": "tests/test_region_sweep.py::test_region_robust_writes_its_table",

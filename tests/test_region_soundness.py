@@ -155,7 +155,9 @@ def test_feasible_set_enclosure_contains_sampled_values(model, gap, width, v1, v
     feasible = FeasibleSet(model, current_limit=9.0 if limited else None)
     lo = np.array([[gap], [v1], [v2]])
     hi = lo + np.array([[width], [vw], [vw]])
-    hlo, hhi = feasible.pointwise_interval([lo[:1], lo[1:]], [hi[:1], hi[1:]])
+    rest = np.zeros((3, 1))  # x2, x3, x4: no compensation, they do not enter
+    x_lo, x_hi = np.vstack([lo[:1], rest]), np.vstack([hi[:1], rest])
+    hlo, hhi = feasible.pointwise_interval([x_lo, lo[1:]], [x_hi, hi[1:]])
     rng = np.random.default_rng(seed)
     pts = lo + (hi - lo) * rng.uniform(size=(3, 200))
     vals = feasible.evaluate(pts[0], pts[1], pts[2])

@@ -9,7 +9,7 @@ plant throughout; the papers' model knows none of its effects. What must come ou
 * the diagnosis finds effects and its held-out error falls (its own before/after);
 * on the same twin, the FL regulator built from the stage file (constants refitted, effects
   compensated) tracks at least as well as the papers' regulator, and the region command accepts the
-  file and certifies a set for its constants.
+  file and certifies a set for its constants with those effects compensated.
 """
 
 from __future__ import annotations
@@ -91,11 +91,16 @@ def test_design_identify_diagnose_stage_file_control_and_region(tmp_path, capsys
     assert after[0] <= 1.05 * before[0] and after[1] <= 1.05 * before[1], (before, after)
     assert after[0] < before[0] or after[1] < before[1], (before, after)
 
-    # 5. the operating region for the file's constants
+    # 5. the operating region for the file's constants, with the found state-dependent effects
+    # compensated by the regulator (so part of the feasible set), checked by 200 runs on a twin
+    # that has them
     region = tmp_path / "region.json"
     code = main(["region", "--params", str(diag), "--gaps", "20", "--samples", "200", "--json", str(region)])
     assert code == 0
-    (cert,) = json.loads(region.read_text())["certificates"]
-    assert cert["certified"] and cert["level"] > 0
+    doc_region = json.loads(region.read_text())
+    assert doc_region["effects_compensated"] == [e.name for e in stage.effects if e.compensable]
+    assert doc_region["effects_compensated"], doc_region  # friction / cogging depend on the state
+    (cert,) = doc_region["certificates"]
+    assert cert["certified"] and cert["level"] > 0 and cert["monte_carlo"]["violations"] == 0
     # the certificate is for the file's model (its constants), not the papers': they differ
     assert stage.constants.as_array() != StageModel().constants.as_array()

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.errors import InputError
-from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.closed_loop import LOOP_VARIABLES, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import checked_p, ellipsoid_image
 from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet
 from maglev_oc.results import Result
@@ -56,7 +56,7 @@ class BoundaryMinimizer:
         z = ca.SX.sym("z", N_ERROR)
         phi = ca.SX.sym("phi")
         pvec = ca.SX.sym("P", N_ERROR * N_ERROR)
-        off = ca.SX.sym("F", 4, 3)
+        off = ca.SX.sym("F", len(LOOP_VARIABLES), 3)
         h = feasible.loop_expressions(loop, z, phi, off)
         P = ca.reshape(pvec, N_ERROR, N_ERROR)
         obj = ca.bilin(P, z, z)

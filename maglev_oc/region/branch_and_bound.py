@@ -18,9 +18,9 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.errors import InputError
-from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.closed_loop import LOOP_VARIABLES, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import ellipsoid_image
-from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, transformation_constraints
+from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, compensated_constraints
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
@@ -36,7 +36,7 @@ class BoxSearch(Result):
     status: str
     message: str
     level: float
-    witness: np.ndarray | None  # (4,) zeta (3) and phase of an infeasible point, if refuted
+    witness: np.ndarray | None  # (d + 1,) zeta (d) and phase of an infeasible point, if refuted
     witness_level: float  # V at the witness (c |zeta|^2)
     binding: str  # constraint violated at the witness ('' otherwise)
     boxes: int  # boxes evaluated
@@ -84,16 +84,24 @@ class LevelCertifier:
         self.feasible = feasible
         self.loop = loop
         self.max_boxes = int(max_boxes)
-        zeta = ca.SX.sym("zeta", 3)
+        # l = (x1, v1, v2) and, with a compensation, the states it depends on (feasible.loop_variables)
+        self.rows = tuple(feasible.loop_variables)
+        self.dims = len(self.rows)
+        zeta = ca.SX.sym("zeta", self.dims)
         phi = ca.SX.sym("phi")
-        lmat = ca.SX.sym("L", 3, 3)  # sqrt(c) chol(S)
-        off = ca.SX.sym("F", 4, 3)
+        lmat = ca.SX.sym("L", self.dims, self.dims)  # sqrt(c) chol(S)
+        off = ca.SX.sym("F", len(LOOP_VARIABLES), 3)
         basis = ca.vertcat(1, ca.sin(phi), ca.cos(phi))
         ell = ca.mtimes(lmat, zeta)
         offs = ca.mtimes(off, basis)
-        x1 = offs[0] + ell[0]
-        v = ca.vertcat(offs[2] + ell[1], offs[3] + ell[2])
-        margin, headroom = transformation_constraints(feasible.model, x1, v, feasible.current_limit)
+        value = {name: offs[k] for k, name in enumerate(LOOP_VARIABLES)}
+        for k, name in enumerate(self.rows):
+            value[name] = value[name] + ell[k]
+        x = ca.vertcat(value["x1"], value["x2"], value["x3"], value["x4"])
+        v = ca.vertcat(value["v1"], value["v2"])
+        margin, headroom = compensated_constraints(
+            feasible.model, x, v, feasible.current_limit, feasible.compensation
+        )
         h = ca.vertcat(margin, headroom)
         self._fn = ca.Function("h_zeta", [zeta, phi, ca.vec(lmat), ca.vec(off)], [h])
         self._ifn = IntervalFunction(self._fn)
@@ -117,30 +125,31 @@ class LevelCertifier:
         t0 = time.perf_counter()
         if not (level > 0 and math.isfinite(level)):
             raise InputError(f"level must be positive and finite, got {level!r}")
-        img = ellipsoid_image(self.loop, P)
+        img = ellipsoid_image(self.loop, P, self.rows)
         lmat = math.sqrt(level) * img.chol
         par_l = lmat.ravel(order="F")[:, None]
         par_f = self.loop.offset_coefficients(reference).ravel(order="F")[:, None]
         periodic = not reference.is_setpoint
-        lo, hi = initial_boxes(periodic, phase_cells)
-        scale = np.array([1.0, 1.0, 1.0, 1.0 / math.pi])  # phase widths count per pi
+        d = self.dims
+        lo, hi = initial_boxes(periodic, phase_cells, d)
+        scale = np.append(np.ones(d), 1.0 / math.pi)  # phase widths count per pi
         boxes = 0
         while lo.shape[1] > 0:
             # boxes outside the unit ball hold no point of the ellipsoid's image
-            near = np.clip(0.0, lo[:3], hi[:3])
+            near = np.clip(0.0, lo[:d], hi[:d])
             keep = np.sum(near**2, axis=0) <= 1.0
             lo, hi, near = lo[:, keep], hi[:, keep], near[:, keep]
             n = lo.shape[1]
             if n == 0:
                 break
             boxes += n
-            hlo, _ = self._ifn([lo[:3], lo[3:4], par_l, par_f], [hi[:3], hi[3:4], par_l, par_f])
+            hlo, _ = self._ifn([lo[:d], lo[d:], par_l, par_f], [hi[:d], hi[d:], par_l, par_f])
             ok = np.all(hlo[0] >= 0, axis=0)
             lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if lo.shape[1] == 0:
                 break
             # a point of each undecided box inside the ball: refute if infeasible there
-            phase_mid = 0.5 * (lo[3] + hi[3])
+            phase_mid = 0.5 * (lo[d] + hi[d])
             vals = np.asarray(self._fn.map(lo.shape[1])(near, phase_mid[None, :], par_l, par_f))
             bad = np.any(vals < 0, axis=0)
             if np.any(bad):
@@ -164,7 +173,7 @@ class LevelCertifier:
 
     def zeta_to_state(self, P, level: float, zeta) -> np.ndarray:
         """The z~ of least V whose l equals sqrt(level) chol(S) zeta (V there = level |zeta|^2)."""
-        img = ellipsoid_image(self.loop, P)
+        img = ellipsoid_image(self.loop, P, self.rows)
         ell = math.sqrt(level) * img.chol @ np.asarray(zeta, dtype=float)
         return img.Pinv_Mt @ np.linalg.solve(img.S, ell)
 
@@ -191,7 +200,7 @@ def _bisect_boxes(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, periodic: b
     """Every box halved along its widest (scaled) side; the phase only for a sinusoid."""
     if not periodic:
         scale = scale.copy()
-        scale[3] = 0.0
+        scale[-1] = 0.0
     return bisect_widest(lo, hi, scale)
 
 

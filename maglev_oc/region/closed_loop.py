@@ -44,6 +44,7 @@ __all__ = [
     "E2",
     "ERROR_STATE_NAMES",
     "ERROR_STATE_UNITS",
+    "LOOP_VARIABLES",
     "N_ERROR",
     "Reference",
     "RegulatorLoop",
@@ -55,6 +56,11 @@ E1, DE1, E2, DE2 = 0, 1, 5, 6
 """Indices of the vertical error, its rate, the horizontal error and its rate in z~."""
 ERROR_STATE_NAMES = ("e1", "e1'", "xi_v1", "xi_v2", "xi_v3", "e2", "e2'", "xi_h1", "xi_h2", "xi_h3")
 ERROR_STATE_UNITS = ("m", "m/s", "m s^2", "m s", "m", "m", "m/s", "m s^2", "m s", "m")
+LOOP_VARIABLES = ("x1", "x3", "v1", "v2", "x2", "x4")
+"""The physical quantities affine in z~ (for each phase) that a feasible set can depend on, in the
+order of :meth:`RegulatorLoop.offsets`: gap, position [m], accelerations v1, v2 [m/s^2], vertical
+and horizontal velocities [m/s] (the last two only matter when the regulator compensates an
+effect that depends on the velocities)."""
 
 
 @dataclass(frozen=True)
@@ -215,19 +221,45 @@ class RegulatorLoop:
         return self.steady_state_map(reference) @ reference.exo_state(phase)
 
     def offsets(self, reference: Reference, phase) -> np.ndarray:
-        """(x1, x3, v1, v2) at z~ = 0 for phase(s) phi: shape (4, n) [m, m, m/s^2, m/s^2]."""
+        """The :data:`LOOP_VARIABLES` (x1, x3, v1, v2, x2, x4) at z~ = 0 for phase(s) phi: shape
+        (6, n) [m, m, m/s^2, m/s^2, m/s, m/s]."""
         zss = self.steady_state(reference, phase)
         sig = reference.signals(phase)
-        return np.vstack([sig[0] + zss[E1], sig[3] + zss[E2], self.K_h @ zss[5:], self.K_v @ zss[:5]])
+        return np.vstack(
+            [
+                sig[0] + zss[E1],
+                sig[3] + zss[E2],
+                self.K_h @ zss[5:],
+                self.K_v @ zss[:5],
+                sig[1] + zss[DE1],
+                sig[4] + zss[DE2],
+            ]
+        )
 
     def offset_coefficients(self, reference: Reference) -> np.ndarray:
-        """(4, 3) matrix F with offsets(phi) = F @ (1, sin phi, cos phi): every offset is a
+        """(6, 3) matrix F with offsets(phi) = F @ (1, sin phi, cos phi): every offset is a
         sinusoid of the phase (used to build symbolic and interval expressions)."""
         basis = np.array([0.0, math.pi / 2, math.pi, 3 * math.pi / 2])
-        vals = self.offsets(reference, basis)  # (4, 4)
+        vals = self.offsets(reference, basis)  # (6, 4)
         design = np.column_stack([np.ones(4), np.sin(basis), np.cos(basis)])
         coef, *_ = np.linalg.lstsq(design, vals.T, rcond=None)
         return coef.T
+
+    def rows(self, names) -> np.ndarray:
+        """(k, 10) matrix M whose rows give the :data:`LOOP_VARIABLES` ``names`` minus their
+        offsets as linear functions of z~ (x1 - offset = e1, v1 - offset = K_h z~_h, ...)."""
+        full = {
+            "x1": np.eye(N_ERROR)[E1],
+            "x3": np.eye(N_ERROR)[E2],
+            "v1": self.output[2],
+            "v2": self.output[3],
+            "x2": np.eye(N_ERROR)[DE1],
+            "x4": np.eye(N_ERROR)[DE2],
+        }
+        unknown = [n for n in names if n not in full]
+        if unknown:
+            raise InputError(f"rows: unknown loop variables {unknown}; known: {', '.join(LOOP_VARIABLES)}")
+        return np.array([full[n] for n in names], dtype=float).reshape(len(names), N_ERROR)
 
     # ------------------------------------------------------------------------------------
     def error_state(self, x, xi, reference: Reference, phase: float = 0.0) -> np.ndarray:

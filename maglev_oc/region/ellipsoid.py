@@ -31,31 +31,36 @@ __all__ = [
 class EllipsoidImage:
     """What Omega_c = {z~' P z~ <= c} looks like through the functions F depends on.
 
-    S (3, 3) = M P^-1 M' for l = (e1, v1, v2); chol (3, 3) lower factor of S; ``spread`` (4,) =
+    S (d, d) = M P^-1 M' for l (default (e1, v1, v2)); chol (d, d) lower factor of S; ``spread`` (4,) =
     sqrt(m' P^-1 m) for m = rows (e1, e2, v1, v2): on Omega_c each ranges over +- sqrt(c) spread.
     """
 
     S: np.ndarray
     chol: np.ndarray
     spread: np.ndarray
-    Pinv_Mt: np.ndarray  # (10, 3) P^-1 M'
+    Pinv_Mt: np.ndarray  # (10, d) P^-1 M'
 
 
-def ellipsoid_image(loop: RegulatorLoop, P: np.ndarray) -> EllipsoidImage:
-    """What {V <= c} looks like through (e1, v1, v2) and the four linear functions F depends on.
+def ellipsoid_image(loop: RegulatorLoop, P: np.ndarray, rows=("x1", "v1", "v2")) -> EllipsoidImage:
+    """What {V <= c} looks like through l (default (e1, v1, v2)) and the four linear functions F
+    depends on.
 
     Parameters
     ----------
     loop : RegulatorLoop
     P : (10, 10) array
         Symmetric positive definite.
+    rows : sequence of str
+        The loop variables (:data:`~maglev_oc.region.closed_loop.LOOP_VARIABLES`) making up l;
+        a compensated effect adds the states it depends on
+        (:attr:`~maglev_oc.region.feasibility.FeasibleSet.loop_variables`).
 
     Returns
     -------
     EllipsoidImage
     """
     P = checked_p(P)
-    M = loop.output[[0, 2, 3]]
+    M = loop.rows(tuple(rows))
     pinv_mt = np.linalg.solve(P, M.T)
     S = M @ pinv_mt
     S = 0.5 * (S + S.T)

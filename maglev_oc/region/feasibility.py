@@ -20,6 +20,15 @@ method (CasADi ``rootfinder``) on every grid line where a constraint changes sig
 
 Over 8-30 mm the root at R = 0 needs i_d = -L3/(2 L4) >= 18 A, twice the peak limit, so with the
 9 A limit the current constraint always binds before R = 0: A is larger than F.
+
+**Compensated effects.** When the regulator feeds an identified acceleration d(x) forward (a
+stage file's state-dependent effects, ``FeedbackLinearizingRegulator(compensation=d)``), it asks
+the transformation for v - d(x) (vertical d_1 from v2, horizontal d_2 from v1). On the plant that
+has exactly that effect the loop in error coordinates is unchanged (the effect is cancelled), but
+the transformation and the currents are evaluated at v - d(x): F depends on the states d depends
+on (the velocities for friction, the position for cogging or a cable carrier) as well as on
+(x1, v1, v2). ``FeasibleSet(compensation=d)`` is that set; :attr:`FeasibleSet.loop_variables`
+names what it depends on.
 """
 
 from __future__ import annotations
@@ -49,6 +58,7 @@ __all__ = [
     "SLICE_VARIABLES",
     "FeasibilityMap",
     "FeasibleSet",
+    "compensated_constraints",
     "constraints_from_coefficients",
     "feasibility_map",
     "transformation_constraints",
@@ -107,6 +117,19 @@ def transformation_constraints(model: StageModel, x1, v, current_limit: float | 
     return margin, headroom
 
 
+def compensated_constraints(
+    model: StageModel, x, v, current_limit: float | None, compensation: ca.Function | None
+):
+    """(margin, headroom) of :func:`transformation_constraints` at the state ``x`` (4: x1..x4) when
+    the regulator compensates ``compensation`` (x (4) -> (x2', x4') [m/s^2]): the transformation
+    is asked for (v1 - d_2(x), v2 - d_1(x)), as in :class:`FeedbackLinearizingRegulator`. Without
+    a compensation, the constraints at v (x2..x4 unused)."""
+    if compensation is None:
+        return transformation_constraints(model, x[0], v, current_limit)
+    d = compensation(x)
+    return transformation_constraints(model, x[0], ca.vertcat(v[0] - d[1], v[1] - d[0]), current_limit)
+
+
 def constraints_from_coefficients(coefficients, v1, v2, gravity: float, current_limit: float | None):
     """numpy twin of :func:`transformation_constraints` given L1..L4 (4, ...) at the gaps.
 
@@ -149,19 +172,32 @@ class FeasibleSet:
         constraint and leaves A = {R >= 0} with the stoppers.
     gap_range, position_range : (float, float) or None
         Stoppers [m]; None drops the constraint.
+    compensation : casadi.Function, optional
+        The acceleration the regulator feeds forward, x (4) -> (x2', x4') [m/s^2] (module
+        docstring); its operations must have an interval extension
+        (:class:`~maglev_oc.region.interval.IntervalFunction`).
+    compensated : tuple of str
+        Names of the compensated effects, for labels.
 
-    Attributes (CasADi Functions)
+    Attributes
     ----------
-    pointwise : (x1, v (2)) -> (margin, headroom)
+    pointwise : casadi.Function
+        (x (4), v (2)) -> (margin, headroom): x2..x4 matter only through the compensation.
     pointwise_interval : IntervalFunction of ``pointwise``
+    loop_variables : tuple of str
+        The :data:`~maglev_oc.region.closed_loop.LOOP_VARIABLES` the nonlinear constraints depend
+        on: (x1, v1, v2), then x2, x3, x4 where the compensation depends on them.
     """
 
     model: StageModel
     current_limit: float | None = PEAK_CURRENT_LIMIT
     gap_range: tuple[float, float] | None = GAP_TRAVEL
     position_range: tuple[float, float] | None = POSITION_TRAVEL
+    compensation: ca.Function | None = None
+    compensated: tuple[str, ...] = ()
     pointwise: ca.Function = field(init=False, repr=False)
     pointwise_interval: IntervalFunction = field(init=False, repr=False)
+    loop_variables: tuple[str, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.model, StageModel):
@@ -178,12 +214,28 @@ class FeasibleSet:
             object.__setattr__(self, name, (lo, hi))
         if self.gap_range is not None and self.gap_range[0] <= 0:
             raise InputError(f"gap_range must be positive [m], got {self.gap_range!r}")
-        x1 = ca.SX.sym("x1")
+        comp = self.compensation
+        if comp is not None:
+            if not isinstance(comp, ca.Function) or comp.n_in() != 1 or comp.n_out() != 1:
+                raise InputError("compensation must be a casadi.Function x (4) -> (x2', x4') (2)")
+            if comp.size1_in(0) != 4 or comp.size1_out(0) != 2:
+                raise InputError("compensation must map x (4) -> (x2', x4') (2)")
+        x = ca.SX.sym("x", 4)
         v = ca.SX.sym("v", 2)
-        margin, headroom = transformation_constraints(self.model, x1, v, self.current_limit)
-        fn = ca.Function("feasible", [x1, v], [ca.vertcat(margin, headroom)], ["x1", "v"], ["h"])
+        margin, headroom = compensated_constraints(self.model, x, v, self.current_limit, comp)
+        fn = ca.Function("feasible", [x, v], [ca.vertcat(margin, headroom)], ["x", "v"], ["h"])
         object.__setattr__(self, "pointwise", fn)
-        object.__setattr__(self, "pointwise_interval", IntervalFunction(fn))
+        try:
+            object.__setattr__(self, "pointwise_interval", IntervalFunction(fn))
+        except NotImplementedError as exc:
+            raise InputError(f"compensation: {exc}; no certificate can be computed with it") from None
+        extra = ()
+        if comp is not None:
+            jac = ca.jacobian(comp(x), x).sparsity()
+            used = {jac.get_col()[k] for k in range(jac.nnz())}  # columns that hold a nonzero
+            extra = tuple(name for name, k in (("x2", 1), ("x3", 2), ("x4", 3)) if k in used)
+        object.__setattr__(self, "loop_variables", ("x1", "v1", "v2", *extra))
+        object.__setattr__(self, "compensated", tuple(self.compensated))
 
     @property
     def label(self) -> str:
@@ -193,7 +245,10 @@ class FeasibleSet:
             if self.gap_range is None
             else f"gap in [{self.gap_range[0] * 1e3:g}, {self.gap_range[1] * 1e3:g}] mm"
         )
-        return f"R >= 0, {cur}, {gap}"
+        comp = ""
+        if self.compensation is not None:
+            comp = f", {', '.join(self.compensated) or 'an effect'} compensated"
+        return f"R >= 0, {cur}, {gap}{comp}"
 
     def check_setpoint(self, gap: float, position: float = 0.0) -> None:
         """Raise :class:`InputError` unless the stage at rest at (``gap``, ``position``) [m] lies
@@ -206,12 +261,12 @@ class FeasibleSet:
                     f"{where}: the {name} must lie strictly between the stoppers at "
                     f"{rng[0] * mm:g} and {rng[1] * mm:g} mm"
                 )
-        margin, headroom = self.evaluate(gap, 0.0, 0.0)
+        margin, headroom = self.evaluate(gap, 0.0, 0.0, x3=position)
         if margin > 0 and headroom > 0:
             return
         lo, hi = self.gap_range or (1e-3, 40e-3)
         grid = np.linspace(lo, hi, 401)[1:-1]
-        h = self.evaluate(grid, 0.0, 0.0)
+        h = self.evaluate(grid, 0.0, 0.0, x3=position)
         ok = grid[(h[0] > 0) & (h[1] > 0)]
         allowed = f"({ok.min() * mm:.1f}, {ok.max() * mm:.1f}) mm" if ok.size else "none"
         why = (
@@ -221,7 +276,7 @@ class FeasibleSet:
         )
         raise InputError(f"{where}: {why}; gaps held at rest within the limits: {allowed}")
 
-    def evaluate(self, x1, v1, v2) -> np.ndarray:
+    def evaluate(self, x1, v1, v2, *, x2=0.0, x3=0.0, x4=0.0) -> np.ndarray:
         """The constraints of F at given gaps and accelerations.
 
         Parameters
@@ -230,21 +285,26 @@ class FeasibleSet:
             Gap [m].
         v1, v2 : arrays
             Accelerations [m/s^2], broadcast with x1.
+        x2, x3, x4 : arrays
+            Vertical velocity [m/s], position [m], horizontal velocity [m/s]: they matter only
+            through a compensation (default at rest at position 0).
 
         Returns
         -------
         (2, ...) array
             (margin [m/s^2], headroom [A^2]).
         """
-        x1, v1, v2 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x1, v1, v2)))
+        arrays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x1, v1, v2, x2, x3, x4)))
+        x1, v1, v2, x2, x3, x4 = arrays
         n = x1.size
-        out = np.asarray(self.pointwise.map(n)(x1.reshape(1, n), np.vstack([v1.ravel(), v2.ravel()])))
+        x = np.vstack([a.ravel() for a in (x1, x2, x3, x4)])
+        out = np.asarray(self.pointwise.map(n)(x, np.vstack([v1.ravel(), v2.ravel()])))
         return out.reshape((2, *x1.shape))
 
     # ------------------------------------------------------------------------------------
     def loop_expressions(self, loop: RegulatorLoop, ztilde, phase, offsets) -> list:
         """Symbolic constraint values (CONSTRAINT_NAMES order) of the closed loop at z~ and phase
-        phi, with ``offsets`` the (4, 3) matrix of :meth:`RegulatorLoop.offset_coefficients`
+        phi, with ``offsets`` the (6, 3) matrix of :meth:`RegulatorLoop.offset_coefficients`
         (a CasADi matrix or numbers)."""
         basis = ca.vertcat(1, ca.sin(phase), ca.cos(phase))
         off = ca.mtimes(offsets, basis)
@@ -252,7 +312,10 @@ class FeasibleSet:
         x3 = off[1] + ztilde[5]
         v1 = off[2] + ca.dot(ca.DM(loop.K_h), ztilde[5:10])
         v2 = off[3] + ca.dot(ca.DM(loop.K_v), ztilde[0:5])
-        margin, headroom = transformation_constraints(self.model, x1, ca.vertcat(v1, v2), self.current_limit)
+        x = ca.vertcat(x1, off[4] + ztilde[1], x3, off[5] + ztilde[6])
+        margin, headroom = compensated_constraints(
+            self.model, x, ca.vertcat(v1, v2), self.current_limit, self.compensation
+        )
         g_lo, g_hi = self.gap_range if self.gap_range is not None else (-np.inf, np.inf)
         p_lo, p_hi = self.position_range if self.position_range is not None else (-np.inf, np.inf)
         big = 1.0  # a constant "satisfied" value for constraints that are switched off

@@ -43,6 +43,7 @@ __all__ = [
     "CertificateCheck",
     "SliceCheck",
     "check_error_states",
+    "fl_batch_simulator",
     "fl_slice",
     "merge_checks",
     "reference_samples",
@@ -395,6 +396,38 @@ class CertificateCheck(Result):
         )
         status = "no_violations" if bad == 0 else "violations"
         return cls(bad == 0, status, message, timings=dict(timings), **fields)
+
+
+def fl_batch_simulator(
+    model, *, compensation: ca.Function | None = None, duration: float, compile: bool = True
+) -> BatchSimulator:
+    """The FL regulator on the twin of ``model`` whose plant is what a certificate assumes: the
+    model itself, plus the effect ``compensation`` (x (4) -> (x2', x4') [m/s^2]) when the
+    regulator compensates one (:class:`~maglev_oc.region.feasibility.FeasibleSet`'s premise).
+
+    Parameters
+    ----------
+    model : StageModel
+    compensation : casadi.Function, optional
+    duration : float
+        Horizon [s].
+    compile : bool
+        See :class:`BatchSimulator`.
+
+    Returns
+    -------
+    BatchSimulator
+    """
+    from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+    from maglev_oc.sim.effects import TwinEffects
+
+    twin = RigTwin(model)
+    if compensation is not None:
+        x, i = ca.SX.sym("x", 4), ca.SX.sym("i", 2)
+        extra = ca.Function("effects", [x, i], [compensation(x)], ["x", "i"], ["acc"])
+        twin = RigTwin(model, TwinEffects(extra=extra))
+    controller = FeedbackLinearizingRegulator(model, compensation=compensation)
+    return BatchSimulator(twin, controller, duration=duration, compile=compile)
 
 
 def check_error_states(

@@ -232,8 +232,8 @@ class Procedure2:
             if res.status == "certified":
                 return lev, tuple(attempts)
             if res.status == "refuted" and res.witness_level < bounds.best:
-                zt = self.certifier.zeta_to_state(P, lev, res.witness[:3])
-                bounds.refuted(res.binding, res.witness_level, zt, float(res.witness[3]))
+                zt = self.certifier.zeta_to_state(P, lev, res.witness[:-1])
+                bounds.refuted(res.binding, res.witness_level, zt, float(res.witness[-1]))
                 target = res.witness_level  # retry the same fraction of the better bound
                 continue
             k += 1

@@ -90,7 +90,7 @@ from scipy.linalg import eigh, null_space
 
 from maglev_oc.errors import InputError
 from maglev_oc.region.branch_and_bound import bisect_widest, initial_boxes
-from maglev_oc.region.closed_loop import N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.closed_loop import LOOP_VARIABLES, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import InitialConditionSet, checked_p, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.interval import IntervalFunction
@@ -305,6 +305,11 @@ class RobustCertifier:
         self.ladder = ladder
         if phase_cells < 1:
             raise InputError(f"phase_cells must be >= 1, got {phase_cells!r}")
+        if feasible.compensation is not None:
+            raise InputError(
+                "the robust certificate bounds the constants' mismatch of the uncompensated loop; "
+                "a compensated effect is not covered (certify it with Procedure 2)"
+            )
         self.feasible = feasible
         self.loop = loop
         self.max_boxes = int(max_boxes)
@@ -315,7 +320,7 @@ class RobustCertifier:
         ell = ca.SX.sym("l", 3)  # (e1, v1~, v2~)
         p = ca.SX.sym("p", 2)  # (p_v, p_h) = B'P z~
         phi = ca.SX.sym("phi")
-        off = ca.SX.sym("F", 4, 3)
+        off = ca.SX.sym("F", len(LOOP_VARIABLES), 3)
         shift = ca.SX.sym("d0", 4)  # C0 - C_nom
         radius = ca.SX.sym("r", 4)  # box half-widths
         shape = ca.SX.sym("Ls", 4, 4)  # chol(S) of the ellipsoid (zero for a box)

@@ -41,7 +41,7 @@ from scipy.spatial import ConvexHull
 
 from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
-from maglev_oc.region.closed_loop import E1, E2, N_ERROR, Reference, RegulatorLoop
+from maglev_oc.region.closed_loop import E1, E2, LOOP_VARIABLES, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import max_rectangle
 from maglev_oc.region.feasibility import (
     FeasibleSet,
@@ -91,12 +91,17 @@ class PolygonBuilder:
     """Builds and proves inner polygons for one feasible set and loop (functions built once)."""
 
     def __init__(self, feasible: FeasibleSet, loop: RegulatorLoop) -> None:
+        if feasible.compensation is not None:
+            raise InputError(
+                "the SDP enlargement's inner polygons are for the uncompensated feasible set; with a "
+                "compensated effect use Procedure 2 with the Lyapunov P (or a P of your own)"
+            )
         self.feasible = feasible
         self.loop = loop
         e1 = ca.SX.sym("e1")
         phi = ca.SX.sym("phi")
         dv = ca.SX.sym("dv", 2)
-        off = ca.SX.sym("F", 4, 3)
+        off = ca.SX.sym("F", len(LOOP_VARIABLES), 3)
         basis = ca.vertcat(1, ca.sin(phi), ca.cos(phi))
         o = ca.mtimes(off, basis)
         x1 = o[0] + e1
