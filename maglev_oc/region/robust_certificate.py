@@ -612,6 +612,7 @@ def robust_lyapunov_matrix(
     margin: float = 0.9,
     samples: int = 4000,
     seed: int = 0,
+    direction: np.ndarray | None = None,
 ) -> tuple[np.ndarray | None, str]:
     """A P chosen for robustness (a heuristic; the certificate is :meth:`RobustCertifier.run`).
 
@@ -622,7 +623,10 @@ def robust_lyapunov_matrix(
     (S-procedure),  [[A Y + Y A' + alpha Y, B], [B', -diag(beta)]] <= 0. Subject to that and to
     the spreads of (e1, e2, v1~, v2~) over the set staying within those of the nominal set, the
     SDP (cvxpy + Clarabel, acceleration-scaled coordinates) maximises the (e1, e2) rectangle at
-    rest, for each alpha of ``alphas`` [1/s]; the best is returned.
+    rest, for each alpha of ``alphas`` [1/s]; the best is returned. With ``direction`` (a z~ (10,),
+    e.g. one start's error state) it maximises instead how far along it the set {V <= 1} reaches
+    (a P aimed at that start; pass the nominal certificate of a P aimed at it too, e.g.
+    :func:`~maglev_oc.region.sdp.enlarge` with the same direction, since its spreads bound the set).
 
     Returns
     -------
@@ -663,6 +667,11 @@ def robust_lyapunov_matrix(
         x = np.zeros((N_ERROR, 2))
         x[0, 0], x[5, 1] = 1 / d[0], s / d[5]
         corners.append(x)
+    if direction is not None:
+        direction = np.asarray(direction, dtype=float).reshape(N_ERROR)
+        if not (np.all(np.isfinite(direction)) and np.any(direction != 0)):
+            raise InputError("direction must be a finite, nonzero z~ (10,)")
+        corners = [(direction / d)[:, None]]  # one column: the objective's a has one entry
 
     def solve(alpha: float, mu_s: np.ndarray, rectangle: bool):
         Y = cp.Variable((N_ERROR, N_ERROR), symmetric=True)
@@ -674,12 +683,12 @@ def robust_lyapunov_matrix(
             Y >> 1e-9 * np.eye(N_ERROR),
         ]
         if rectangle:
-            a = cp.Variable(2)
+            a = cp.Variable(corners[0].shape[1])
             cons += [rs @ Y @ rs <= b2 for rs, b2 in zip(rows, spreads, strict=True)]
             for x in corners:
                 xa = cp.reshape(x @ a, (N_ERROR, 1), order="F")
                 cons.append(cp.bmat([[np.ones((1, 1)), xa.T], [xa, Y]]) >> 0)
-            prob = cp.Problem(cp.Maximize(cp.log(a[0]) + cp.log(a[1])), cons)
+            prob = cp.Problem(cp.Maximize(cp.sum(cp.log(a))), cons)
         else:
             cons += [rs @ Y @ rs <= t * b2 for rs, b2 in zip(rows, spreads, strict=True)]
             prob = cp.Problem(cp.Minimize(t), cons)
