@@ -35,7 +35,7 @@ from maglev_oc.region.study import LARGE_STEP_START, LARGE_STEP_TARGET
 from maglev_oc.region.sweep import PlantSet
 
 CONFIDENCES = (0.01, 0.05, 0.1, 0.2, 0.3, 0.5, 0.9, 0.95, 0.99)
-AIMED_CONFIDENCES = (1e-6, 0.01, 0.1, 0.5)
+AIMED_CONFIDENCES = (1e-6, 1e-4, 1e-3, 0.01, 0.1, 0.5)
 
 
 def main() -> None:
