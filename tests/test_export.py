@@ -286,7 +286,9 @@ def _exported_nmpc(model, tmp_path, budget):
     nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options={"max_iter": budget})
     ctrl = CompiledNMPC(nmpc, backend="vm")
     export = export_controller(ctrl, tmp_path / "nmpc")
-    return nmpc, ctrl, export, _ExportedNMPC(_build(export, tmp_path), export)
+    c = _ExportedNMPC(_build(export, tmp_path), export)
+    assert c.size() == export.memory_bytes  # the struct as the export reports it (and reads it)
+    return nmpc, ctrl, export, c
 
 
 def _python_split_commands(nmpc, y, r, c0):

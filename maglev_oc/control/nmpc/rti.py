@@ -11,23 +11,25 @@ Real-time iteration (``mode="rti"``)
 
 QP solver and the unconstrained shortcut
     The QP variables are ordered (u_0, x_1, u_1, ..., x_N) and the constraints per stage
-    (dynamics, current polytope): the OCP structure HPIPM's Riccati-based interior point
-    method exploits (u_0 plays HPIPM's "x_0" since x_0 is not a variable). ``hpipm`` is the
-    default (mode "speed_abs", iteration limit 30) because its cost on a constrained sample is
-    bounded (4-10 interior point iterations of fixed cost) where QRQP's active-set iterations
-    each refactorize the KKT matrix, so that QRQP's cost grows with the number of constraints
-    that switch (the start of a large step). The QP is scaled (positions in mm) so that
-    HPIPM's absolute tolerances are reachable (in SI units its Hessian spans 1e-3..1e7 and the
-    first sample of a large step ran into the iteration limit). Measured by bench/nmpc_step.py
-    with the QP solved every sample (N = 20, CasADi VM, per call, two runs): HPIPM 0.42-0.47
-    ms, QRQP 0.42 ms, OSQP 0.75-0.83 ms (OSQP needs tight tolerances for the solution check,
-    hence many ADMM iterations); in the generated C the p99 over a large step, set by the
-    samples that need the QP, was 0.14 ms with HPIPM and 0.24 ms with QRQP. Most samples have no
-    active inequality: the Riccati recursion of the equality-constrained QP (:mod:`.riccati`)
-    is computed first and, when it satisfies every bound and polytope row, it IS the QP's
-    solution and the solver is not called (a CasADi Switch: only the selected branch runs, in
-    Python and in the generated C). The QP solver runs on the other samples (0.1-1 % of the
-    samples of the papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every
+    (dynamics, current polytope): the OCP structure HPIPM's Riccati-based interior point method
+    exploits (u_0 plays HPIPM's "x_0" since x_0 is not a variable). ``hpipm`` is the default
+    (mode "speed_abs", iteration limit 30) because its cost on a constrained sample is bounded
+    (4-10 interior point iterations of fixed cost) where QRQP's active-set iterations each
+    refactorize the KKT matrix, so that QRQP's cost grows with the number of constraints that
+    switch (the start of a large step). The QP is scaled (positions in mm, and the cost so that
+    its smallest Hessian entry is 1: :meth:`.transcription.Transcription.qp_data_function`) so
+    that HPIPM's absolute tolerances mean the same precision on every entry (in SI units its
+    Hessian spans 1e-3..1e7 and the first sample of a large step ran into the iteration limit;
+    without the cost scale its first current was up to 0.07 A off the exact solution). Measured
+    by bench/nmpc_step.py with the QP solved every sample (N = 20, CasADi VM, per call, two
+    runs): HPIPM 0.42-0.47 ms, QRQP 0.42 ms, OSQP 0.75-0.83 ms (OSQP needs tight tolerances for
+    the solution check, hence many ADMM iterations); in the generated C the p99 over a large
+    step, set by the samples that need the QP, was 0.14 ms with HPIPM and 0.24 ms with QRQP.
+    Most samples have no active inequality: the Riccati recursion of the equality-constrained QP
+    (:mod:`.riccati`) is computed first and, when it satisfies every bound and polytope row, it
+    IS the QP's solution and the solver is not called (a CasADi Switch: only the selected branch
+    runs, in Python and in the generated C). The QP solver runs on the other samples (0.1-1 % of
+    the samples of the papers' scenarios); ``unconstrained_shortcut=False`` solves the QP every
     sample.
 
 Preparation and feedback (initial value embedding)
