@@ -156,6 +156,18 @@ LIBRARY_OPTION_TESTS: dict[str, str] = {
     "maglev_oc.region.feasibility.FeasibleSet(position_range)": (
         f"{HERE}::test_feasible_set_position_range_is_the_only_place_x3_enters"
     ),
+    "maglev_oc.region.feasibility.FeasibleSet(compensation)": (
+        "tests/test_region_compensation.py::test_constant_vertical_compensation_is_a_heavier_gravity"
+    ),
+    "maglev_oc.region.montecarlo.fl_batch_simulator(compensation)": (
+        "tests/test_region_compensation.py::test_compensated_certificate_holds_on_the_twin_with_the_effect"
+    ),
+    "maglev_oc.region.robust_certificate.robust_lyapunov_matrix(direction)": (
+        "tests/test_region_robust_certificate.py::test_robust_p_aimed_at_a_start_reaches_further_along_it"
+    ),
+    "maglev_oc.control.nmpc.NMPCSettings(effects)": (
+        "tests/test_nmpc_effects.py::test_the_feedforward_current_makes_the_plant_with_the_effects_follow_the_reference"
+    ),
     "maglev_oc.control.fl_regulator.FeedbackLinearizingRegulator(K_h)": (
         f"{HERE}::test_fl_gains_scale_the_outer_loop"
     ),
