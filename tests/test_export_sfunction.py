@@ -102,6 +102,9 @@ void harness_mdlInitializeSampleTimes(SimStruct* S) { mdlInitializeSampleTimes(S
 void harness_mdlStart(SimStruct* S) { mdlStart(S); }
 void harness_mdlOutputs(SimStruct* S, int_T tid) { mdlOutputs(S, tid); }
 void harness_mdlTerminate(SimStruct* S) { mdlTerminate(S); }
+#ifdef MDL_UPDATE
+void harness_mdlUpdate(SimStruct* S, int_T tid) { mdlUpdate(S, tid); }
+#endif
 """
 
 _PORTS = ctypes.c_int * MAX_PORTS
@@ -154,7 +157,8 @@ def _build(export, tmp_path) -> ctypes.CDLL:
         objects.append(obj)
     out = subprocess.run(["nm", "-u", str(objects[-1])], check=True, capture_output=True, text=True).stdout
     undefined = {line.split()[-1] for line in out.splitlines() if line.strip()}
-    assert undefined <= {f"{export.prefix}_init", f"{export.prefix}_step", "memcpy", "memset"}, undefined
+    interface = {f"{export.prefix}_{name}" for name in ("init", "step", "prepare", "feedback")}
+    assert undefined <= {*interface, "memcpy", "memset"}, undefined
     lib = tmp_path / f"libsfun_{export.prefix}.so"
     link = [cc, "-shared", *map(str, objects), "-o", str(lib), "-lm"]
     subprocess.run(link, check=True, capture_output=True)
@@ -169,6 +173,10 @@ class _Simulink:
         for name in ("mdlInitializeSizes", "mdlInitializeSampleTimes", "mdlStart", "mdlTerminate"):
             getattr(lib, f"harness_{name}").argtypes = [ctypes.POINTER(SimStruct)]
         lib.harness_mdlOutputs.argtypes = [ctypes.POINTER(SimStruct), ctypes.c_int]
+        # mdlUpdate if the block has one (the NMPC's: its preparation of the next sample)
+        self.update = getattr(lib, "harness_mdlUpdate", None)
+        if self.update is not None:
+            self.update.argtypes = [ctypes.POINTER(SimStruct), ctypes.c_int]
         lib.harness_simstruct_size.restype = ctypes.c_size_t
         assert lib.harness_simstruct_size() == ctypes.sizeof(SimStruct)
         self.S = SimStruct()
@@ -194,7 +202,8 @@ class _Simulink:
         self.lib.harness_mdlInitializeSampleTimes(self.p)
 
     def run(self, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """mdlStart, mdlOutputs at every sample of (y, r), mdlTerminate -> (u, diag) per sample."""
+        """mdlStart, mdlOutputs (then mdlUpdate, if the block has one) at every sample of (y, r),
+        mdlTerminate -> (u, diag) per sample."""
         self.lib.harness_mdlStart(self.p)
         u, diag = [], []
         for k in range(y.shape[1]):
@@ -204,6 +213,9 @@ class _Simulink:
             assert self.S.error is None, self.S.error
             u.append(self.outputs[0].copy())
             diag.append(self.outputs[1].copy())
+            if self.update is not None:
+                self.update(self.p, 0)
+                assert self.S.error is None, self.S.error
         self.lib.harness_mdlTerminate(self.p)
         return np.array(u).T, np.array(diag).T
 
@@ -226,6 +238,32 @@ def _direct(lib: ctypes.CDLL, export, y: np.ndarray, r: np.ndarray) -> tuple[np.
         # the diagnostics follow c and c_next in the memory struct
         diag.append(mem[16 * export.n_state :].view(np.float64)[:n_diag].copy())
     return np.array(u).T, np.array(diag).T
+
+
+def _python_step(ctrl):
+    """(c, y, r) -> (u, c_next) of the Python controller the export was made from: its step, or
+    for the NMPC the preparation for r then the feedback (the export's step)."""
+    import casadi as ca
+
+    from maglev_oc.control.nmpc.grid import extrapolated_reference
+
+    nmpc = getattr(ctrl, "controller", None)
+    if nmpc is None:
+
+        def step(c, y, r):
+            u, c_next, _ = ctrl.step(c, y, r)
+            return np.asarray(u).ravel(), np.asarray(c_next).ravel()
+
+        return step
+    rs = ca.SX.sym("r", 6)
+    offsets = nmpc.grid.node_offsets * nmpc.sample_time
+    nodes = ca.Function("nodes", [rs], [extrapolated_reference(rs, offsets)])
+
+    def split(c, y, r):
+        u, c_next, _ = nmpc.rti_feedback(c, nmpc.rti_prepare(c, nodes(r)), y)
+        return np.asarray(u).ravel(), np.asarray(c_next).ravel()
+
+    return split
 
 
 def _controller(name: str, model):
@@ -266,12 +304,22 @@ def test_simulink_block_gives_the_exported_step_bit_for_bit(model, tmp_path, nam
     u_direct, diag_direct = _direct(lib, export, y, r)
     np.testing.assert_array_equal(u, u_direct)
     np.testing.assert_array_equal(diag, diag_direct)
-    # and the export is the Python controller (to round-off, tests/test_export.py), started the same way
+    # and the export is the Python controller (to round-off, tests/test_export.py), started the same
+    # way; for the NMPC its preparation and feedback Functions, which the export's step is
+    step = _python_step(ctrl)
     c = np.asarray(ctrl.initial_state(y[:, 0], r[:, 0], np.zeros(2)), dtype=float).ravel()
-    for k in range(50):
-        uk, c, _ = ctrl.step(c, y[:, k], r[:, k])
-        c = np.asarray(c).ravel()
-        np.testing.assert_allclose(u[:, k], np.asarray(uk).ravel(), rtol=0, atol=1e-9)
+    for k in range(60):
+        uk, c = step(c, y[:, k], r[:, k])
+        np.testing.assert_allclose(u[:, k], uk, rtol=0, atol=1e-9)
+    if name == "nmpc":
+        # the block prepared every sample but the first in mdlUpdate, off the output path (the
+        # first: the block starts the controller in that sample's mdlOutputs, whose feedback then
+        # prepares; later the set-point's predicted reference is the reference)
+        assert block.update is not None
+        late = block.dwork[0][export.memory_bytes - 8 : export.memory_bytes].view(np.int64)[0]
+        assert late == 1
+    else:
+        assert block.update is None
 
     # a restart of the model (its memory left as the last run left it, or garbage) starts over
     for v in block.dwork:

@@ -213,7 +213,7 @@ def export_controller(controller, out: str | os.PathLike, *, prefix: str | None 
         split = nmpc is not None
         (work / f"{prefix}.h").write_text(_header(fields, split))
         (work / f"{prefix}.c").write_text(_source(fields, split))
-        (work / f"sfun_{prefix}.c").write_text(_SFUNCTION.format(**fields))
+        (work / f"sfun_{prefix}.c").write_text(_SFUNCTION.format(**fields, **_sfunction_parts(fields, split)))
         (work / "build_sfunction.m").write_text(_BUILD_SFUNCTION.format(**fields))
         (work / "README.md").write_text(_readme(prefix, controller, nc, sizes, split))
         manifest = {
@@ -551,6 +551,9 @@ def _source(fields: dict[str, object], split: bool) -> str:
 # sample from the first reading and reference (u0 = 0: nothing flows before the block runs),
 # because the inputs are not available in mdlStart. mdlOutputs both outputs and advances the
 # controller: the block is discrete with one sample time, so Simulink calls it once per sample.
+# The NMPC's block outputs with the feedback alone and prepares the next sample in mdlUpdate,
+# which Simulink runs after every block's outputs of the step: the preparation is off the path
+# from the reading to the current.
 _SFUNCTION = """\
 /* {name}: the exported controller as a level-2 C MEX S-function (see README.md).
    Inputs y (2) [m], r (6) [m, m/s, m/s^2]; outputs u (2) [A], diag ({nd}); sample time {ts} s;
@@ -613,13 +616,13 @@ static void mdlOutputs(SimStruct* S, int_T tid) {{
     {prefix}_init(m, y, r, 0); /* u0 = 0 */
     *started = 1;
   }}
-  if ({prefix}_step(m, y, r, u)) {{
+  if ({prefix}_{output_call}(m, y, r, u)) {{
     ssSetErrorStatus(S, "sfun_{prefix}: the controller's generated code reported a failure");
     return;
   }}
   for (k = 0; k < {PREFIX}_N_DIAG; ++k) diag[k] = m->diag[k];
 }}
-
+{update}
 static void mdlTerminate(SimStruct* S) {{
   *(int32_T*)ssGetDWork(S, 1) = 0; /* nothing to free: Simulink owns the memory */
 }}
@@ -630,6 +633,26 @@ static void mdlTerminate(SimStruct* S) {{
 #include "cg_sfun.h"
 #endif
 """
+
+_SFUNCTION_UPDATE = """
+#define MDL_UPDATE
+/* the preparation of the next sample, after this sample's outputs (mdlOutputs: the feedback) */
+static void mdlUpdate(SimStruct* S, int_T tid) {{
+  {prefix}_mem* m = ({prefix}_mem*)ssGetDWork(S, 0);
+  (void)tid;
+  if (*(int32_T*)ssGetDWork(S, 1) && {prefix}_prepare(m)) {{
+    ssSetErrorStatus(S, "sfun_{prefix}: the controller's preparation reported a failure");
+  }}
+}}
+"""
+
+
+def _sfunction_parts(fields: dict[str, object], split: bool) -> dict[str, str]:
+    """The S-function's output call and its mdlUpdate (the NMPC's preparation), or none."""
+    if split:
+        return {"output_call": "feedback", "update": _SFUNCTION_UPDATE.format(**fields)}
+    return {"output_call": "step", "update": ""}
+
 
 _BUILD_SFUNCTION = """\
 % Build the Simulink block sfun_{prefix} ({name}, exported by maglev_oc; see README.md).
@@ -732,6 +755,8 @@ int err = {prefix}_feedback(&m, y, r, u); /* 0 on success */
   the feedback prepares for `r` first and counts it in `m.late_preparations`: its answer is
   always the answer for the `r` it is given, only its latency is then that of a whole step.
 * `{prefix}_step(&m, y, r, u)` is `{prefix}_prepare_for(&m, r)` then `{prefix}_feedback`.
+* The Simulink block `sfun_{prefix}` runs the feedback in mdlOutputs and the preparation of the
+  next sample in mdlUpdate, which Simulink calls after every block's outputs of the step.
 
 What differs from the NMPC's one-Function step in Python (`NonlinearMPC.rti_step`): the first
 shooting interval's dynamics are linearized at x0_pred instead of at the estimate x0 itself (the
