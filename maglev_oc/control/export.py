@@ -762,9 +762,9 @@ What differs from the NMPC's one-Function step in Python (`NonlinearMPC.rti_step
 shooting interval's dynamics are linearized at x0_pred instead of at the estimate x0 itself (the
 rest of the QP does not depend on x0). When the reading equals the prediction the two are the
 same arithmetic; otherwise the currents differ by the change of the first interval's Jacobians
-over x0 - x0_pred times the QP's step (second order: about 0.5 mA at 10 um from the prediction
-and 0.5 mm from the plan; in closed loop on the rig twin the positions stay within 2 um of the
-Python controller's).
+over x0 - x0_pred times the QP's step (a product of two small quantities: about 0.5 mA at 10 um
+from the prediction and 0.5 mm from the plan; in closed loop on the rig twin the positions stay
+within 2 um of the Python controller's).
 """
 
 _DIAG_MEANING = {
