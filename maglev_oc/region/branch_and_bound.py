@@ -18,6 +18,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.errors import InputError
+from maglev_oc.numerics import ColumnMap
 from maglev_oc.region.closed_loop import LOOP_VARIABLES, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import ellipsoid_image
 from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, compensated_constraints
@@ -105,6 +106,7 @@ class LevelCertifier:
         h = ca.vertcat(margin, headroom)
         self._fn = ca.Function("h_zeta", [zeta, phi, ca.vec(lmat), ca.vec(off)], [h])
         self._ifn = IntervalFunction(self._fn)
+        self._columns = ColumnMap(self._fn)  # the constraints at many points, one map built once
 
     def certify(self, reference: Reference, P, level: float, *, phase_cells: int = 24) -> BoxSearch:
         """Branch and bound for the nonlinear constraints on {V <= level}.
@@ -150,7 +152,7 @@ class LevelCertifier:
                 break
             # a point of each undecided box inside the ball: refute if infeasible there
             phase_mid = 0.5 * (lo[d] + hi[d])
-            vals = np.asarray(self._fn.map(lo.shape[1])(near, phase_mid[None, :], par_l, par_f))
+            vals = self._columns(near, phase_mid[None, :], par_l, par_f)[0]
             bad = np.any(vals < 0, axis=0)
             if np.any(bad):
                 r2 = np.where(bad, np.sum(near**2, axis=0), np.inf)

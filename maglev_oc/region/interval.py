@@ -47,20 +47,30 @@ _UNARY_MONOTONE_INCREASING = {
 
 def _pad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Move the bounds outward; NaN bounds become infinite (an enclosure of anything)."""
-    lo = lo - (np.abs(lo) * _PAD + _TINY)
-    hi = hi + (np.abs(hi) * _PAD + _TINY)
-    lo = np.where(np.isnan(lo), -np.inf, lo)
-    hi = np.where(np.isnan(hi), np.inf, hi)
-    return lo, hi
+    # lo - (|lo| PAD + TINY) and hi + (|hi| PAD + TINY), in new arrays updated in place
+    out_lo = np.abs(lo)
+    out_lo *= _PAD
+    out_lo += _TINY
+    np.subtract(lo, out_lo, out=out_lo)
+    out_hi = np.abs(hi)
+    out_hi *= _PAD
+    out_hi += _TINY
+    out_hi += hi
+    out_lo[np.isnan(out_lo)] = -np.inf
+    out_hi[np.isnan(out_hi)] = np.inf
+    return out_lo, out_hi
 
 
 def _mul(alo, ahi, blo, bhi):
     with np.errstate(invalid="ignore"):
-        p = np.stack([alo * blo, alo * bhi, ahi * blo, ahi * bhi])
-    # 0 * inf is NaN: the product of a zero and an unbounded interval is unbounded
-    bad = np.isnan(p).any(axis=0)
-    lo = np.where(bad, -np.inf, np.nanmin(np.where(np.isnan(p), np.inf, p), axis=0))
-    hi = np.where(bad, np.inf, np.nanmax(np.where(np.isnan(p), -np.inf, p), axis=0))
+        p1, p2, p3, p4 = alo * blo, alo * bhi, ahi * blo, ahi * bhi
+        lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
+        hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+    # 0 * inf is NaN: the product of a zero and an unbounded interval is unbounded (np.minimum and
+    # np.maximum pass a NaN of any product on, so the NaNs of lo and hi mark those boxes)
+    bad = np.isnan(lo)
+    lo[bad] = -np.inf
+    hi[bad] = np.inf
     return lo, hi
 
 

@@ -43,6 +43,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import Platform, microstepper
+from maglev_oc.numerics import ColumnMap
 from maglev_oc.region.branch_and_bound import bisect_widest
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
@@ -133,6 +134,7 @@ class MicrostepperRegion:
         self.chol = cholesky(self.S, lower=True)
         self._spread = np.sqrt(np.einsum("ij,jk,ik->i", self.errors, p_inv, self.errors))
         self._fn, self._ifn = self._constraint_functions()
+        self._columns = ColumnMap(self._fn)  # the constraints at many points, one map built once
 
     def _constraint_functions(self) -> tuple[ca.Function, IntervalFunction]:
         ell, gap0 = ca.SX.sym("l", 4), ca.SX.sym("gap0")
@@ -221,7 +223,7 @@ class MicrostepperRegion:
             lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if not lo.shape[1]:
                 break
-            vals = np.asarray(self._fn.map(lo.shape[1])(near, par_l, gap0)).reshape(-1, lo.shape[1])
+            vals = self._columns(near, par_l, gap0)[0]
             bad = np.any(vals < 0, axis=0)
             if np.any(bad):
                 k = int(np.argmax(bad))

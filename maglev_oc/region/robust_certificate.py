@@ -89,6 +89,7 @@ import numpy as np
 from scipy.linalg import eigh, null_space
 
 from maglev_oc.errors import InputError
+from maglev_oc.numerics import ColumnMap
 from maglev_oc.region.branch_and_bound import bisect_widest, initial_boxes
 from maglev_oc.region.closed_loop import LOOP_VARIABLES, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import InitialConditionSet, checked_p, initial_condition_set
@@ -332,6 +333,7 @@ class RobustCertifier:
         sup = ca.dot(g, shift) + ca.dot(radius, ca.fabs(g)) + ca.norm_2(ca.mtimes(shape.T, g))
         theta = [shift, radius, ca.vec(shape)]
         self._sup = ca.Function("sup_rate", [ell, p, phi, ca.vec(off), *theta], [sup, g])
+        self._sup_columns = ColumnMap(self._sup)  # at many error states, one map built once
         self._jac = ca.Function("mismatch_jacobian", [ell, phi, ca.vec(off)], [J])
         # the interval graph over (zeta, phase): k bounds c zeta'R zeta - alpha c + sup
         zeta = ca.SX.sym("zeta", N_IMAGE)
@@ -383,8 +385,8 @@ class RobustCertifier:
         w = geo_n @ zt
         d0, r, factor = self.theta_parameters(plants)
         par_f = self.loop.offset_coefficients(reference).ravel(order="F")[:, None]
-        sup, g = self._sup.map(n)(w[0:3], w[3:5], phase[None, :], par_f, d0, r, factor.ravel(order="F"))
-        sup, g = np.asarray(sup).ravel(), np.asarray(g)
+        sup, g = self._sup_columns(w[0:3], w[3:5], phase[None, :], par_f, d0, r, factor.ravel(order="F"))
+        sup = sup.ravel()
         Q = -(self.loop.A.T @ P + P @ self.loop.A)
         base = -np.einsum("in,ij,jn->n", zt, Q, zt)
         # the worst plant: C0 + r sign(g) + S g / |factor' g|
