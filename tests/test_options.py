@@ -162,6 +162,12 @@ LIBRARY_OPTION_TESTS: dict[str, str] = {
     "maglev_oc.region.montecarlo.fl_batch_simulator(compensation)": (
         "tests/test_region_compensation.py::test_compensated_certificate_holds_on_the_twin_with_the_effect"
     ),
+    "maglev_oc.region.sweep.SweepSpec(effects)": (
+        "tests/test_region_sweep.py::test_sweeps_draw_effect_scales_in_their_ranges_beside_the_same_plants"
+    ),
+    "maglev_oc.region.sweep.SweepSpec(effect_ranges)": (
+        "tests/test_region_sweep.py::test_effect_scales_are_the_twin_with_scaled_effects"
+    ),
     "maglev_oc.region.robust_certificate.robust_lyapunov_matrix(direction)": (
         "tests/test_region_robust_certificate.py::test_robust_p_aimed_at_a_start_reaches_further_along_it"
     ),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 
@@ -17,10 +18,20 @@ from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.montecarlo import BatchSimulator, check_error_states
 from maglev_oc.region.procedure2 import Procedure2
-from maglev_oc.region.sweep import PlantSet, SweepSpec, dask_client, run_sweep
+from maglev_oc.region.sweep import PlantSet, SampledPlantTwin, SweepSpec, dask_client, run_sweep
+from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.twin import RigTwin
 
-FIELDS = ("violating", "constants", "start_ratio", "min_margin", "max_current", "stopper_hit", "min_gap")
+FIELDS = (
+    "violating",
+    "constants",
+    "effect_scales",
+    "start_ratio",
+    "min_margin",
+    "max_current",
+    "stopper_hit",
+    "min_gap",
+)
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +92,86 @@ def test_a_zero_size_set_reproduces_the_nominal_monte_carlo(model, spec20):
     assert_allclose(res.min_margin, chk.outcome.min_margin, rtol=1e-12)
     assert_allclose(res.max_current, chk.outcome.max_current, rtol=1e-12)
     assert_allclose(res.start_ratio, chk.start_ratio, rtol=1e-12)
+
+
+def _steps(twin, states, u) -> np.ndarray:
+    return np.column_stack([np.asarray(twin.step(s, u)[0]).ravel() for s in states.T])
+
+
+def test_effect_scales_are_the_twin_with_scaled_effects(model):
+    """A scale row is the same twin with that effect's numbers scaled, built independently as a
+    RigTwin with scaled dataclasses: ones = the rig twin exactly; (2, 0.5, 3) = guides with 2x
+    and 0.5x Coulomb level and viscous coefficient (same pre-sliding distance) and 3x cogging
+    (to 1e-12 relative: the same arithmetic in another order); zeros = no friction, no cogging."""
+    rig = TwinEffects.rig(misalignment=None)  # binding friction scales with the level too: left out
+    sampled = SampledPlantTwin(model, rig)
+    rng = np.random.default_rng(5)
+    x = np.vstack(
+        [0.012 + 0.012 * rng.random(8), 0.05 * rng.standard_normal(8), 0.05 * rng.standard_normal((2, 8))]
+    )
+    x[3] *= 2.0
+    u = np.array([0.7, -1.3])
+
+    def states(twin, scales, friction):
+        out = []
+        for k in range(x.shape[1]):
+            s = twin.initial_state(x[:, k], u)
+            s[7:9] = friction[:, k]
+            out.append(s if scales is None else np.concatenate([s[:-7], scales, s[-4:]]))
+        return np.column_stack(out)
+
+    fr = 0.05 * rng.standard_normal((2, 8))
+    base = _steps(RigTwin(model, rig), states(RigTwin(model, rig), None, fr), u)
+    ones = _steps(sampled, states(sampled, np.ones(3), fr), u)
+    assert_array_equal(ones[: base.shape[0]], base)
+
+    def scaled(f, k):
+        return dataclasses.replace(f, coulomb=k * f.coulomb, viscous=k * f.viscous)
+
+    c = rig.cogging
+    bigger = dataclasses.replace(
+        rig,
+        friction_vertical=scaled(rig.friction_vertical, 2.0),
+        friction_horizontal=scaled(rig.friction_horizontal, 0.5),
+        cogging=dataclasses.replace(
+            c, peak_at_reference=3 * c.peak_at_reference, horizontal_peak=3 * c.horizontal_peak
+        ),
+    )
+    # the Dahl state of k-times guides is k times the state: start them there
+    fr_k = fr * np.array([[2.0], [0.5]])
+    want = _steps(RigTwin(model, bigger), states(RigTwin(model, bigger), None, fr_k), u)
+    got = _steps(sampled, states(sampled, np.array([2.0, 0.5, 3.0]), fr_k), u)
+    assert_allclose(got[: want.shape[0]], want, rtol=1e-12, atol=1e-15)
+    assert np.max(np.abs(got[:4] - ones[:4])) > 0  # and they do move the plant
+
+    none = dataclasses.replace(rig, friction_vertical=None, friction_horizontal=None, cogging=None)
+    zero_fr = np.zeros((2, 8))
+    want = _steps(RigTwin(model, none), states(RigTwin(model, none), None, zero_fr), u)
+    got = _steps(sampled, states(sampled, np.zeros(3), zero_fr), u)
+    assert_allclose(got[: want.shape[0]], want, rtol=1e-12, atol=1e-15)
+
+
+def test_sweeps_draw_effect_scales_in_their_ranges_beside_the_same_plants(model, spec20):
+    C = np.asarray(model.constants.as_array())
+    plants = PlantSet.box(0.98 * C, 1.02 * C)
+    spec = dataclasses.replace(
+        spec20, plants=plants, effects=TwinEffects.rig(), effect_ranges=((0.5, 2.0), (0.0, 3.0), (1.0, 1.0))
+    )
+    a = run_sweep(spec, 120, seed=7, task_size=60, progress=False)
+    b = run_sweep(spec, 120, seed=7, task_size=60, progress=False)
+    _same(a, b)
+    k = a.effect_scales
+    assert k.shape == (3, 120) and np.all(k[0] >= 0.5) and np.all(k[0] <= 2.0) and np.all(k[1] <= 3.0)
+    assert np.all(k[2] == 1.0) and np.ptp(k[0]) > 1.0  # spread over the range
+    # the plants and starts come from their own streams: the same with or without effect ranges
+    plain = run_sweep(
+        dataclasses.replace(spec, effect_ranges=None), 120, seed=7, task_size=60, progress=False
+    )
+    assert_array_equal(plain.constants, a.constants) and np.all(plain.effect_scales == 1.0)
+    # inside the 20 mm certificate, the rig's friction and cogging up to 3x still leave F alone
+    assert a.violations == 0
+    with pytest.raises(InputError, match="effect_ranges"):
+        dataclasses.replace(spec, effect_ranges=((1.0, 0.5), (0, 1), (0, 1)))
 
 
 def test_seeds_change_the_samples_and_repeat_them(model, spec20):

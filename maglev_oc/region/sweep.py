@@ -12,6 +12,11 @@ plant's constants carried as four extra state rows that every step passes on unc
 generated-C closed loop (:class:`~maglev_oc.region.montecarlo.BatchSimulator`) runs any plant;
 :class:`PlantBatchSimulator` sets those rows per run.
 
+Sampled effects too: with ``SweepSpec(effects=TwinEffects.rig(), effect_ranges=...)`` each run
+scales the twin's guide friction (vertical, horizontal: Coulomb level and viscous coefficient) and
+its cogging force by factors drawn uniformly from those ranges (:data:`EFFECT_SCALES`), carried as
+three more state rows the same way.
+
 Reproducible with a seed whatever the number of workers: the runs are cut into tasks of a fixed
 size (``task_size``, independent of the worker count), task k draws its plants and starts from
 ``numpy.random.SeedSequence(seed).spawn(n_tasks)[k]`` and the results are concatenated in task
@@ -46,11 +51,13 @@ from maglev_oc.region.montecarlo import (
     uniform_in_ellipsoid,
 )
 from maglev_oc.results import Result
+from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.twin import RigTwin
 
 __all__ = [
     "CONSTANT_NAMES",
     "CONTROLLERS",
+    "EFFECT_SCALES",
     "PlantBatchSimulator",
     "PlantSet",
     "SampledPlantTwin",
@@ -64,6 +71,10 @@ CONSTANT_NAMES = ("C1", "C2", "C3", "C4")
 CONTROLLERS = ("fl", "lqr", "linear")
 """Controllers a sweep can run: the FL regulator, the LQR regulator, the papers' linear regulator."""
 EXTRA_HINT = "pip install 'maglev_oc[sweeps]'"
+EFFECT_SCALES = ("friction_vertical", "friction_horizontal", "cogging")
+"""The twin's effects a sweep can scale per run, in the order of ``SweepSpec.effect_ranges`` and
+of the scale rows of :class:`SampledPlantTwin`."""
+_N_SCALES = len(EFFECT_SCALES)
 
 
 def _import_distributed():
@@ -222,18 +233,26 @@ class _ConstantsAsInput:
 
 
 class SampledPlantTwin(RigTwin):
-    """The rig twin whose plant constants C1..C4 are the last four rows of its state.
+    """The rig twin whose plant is part of its state: scales of the effects of
+    :data:`EFFECT_SCALES` (3 rows), then the constants C1..C4 (the last four rows).
 
-    ``step`` passes those rows on unchanged and uses them for L1..L4, so one step Function (and
-    one generated-C loop) simulates any plant; :meth:`initial_state` fills them with
-    ``constants`` (default: the model's). ``acceleration`` uses the model's constants. The
-    effects, delay, amplifier and stoppers are the twin's (:class:`~maglev_oc.sim.twin.RigTwin`).
+    ``step`` passes those rows on unchanged and uses them: the constants for L1..L4, the scales
+    on the guides' Coulomb friction (level, with any binding of a misalignment, and pre-sliding
+    stiffness together), their viscous coefficients and the cogging forces, so one step
+    Function (and one generated-C loop) simulates any plant; :meth:`initial_state` fills them
+    (default: the model's constants, every scale 1). ``acceleration`` uses the model's constants
+    and unit scales. The delay, amplifier, encoder and stoppers are the twin's
+    (:class:`~maglev_oc.sim.twin.RigTwin`).
     """
 
     def _build(self) -> None:
-        object.__setattr__(self, "n_state", self.n_state + 4)  # called once, from __post_init__
-        object.__setattr__(self, "_plant_constants", ca.DM(self.model.constants.as_array()))
+        object.__setattr__(self, "n_state", self.n_state + _N_SCALES + 4)  # once, from __post_init__
+        self._nominal_plant()
         super()._build()
+
+    def _nominal_plant(self) -> None:
+        object.__setattr__(self, "_plant_constants", ca.DM(self.model.constants.as_array()))
+        object.__setattr__(self, "_effect_scales", ca.DM.ones(_N_SCALES))
 
     def _accelerations(self, x, i, friction):
         nominal = self.model
@@ -243,12 +262,23 @@ class SampledPlantTwin(RigTwin):
         finally:
             object.__setattr__(self, "model", nominal)
 
+    def _friction_scale(self, axis: int):
+        return self._effect_scales[axis]
+
+    def _viscous_force(self, axis: int, velocity):
+        return self._effect_scales[axis] * super()._viscous_force(axis, velocity)
+
+    def _cogging_forces(self, x, gap):
+        normal, along = super()._cogging_forces(x, gap)
+        return self._effect_scales[2] * normal, self._effect_scales[2] * along
+
     def _step_function(self) -> ca.Function:
-        """RigTwin's step on the first rows, the constants' rows passed on."""
-        nb = self.n_state - 4
+        """RigTwin's step on the first rows, the plant's rows passed on."""
+        nb = self.n_state - _N_SCALES - 4
         s = ca.SX.sym("s", self.n_state)
         u_cmd = ca.SX.sym("u", 2)
-        object.__setattr__(self, "_plant_constants", s[nb:])
+        object.__setattr__(self, "_effect_scales", s[nb : nb + _N_SCALES])
+        object.__setattr__(self, "_plant_constants", s[nb + _N_SCALES :])
         base = s[:nb]
         xs, cur, heat, fric = base[0:4], base[4:6], base[6], base[7:9]
         u_in, buf_next = self._delayed(base, u_cmd)
@@ -257,16 +287,17 @@ class SampledPlantTwin(RigTwin):
         x_next, hit = self._stopped(z[0:4])
         cur_next = self._current_at(u_sat, cur, self.sample_time)
         fric_next = self._friction_update(fric, xs, self.sample_time)
-        object.__setattr__(self, "_plant_constants", ca.DM(self.model.constants.as_array()))
+        self._nominal_plant()
         s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next, s[nb:])
         flags = ca.vertcat(limited, hit, foldback)
         return ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"])
 
-    def initial_state(self, x0, u0=(0.0, 0.0), constants=None) -> np.ndarray:
-        """Twin state for ``x0`` and ``u0`` (:meth:`RigTwin.initial_state`) and the plant's
-        constants (4,) (default: the model's)."""
+    def initial_state(self, x0, u0=(0.0, 0.0), constants=None, scales=None) -> np.ndarray:
+        """Twin state for ``x0`` and ``u0`` (:meth:`RigTwin.initial_state`), the effects' scales
+        (3,) (default 1) and the plant's constants (4,) (default: the model's)."""
         c = self.model.constants.as_array() if constants is None else _constants_array(constants)
-        return np.concatenate([super().initial_state(x0, u0), c])
+        k = np.ones(_N_SCALES) if scales is None else np.asarray(scales, dtype=float).reshape(_N_SCALES)
+        return np.concatenate([super().initial_state(x0, u0), k, c])
 
 
 class PlantBatchSimulator(BatchSimulator):
@@ -277,8 +308,9 @@ class PlantBatchSimulator(BatchSimulator):
             raise TypeError(f"twin must be a SampledPlantTwin, got {type(twin).__name__}")
         super().__init__(twin, controller, **kwargs)
 
-    def run_plants(self, x0, c0, reference, constants) -> BatchOutcome:
-        """n runs, run k on the plant with constants ``constants[:, k]``.
+    def run_plants(self, x0, c0, reference, constants, scales=None) -> BatchOutcome:
+        """n runs, run k on the plant with constants ``constants[:, k]`` (and effect scales
+        ``scales[:, k]``).
 
         Parameters
         ----------
@@ -287,6 +319,8 @@ class PlantBatchSimulator(BatchSimulator):
         reference : (6, n_steps) or (6,) array
         constants : (4, n) array
             The plants' C1..C4.
+        scales : (3, n) array, optional
+            Scales of the twin's effects (:data:`EFFECT_SCALES`); default 1.
 
         Returns
         -------
@@ -295,10 +329,17 @@ class PlantBatchSimulator(BatchSimulator):
         """
         constants = np.asarray(constants, dtype=float)
         x0 = np.asarray(x0, dtype=float)
-        if constants.shape != (4, x0.shape[1] if x0.ndim == 2 else -1):
+        n = x0.shape[1] if x0.ndim == 2 else -1
+        if constants.shape != (4, n):
             raise InputError(f"constants must have shape (4, n) like x0, got {constants.shape}")
+        scales = np.ones((_N_SCALES, n)) if scales is None else np.asarray(scales, dtype=float)
+        if scales.shape != (_N_SCALES, n):
+            raise InputError(f"scales must have shape ({_N_SCALES}, n) like x0, got {scales.shape}")
         states = np.column_stack(
-            [self.twin.initial_state(x0[:, k], constants=constants[:, k]) for k in range(x0.shape[1])]
+            [
+                self.twin.initial_state(x0[:, k], constants=constants[:, k], scales=scales[:, k])
+                for k in range(x0.shape[1])
+            ]
         )
         return self.run(x0, c0, reference, twin_states=states)
 
@@ -328,6 +369,11 @@ class SweepSpec:
         Horizon [s].
     current_limit : float or None
         |u| limit [A] of F.
+    effects : TwinEffects, optional
+        The twin's effects (default: none, the ideal plant).
+    effect_ranges : ((lo, hi), (lo, hi), (lo, hi)), optional
+        Ranges of the scales of the friction (vertical, horizontal) and cogging of ``effects``
+        (:data:`EFFECT_SCALES`), drawn uniformly per run (default: every scale 1).
     """
 
     plants: PlantSet
@@ -340,8 +386,20 @@ class SweepSpec:
     start: tuple[float, ...] | None = None
     duration: float = 1.0
     current_limit: float | None = PEAK_CURRENT_LIMIT
+    effects: TwinEffects = field(default_factory=TwinEffects.ideal)
+    effect_ranges: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.effect_ranges is not None:
+            ranges = np.asarray(self.effect_ranges, dtype=float)
+            if ranges.shape != (_N_SCALES, 2) or not np.all(np.isfinite(ranges)):
+                raise InputError(
+                    f"effect_ranges must be {_N_SCALES} (lo, hi) pairs for {', '.join(EFFECT_SCALES)}, "
+                    f"got {self.effect_ranges!r}"
+                )
+            if np.any(ranges[:, 0] < 0) or np.any(ranges[:, 0] > ranges[:, 1]):
+                raise InputError(f"effect_ranges need 0 <= lo <= hi, got {self.effect_ranges!r}")
+            object.__setattr__(self, "effect_ranges", tuple(map(tuple, ranges.tolist())))
         if self.controller not in CONTROLLERS:
             raise InputError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
         if (self.P is None) == (self.start is None):
@@ -375,10 +433,19 @@ class SweepSpec:
         z = uniform_in_ellipsoid(np.asarray(self.P), self.level, n, np.random.default_rng(start_seed))
         return constants, z
 
+    def draw_scales(self, n: int, seed: np.random.SeedSequence) -> np.ndarray:
+        """(3, n) effect scales of a task's stream (a third stream of ``seed``; ones without
+        ``effect_ranges``)."""
+        if self.effect_ranges is None:
+            return np.ones((_N_SCALES, n))
+        rng = np.random.default_rng(np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, 2)))
+        ranges = np.asarray(self.effect_ranges)
+        return ranges[:, :1] + (ranges[:, 1:] - ranges[:, :1]) * rng.uniform(0.0, 1.0, (_N_SCALES, n))
+
 
 @functools.lru_cache(maxsize=4)
 def _simulator(
-    controller: str, params: StageParameters, constants: tuple, duration: float
+    controller: str, params: StageParameters, constants: tuple, duration: float, effects: TwinEffects
 ) -> PlantBatchSimulator:
     """The compiled loop of a worker (one C build per worker and loop, reused by its tasks)."""
     from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
@@ -388,13 +455,14 @@ def _simulator(
     model = StageModel(params, LumpedConstants(*constants, source="controller (nominal)"))
     build = {"fl": FeedbackLinearizingRegulator, "lqr": lqr_regulator, "linear": paper_linear_regulator}
     ctrl = build[controller](model)
-    return PlantBatchSimulator(SampledPlantTwin(model), ctrl, duration=duration, threads=1)
+    return PlantBatchSimulator(SampledPlantTwin(model, effects), ctrl, duration=duration, threads=1)
 
 
 def _task(spec: SweepSpec, n: int, seed: np.random.SeedSequence) -> dict[str, np.ndarray]:
     """n runs of ``spec`` from the random stream ``seed``: the arrays of :class:`SweepResult`."""
-    sim = _simulator(spec.controller, spec.params, tuple(spec.constants), spec.duration)
+    sim = _simulator(spec.controller, spec.params, tuple(spec.constants), spec.duration, spec.effects)
     constants, z = spec.draw(n, seed)
+    scales = spec.draw_scales(n, seed)
     ref = reference_samples(spec.reference, 0.0, sim.n_steps, sim.twin.sample_time)
     if spec.P is None:
         x = np.repeat(np.asarray(spec.start, dtype=float)[:, None], n, axis=1)
@@ -404,10 +472,11 @@ def _task(spec: SweepSpec, n: int, seed: np.random.SeedSequence) -> dict[str, np
         x, xi = RegulatorLoop().physical_state(z, spec.reference, 0.0)
         c0 = regulator_state(x, xi)
         ratio = np.einsum("in,ij,jn->n", z, np.asarray(spec.P), z) / spec.level
-    out = sim.run_plants(x, c0, ref, constants)
+    out = sim.run_plants(x, c0, ref, constants, scales)
     return {
         "violating": out.violations(spec.current_limit),
         "constants": constants,
+        "effect_scales": scales,
         "start_ratio": ratio,
         "min_margin": out.min_margin,
         "max_current": out.max_current,
@@ -438,6 +507,7 @@ class SweepResult(Result):
     workers: str  # where the tasks ran
     violating: np.ndarray = field(repr=False)
     constants: np.ndarray = field(repr=False)
+    effect_scales: np.ndarray = field(repr=False)  # (3, n) EFFECT_SCALES of each run
     start_ratio: np.ndarray = field(repr=False)  # V(start)/level, NaN for a fixed start
     min_margin: np.ndarray = field(repr=False)
     max_current: np.ndarray = field(repr=False)

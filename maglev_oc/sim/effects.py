@@ -104,14 +104,16 @@ class GuideFriction:
         """Pre-sliding stiffness sigma [N/m]."""
         return self.coulomb / self.presliding_distance
 
-    def dahl_step(self, force, velocity, h: float, level=None):
+    def dahl_step(self, force, velocity, h: float, level=None, scale=1.0):
         """The Coulomb state after a step ``h`` [s] with the velocity held (CasADi expressions):
         dF/dt = sigma v - (sigma |v| / Fc) F is linear in F, so F(h) = Fss + (F - Fss)
         exp(-sigma |v| h / Fc), Fss = Fc sign(v). ``level``: the Coulomb level Fc (default
-        :attr:`coulomb`; the 2-DOF twin raises it where the guides bind). Without Coulomb friction
-        (sigma = 0) the state stays where it is (zero from rest): a purely viscous guide."""
+        :attr:`coulomb`; the 2-DOF twin raises it where the guides bind). ``scale``: guides whose
+        Coulomb level and pre-sliding stiffness are ``scale`` times these (the same pre-sliding
+        distance), whose state is ``scale`` times this one's; 0 is frictionless. Without Coulomb
+        friction (sigma = 0) the state stays where it is (zero from rest): a purely viscous guide."""
         fc = self.coulomb if level is None else level
-        f_ss = fc * ca.sign(velocity)
+        f_ss = scale * fc * ca.sign(velocity)
         if self.coulomb == 0:
             return force
         return f_ss + (force - f_ss) * ca.exp(-self.stiffness * ca.fabs(velocity) * h / fc)

@@ -104,19 +104,29 @@ class RigTwin:
             acc_v += extra[0]
             acc_h += extra[1]
         if e.cogging is not None:
-            c = e.cogging
-            scale = (c.reference_gap / gap) ** c.exponent
-            angle = math.pi * x[2] / p.slot_pitch + c.phase
-            acc_v -= c.peak_at_reference * scale * ca.sin(angle) / p.mass_vertical
-            if c.horizontal_peak > 0:
-                acc_h += c.horizontal_peak * scale * ca.sin(2 * angle) / p.mass_horizontal
+            cog_v, cog_h = self._cogging_forces(x, gap)
+            acc_v -= cog_v / p.mass_vertical
+            if e.cogging.horizontal_peak > 0:
+                acc_h += cog_h / p.mass_horizontal
         if e.misalignment is not None:
             acc_h += G * math.sin(e.misalignment.level_tilt)
         if e.friction_vertical is not None:
-            acc_v -= (friction[0] + e.friction_vertical.viscous * x[1]) / p.mass_vertical
+            acc_v -= (friction[0] + self._viscous_force(0, x[1])) / p.mass_vertical
         if e.friction_horizontal is not None:
-            acc_h -= (friction[1] + e.friction_horizontal.viscous * x[3]) / p.mass_horizontal
+            acc_h -= (friction[1] + self._viscous_force(1, x[3])) / p.mass_horizontal
         return acc_v, acc_h
+
+    def _cogging_forces(self, x, gap):
+        """(normal, along-travel) cogging forces [N] at the (misaligned) gap; effects.cogging set."""
+        c, p = self.effects.cogging, self.model.params
+        scale = (c.reference_gap / gap) ** c.exponent
+        angle = math.pi * x[2] / p.slot_pitch + c.phase
+        return c.peak_at_reference * scale * ca.sin(angle), c.horizontal_peak * scale * ca.sin(2 * angle)
+
+    def _viscous_force(self, axis: int, velocity):
+        """Viscous friction force [N] of the guides of ``axis`` (0 vertical, 1 horizontal)."""
+        fr = (self.effects.friction_vertical, self.effects.friction_horizontal)[axis]
+        return fr.viscous * velocity
 
     def _coulomb_levels(self, x):
         """Coulomb levels (vertical, horizontal) [N]; binding raises them away from x3 = 0."""
@@ -136,8 +146,15 @@ class RigTwin:
         out = []
         levels = self._coulomb_levels(x)
         for k, (fr, vel) in enumerate(((e.friction_vertical, x[1]), (e.friction_horizontal, x[3]))):
-            out.append(ca.SX(0) if fr is None else fr.dahl_step(friction[k], vel, h, levels[k]))
+            if fr is None:
+                out.append(ca.SX(0))
+            else:
+                out.append(fr.dahl_step(friction[k], vel, h, levels[k], self._friction_scale(k)))
         return ca.vertcat(*out)
+
+    def _friction_scale(self, axis: int):
+        """Scale of the guides' Coulomb friction of ``axis`` (0 vertical, 1 horizontal): 1 here."""
+        return 1.0
 
     def _build(self) -> None:
         """The Functions ``acceleration``, ``step`` and ``measure`` (built once, at construction)."""
