@@ -133,7 +133,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     e = export_controller(ctrl, args.out, prefix=args.prefix)
     print(
         f"{e.name}: {e.directory} ({', '.join(p.name for p in e.sources)}); "
-        f"{e.prefix}_init / {e.prefix}_step / {e.prefix}_reset, {e.memory_bytes} bytes of memory, "
+        f"{' / '.join(f'{e.prefix}_{f}' for f in e.entry_points)}, {e.memory_bytes} bytes of memory, "
         f"{e.sample_time * 1e6:g} us sample time"
     )
     return 0
