@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from maglev_oc.numerics import NumpyCall
+from maglev_oc.numerics import ColumnMap, NumpyCall
 
 
 def _reference(fn: ca.Function, *args) -> list[np.ndarray]:
@@ -55,3 +55,29 @@ def test_repeated_calls_do_not_share_output_memory():
     first = f(1.0)[0]
     f(5.0)
     assert float(first[0, 0]) == 3.0
+
+
+@pytest.mark.parametrize("n", [1, 5, 7, 8, 19])
+def test_column_map_is_the_functions_map_bit_for_bit(n):
+    """ColumnMap in chunks of 4 (a padded last chunk, a held parameter column, two outputs) against
+    CasADi's own map(n) with DMs."""
+    x, p = ca.SX.sym("x", 3), ca.SX.sym("p", 2)
+    f = ca.Function("f", [x, p], [ca.sin(x) * p[0] + ca.exp(-x[0] * p[1]), ca.sumsqr(x) / p[1]])
+    rng = np.random.default_rng(n)
+    X, P = rng.normal(size=(3, n)), np.array([[1.3], [0.7]])
+    got = ColumnMap(f, chunk=4)(X, P)
+    want = f.map(n)(X, P)
+    assert len(got) == 2
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape
+        assert np.array_equal(g, np.asarray(w))
+
+
+def test_column_map_refuses_what_it_cannot_map():
+    x = ca.SX.sym("x", 2, 2)
+    with pytest.raises(ValueError, match="not a column"):
+        ColumnMap(ca.Function("f", [x], [x[0, 0]]))
+    y, z = ca.SX.sym("y", 2), ca.SX.sym("z", 2)
+    cm = ColumnMap(ca.Function("g", [y, z], [y + z]), chunk=2)
+    with pytest.raises(ValueError, match="1 or 3 columns"):
+        cm(np.zeros((2, 3)), np.zeros((2, 2)))
