@@ -216,9 +216,7 @@ class MicrostepperRegion:
             if not lo.shape[1]:
                 break
             boxes += lo.shape[1]
-            n = lo.shape[1]
-            hlo, _ = self._ifn([lo, np.repeat(par_l, n, 1), np.repeat(gap0, n, 1)],
-                               [hi, np.repeat(par_l, n, 1), np.repeat(gap0, n, 1)])  # fmt: skip
+            hlo, _ = self._ifn([lo, par_l, gap0], [hi, par_l, gap0])  # the parameters broadcast over boxes
             ok = np.all(np.vstack(hlo) >= 0, axis=0) if len(hlo) > 1 else np.all(hlo[0] >= 0, axis=0)
             lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if not lo.shape[1]:
