@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 # One BLAS thread per process, set before NumPy loads here and in the xdist workers this process
 # starts (they inherit the environment): pytest-xdist already runs one worker per core, and
@@ -14,6 +16,7 @@ if not any(os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"
 
 import matplotlib
 import pytest
+from xdist.scheduler import LoadFileScheduling
 
 matplotlib.use("Agg")
 
@@ -50,10 +53,84 @@ def twin_log(model: StageModel, truth_model: StageModel) -> Log:
 # the independent generator's logs and their diagnoses, shared by the diagnosis test files
 from tests.diagnosis_support import diagnosed, generated  # noqa: E402, F401
 
+# studies and reports checked by several test files
+from tests.report_support import (  # noqa: E402, F401
+    shared_eps_trend,
+    shared_model_report,
+    shared_region_report,
+)
 
+# --- where and in which order the tests run (pytest-xdist) ------------------------------------------------
+DURATIONS = Path(__file__).with_name("durations.json")
+"""Measured seconds (setup + call) of the longer tests: the order in which work is handed out."""
+SHARED_BY_FILES = {
+    "shared_eps_trend": ("tests/test_eps_trend.py", "tests/test_reports_identification_layout.py"),
+    "shared_region_report": ("tests/test_region_study.py", "tests/test_reports_model_region_layout.py"),
+    "shared_model_report": ("tests/test_reports.py", "tests/test_reports_model_region_layout.py"),
+    "diagnosed": ("tests/test_diagnose.py", "tests/test_diagnose_clean_seeds.py"),
+}
+"""The files that use each session fixture shared between files: they run on one worker, so the
+fixture is computed once per run (the other session fixtures are cheap, or cached per key and
+computed on each worker that needs them)."""
+
+
+def _file_groups() -> dict[str, str]:
+    """Test file -> its unit of work: the files of :data:`SHARED_BY_FILES` joined (transitively),
+    every other file alone."""
+    group: dict[str, str] = {}
+    for files in SHARED_BY_FILES.values():
+        joined = {group.get(f, f) for f in files}
+        name = min(joined)
+        for f, g in list(group.items()):
+            if g in joined:
+                group[f] = name
+        for f in files:
+            group[f] = name
+    return group
+
+
+FILE_GROUPS = _file_groups()
+
+
+class SharedFileScheduling(LoadFileScheduling):
+    """pytest-xdist's ``--dist loadfile`` with the files of :data:`FILE_GROUPS` as one unit.
+
+    (``--dist loadgroup`` would take ``xdist_group`` marks, but pytest-xdist 3.8 puts the group
+    into a node id that pytest 9 no longer reads: every test would be a unit of its own, and the
+    module fixtures would be computed on both workers.)"""
+
+    def _split_scope(self, nodeid: str) -> str:
+        file = super()._split_scope(nodeid)
+        return FILE_GROUPS.get(file, file)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    if config.getvalue("dist") == "loadfile":
+        return SharedFileScheduling(config, log)
+    return None
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """Files with slow tests first (stable otherwise): pytest-xdist's ``--dist loadfile`` hands
-    files to the workers in collection order, so the long files start first and the many short
-    ones fill in at the end instead of one long file running alone at the end of the suite."""
-    heavy = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.path not in heavy)
+    """The units of work (a file, or the files of :data:`FILE_GROUPS`) longest first, from
+    :data:`DURATIONS`; with ``--no-loadscope-reorder`` pytest-xdist hands them out in this order as
+    workers run dry, so the long units start at once and the many short files fill in at the end
+    instead of one long unit running alone at the end of the suite. The order never changes what
+    a test checks. A test file that uses a shared fixture without being listed is an error (it
+    would compute the fixture again on another worker)."""
+    for item in items:
+        file = item.nodeid.split("::", 1)[0]
+        defs = item._fixtureinfo.name2fixturedefs if hasattr(item, "_fixtureinfo") else {}
+        for name, files in SHARED_BY_FILES.items():
+            shared = name in defs and defs[name][-1].scope == "session"  # not a file's own of that name
+            if shared and file not in files:
+                raise pytest.UsageError(f"{file} uses {name}: add it to SHARED_BY_FILES in tests/conftest.py")
+    measured = json.loads(DURATIONS.read_text())["seconds"] if DURATIONS.exists() else {}
+    unit = {
+        item: FILE_GROUPS.get(item.nodeid.split("::", 1)[0], item.nodeid.split("::", 1)[0]) for item in items
+    }
+    cost: dict[str, float] = {}
+    for item in items:
+        cost[unit[item]] = cost.get(unit[item], 0.0) + measured.get(item.nodeid, 0.1)
+    order = {item: k for k, item in enumerate(items)}
+    items.sort(key=lambda item: (-cost[unit[item]], unit[item], order[item]))

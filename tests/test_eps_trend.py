@@ -95,10 +95,11 @@ def test_stationary_point_refuses_bad_settings():
 
 # --- the study ----------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def study(model):
+def study(shared_eps_trend):
     """The study with its defaults: the identification study's runs, with and without the rig
-    twin's guide friction (about 12 s on one core)."""
-    return eps_trend_study(model)
+    twin's guide friction (about 12 s on one core), computed once per session
+    (tests/report_support.py; the identification report's tests use the same study)."""
+    return shared_eps_trend
 
 
 def test_papers_trend_is_table_ii_and_iii_of_000(study):

@@ -11,19 +11,17 @@ from maglev_oc.results import check_result
 
 
 @pytest.fixture(scope="module")
-def quick(model):
-    from maglev_oc.analyses.operating_region import QUICK
-
-    return operating_region_study(model, QUICK)
+def quick(shared_region_report):
+    """The study in the report's QUICK configuration, computed once per session with its report
+    (tests/report_support.py; tests/test_reports_model_region_layout.py checks the same report)."""
+    return shared_region_report[0]
 
 
 @pytest.mark.slow
-def test_quick_report_prints_the_study(tmp_path, model, quick):
-    from maglev_oc.analyses import operating_region
-
+def test_quick_report_prints_the_study(quick, shared_region_report):
     from maglev_oc.reporting.region_plots import BINDING_WORDS
 
-    report = operating_region.write_report(tmp_path / "operating_region.pdf", quick, model)
+    report = shared_region_report[1]  # operating_region.write_report of this study
     assert report.path.read_bytes()[:5] == b"%PDF-"
     table = report.section("Certified sets")
     lyapunov = [r for r in table.rows if r[1] == "Lyapunov"]

@@ -9,10 +9,9 @@ from maglev_oc.control.gains import PAPER_GAINS
 
 
 @pytest.fixture(scope="module")
-def model_report(tmp_path_factory, model):
-    from maglev_oc.analyses import model as analysis
-
-    return analysis.build(tmp_path_factory.mktemp("reports") / "model.pdf", model)
+def model_report(shared_model_report):
+    """The model report's contents, written once per session (tests/report_support.py)."""
+    return shared_model_report[1]
 
 
 def test_model_report_is_whole_and_in_order(model_report):

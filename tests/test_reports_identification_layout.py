@@ -254,13 +254,14 @@ def test_effect_names_are_plain_words():
 
 # --- the reports as written (slow) ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def identification_report(model, tmp_path_factory):
+def identification_report(model, tmp_path_factory, shared_eps_trend):
+    """The identification study, the eps-trend study (shared with tests/test_eps_trend.py) and
+    their report."""
     from maglev_oc.analyses.identification import write_report
 
-    from maglev_oc.identification.eps_trend import eps_trend_study
     from maglev_oc.identification.study import run_study
 
-    st, trend = run_study(model), eps_trend_study(model)
+    st, trend = run_study(model), shared_eps_trend
     return st, trend, write_report(tmp_path_factory.mktemp("ident") / "identification.pdf", st, trend)
 
 

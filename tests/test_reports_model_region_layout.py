@@ -36,22 +36,16 @@ def _numbers(text: str) -> list[float]:
 
 
 @pytest.fixture(scope="module")
-def model_report(tmp_path_factory, model):
-    from maglev_oc.analyses import model as analysis
-
-    study = analysis.model_study(model)
-    return study, analysis.write_report(tmp_path_factory.mktemp("model") / "model.pdf", study)
+def model_report(shared_model_report):
+    """reports/model.pdf: (study, contents), written once per session (tests/report_support.py)."""
+    return shared_model_report
 
 
 @pytest.fixture(scope="module")
-def region_report(tmp_path_factory, model):
-    from maglev_oc.analyses import operating_region as analysis
-
-    from maglev_oc.region.study import operating_region_study
-
-    study = operating_region_study(model, analysis.QUICK)
-    path = tmp_path_factory.mktemp("region") / "operating_region.pdf"
-    return study, analysis.write_report(path, study, model)
+def region_report(shared_region_report):
+    """The QUICK operating-region study and its report: (study, contents), computed once per
+    session (tests/report_support.py; tests/test_region_study.py checks the same study)."""
+    return shared_region_report
 
 
 class _Rows(dict):
