@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium_currents
@@ -11,6 +14,7 @@ from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import (
     GAP_TRAVEL,
     FeasibleSet,
+    _bisect,
     feasibility_map,
 )
 from maglev_oc.results import check_result
@@ -97,3 +101,23 @@ def test_a_setpoint_is_held_exactly_when_its_equilibrium_current_fits(model, gap
     FeasibleSet(model, current_limit=current + 1e-3).check_setpoint(gap)
     with pytest.raises(InputError, match="needs \\|u\\| >"):
         FeasibleSet(model, current_limit=current - 1e-3).check_setpoint(gap)
+
+
+# --- the bisection that replaces Newton on a boundary line ---------------------------------------
+@settings(max_examples=60, deadline=None)
+@given(
+    root=st.floats(-0.9, 0.9),
+    width=st.floats(1e-4, 1.0),
+    slope=st.floats(0.1, 10.0),
+    falling=st.booleans(),
+)
+def test_bisection_finds_the_sign_change_in_its_bracket(root, width, slope, falling):
+    # g(s; c, k) = k (s - c) (falling: its negative), cubed so Newton-like shortcuts are no help;
+    # the bracket [c - width a, c + width b] holds one sign change. 60 halvings of a bracket of at
+    # most 2 leave 2 / 2^60 ~ 2e-18: the root to 1e-12 (well above double rounding near 1).
+    s, p = ca.SX.sym("s"), ca.SX.sym("p", 3)
+    g = ca.Function("g", [s, p], [p[2] * (p[1] * (s - p[0])) ** 3])
+    lo, hi = root - 0.37 * width, root + 0.63 * width
+    found = _bisect(g, lo, hi, np.array([root, slope, -1.0 if falling else 1.0]))
+    assert lo <= found <= hi
+    assert found == pytest.approx(root, abs=1e-12)
