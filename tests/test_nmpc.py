@@ -347,6 +347,92 @@ def test_prepare_then_feedback_is_the_step_when_the_reading_is_the_predicted_one
         assert_allclose(d2[[0, 1, 5]], d1[[0, 1, 5]], atol=0)
 
 
+def test_feedback_parts_around_the_qp_solver_are_the_feedback(model):
+    # rti_feedback_parts (the C export's feedback, around its own QP solver) with the QP solved by
+    # the NMPC's conic on the same data give rti_feedback's outputs, on an unconstrained sample
+    # (bit for bit) and a constrained one (1e-12: the conic called on numbers instead of inside
+    # the Function), with a reading 10 um off the prediction (the first dynamics rows' bounds
+    # corrected by J (x0 - x0_pred)); the solver's steps and status go to the diagnostics
+    from maglev_oc.control.nmpc.layout import NX
+    from maglev_oc.control.nmpc.rti import PreparedLayout, qp_solver_function, rti_feedback_parts
+
+    ctrl = NonlinearMPC(model, qp_solver="qrqp")
+    parts = ctrl._parts
+    lq, post = rti_feedback_parts(parts, ctrl._observer, horizon=ctrl.grid.horizon)
+    qp = qp_solver_function("qrqp", {}, ctrl.grid.horizon, parts.qp_data)
+    layout = PreparedLayout.of(parts.qp_data)
+    for dx, constrained in (([50e-6, 0.0, 50e-6, 0.0], False), ([4e-3, 0.0, 15e-3, 0.0], True)):
+        mem, y, ref, _ = _equilibrium_inputs(ctrl, model, 20 * MM, dx)
+        prepared = ctrl.rti_prepare(mem, ref)
+        y = y + 10e-6
+        want = [v.full().ravel() for v in ctrl.rti_feedback(mem, prepared, y)]
+        dz_lq, feasible = lq(mem, prepared, y)
+        assert bool(float(feasible)) != constrained
+        p = {k: np.array(v).ravel() for k, v in layout.split(prepared).items()}
+        if constrained:
+            x0 = np.array(ctrl._observer.state_estimate(ca.DM(mem[0:4]), ca.DM(y))).ravel()
+            shift = p["J"].reshape(NX, NX, order="F") @ (x0 - p["x0_pred"])
+            lba, uba = p["lba"].copy(), p["uba"].copy()
+            lba[:NX] += shift
+            uba[:NX] += shift
+            h = ca.DM(parts.qp_data.sparsity_out("H"), p["H"])
+            a = ca.DM(parts.qp_data.sparsity_out("A"), p["A"])
+            sol = qp(h=h, g=p["g"], a=a, lba=lba, uba=uba, lbx=p["lbx"], ubx=p["ubx"])
+            dz, lam_x, lam_a, info = sol["x"], sol["lam_x"], sol["lam_a"], (3, 0)
+        else:
+            dz, lam_x, lam_a, info = dz_lq, np.zeros(ctrl.nz), np.zeros(ctrl.na), (0, -1)
+        got = [v.full().ravel() for v in post(mem, prepared, y, dz, lam_x, lam_a, dz_lq, *info)]
+        assert_allclose(got[0], want[0], rtol=0, atol=1e-12 if constrained else 0)
+        assert_allclose(got[1], want[1], rtol=0, atol=1e-12 if constrained else 0)
+        assert (got[2][1], got[2][-1]) == info
+
+
+def test_prepared_riccati_factor_applies_the_inverse_of_the_condensed_hessian(model):
+    # riccati.riccati_factor's pass (its docstring; the export's QP solver runs it in C) written
+    # in numpy, against the KKT system of min 1/2 dz' H dz + g' dz under the homogeneous dynamics
+    # solved densely (an independent method): the same minimizer to 1e-9 of its scale, for the
+    # QP's gradient and for a unit vector on a late state
+    from maglev_oc.control.nmpc.rti import PreparedLayout
+
+    ctrl = NonlinearMPC(model)
+    n = ctrl.grid.horizon
+    mem, _, ref, _ = _equilibrium_inputs(ctrl, model, 20 * MM, [4e-3, 0.0, 15e-3, 0.0])
+    layout = PreparedLayout.of(ctrl._parts.qp_data)
+    p = {k: np.array(v).ravel() for k, v in layout.split(ctrl.rti_prepare(mem, ref)).items()}
+    h = ca.DM(ctrl._parts.qp_data.sparsity_out("H"), p["H"]).full()
+    a = ca.DM(ctrl._parts.qp_data.sparsity_out("A"), p["A"]).full()
+    dyn = a[np.tile(np.r_[np.ones(4), np.zeros(2)], n).astype(bool)]
+    f = p["riccati"].reshape(n, 40)
+
+    def factor_pass(g):
+        pv, ks = g[6 * n - 4 :], [None] * n
+        for j in range(n - 1, -1, -1):
+            b, qi = f[j, :8].reshape(2, 4).T, f[j, 8:12].reshape(2, 2).T
+            k_mat, a_mat = f[j, 12:20].reshape(4, 2).T, f[j, 20:36].reshape(4, 4).T
+            qu = g[6 * j : 6 * j + 2] + b.T @ pv
+            ks[j] = qi @ qu
+            if j > 0:
+                pv = g[6 * j - 4 : 6 * j] + a_mat.T @ pv - k_mat.T @ qu
+        dz, dx = np.zeros(6 * n), np.zeros(4)
+        for j in range(n):
+            b, k_mat, a_mat = (
+                f[j, :8].reshape(2, 4).T,
+                f[j, 12:20].reshape(4, 2).T,
+                f[j, 20:36].reshape(4, 4).T,
+            )
+            du = -ks[j] - (k_mat @ dx if j > 0 else 0)
+            dx = a_mat @ dx + b @ du if j > 0 else b @ du
+            dz[6 * j : 6 * j + 2], dz[6 * j + 2 : 6 * j + 6] = du, dx
+        return dz
+
+    kkt = np.block([[h, dyn.T], [dyn, np.zeros((dyn.shape[0], dyn.shape[0]))]])
+    unit = np.zeros(6 * n)
+    unit[6 * n - 10] = 1.0  # the gap of x_{N-1}
+    for g in (p["g"], unit):
+        want = np.linalg.solve(kkt, np.r_[-g, np.zeros(dyn.shape[0])])[: 6 * n]
+        assert_allclose(factor_pass(g), want, rtol=0, atol=1e-9 * np.max(np.abs(want)))
+
+
 def test_feedback_differs_from_the_step_by_the_linearization_point_only(model):
     # A reading off the prediction by e (x0 - x0_pred = (e, 0, e, 0)): the feedback's step is the
     # prepared one plus its exact sensitivity, the QP linearized at x0_pred; the one-Function step

@@ -67,7 +67,12 @@ import numpy as np
 
 from maglev_oc.control.base import N_MEASUREMENTS, N_REFERENCE
 from maglev_oc.control.nmpc.layout import N_POLYTOPE_ROWS, NU, NX, STAGE_ROWS, MemoryLayout
-from maglev_oc.control.nmpc.riccati import riccati_function, satisfies_inequalities
+from maglev_oc.control.nmpc.riccati import (
+    FACTOR_STAGE,
+    riccati_factor,
+    riccati_function,
+    satisfies_inequalities,
+)
 from maglev_oc.control.nmpc.status import DIAG_NAMES
 from maglev_oc.control.nmpc.transcription import Transcription
 from maglev_oc.estimation.extended_high_gain import N_DISTURBANCE, N_OBSERVER_STATE, ExtendedHighGainObserver
@@ -81,6 +86,7 @@ __all__ = [
     "qp_solver_function",
     "read_qp_statistics",
     "rti_feedback_function",
+    "rti_feedback_parts",
     "rti_parts",
     "rti_prepare_function",
     "rti_step_function",
@@ -351,8 +357,10 @@ class PreparedLayout:
     Entries, in this order: H and A (their nonzeros), g, lba, uba, lbx, ubx, data_ok, z_ref
     (:meth:`Transcription.qp_data_function <.transcription.Transcription.qp_data_function>` at
     the predicted initial state), the predicted initial state x0_pred (4), the Riccati step
-    there dz_pred (nz), its sensitivity to the initial state S (nz, 4, column-major) and the
-    sensitivity of the first dynamics rows' bounds to the initial state J (4, 4, column-major).
+    there dz_pred (nz), its sensitivity to the initial state S (nz, 4, column-major), the
+    sensitivity of the first dynamics rows' bounds to the initial state J (4, 4, column-major)
+    and the Riccati factorization of the QP (:func:`~.riccati.riccati_factor`, for a QP solver
+    that reuses it: the C export's dual active-set method; the feedback here does not read it).
     """
 
     sizes: tuple[tuple[str, int], ...]
@@ -375,6 +383,7 @@ class PreparedLayout:
                 ("dz_pred", nz),
                 ("S", nz * NX),
                 ("J", NX * NX),
+                ("riccati", FACTOR_STAGE * (nz // (NX + NU))),
             )
         )
 
@@ -449,6 +458,7 @@ def rti_prepare_function(parts: RTIParts, observer: ExtendedHighGainObserver, *,
         dz_pred,
         ca.vec(ca.densify(sens)),
         ca.vec(ca.densify(jac)),
+        riccati_factor(h, a, horizon),  # the same expressions as the step's: computed once (cse)
     )
     prepared = ca.substitute(prepared, x0_pred, _predicted_initial_state(observer, obs))
     return ca.Function(
@@ -488,7 +498,84 @@ def rti_feedback_function(
     mem = ca.MX.sym("memory", layout.size)
     prepared = ca.MX.sym("prepared", prep_layout.size)
     y = ca.MX.sym("y", N_MEASUREMENTS)
-    p = prep_layout.split(prepared)
+    f = _feedback_data(qp_data, observer, mem, prepared, y, horizon)
+    dz, lam_x, lam_a = _step_or_qp(qp, qp_data, nz, na)(
+        f["feasible"], f["H"], f["g"], f["A"], f["lba"], f["uba"], f["lbx"], f["ubx"], f["dz_lq"]
+    )
+    u, mem_next, diag = _feedback_post(parts, f, dz, lam_x, lam_a)
+    return ca.Function(
+        "nmpc_rti_feedback",
+        [mem, prepared, y],
+        [u, mem_next, _step_diagnostics(diag, f["feasible"])],
+        ["memory", "prepared", "y"],
+        ["u", "memory_next", "diag"],
+    )
+
+
+def rti_feedback_parts(
+    parts: RTIParts, observer: ExtendedHighGainObserver, *, horizon: int
+) -> tuple[ca.Function, ca.Function]:
+    """The feedback of :func:`rti_feedback_function` in two Functions around a QP solver that is
+    not a CasADi Function (the C export's dual active-set method, :mod:`maglev_oc.control.export_qp`).
+
+    Parameters
+    ----------
+    parts : RTIParts
+    observer : ExtendedHighGainObserver
+    horizon : int
+        N.
+
+    Returns
+    -------
+    lq : casadi.Function
+        ``nmpc_rti_feedback_lq``: (memory, prepared, y) -> (dz_lq (nz), feasible): the Riccati
+        step corrected by the reading and 1 if it satisfies every bound (then it is the QP's
+        solution), as in :func:`rti_feedback_function`.
+    post : casadi.Function
+        ``nmpc_rti_feedback_post``: (memory, prepared, y, dz, lam_x, lam_a, dz_lq,
+        qp_iterations, qp_status) -> (u, memory_next, diag): the post-processing of
+        :func:`rti_feedback_function` (solution check, fallback to the saturated ``dz_lq``,
+        shift, observer update) of the QP's solution (dz, lam_x, lam_a) -- or of (dz_lq, 0, 0)
+        where ``feasible`` -- with the solver's iteration count and status in the diagnostics
+        (0 and -1 where no QP was solved). With the same QP solution, the same arithmetic as
+        :func:`rti_feedback_function`.
+    """
+    qp_data = parts.qp_data
+    nz, na = qp_data.size1_out("g"), qp_data.size1_out("lba")
+    mem = ca.MX.sym("memory", MemoryLayout(nz).size)
+    prepared = ca.MX.sym("prepared", PreparedLayout.of(qp_data).size)
+    y = ca.MX.sym("y", N_MEASUREMENTS)
+    f = _feedback_data(qp_data, observer, mem, prepared, y, horizon)
+    lq = ca.Function(
+        "nmpc_rti_feedback_lq",
+        [mem, prepared, y],
+        [f["dz_lq"], f["feasible"]],
+        ["memory", "prepared", "y"],
+        ["dz_lq", "feasible"],
+    )
+    dz, lam_x, lam_a, dz_lq = (
+        ca.MX.sym(name, n) for name, n in (("dz", nz), ("lam_x", nz), ("lam_a", na), ("dz_lq", nz))
+    )
+    iterations, status = ca.MX.sym("qp_iterations"), ca.MX.sym("qp_status")
+    u, mem_next, diag = _feedback_post(parts, {**f, "dz_lq": dz_lq}, dz, lam_x, lam_a)
+    diag = ca.vertcat(diag[0], iterations, diag[2:], status)
+    post = ca.Function(
+        "nmpc_rti_feedback_post",
+        [mem, prepared, y, dz, lam_x, lam_a, dz_lq, iterations, status],
+        [u, mem_next, diag],
+        ["memory", "prepared", "y", "dz", "lam_x", "lam_a", "dz_lq", "qp_iterations", "qp_status"],
+        ["u", "memory_next", "diag"],
+    )
+    return lq, post
+
+
+def _feedback_data(qp_data: ca.Function, observer, mem, prepared, y, horizon: int) -> dict[str, Any]:
+    """The feedback's QP (MX): the prepared data with the first dynamics rows' bounds corrected
+    by the reading's estimate, the corrected Riccati step ``dz_lq``, whether it is ``feasible``,
+    and the memory's parts (:func:`rti_feedback_function`)."""
+    nz = qp_data.size1_out("g")
+    layout = MemoryLayout(nz)
+    p = PreparedLayout.of(qp_data).split(prepared)
     obs, d, zb = mem[layout.observer], mem[layout.disturbance], mem[layout.plan]
     delta = observer.state_estimate(obs, y) - p["x0_pred"]
     # a reading that is not finite: no correction, and the data flagged (the post-processing then
@@ -504,19 +591,42 @@ def rti_feedback_function(
     a = ca.MX(qp_data.sparsity_out("A"), p["A"])
     dz_lq = p["dz_pred"] + ca.mtimes(ca.reshape(p["S"], nz, NX), delta)
     feasible = satisfies_inequalities(dz_lq, a, lba, uba, p["lbx"], p["ubx"], horizon)
-    dz, lam_x, lam_a = _step_or_qp(qp, qp_data, nz, na)(
-        feasible, hess, p["g"], a, lba, uba, p["lbx"], p["ubx"], dz_lq
-    )
+    return {
+        **{key: p[key] for key in ("g", "lbx", "ubx", "z_ref")},
+        "H": hess,
+        "A": a,
+        "lba": lba,
+        "uba": uba,
+        "data_ok": data_ok,
+        "dz_lq": dz_lq,
+        "feasible": feasible,
+        "memory": (mem, obs, d, zb),
+        "y": y,
+    }
+
+
+def _feedback_post(parts: RTIParts, f: dict[str, Any], dz, lam_x, lam_a):
+    """(u, memory_next, diag) of the post-processing on the feedback's data ``f``."""
+    _, obs, d, zb = f["memory"]
     u, mem_next, diag, _ = parts.post(
-        zb, dz, lam_x, lam_a, a, lba, uba, p["lbx"], p["ubx"], data_ok, hess, p["z_ref"], obs, d, y, dz_lq
+        zb,
+        dz,
+        lam_x,
+        lam_a,
+        f["A"],
+        f["lba"],
+        f["uba"],
+        f["lbx"],
+        f["ubx"],
+        f["data_ok"],
+        f["H"],
+        f["z_ref"],
+        obs,
+        d,
+        f["y"],
+        f["dz_lq"],
     )
-    return ca.Function(
-        "nmpc_rti_feedback",
-        [mem, prepared, y],
-        [u, mem_next, _step_diagnostics(diag, feasible)],
-        ["memory", "prepared", "y"],
-        ["u", "memory_next", "diag"],
-    )
+    return u, mem_next, diag
 
 
 def python_entry(step: ca.Function, n_memory: int, horizon: int) -> ca.Function:
