@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.cli import main
-from maglev_oc.control.export import export_controller, initial_state_map
+from maglev_oc.control.export import DUAL_QP_BUDGET, export_controller, initial_state_map
 from maglev_oc.control.registry import build_controller
 from maglev_oc.errors import InputError
 from maglev_oc.numerics import c_compiler
@@ -68,6 +68,10 @@ def _build(export, tmp_path, flags=("-O1",)) -> ctypes.CDLL:
 
 class _Exported:
     """The exported controller through its C interface."""
+
+    def diag(self, n: int, offset: int) -> np.ndarray:
+        """The diagnostics of the last step (n doubles at byte ``offset`` of the memory struct)."""
+        return np.frombuffer(self.mem, dtype=np.float64, count=n, offset=offset).copy()
 
     def __init__(self, lib: ctypes.CDLL, prefix: str):
         self.size = getattr(lib, f"{prefix}_mem_size")
@@ -279,13 +283,24 @@ class _SplitInTheLoop(_InTheLoop):
         return u, np.frombuffer(self.c.mem, dtype=np.float64, count=n, offset=self._diag_offset).copy()
 
 
-def _exported_nmpc(model, tmp_path, budget):
+# The exported NMPC's QP solver is the dual active-set method in C (maglev_oc.control.export_qp)
+# where the Python controller's is qrqp: both return the QP's exact solution on its active set, but
+# not by the same arithmetic, so on the samples that solve a QP the commands agree to the QPs'
+# round-off, not bit for bit (measured 1.5e-13 A on the large step): asserted 1e-6 A, the bar of
+# the QPs' exact solution (tests/test_export_qp.py checks the C solver against qpOASES). On the
+# other samples the arithmetic is the same (the Riccati step in both).
+QP_TOLERANCE_A = 1e-6
+
+
+def _exported_nmpc(model, tmp_path, budget, qp_solver="dual"):
     from maglev_oc.control.nmpc import NonlinearMPC
     from maglev_oc.sim.compiled_nmpc import CompiledNMPC
 
     nmpc = NonlinearMPC(model, preview=False, qp_solver="qrqp", qp_options={"max_iter": budget})
     ctrl = CompiledNMPC(nmpc, backend="vm")
-    export = export_controller(ctrl, tmp_path / "nmpc")
+    options = {"qp_iterations": budget} if qp_solver == "dual" else {}
+    export = export_controller(ctrl, tmp_path / "nmpc", qp_solver=qp_solver, **options)
+    assert export.qp_solver == qp_solver
     c = _ExportedNMPC(_build(export, tmp_path), export)
     assert c.size() == export.memory_bytes  # the struct as the export reports it (and reads it)
     return nmpc, ctrl, export, c
@@ -311,35 +326,52 @@ def _python_split_commands(nmpc, y, r, c0):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("budget", [20, 1])
-def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, tmp_path, budget):
-    # The NMPC's real-time iteration with qrqp, exported self-contained (1.4 MB of C), against the
-    # same preparation and feedback Functions in CasADi's virtual machine on the large step's
-    # first 0.1 s: the current constraints are active there, so the QP's active set is exercised,
-    # not only its solution. With the export's default budget of 20 QP iterations every QP
-    # finishes; with 1 none does, and the C step must apply the same fallback (the saturated
-    # Riccati step) as the Python one instead of returning an error (CasADi's generated qrqp
-    # returns its status as an error). step (= prepare_for(r), feedback) and prepare then
-    # feedback give the same commands bit for bit: the reference here is a set-point after the
-    # step at t = 0, so the predicted reference is r itself and no feedback prepares late.
-    nmpc, ctrl, export, c = _exported_nmpc(model, tmp_path, budget)
+@pytest.mark.parametrize(("qp_solver", "budget"), [("dual", 25), ("dual", 1), ("qrqp", 20), ("qrqp", 1)])
+def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, tmp_path, qp_solver, budget):
+    # The NMPC's real-time iteration exported self-contained, against the same preparation and
+    # feedback Functions in CasADi's virtual machine (with qrqp) on the large step's first 0.1 s:
+    # the current constraints are active there, so the QP's active set is exercised, not only its
+    # solution. The export's QP solver: the dual active-set method (the default; the commands
+    # agree to QP_TOLERANCE_A, above) or CasADi's qrqp generated in (1.4 MB of C; the same
+    # arithmetic: 1e-9 A). With the default budgets every QP finishes; with 1 none does (the dual
+    # method's final solve on the active set is a step of its own), and the C step must apply
+    # the same fallback (the saturated Riccati step) as the Python one instead of returning an
+    # error (CasADi's generated qrqp returns its status as an error), and report it. step (=
+    # prepare_for(r), feedback) and prepare then feedback give the same commands bit for bit:
+    # the reference here is a set-point after the step at t = 0, so the predicted reference is r
+    # itself and no feedback prepares late.
+    nmpc, ctrl, export, c = _exported_nmpc(model, tmp_path, budget, qp_solver)
     assert set(export.entry_points) >= {"prepare", "prepare_for", "feedback", "step"}
     sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.1)
     res = ClosedLoop(RigTwin(model), ctrl).run(sc)
     fallbacks = int(np.sum(res.diagnostic("solver_ok") == 0))
     active = res.diagnostic("active_constraints")
-    if budget == 20:
+    if budget > 1:
         assert fallbacks == 0 and np.max(active) > 0
     else:
         assert fallbacks >= 10  # every sample that needs the QP (54 over the whole large step)
     y, r = res.y, res.reference
     u0 = np.zeros(2)
     assert c.init(y[:, 0], r[:, 0], u0) == 0
-    steps = [c.step(y[:, k], r[:, k]) for k in range(y.shape[1])]
+    steps, diags = [], []
+    for k in range(y.shape[1]):
+        steps.append(c.step(y[:, k], r[:, k]))
+        diags.append(c.diag(len(ctrl.diag_names), 2 * ctrl.n_state * 8))
     assert all(flag == 0 for flag, _ in steps)  # a fallback is not an error of the step
     got = np.array([u for _, u in steps]).T
     want = _python_split_commands(nmpc, y, r, ctrl.initial_state(y[:, 0], r[:, 0], u0))
-    assert np.max(np.abs(got - want)) < TOLERANCE_A
+    assert np.max(np.abs(got - want)) < (QP_TOLERANCE_A if qp_solver == "dual" else TOLERANCE_A)
+    diag = dict(zip(ctrl.diag_names, np.array(diags).T, strict=True))
+    qp = diag["qp_iterations"] != 0
+    assert np.sum(qp) >= 10
+    np.testing.assert_array_equal(diag["qp_status"][~qp], -1)  # no QP solved
+    if qp_solver == "dual":  # its steps and status word (export_qp.STATUS_CODES)
+        if budget == 1:
+            assert np.all(diag["solver_ok"][qp] == 0) and np.all(diag["qp_status"][qp] == 1)
+            assert np.all(diag["qp_iterations"][qp] == 1)
+        else:
+            assert np.all(diag["solver_ok"] == 1) and np.all(diag["qp_status"][qp] == 0)
+            assert 2 <= np.max(diag["qp_iterations"]) <= 7  # measured 7 at most on the large step
     assert c.init(y[:, 0], r[:, 0], u0) == 0
     split = []
     for k in range(y.shape[1]):
@@ -366,7 +398,7 @@ def test_exported_nmpc_prepare_and_feedback_in_closed_loop_tracks_like_python(mo
     # late exactly at the reference's steps (the prediction is the last sample held).
     from maglev_oc.sim.scenarios import SetpointSequence
 
-    _, ctrl, _, c = _exported_nmpc(model, tmp_path, 20)
+    _, ctrl, _, c = _exported_nmpc(model, tmp_path, DUAL_QP_BUDGET)
     scenarios = paper_scenarios()
     small = SetpointSequence((0.0, 0.2, 0.4), ((20e-3, 0.0), (21e-3, 1e-3), (20e-3, 0.0)))
     for sc in (
@@ -467,7 +499,7 @@ def test_no_heap_allocation_after_init(model, tmp_path, name):
     # step's first 0.06 s, where the QP is solved) with an allocator that aborts after init; the
     # commands are those of the same export through ctypes (same code, same numbers: bit for bit)
     if name == "nmpc":
-        _, ctrl, export, c = _exported_nmpc(model, tmp_path, 20)
+        _, ctrl, export, c = _exported_nmpc(model, tmp_path, DUAL_QP_BUDGET)
         sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.06)
     else:
         ctrl = build_controller(name, model)
@@ -502,3 +534,34 @@ def test_no_heap_allocation_after_init(model, tmp_path, name):
     else:
         want = [c.step(y[:, k], r[:, k])[1] for k in range(y.shape[1])]
     np.testing.assert_array_equal(got, np.array(want).T)
+
+
+def test_cli_exports_the_nmpc_with_its_qp_solver_and_budget(tmp_path, capsys):
+    # default: the dual active-set solver, its own source file and the budget given; qrqp on
+    # request (generated into the file, no QP source); both options refused for other controllers
+    out = tmp_path / "nmpc"
+    assert main(["export", "nmpc", "--out", str(out), "--qp-iterations", "12"]) == 0
+    manifest = json.loads((out / "export.json").read_text())
+    prefix = manifest["prefix"]
+    assert (manifest["qp_solver"], manifest["qp_iterations"]) == ("dual", 12)
+    assert f"{prefix}_qp.c" in manifest["sources"] and (out / f"{prefix}_qp.c").is_file()
+    assert f"#define {prefix.upper()}_QP_MAX_ITER 12 " in (out / f"{prefix}.h").read_text()
+    assert f"'{prefix}_qp.c'" in (out / "build_sfunction.m").read_text()
+    readme = (out / "README.md").read_text()
+    assert "dual active set" in readme and "At most 12 steps per QP" in readme
+    assert "casadi_qrqp" not in (out / f"{prefix}_generated.c").read_text()
+    assert main(["export", "nmpc", "--out", str(out), "--qp-solver", "qrqp"]) == 0
+    manifest = json.loads((out / "export.json").read_text())
+    assert (manifest["qp_solver"], manifest["qp_iterations"]) == ("qrqp", None)
+    assert not (out / f"{prefix}_qp.c").exists()
+    assert "casadi_qrqp" in (out / f"{prefix}_generated.c").read_text()
+    capsys.readouterr()
+    assert main(["export", "pid", "--out", str(tmp_path / "pid"), "--qp-solver", "dual"]) == 2
+    assert "NMPC only" in capsys.readouterr().err
+
+
+def test_export_refuses_a_budget_without_the_dual_solver(model, tmp_path):
+    with pytest.raises(InputError, match="qp_iterations"):
+        export_controller(build_controller("pid", model), tmp_path / "pid", qp_iterations=5)
+    with pytest.raises(InputError, match="qp_solver"):
+        export_controller(build_controller("pid", model), tmp_path / "pid", qp_solver="hpipm")

@@ -279,7 +279,7 @@ def _controller(name: str, model):
 @pytest.mark.parametrize("name", ["fl", "pid", pytest.param("nmpc", marks=pytest.mark.slow)])
 def test_simulink_block_gives_the_exported_step_bit_for_bit(model, tmp_path, name):
     # fl/pid: the set-point steps through t = 1 s (7500 samples); nmpc: the large step's first
-    # 0.1 s, where the current constraints are active and qrqp runs
+    # 0.1 s, where the current constraints are active and the QP solver runs
     ctrl, scenario, seconds = _controller(name, model)
     export = export_controller(ctrl, tmp_path / "export")
     lib = _build(export, tmp_path)
@@ -305,12 +305,16 @@ def test_simulink_block_gives_the_exported_step_bit_for_bit(model, tmp_path, nam
     np.testing.assert_array_equal(u, u_direct)
     np.testing.assert_array_equal(diag, diag_direct)
     # and the export is the Python controller (to round-off, tests/test_export.py), started the same
-    # way; for the NMPC its preparation and feedback Functions, which the export's step is
+    # way; for the NMPC its preparation and feedback Functions, which the export's step is, with
+    # the QP solved by another method on the constrained samples (the first 54 here: the export's
+    # dual active-set method, Python's qrqp, both exact on the QP's active set, measured 1.5e-13 A
+    # apart): 1e-6 A there, the QPs' exactness bar (tests/test_export.py, QP_TOLERANCE_A)
     step = _python_step(ctrl)
     c = np.asarray(ctrl.initial_state(y[:, 0], r[:, 0], np.zeros(2)), dtype=float).ravel()
+    tolerance = 1e-6 if name == "nmpc" else 1e-9
     for k in range(60):
         uk, c = step(c, y[:, k], r[:, k])
-        np.testing.assert_allclose(u[:, k], uk, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(u[:, k], uk, rtol=0, atol=tolerance)
     if name == "nmpc":
         # the block prepared every sample but the first in mdlUpdate, off the output path (the
         # first: the block starts the controller in that sample's mdlOutputs, whose feedback then
