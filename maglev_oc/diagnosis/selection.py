@@ -32,6 +32,11 @@ effects already chosen (bias-compensated least squares on the training blocks,
    means the data show a dependence on that variable, not this effect's shape, and the residual
    goes to ``unexplained`` instead of to the nearest candidate.
 
+Once guide friction is chosen on an axis, that axis's slow held-out samples no longer count as
+evidence for the next effects (:func:`evidence`): the friction term is only approximate near
+zero speed, and its misfit there, tied to where the axis reverses, can pass for a spring or a
+constant force.
+
 Among the candidates that pass all six the one with the largest gain is added; the selection
 stops when none passes or after ``max_effects``. The confidence of each choice is the share of
 block-bootstrap resamples of the training blocks in which the same candidate has the largest
@@ -54,7 +59,7 @@ from maglev_oc.regression.design import Design
 from maglev_oc.regression.solve import SubsetFit, fit_subset
 from maglev_oc.regression.terms import Estimate
 
-__all__ = ["Judgement", "Selection", "SelectionSettings", "fitted_constants", "judge", "select"]
+__all__ = ["Judgement", "Selection", "SelectionSettings", "evidence", "fitted_constants", "judge", "select"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +77,7 @@ class SelectionSettings:
     parameter_penalty: float = 0.002
     rival_margin: float = 0.05
     max_effects: int = 4
+    slow_speed: float = 5e-3
     bootstrap: int = 30
     seed: int = 0
 
@@ -131,8 +137,32 @@ def _axes(candidate: Candidate, moving: np.ndarray) -> np.ndarray:
     return np.array([a for a in axes if moving[a]], dtype=int)
 
 
-def _holdout_residual(design: Design, fit: SubsetFit) -> np.ndarray:
-    return design.held_out_target - np.tensordot(fit.coef, design.held_out_columns[fit.index], axes=1)
+def _holdout_residual(design: Design, fit: SubsetFit, counted: np.ndarray | None = None) -> np.ndarray:
+    """(2, n_hold) held-out residual of ``fit``; zero where ``counted`` (2, n_hold) is False."""
+    r = design.held_out_target - np.tensordot(fit.coef, design.held_out_columns[fit.index], axes=1)
+    return r if counted is None else np.where(counted, r, 0.0)
+
+
+def evidence(design: Design, chosen: Sequence[Candidate], settings: SelectionSettings) -> np.ndarray | None:
+    """(2, n_hold) which held-out samples count as evidence for further effects, or None (all).
+
+    Once guide friction is claimed on an axis, that axis's samples slower than
+    ``settings.slow_speed`` are left out: there the friction model (Coulomb plus viscous, the axis
+    held while it sticks) is only approximate (no Stribeck drop, no pre-sliding hysteresis), and
+    its misfit is tied to where the axis reverses, which is at the ends of its excursions. Judged
+    on those samples a spring or a constant force along the axis fits the misfit (the residual at
+    the slow samples correlates with the position while the fast samples show nothing); an effect
+    that is there acts at speed too. 5 mm/s is 2.5 times the friction term's reversal speed and
+    above the Stribeck speeds of ball guides (0.1-5 mm/s).
+    """
+    axes = {AXIS_INDEX[c.axis] for c in chosen if c.family == "friction" and c.axis in AXIS_INDEX}
+    if not axes:
+        return None
+    velocity = design.prepared.x[[1, 3]][:, design.holdout]
+    counted = np.ones(velocity.shape, dtype=bool)
+    for a in axes:
+        counted[a] = np.abs(velocity[a]) >= settings.slow_speed
+    return counted
 
 
 def holdout_significance(
@@ -189,10 +219,13 @@ def judge(
     mse0: np.ndarray,
     settings: SelectionSettings,
     rivals: dict[tuple[str, int], tuple[float, str]] | None = None,
+    counted: np.ndarray | None = None,
 ) -> Judgement:
+    """``r0``, ``mse0``: the held-out residual of ``current`` and its mean square, zero and left out
+    where ``counted`` is False (:func:`evidence`)."""
     axes = _axes(cand, design.moving)
     fit = fit_subset(design, [*current, cand.name], covariance=False)
-    r1 = _holdout_residual(design, fit)
+    r1 = _holdout_residual(design, fit, counted)
     mse1 = np.mean(r1**2, axis=1)
     gain_axes = np.full(2, np.nan)
     gain_axes[axes] = 1.0 - mse1[axes] / mse0[axes]
@@ -210,7 +243,8 @@ def judge(
     threshold = float(chi2.isf(settings.alpha, coef.size))
     # its size: how much adding it changes the model's prediction on the held-out block (not
     # the RMS of its own columns, which collinearity with the constants can make large)
-    contrib = np.sqrt(np.mean((r0 - r1) ** 2, axis=1))
+    n_counted = np.full(2, r0.shape[1]) if counted is None else np.maximum(counted.sum(axis=1), 1)
+    contrib = np.sqrt(np.sum((r0 - r1) ** 2, axis=1) / n_counted)
     # separability from the normal matrix of the joint fit
     vif, partners = _separability(design, cand, fit, settings)
     measured = Judgement(
@@ -335,7 +369,12 @@ def _rival_columns(design: Design, probes: dict[tuple[str, str], str], axis: str
 
 
 def _rival_gains(
-    design: Design, current: list[str], mse0: np.ndarray, probes: dict[tuple[str, str], str], sizes: set
+    design: Design,
+    current: list[str],
+    mse0: np.ndarray,
+    probes: dict[tuple[str, str], str],
+    sizes: set,
+    counted: np.ndarray | None = None,
 ) -> dict[tuple[str, int], tuple[float, str]]:
     """The best generic rival of each size: (axes of a candidate, number of coefficients k) ->
     (held-out gain, variable). A rival has as many coefficients as the candidate it rivals (an
@@ -357,7 +396,7 @@ def _rival_gains(
                 if len(cv) < kv or len(ch) < kh:
                     continue
                 f = fit_subset(design, current, covariance=False, extra=[*cv, *ch])
-                r = _holdout_residual(design, f)
+                r = _holdout_residual(design, f, counted)
                 gain = float(np.mean(1.0 - np.mean(r[moving] ** 2, axis=1) / mse0[moving]))
                 if gain > best[0]:
                     best = (gain, var)
@@ -385,11 +424,14 @@ def select(
     steps: list[Step] = []
     last: dict[str, Judgement] = {}
     while pool and len(current) - 1 < settings.max_effects:
-        r0 = _holdout_residual(design, cur_fit)
+        counted = evidence(design, [by_name[n] for n in current[1:]], settings)
+        r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
         sizes = {(by_name[n].axis, _reported(by_name[n])) for n in pool}
-        rivals = _rival_gains(design, current, mse0, probes, sizes) if probes else None
-        judged = {n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals) for n in pool}
+        rivals = _rival_gains(design, current, mse0, probes, sizes, counted) if probes else None
+        judged = {
+            n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted) for n in pool
+        }
         last.update(judged)
         passing = [j for j in judged.values() if j.verdict == "passes"]
         if not passing:
@@ -404,12 +446,12 @@ def select(
         votes = 0
         for blocks in resamples if len(contenders) > 1 else []:
             fb = fit_subset(design, current, blocks=blocks, covariance=False)
-            rb = _holdout_residual(design, fb)
+            rb = _holdout_residual(design, fb, counted)
             mb = np.maximum(np.mean(rb**2, axis=1), 1e-30)
             score = {}
             for n in contenders:
                 f = fit_subset(design, [*current, n], blocks=blocks, covariance=False)
-                r1 = _holdout_residual(design, f)
+                r1 = _holdout_residual(design, f, counted)
                 gain = float(np.mean(1 - np.mean(r1[moving] ** 2, axis=1) / mb[moving]))
                 score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
             votes += max(score, key=score.get) == best.name
@@ -429,11 +471,12 @@ def select(
         for name in current[1:]:
             others = [c for c in current if c != name]
             fit_o = fit_subset(design, others, covariance=False)
-            r0 = _holdout_residual(design, fit_o)
+            counted = evidence(design, [by_name[n] for n in others[1:]], settings)
+            r0 = _holdout_residual(design, fit_o, counted)
             mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
             sizes = {(by_name[name].axis, _reported(by_name[name]))}
-            rivals = _rival_gains(design, others, mse0, probes, sizes) if probes else None
-            j = judge(design, by_name[name], others, fit_o, r0, mse0, settings, rivals)
+            rivals = _rival_gains(design, others, mse0, probes, sizes, counted) if probes else None
+            j = judge(design, by_name[name], others, fit_o, r0, mse0, settings, rivals, counted)
             if j.verdict != "passes":
                 current = others
                 steps = [st for st in steps if st.chosen != name]

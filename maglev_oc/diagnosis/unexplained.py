@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.diagnosis.library import PROBE_VARIABLES, Candidate, smooth_probes
-from maglev_oc.diagnosis.selection import SelectionSettings, _holdout_residual, holdout_significance
+from maglev_oc.diagnosis.selection import SelectionSettings, _holdout_residual, evidence, holdout_significance
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
@@ -109,18 +109,20 @@ def find_unexplained(
     out: list[Unexplained] = []
     found = {axis: 0 for axis in AXES}
     remaining = list(probes)
+    counted = evidence(design, explained, settings)  # the samples that count (see there)
+    n_counted = np.full(2, design.held_out_target.shape[1]) if counted is None else counted.sum(axis=1)
     while remaining:
         cur_fit = fit_subset(design, current, covariance=False)
-        r0 = _holdout_residual(design, cur_fit)
+        r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
         open_probes = [e for e in remaining if found[e[0].axis] < max_per_axis]
         if not open_probes:
             break
-        entry, r1 = _best_probe(design, current, open_probes, mse0)
+        entry, r1 = _best_probe(design, current, open_probes, mse0, counted)
         term = entry[0]
         a = AXES.index(term.axis)
         gain, z = holdout_significance(design, r0, r1, np.array([a]))
-        size = float(np.sqrt(np.mean((r0[a] - r1[a]) ** 2)))  # net change of the prediction
+        size = float(np.sqrt(np.sum((r0[a] - r1[a]) ** 2) / max(n_counted[a], 1)))  # net change
         if gain < settings.min_gain or z < settings.min_z or size < settings.min_effect:
             break
         out.append(_unexplained(model, entry, size, gain, z))
@@ -150,13 +152,13 @@ def _probes(data: PreparedLogs, periods: Sequence[tuple[str, float]]) -> list[tu
     return probes
 
 
-def _best_probe(design, current: list[str], probes: list[tuple], mse0: np.ndarray):
+def _best_probe(design, current: list[str], probes: list[tuple], mse0: np.ndarray, counted=None):
     """(probe, its held-out residual) that lowers the held-out error of its axis the most."""
     best = None
     for entry in probes:
         a = AXES.index(entry[0].axis)
         fit = fit_subset(design, [*current, entry[0].name], covariance=False)
-        r1 = _holdout_residual(design, fit)
+        r1 = _holdout_residual(design, fit, counted)
         gain = 1.0 - float(np.mean(r1[a] ** 2)) / mse0[a]
         if best is None or gain > best[0]:
             best = (gain, entry, r1)
