@@ -77,6 +77,10 @@ class Candidate:
     nuisance: tuple[str, ...] = ()
     """Parameters that only shape the term (not reported as its size) and are expected to be
     correlated with the constants: left out of the separability test."""
+    fallback_for: str | None = None
+    """The candidate this one stands in for when that one's fit is physically implausible: the same
+    effect with a parameter held at its physical bound (the bound-constrained least-squares fit when
+    the unconstrained one lies beyond it). Judged only then, and reported under that name."""
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
@@ -87,6 +91,11 @@ class Candidate:
     @property
     def name(self) -> str:
         return self.term.name
+
+    @property
+    def reported_name(self) -> str:
+        """The effect's name in results: a fallback's is its parent's."""
+        return self.fallback_for or self.term.name
 
     @property
     def axis(self) -> str:

@@ -46,31 +46,60 @@ __all__ = [
 
 
 def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
-    """Coulomb + viscous friction of each axis's guides, with the share held while sticking."""
+    """Coulomb + viscous friction of each axis's guides, with the share held while sticking; and
+    for each axis the same friction with no viscous part, judged only when the full fit's viscous
+    coefficient comes out negative (its bound-constrained fit: at slow speeds, where a gap axis
+    spends most of its time, the viscous force is small beside the Coulomb force and its
+    coefficient takes up the friction model's misfit, so a fit can turn it negative while the
+    Coulomb force is clear)."""
     out = []
     for axis in ("vertical", "horizontal"):
-        term = guide_friction(ctx.params, axis, holding=ctx.modelled(axis))
-        out.append(
-            Candidate(
-                with_physical(term, _friction_physical(ctx, term, axis)),
-                "friction",
-                "gap_rate" if axis == "vertical" else "position_rate",
-                "slow constant-speed sweeps in both directions (speed reversals at several speeds) separate "
-                "Coulomb from viscous friction and from the thrust constant",
-                all_of(
-                    detected("coulomb", "Coulomb friction (sticking without friction is not physical)"),
-                    not_below("viscous", "viscous friction"),
-                    within("coulomb", MAX_FORCE_SHARE * ctx.weight(axis), "Coulomb friction"),
-                    within("holding", 1.5, "share of the force held while sticking"),
-                ),
-                lambda e, axis=axis: (
-                    f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
-                    f"and {fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
-                ),
-                nuisance=("holding",),
+        for viscous in (True, False):
+            name = f"guide_friction_{axis}"
+            term = guide_friction(
+                ctx.params,
+                axis,
+                holding=ctx.modelled(axis),
+                viscous=viscous,
+                name=name if viscous else f"{name}_without_viscous",
             )
-        )
+            plausible = [
+                detected("coulomb", "Coulomb friction (sticking without friction is not physical)"),
+                within("coulomb", MAX_FORCE_SHARE * ctx.weight(axis), "Coulomb friction"),
+                within("holding", 1.5, "share of the force held while sticking"),
+            ]
+            if viscous:
+                plausible.insert(1, not_below("viscous", "viscous friction"))
+            out.append(
+                Candidate(
+                    with_physical(term, _friction_physical(ctx, term, axis)),
+                    "friction",
+                    "gap_rate" if axis == "vertical" else "position_rate",
+                    "slow constant-speed sweeps in both directions (speed reversals at several speeds) "
+                    "separate Coulomb from viscous friction and from the thrust constant",
+                    all_of(*plausible),
+                    _friction_words(axis, viscous),
+                    nuisance=("holding",),
+                    fallback_for=None if viscous else name,
+                )
+            )
     return out
+
+
+def _friction_words(axis: str, viscous: bool):
+    def describe(e):
+        if viscous:
+            return (
+                f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
+                f"and {fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+            )
+        return (
+            f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction (and "
+            "hold the axis while it sticks); their viscous friction is not resolved on this log (fitted "
+            "freely it came out negative, so it is held at zero)."
+        )
+
+    return describe
 
 
 def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
@@ -78,6 +107,7 @@ def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
 
     def convert(q, cov, c):
         out = base(q, cov, c)
+        out.setdefault("viscous", Estimate(0.0, 0.0, "N s/m"))  # held at its bound
         if axis == "horizontal":  # the holding column carries the reference C1
             k = ctx.reference_ratio("C1", c)
             h = out["holding"]

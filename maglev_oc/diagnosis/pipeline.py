@@ -275,12 +275,11 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     than :data:`REFIT_TOLERANCE`, the references are converged and the selection repeated once."""
     for attempt in range(2):
         full = candidate_library(fitted, session.data)
-        unknown = sorted(set(exclude) - {c.name for c in full})
+        effects = list(dict.fromkeys(c.reported_name for c in full))
+        unknown = sorted(set(exclude) - set(effects))
         if unknown:
-            raise InputError(
-                f"exclude: unknown candidate(s) {unknown}; the library has {[c.name for c in full]}"
-            )
-        library = [c for c in full if c.name not in exclude]
+            raise InputError(f"exclude: unknown candidate(s) {unknown}; the library has {effects}")
+        library = [c for c in full if c.reported_name not in exclude]  # an effect with its fallback
         design = session.library_design(fitted, library)
         sel = session.select(design, library)
         if not sel.selected:
@@ -383,7 +382,7 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
         others = sorted((j for j in step.judgements.values() if j.name != name), key=lambda j: -j.gain)
         effects.append(
             Effect(
-                name=name,
+                name=cand.reported_name,
                 explanation=cand.term.explanation,
                 finding=cand.describe(params),
                 axis=cand.axis,

@@ -430,8 +430,20 @@ def select(
         sizes = {(by_name[n].axis, _reported(by_name[n])) for n in pool}
         rivals = _rival_gains(design, current, mse0, probes, sizes, counted) if probes else None
         judged = {
-            n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted) for n in pool
+            n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted)
+            for n in pool
+            if by_name[n].fallback_for is None
         }
+        # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
+        # is physically implausible
+        implausible = {n for n, j in judged.items() if j.verdict == "implausible"}
+        judged.update(
+            {
+                n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted)
+                for n in pool
+                if by_name[n].fallback_for in implausible
+            }
+        )
         last.update(judged)
         passing = [j for j in judged.values() if j.verdict == "passes"]
         if not passing:
@@ -461,7 +473,8 @@ def select(
         last[best.name] = judged[best.name]
         steps.append(Step(best.name, votes / max(len(resamples), 1), judged))
         current.append(best.name)
-        pool.remove(best.name)
+        effect = by_name[best.name].reported_name  # the effect and its fallback leave the pool together
+        pool = [n for n in pool if by_name[n].reported_name != effect]
         cur_fit = best.fit
     # backward: an effect chosen early may be explained by later ones (a constant force by a
     # commutation offset that also makes one); drop any that no longer passes given the others

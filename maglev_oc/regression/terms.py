@@ -341,6 +341,7 @@ def guide_friction(
     reversal_speed: float = 2e-3,
     holding: Callable | None = None,
     stick_speed: float | None = None,
+    viscous: bool = True,
     name: str | None = None,
     explanation: str | None = None,
 ) -> AccelerationTerm:
@@ -359,6 +360,9 @@ def guide_friction(
     below the encoder's resolution) holds a stuck axis against whatever the motor applies, up to
     the breakaway force; without this column the stuck samples (no acceleration under a changing
     current) pull the motor constants towards zero.
+
+    ``viscous=False`` leaves the viscous part out (c = 0: the friction with its viscous coefficient
+    held at its physical bound).
     """
     if axis not in ("vertical", "horizontal"):
         raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
@@ -369,30 +373,36 @@ def guide_friction(
         )
     vi = 1 if axis == "vertical" else 3
     m = _mass(params, axis)
-    k = 3 if holding is not None else 2
+    units = {"coulomb": "N", "viscous": "N s/m", "holding": "1"}
+    names = tuple(
+        n for n, on in (("coulomb", True), ("viscous", viscous), ("holding", holding is not None)) if on
+    )
+    k = len(names)
 
     def fn(width):
         stick = stick_speed * width / reversal_speed  # the variants scale both speeds
 
         def build(x, u, du, p):
-            acc = -(p[0] * ca.tanh(x[vi] / width) + p[1] * x[vi]) / m
+            q = dict(zip(names, (p[i] for i in range(k)), strict=True))
+            acc = -(q["coulomb"] * ca.tanh(x[vi] / width) + q.get("viscous", 0) * x[vi]) / m
             if holding is not None:
-                acc = acc - p[2] * holding(x, u) * ca.exp(-((x[vi] / stick) ** 2))
+                acc = acc - q["holding"] * holding(x, u) * ca.exp(-((x[vi] / stick) ** 2))
             return _put(axis, acc)
 
-        return term_function(f"friction_{axis}", build, k)
+        return term_function(f"friction_{axis}" + ("" if viscous else "_coulomb"), build, k)
 
-    physical = [("coulomb", "N", 1.0), ("viscous", "N s/m", 1.0), ("holding", "1", 1.0)][:k]
+    physical = [(n, units[n], 1.0) for n in names]
     return AccelerationTerm(
         name=name or f"guide_friction_{axis}",
         explanation=explanation
         or (
             f"The {axis} linear guides resist motion with a force of constant size opposing the velocity "
-            "(Coulomb) plus a part growing with speed (viscous)"
-            + (", and hold the axis while it sticks." if k == 3 else ".")
+            "(Coulomb)"
+            + (" plus a part growing with speed (viscous)" if viscous else "")
+            + (", and hold the axis while it sticks." if holding is not None else ".")
         ),
         axis=axis,
-        parameter_names=("coulomb", "viscous", "holding")[:k],
+        parameter_names=names,
         scale=(1.0,) * k,
         function=fn(reversal_speed),
         physical=linear_physical(physical),
