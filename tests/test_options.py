@@ -123,10 +123,17 @@ OPTION_TESTS: dict[str, str] = {
     "export --params": f"tests/test_export.py::{EXPORT_NAMES}",
     "export --prefix": f"tests/test_export.py::{EXPORT_NAMES}",
     "export --qp-iterations": f"{HERE}::test_export_qp_iterations_is_the_nmpc_solvers_budget",
+    "export --qp-solver": "tests/test_export.py::test_cli_exports_the_nmpc_with_its_qp_solver_and_budget",
 }
 """Every option of ``maglev-oc`` -> the test that fails when its effect is ignored or inverted."""
 
 LIBRARY_OPTION_TESTS: dict[str, str] = {
+    "maglev_oc.control.export.export_controller(qp_solver)": (
+        "tests/test_export.py::test_exported_nmpc_gives_the_python_commands_on_constrained_samples"
+    ),
+    "maglev_oc.control.export.export_controller(qp_iterations)": (
+        "tests/test_export.py::test_exported_nmpc_gives_the_python_commands_on_constrained_samples"
+    ),
     "maglev_oc.identification.pipeline.identify(estimate)": f"{HERE}::test_identify_estimate_fits_only_those",
     "maglev_oc.identification.pipeline.identify(methods)": (
         "tests/test_identify_pipeline.py::test_methods_are_validated"
@@ -1197,25 +1204,41 @@ def test_identify_terms_are_fitted(model, twin_csv):
 
 # --- export ---------------------------------------------------------------------------------------
 def test_export_qp_iterations_is_the_nmpc_solvers_budget(monkeypatch, capsys):
-    # The budget reaches the exported NMPC's QP solver (what a budget does to the loop: the
-    # budget test of tests/test_nmpc.py).
-    # The NMPC is stopped once built: its export takes 15 s and is tested in tests/test_export.py.
+    # The budget reaches the exported NMPC's QP solver: the export's dual active-set solver by
+    # default, qrqp's max_iter with --qp-solver qrqp (what a budget does to the loop: the budget
+    # tests of tests/test_export.py and tests/test_nmpc.py). The NMPC, its compiled form and the
+    # export are stand-ins that record what they are given (the export is tested in
+    # tests/test_export.py).
+    import maglev_oc.control.export as export
     import maglev_oc.control.nmpc as nmpc
+    import maglev_oc.sim.compiled_nmpc as compiled
 
-    built = []
+    built, exported = [], []
 
     def recording(model, **options):
         built.append(options)
-        raise RuntimeError("built")
+        return SimpleNamespace()
+
+    def exporting(ctrl, out, **options):
+        exported.append(options)
+        raise RuntimeError("exported")
 
     monkeypatch.setattr(nmpc, "NonlinearMPC", recording)
-    for options, budget in (([], cli.QP_ITERATION_BUDGET), (["--qp-iterations", "3"], 3)):
+    monkeypatch.setattr(compiled, "CompiledNMPC", lambda ctrl, **_: ctrl)
+    monkeypatch.setattr(export, "export_controller", exporting)
+    for options, qp_options, export_options in (
+        ([], None, {"qp_solver": "dual", "qp_iterations": None}),
+        (["--qp-iterations", "3"], None, {"qp_solver": "dual", "qp_iterations": 3}),
+        (["--qp-solver", "qrqp"], {"max_iter": cli.QP_ITERATION_BUDGET}, {"qp_solver": "qrqp"}),
+        (["--qp-solver", "qrqp", "--qp-iterations", "3"], {"max_iter": 3}, {"qp_solver": "qrqp"}),
+    ):
         assert main(["export", "nmpc", "--out", "/nonexistent/x", *options]) == cli.EXIT_INTERNAL
-        assert built.pop()["qp_options"] == {"max_iter": budget}
-    assert cli.QP_ITERATION_BUDGET >= 10  # the large step needs up to 7 iterations
+        assert built.pop().get("qp_options") == qp_options
+        assert {k: v for k, v in exported.pop().items() if k != "prefix"} == export_options
+    assert cli.QP_ITERATION_BUDGET >= 10 and export.DUAL_QP_BUDGET >= 10  # the large step needs 7
     for argv, needle in (
         (["nmpc", "--qp-iterations", "0"], "--qp-iterations must be in [1, 1000]"),
-        (["pid", "--qp-iterations", "5"], "--qp-iterations applies to the NMPC only"),
+        (["pid", "--qp-iterations", "5"], "--qp-iterations and --qp-solver apply to the NMPC only"),
     ):
         assert main(["export", *argv, "--out", "/nonexistent/x"]) == cli.EXIT_USAGE
         assert needle in capsys.readouterr().err
