@@ -52,7 +52,7 @@ from maglev_oc.region.montecarlo import (
 )
 from maglev_oc.results import Result
 from maglev_oc.sim.effects import TwinEffects
-from maglev_oc.sim.twin import RigTwin
+from maglev_oc.sim.twin import ConstantsAsInput, RigTwin
 
 __all__ = [
     "CONSTANT_NAMES",
@@ -218,20 +218,6 @@ def _constants_array(value) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------
-class _ConstantsAsInput:
-    """What :meth:`RigTwin._accelerations` reads of a model (``params``, ``L``), with the
-    constants given as a CasADi expression instead of the model's numbers."""
-
-    def __init__(self, model: StageModel, constants) -> None:
-        self.params = model.params
-        self._model = model
-        self._constants = constants
-
-    def L(self, y):
-        L = self._model.L_theta(y, self._constants)
-        return L[0], L[1], L[2], L[3]
-
-
 class SampledPlantTwin(RigTwin):
     """The rig twin whose plant is part of its state: scales of the effects of
     :data:`EFFECT_SCALES` (3 rows), then the constants C1..C4 (the last four rows).
@@ -256,7 +242,7 @@ class SampledPlantTwin(RigTwin):
 
     def _accelerations(self, x, i, friction):
         nominal = self.model
-        object.__setattr__(self, "model", _ConstantsAsInput(nominal, self._plant_constants))
+        object.__setattr__(self, "model", ConstantsAsInput(nominal, self._plant_constants))
         try:
             return super()._accelerations(x, i, friction)
         finally:

@@ -61,6 +61,7 @@ from maglev_oc.sim.comparison import RIG_CONSTANTS
 from maglev_oc.sim.effects import CommutationOffset, TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.metrics import StepMetrics, evaluate
+from maglev_oc.sim.parametric_twin import ParametricTwin
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence, paper_scenarios
 from maglev_oc.sim.twin import RigTwin
 
@@ -225,8 +226,12 @@ class TwinParameters:
     def twin(self, model: StageModel, *, stoppers: bool = True) -> RigTwin:
         """The twin: ``model``'s geometry with :meth:`constants` and :meth:`effects` (without the
         mechanical stoppers if ``stoppers`` is False)."""
+        return RigTwin(*self._plant(model, stoppers))
+
+    def _plant(self, model: StageModel, stoppers: bool) -> tuple[StageModel, TwinEffects]:
+        """(true plant, effects) of :meth:`twin`."""
         effects = self.effects() if stoppers else dataclasses.replace(self.effects(), stoppers=None)
-        return RigTwin(model.with_constants(self.constants()), effects)
+        return model.with_constants(self.constants()), effects
 
     def changes(self) -> dict[str, float]:
         """The fields that differ from :meth:`nominal`."""
@@ -443,15 +448,22 @@ class _Run:
 
 
 _CFLAGS = ("-O1",)
-"""Compiler flags of the calibration's loops: each twin's loops run a few scenarios once, so
-compiling dominates: over a calibration on the 2-core test machine gcc takes 24 s at -O1 against
-34 s at -O3, and the whole calibration 39 s against 49 s, with the same results (-O0: 14 s of gcc
-but 8 s more running)."""
+"""Compiler flags of the calibration's loops. When every twin had its own build, compiling
+dominated and -O1 took two thirds of -O3's time with the same results; with one build per
+controller and loop structure (:class:`_Bench`) the runs dominate, at about the same cost
+either way."""
 
 
 class _Bench:
     """Builds and runs the calibration's closed loops (C backend when a compiler is found), with
-    a cache of the runs keyed by (parameters, controller, scenario, stoppers)."""
+    a cache of the runs keyed by (parameters, controller, scenario, stoppers).
+
+    The twins differ in the sizes of :data:`~maglev_oc.sim.parametric_twin.TUNABLE` (constants,
+    amplifier bandwidth, commutation offset, vertical Coulomb level, cogging), which a
+    :class:`ParametricTwin` carries as state rows: one loop per controller, computation delay and
+    stopper setting runs every twin of those (:meth:`ClosedLoop.on`), the same runs to the bit
+    as a loop built for each twin. A twin without vertical Coulomb friction gets a loop of its own.
+    """
 
     def __init__(self, model: StageModel) -> None:
         self.model = model
@@ -459,7 +471,8 @@ class _Bench:
         self.scenarios = _scenarios()
         self.simulations = 0
         self._controllers: dict[float, dict[str, Any]] = {}
-        self._loops: dict[tuple[TwinParameters, str, bool], ClosedLoop] = {}
+        self._templates: dict[tuple[int, bool], ParametricTwin] = {}
+        self._loops: dict[tuple, ClosedLoop] = {}
         self._runs: dict[tuple[TwinParameters, str, str, bool], _Run] = {}
 
     def controllers(self, differentiation: float) -> dict[str, Any]:
@@ -468,20 +481,28 @@ class _Bench:
             self._controllers[differentiation] = _controllers(self.model, differentiation)
         return self._controllers[differentiation]
 
+    def _loop(self, params: TwinParameters, controller: str, stoppers: bool) -> ClosedLoop:
+        """The loop of ``controller`` on the twin ``params``: the shared loop of its structure on
+        that twin's plant, or (no vertical Coulomb friction) a loop of its own."""
+        ctrl = self.controllers(params.velocity_differentiation)[controller]
+        plant, effects = params._plant(self.model, stoppers)
+        if params.vertical_friction <= 0:
+            return ClosedLoop(RigTwin(plant, effects), ctrl, backend=self.backend, cflags=_CFLAGS)
+        shape = (params.input_delay_samples, stoppers)
+        if shape not in self._templates:
+            self._templates[shape] = ParametricTwin(plant, effects)
+        template = self._templates[shape]
+        key = (shape, params.velocity_differentiation, controller)
+        if key not in self._loops:
+            self._loops[key] = ClosedLoop(template, ctrl, backend=self.backend, cflags=_CFLAGS)
+        return self._loops[key].on(template.at(plant, effects))
+
     def run(self, params: TwinParameters, controller: str, scenario: str, *, stoppers: bool = True) -> _Run:
         key = (params, controller, scenario, stoppers)
         if key in self._runs:
             return self._runs[key]
-        if any(p != params for p, _, _ in self._loops):  # one twin's compiled loops at a time
-            self._loops.clear()
-        loop = self._loops.get((params, controller, stoppers))
-        if loop is None:
-            ctrl = self.controllers(params.velocity_differentiation)[controller]
-            twin = params.twin(self.model, stoppers=stoppers)
-            loop = ClosedLoop(twin, ctrl, backend=self.backend, cflags=_CFLAGS)
-            self._loops[(params, controller, stoppers)] = loop
         sc = self.scenarios[scenario]
-        res = loop.run(sc)
+        res = self._loop(params, controller, stoppers).run(sc)
         self.simulations += 1
         k = max(1, round(1.0 / (_TRACE_RATE * res.sample_time)))
         trace = (res.t[::k], res.x[0, ::k], res.reference[0, ::k])

@@ -104,19 +104,26 @@ class GuideFriction:
         """Pre-sliding stiffness sigma [N/m]."""
         return self.coulomb / self.presliding_distance
 
-    def dahl_step(self, force, velocity, h: float, level=None, scale=1.0):
+    def dahl_step(self, force, velocity, h: float, level=None, scale=1.0, coulomb=None):
         """The Coulomb state after a step ``h`` [s] with the velocity held (CasADi expressions):
         dF/dt = sigma v - (sigma |v| / Fc) F is linear in F, so F(h) = Fss + (F - Fss)
         exp(-sigma |v| h / Fc), Fss = Fc sign(v). ``level``: the Coulomb level Fc (default
-        :attr:`coulomb`; the 2-DOF twin raises it where the guides bind). ``scale``: guides whose
-        Coulomb level and pre-sliding stiffness are ``scale`` times these (the same pre-sliding
-        distance), whose state is ``scale`` times this one's; 0 is frictionless. Without Coulomb
-        friction (sigma = 0) the state stays where it is (zero from rest): a purely viscous guide."""
-        fc = self.coulomb if level is None else level
+        the guides' Coulomb level; the 2-DOF twin raises it where the guides bind). ``scale``: guides
+        whose Coulomb level and pre-sliding stiffness are ``scale`` times these (the same
+        pre-sliding distance), whose state is ``scale`` times this one's; 0 is frictionless.
+        ``coulomb``: the guides' Coulomb level in place of :attr:`coulomb` (a number, or a
+        CasADi expression that must stay positive: a twin whose level is a state row). Without
+        Coulomb friction (sigma = 0) the state stays where it is (zero from rest): a purely
+        viscous guide."""
+        coulomb = self.coulomb if coulomb is None else coulomb
+        fc = coulomb if level is None else level
         f_ss = scale * fc * ca.sign(velocity)
-        if self.coulomb == 0:
+        if isinstance(coulomb, (int, float)) and coulomb == 0:
             return force
-        return f_ss + (force - f_ss) * ca.exp(-self.stiffness * ca.fabs(velocity) * h / fc)
+        stiffness = coulomb / self.presliding_distance  # :attr:`stiffness` at this level
+        # (-sigma h) first: CasADi folds a number sigma so, and a level given as an expression
+        # then gives the same operations
+        return f_ss + (force - f_ss) * ca.exp((-stiffness * h) * ca.fabs(velocity) / fc)
 
 
 @dataclass(frozen=True)

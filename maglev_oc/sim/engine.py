@@ -13,6 +13,7 @@ Per sample k (controller and twin share the sample time):
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -177,13 +178,35 @@ class ClosedLoop:
             self._chunk = chunk
         return self._chunk
 
+    def _native_loop(self):
+        if self._native is None:
+            from maglev_oc.sim.native import NativeLoop
+
+            self._native = NativeLoop(self.step_function, flags=self.cflags)
+        return self._native
+
+    def on(self, twin: RigTwin) -> ClosedLoop:
+        """This loop, its fused step and its compiled C (built now if not yet) on ``twin``: a twin
+        with this one's ``step`` and ``measure`` Functions, another plant of a
+        :class:`~maglev_oc.sim.parametric_twin.ParametricTwin`. Nothing is built again; runs
+        start from ``twin``'s initial state and holding current.
+
+        Raises
+        ------
+        InputError
+            ``twin`` does not share this loop's twin Functions.
+        """
+        if twin.step is not self.twin.step or twin.measure is not self.twin.measure:
+            raise InputError("ClosedLoop.on: the twin must share this loop's twin step and measure Functions")
+        if self.expression:
+            self._native_loop() if self.backend == "c" else self._chunk_function()
+        other = copy.copy(self)
+        other.twin = twin
+        return other
+
     def _run_expression(self, z0: np.ndarray, ref: np.ndarray, noise: np.ndarray) -> np.ndarray:
         if self.backend == "c":
-            if self._native is None:
-                from maglev_oc.sim.native import NativeLoop
-
-                self._native = NativeLoop(self.step_function, flags=self.cflags)
-            out, _ = self._native(z0, ref, noise)
+            out, _ = self._native_loop()(z0, ref, noise)
             return out
         chunk = self._chunk_function()
         n = ref.shape[1]

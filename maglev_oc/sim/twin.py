@@ -29,7 +29,22 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
 from maglev_oc.sim.effects import TwinEffects
 
-__all__ = ["RigTwin"]
+__all__ = ["ConstantsAsInput", "RigTwin"]
+
+
+class ConstantsAsInput:
+    """What :meth:`RigTwin._accelerations` reads of a model (``params``, ``L``), with the
+    constants given as a CasADi expression instead of the model's numbers (the twins whose plant
+    is part of their state)."""
+
+    def __init__(self, model: StageModel, constants) -> None:
+        self.params = model.params
+        self._model = model
+        self._constants = constants
+
+    def L(self, y):
+        L = self._model.L_theta(y, self._constants)
+        return L[0], L[1], L[2], L[3]
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,8 +103,9 @@ class RigTwin:
             gap = gap + m.tilt * x[2] + m.waviness * ca.sin(2 * math.pi * x[2] / m.waviness_period)
         L1, L2, L3, L4 = self.model.L(gap)
         G = p.gravity
-        if e.commutation is not None:
-            cd, sd = math.cos(e.commutation.angle), math.sin(e.commutation.angle)
+        rotation = self._commutation_rotation()
+        if rotation is not None:
+            cd, sd = rotation
             i = ca.vertcat(i[0] * cd + i[1] * sd, i[1] * cd - i[0] * sd)
         thrust = L1
         if e.ripple is not None:
@@ -116,12 +132,21 @@ class RigTwin:
             acc_h -= (friction[1] + self._viscous_force(1, x[3])) / p.mass_horizontal
         return acc_v, acc_h
 
+    def _commutation_rotation(self):
+        """(cos, sin) of the commutation offset, or None without one."""
+        c = self.effects.commutation
+        return None if c is None else (math.cos(c.angle), math.sin(c.angle))
+
     def _cogging_forces(self, x, gap):
         """(normal, along-travel) cogging forces [N] at the (misaligned) gap; effects.cogging set."""
         c, p = self.effects.cogging, self.model.params
         scale = (c.reference_gap / gap) ** c.exponent
         angle = math.pi * x[2] / p.slot_pitch + c.phase
-        return c.peak_at_reference * scale * ca.sin(angle), c.horizontal_peak * scale * ca.sin(2 * angle)
+        return self._cogging_peak() * scale * ca.sin(angle), c.horizontal_peak * scale * ca.sin(2 * angle)
+
+    def _cogging_peak(self):
+        """Normal cogging force at the reference gap [N]; effects.cogging set."""
+        return self.effects.cogging.peak_at_reference
 
     def _viscous_force(self, axis: int, velocity):
         """Viscous friction force [N] of the guides of ``axis`` (0 vertical, 1 horizontal)."""
@@ -135,9 +160,13 @@ class RigTwin:
         if e.misalignment is not None:
             binding = e.misalignment.binding * ca.sqrt(x[2] ** 2 + 1e-8)
         levels = []
-        for fr in (e.friction_vertical, e.friction_horizontal):
-            levels.append(0.0 if fr is None else fr.coulomb + binding)
+        for k, fr in enumerate((e.friction_vertical, e.friction_horizontal)):
+            levels.append(0.0 if fr is None else self._coulomb(k) + binding)
         return levels
+
+    def _coulomb(self, axis: int):
+        """Coulomb level [N] of the guides of ``axis`` (0 vertical, 1 horizontal; friction on)."""
+        return (self.effects.friction_vertical, self.effects.friction_horizontal)[axis].coulomb
 
     def _friction_update(self, friction, x, h):
         """Dahl's law over one step with the velocity held (:meth:`GuideFriction.dahl_step`), at
@@ -149,7 +178,11 @@ class RigTwin:
             if fr is None:
                 out.append(ca.SX(0))
             else:
-                out.append(fr.dahl_step(friction[k], vel, h, levels[k], self._friction_scale(k)))
+                out.append(
+                    fr.dahl_step(
+                        friction[k], vel, h, levels[k], self._friction_scale(k), coulomb=self._coulomb(k)
+                    )
+                )
         return ca.vertcat(*out)
 
     def _friction_scale(self, axis: int):
@@ -209,10 +242,13 @@ class RigTwin:
     def _current_at(self, u_sat, i0, theta: float):
         """The amplifier's current theta [s] into the step: its first-order response to the held
         command ``u_sat`` from ``i0``, exact (the lag is linear); ``u_sat`` itself without amplifier."""
-        amp = self.effects.amplifier
-        if amp is None:
+        if self.effects.amplifier is None:
             return u_sat
-        return u_sat + (i0 - u_sat) * math.exp(-theta / amp.time_constant)
+        return u_sat + (i0 - u_sat) * self._current_decay(theta)
+
+    def _current_decay(self, theta: float):
+        """exp(-theta / tau) of the amplifiers' first-order lag (amplifier on)."""
+        return math.exp(-theta / self.effects.amplifier.time_constant)
 
     def _integrate(self, xs, heat, i0, fric, u_sat):
         """(x (4), heat) at the end of the sample: ``substeps`` RK4 steps of the mechanics and the
