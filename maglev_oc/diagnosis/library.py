@@ -25,6 +25,9 @@ fit they come from, so a joint refit stays consistent.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
+
 from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
 from maglev_oc.diagnosis.currents import commutation_candidate, lag_candidate, ripple_candidate
 from maglev_oc.diagnosis.guides import (
@@ -45,6 +48,7 @@ from maglev_oc.diagnosis.magnetics import (
 from maglev_oc.diagnosis.probes import PROBE_VARIABLES, smooth_probes
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.terms import held_by_guides
 
 __all__ = [
     "FAMILIES",
@@ -58,9 +62,37 @@ __all__ = [
 ]
 
 
-def candidate_library(model: StageModel, data: PreparedLogs) -> list[Candidate]:
-    """Every candidate for ``data``, with magnetic references from ``model`` (the base fit)."""
+def candidate_library(
+    model: StageModel, data: PreparedLogs, held: Mapping[str, float] | None = None
+) -> list[Candidate]:
+    """Every candidate for ``data``, with magnetic references from ``model`` (the base fit).
+
+    ``held``: axis -> share of the forces that the guides of an axis with friction hold while it
+    sticks (the chosen friction's ``holding``); the forces of :data:`HELD_FAMILIES` on that axis
+    are held the same way (:func:`~maglev_oc.regression.terms.held_by_guides`), or a force found
+    beside sticking guides would be sized by the samples where it moves the stage only (half its
+    size beside 2 N of vertical friction on independent logs).
+    """
     ctx = LibraryContext(model, data)
+    library = _candidates(ctx)
+    if not held:
+        return library
+    return [
+        dataclasses.replace(c, term=held_by_guides(c.term, held))
+        if c.family in HELD_FAMILIES and c.axis in (*held, "both")
+        else c
+        for c in library
+    ]
+
+
+HELD_FAMILIES = ("periodic", "constant")
+"""Forces beside the motor's (cogging, detent, a tilt, a cable carrier, a constant force): sticking
+guides hold them as they hold the motor's. The other families change the motor's own force, whose
+columns (the constants') the linear fit carries unheld; holding those would make them separable
+from the constants by the holding factor alone."""
+
+
+def _candidates(ctx: LibraryContext) -> list[Candidate]:
     return [
         *friction_candidates(ctx),
         *level_candidates(ctx),

@@ -272,9 +272,12 @@ def _base_fit(session: _Session, design0: Design):
 
 def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     """Steps 4-5: the library and the selection; when the chosen effects move the constants by more
-    than :data:`REFIT_TOLERANCE`, the references are converged and the selection repeated once."""
+    than :data:`REFIT_TOLERANCE`, or guide friction is chosen, the references are converged and the
+    selection repeated once, with the other forces on a sticking axis held by its guides as the
+    chosen friction holds the motor's (:func:`~maglev_oc.diagnosis.library.candidate_library`)."""
+    held: dict[str, float] = {}
     for attempt in range(2):
-        full = candidate_library(fitted, session.data)
+        full = candidate_library(fitted, session.data, held)
         effects = list(dict.fromkeys(c.reported_name for c in full))
         unknown = sorted(set(exclude) - set(effects))
         if unknown:
@@ -284,15 +287,35 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         sel = session.select(design, library)
         if not sel.selected:
             break
+        shares = _holding_shares(sel, library)
         converged = converged_references(
-            session.model, fitted, session.data, sel.selected, session.train, session.hold, session.weights
+            session.model,
+            fitted,
+            session.data,
+            sel.selected,
+            session.train,
+            session.hold,
+            session.weights,
+            held=shares,
         )
-        if moved(converged, fitted) <= REFIT_TOLERANCE:
+        if moved(converged, fitted) <= REFIT_TOLERANCE and shares == held:
             break
-        fitted = converged
+        fitted, held = converged, shares
         if attempt == 0:
             del design, sel  # the next design replaces this one: never hold both (samples x columns)
     return library, design, sel, fitted
+
+
+def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, float]:
+    """axis -> the share of the force its guides hold while sticking, for each chosen friction."""
+    by_name = {c.name: c for c in library}
+    shares = {}
+    for step in sel.steps:
+        cand = by_name[step.chosen]
+        holding = step.judgements[step.chosen].physical.get("holding")
+        if cand.family == "friction" and holding is not None:
+            shares[cand.axis] = float(np.clip(holding.value, 0.0, 1.0))
+    return shares
 
 
 def _waviness_periods(session: _Session, fitted: StageModel, design: Design, sel: Selection) -> list[float]:

@@ -4,7 +4,7 @@ magnetic references iterated to convergence, and the model-form spread of an eff
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -74,6 +74,7 @@ def converged_references(
     *,
     tolerance: float = 1e-3,
     max_rounds: int = 12,
+    held: Mapping[str, float] | None = None,
 ) -> StageModel:
     """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
     the effects' magnetic references (which scale some of their columns) agree with them.
@@ -81,9 +82,9 @@ def converged_references(
     Terms such as the commutation offset are bilinear in a constant and their own parameter;
     their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
     repeated here (a few tenths of a second each: only the chosen effects' columns) until the
-    constants move by less than ``tolerance``."""
+    constants move by less than ``tolerance``. ``held``: as :func:`candidate_library` takes it."""
     for _ in range(max_rounds):
-        by_name = {c.name: c for c in candidate_library(fitted, data)}
+        by_name = {c.name: c for c in candidate_library(fitted, data, held)}
         terms = [by_name[n].term for n in chosen]
         design = build_design(data, fitted, terms=terms, fit=train, holdout=hold, weights=weights)
         refit = fitted_model(

@@ -22,6 +22,7 @@ the position (:func:`periodic_force`, cogging of 000 eq. (9) being :func:`coggin
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Callable, Mapping
@@ -36,6 +37,7 @@ from maglev_oc.results import Estimate
 
 __all__ = [
     "AXES",
+    "REVERSAL_SPEED",
     "AccelerationTerm",
     "Estimate",
     "amplitude_phase",
@@ -44,6 +46,7 @@ __all__ = [
     "constant_acceleration",
     "constant_force",
     "guide_friction",
+    "held_by_guides",
     "is_linear_in_parameters",
     "linear_physical",
     "periodic_force",
@@ -334,11 +337,43 @@ def _mass(params: StageParameters, axis: str) -> float:
 
 
 # --- physical terms ----------------------------------------------------------------------------
+REVERSAL_SPEED = 2e-3
+"""[m/s] Over which guide friction's sign is smoothed and below which an axis counts as stuck
+(:func:`guide_friction`)."""
+
+
+def held_by_guides(term: AccelerationTerm, held: Mapping[str, float]) -> AccelerationTerm:
+    """``term`` with the share of its force that sticking guides hold taken off.
+
+    ``held``: axis -> share h (0..1) of the force the guides of that axis hold while it sticks (the
+    friction term's ``holding``). Static friction holds a stuck axis against every force on it, not
+    only the motor's: the term's acceleration on that axis is multiplied by 1 - h exp(-(v / v_s)^2),
+    v the axis velocity and v_s :data:`REVERSAL_SPEED`, as the friction term holds the modelled one.
+    """
+    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    scale = ca.vertcat(
+        *(
+            1 - min(max(held.get(axis, 0.0), 0.0), 1.0) * ca.exp(-((x[vi] / REVERSAL_SPEED) ** 2))
+            for axis, vi in (("vertical", 1), ("horizontal", 3))
+        )
+    )
+
+    def wrap(fn: ca.Function) -> ca.Function:
+        p = ca.SX.sym("p", fn.size1_in(3))
+        return ca.Function(
+            fn.name(), [x, u, du, p], [fn(x, u, du, p) * scale], ["x", "u", "du", "p"], ["acc"]
+        )
+
+    return dataclasses.replace(
+        term, function=wrap(term.function), variants=tuple(wrap(v) for v in term.variants)
+    )
+
+
 def guide_friction(
     params: StageParameters,
     axis: str,
     *,
-    reversal_speed: float = 2e-3,
+    reversal_speed: float = REVERSAL_SPEED,
     holding: Callable | None = None,
     stick_speed: float | None = None,
     viscous: bool = True,
