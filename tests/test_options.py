@@ -888,8 +888,13 @@ def sweeps(monkeypatch):
 
 
 def _robust(tmp_path: Path, *options: str) -> dict:
+    # --certify-boxes 1000, the smallest budget: these tests check where the options send the
+    # sweeps, which are the same with any budget (same specs, sizes and seeds; measured), while the
+    # default 100000 boxes cost three quarters of each run (the budget itself:
+    # tests/test_region_cli.py::test_region_robust_certify_boxes_is_the_budget)
     out = tmp_path / f"robust{len(list(tmp_path.glob('robust*.json')))}.json"
-    argv = ["region", "--robust", "--gaps", "20", "--samples", "40", *options, "--json", str(out)]
+    argv = ["region", "--robust", "--gaps", "20", "--samples", "40", "--certify-boxes", "1000", *options]
+    argv += ["--json", str(out)]
     assert main(argv) == 0
     return json.loads(out.read_text())
 
