@@ -62,7 +62,8 @@ from tests.report_support import (  # noqa: E402, F401
 
 # --- where and in which order the tests run (pytest-xdist) ------------------------------------------------
 DURATIONS = Path(__file__).with_name("durations.json")
-"""Measured seconds (setup + call) of the longer tests: the order in which work is handed out."""
+"""Measured seconds (CPU of setup + call + teardown) of the longer tests: the order in which work is
+handed out."""
 SHARED_BY_FILES = {
     "shared_eps_trend": ("tests/test_eps_trend.py", "tests/test_reports_identification_layout.py"),
     "shared_region_report": ("tests/test_region_study.py", "tests/test_reports_model_region_layout.py"),
