@@ -302,10 +302,11 @@ def _verdict(
         return "implausible", why
     if rivals and (cand.axis, _reported(cand)) in rivals:
         best_gain, best_var = rivals[(cand.axis, _reported(cand))]
-        if best_gain > gain + settings.rival_margin:
+        own = gain if cand.axis == "both" else float(np.nanmean(j.gain_axes[axes]))
+        if best_gain > own + settings.rival_margin:
             return "not specific", (
                 f"a smooth function of the {best_var.replace('_', ' ')} explains more of the held-out error "
-                f"({best_gain:.1%} against {gain:.1%}): the data show a dependence on that variable, not "
+                f"({best_gain:.1%} against {own:.1%}): the data show a dependence on that variable, not "
                 "this effect's shape"
             )
     return "passes", ""
@@ -384,6 +385,9 @@ def _rival_gains(
     variables = sorted({var for _, var in probes})
     out: dict[tuple[str, int], tuple[float, str]] = {}
     for axes_key, k in sizes:
+        # judged on the candidate's own axes: refitting a rival can move an effect on both axes that
+        # is already chosen, and what that does on the other axis says nothing about this shape
+        on = moving if axes_key == "both" else np.array([AXIS_INDEX[axes_key]])
         best = (-np.inf, "")
         for var in variables:
             if axes_key == "both":
@@ -397,7 +401,7 @@ def _rival_gains(
                     continue
                 f = fit_subset(design, current, covariance=False, extra=[*cv, *ch])
                 r = _holdout_residual(design, f, counted)
-                gain = float(np.mean(1.0 - np.mean(r[moving] ** 2, axis=1) / mse0[moving]))
+                gain = float(np.mean(1.0 - np.mean(r[on] ** 2, axis=1) / mse0[on]))
                 if gain > best[0]:
                     best = (gain, var)
         out[(axes_key, k)] = best
