@@ -129,17 +129,9 @@ class ParametricTwin(RigTwin):
         s = ca.SX.sym("s", self.n_state)
         u_cmd = ca.SX.sym("u", 2)
         object.__setattr__(self, "_tuned", s[nb:])
-        base = s[:nb]
-        xs, cur, heat, fric = base[0:4], base[4:6], base[6], base[7:9]
-        u_in, buf_next = self._delayed(base, u_cmd)
-        u_sat, limited, foldback = self._amplified(u_in, heat)
-        z = self._integrate(xs, heat, cur, fric, u_sat)
-        x_next, hit = self._stopped(z[0:4])
-        cur_next = self._current_at(u_sat, cur, self.sample_time)
-        fric_next = self._friction_update(fric, xs, self.sample_time)
+        base_next, flags = self._step_rows(s[:nb], u_cmd)
         self._own_rows()
-        s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next, s[nb:])
-        flags = ca.vertcat(limited, hit, foldback)
+        s_next = ca.vertcat(base_next, s[nb:])
         return ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"])
 
     # ------------------------------------------------------------------------------------------

@@ -209,6 +209,12 @@ class RigTwin:
         """One sample under ZOH: delay buffer, amplifier, RK4 of the mechanics, stoppers, friction."""
         s = ca.SX.sym("s", self.n_state)
         u_cmd = ca.SX.sym("u", 2)
+        s_next, flags = self._step_rows(s, u_cmd)
+        return ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"])
+
+    def _step_rows(self, s, u_cmd):
+        """(next state, flags) of one sample on the twin's own rows ``s`` (a subclass that carries
+        more rows steps these and passes its own on)."""
         xs, cur, heat, fric = s[0:4], s[4:6], s[6], s[7:9]
         u_in, buf_next = self._delayed(s, u_cmd)
         u_sat, limited, foldback = self._amplified(u_in, heat)
@@ -216,9 +222,7 @@ class RigTwin:
         x_next, hit = self._stopped(z[0:4])
         cur_next = self._current_at(u_sat, cur, self.sample_time)
         fric_next = self._friction_update(fric, xs, self.sample_time)
-        s_next = ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next)
-        flags = ca.vertcat(limited, hit, foldback)
-        return ca.Function("twin_step", [s, u_cmd], [s_next, flags], ["s", "u"], ["s_next", "flags"])
+        return ca.vertcat(x_next, cur_next, z[4], fric_next, buf_next), ca.vertcat(limited, hit, foldback)
 
     def _delayed(self, s, u_cmd):
         """(command applied now, next delay buffer): the oldest command in the buffer when the
