@@ -370,7 +370,8 @@ def test_report_params_reaches_the_region_robust_page_as_a_covariance(tmp_path, 
 
 
 def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, stage_file, monkeypatch):
-    from maglev_oc.reporting.runner import BLAS_THREAD_VARIABLES, run_reports
+    from maglev_oc.numerics import BLAS_THREAD_VARIABLES
+    from maglev_oc.reporting.runner import run_reports
 
     for k in BLAS_THREAD_VARIABLES:  # as on a user's shell: the runner then sets cores / workers
         monkeypatch.delenv(k, raising=False)

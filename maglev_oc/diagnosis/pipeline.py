@@ -65,6 +65,7 @@ from maglev_oc.diagnosis.trace import trace, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
+from maglev_oc.numerics import one_blas_thread
 from maglev_oc.progress import progress
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design
@@ -118,6 +119,7 @@ class _Session:
         return select(design, library, self.settings, {k: t.name for k, t in self.probes.items()})
 
 
+@one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)
 def diagnose(
     logs: Sequence[Log],
     model: StageModel | None = None,

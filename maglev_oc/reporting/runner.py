@@ -75,10 +75,6 @@ def _build(name: str, out: str, params: str | None, package: str) -> ReportRun:
     return ReportRun(name, path, time.perf_counter() - t0)
 
 
-BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-"""What sets the BLAS thread count of a process that has not yet loaded NumPy."""
-
-
 @contextlib.contextmanager
 def _blas_threads(n: int):
     """Spawned workers start with ``n`` BLAS threads each (cores / workers), unless the user set
@@ -86,6 +82,8 @@ def _blas_threads(n: int):
     other and the other workers (measured: a diagnosis 2.2x slower with 2 threads than with 1 on
     two loaded cores; a 200-column block Gram 13x). Workers are spawned, so they read the
     environment as it is here when the pool starts them."""
+    from maglev_oc.numerics import BLAS_THREAD_VARIABLES  # here: the runner itself stays light
+
     saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
     if all(v is None for v in saved.values()):
         os.environ.update({k: str(n) for k in BLAS_THREAD_VARIABLES})
