@@ -1,0 +1,108 @@
+"""What no named effect explains (``maglev_oc.diagnosis.unexplained``), on synthetic logs whose
+answer is known (``tests/test_statistics_properties.py``: a horizontal sweep with planted viscous
+friction, the friction passed as explained): nothing is reported when nothing is left, a force
+planted as a function of the position is reported on its axis with the variable it depends on
+and its size, a sinusoid at a given period as that period, and the options bound what is reported.
+About 3 s of CPU."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.diagnosis.selection import SelectionSettings
+from maglev_oc.diagnosis.unexplained import find_unexplained
+from maglev_oc.regression.data import prepare
+from tests.test_statistics_properties import RATE_FRICTION, _friction_candidate, _log
+
+PERIOD = 0.023
+"""[m] a spatial period no motor of the library has (slot pitch, pole pitch and their doubles
+are elsewhere)."""
+AMPLITUDE = 0.04
+"""[m/s^2] the planted signature: 20 times the selection's smallest physical size (2.25e-3),
+a fifth of the sines' own acceleration."""
+
+
+def _found(model, force, periods=(), **kw):
+    data = prepare([_log(model, friction=RATE_FRICTION, force=force)], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    settings = kw.pop("settings", SelectionSettings())
+    return (
+        find_unexplained(
+            data, model, [_friction_candidate()], fit, hold, None, list(periods), settings, **kw
+        ),
+        data,
+        hold,
+    )
+
+
+def _rms_held_out(data, hold, acc):
+    return float(np.sqrt(np.mean(acc(data.x[2, hold]) ** 2)))
+
+
+def test_nothing_is_reported_when_the_explained_effects_are_all_there_is(model):
+    found, *_ = _found(model, None, periods=[("horizontal", PERIOD)])
+    assert found == []
+
+
+def test_a_force_that_depends_on_the_position_is_reported_with_its_variable_and_size(model):
+    """A spring-and-cubic force in the position: reported once, horizontal, depending on the
+    position, with the RMS of the planted acceleration on the held-out block as its size (within
+    5 %: the probe's Legendre orders reproduce a cubic exactly, but the size is the net change of
+    the prediction and the refit of C1 and the friction takes a little of it; measured 2.5 %) and that size times
+    the horizontal mass as its force."""
+
+    def acc(x3):
+        return -2.0 * x3 + 3000.0 * x3**3  # [m/s^2] at x3 in m: 0.04 and 0.08 m/s^2 at 20 mm
+
+    found, data, hold = _found(model, acc)
+    assert len(found) == 1
+    u = found[0]
+    assert (u.axis, u.depends_on) == ("horizontal", "position")
+    assert u.period is None
+    expected = _rms_held_out(data, hold, lambda x3: acc(x3) - np.mean(acc(x3)))
+    assert u.size == pytest.approx(expected, rel=0.05)
+    assert u.force_rms == pytest.approx(u.size * model.params.mass_horizontal, rel=1e-12)
+    s = SelectionSettings()
+    assert u.gain >= s.min_gain and u.z >= s.min_z
+    d = u.to_dict()
+    assert (d["axis"], d["depends_on"], d["size"], d["force_rms_N"]) == (
+        "horizontal",
+        "position",
+        u.size,
+        u.force_rms,
+    )
+
+
+def test_a_sinusoid_in_the_position_is_reported_at_its_period(model):
+    """A sinusoid of the position at a period the residual's spectrum points to: reported with
+    that period, its size the planted amplitude's RMS (within 5 %, as above; measured 2.7 %)."""
+
+    def acc(x3):
+        return AMPLITUDE * np.sin(2 * math.pi * x3 / PERIOD)
+
+    found, data, hold = _found(model, acc, periods=[("horizontal", PERIOD)])
+    assert [u.period for u in found][:1] == [PERIOD]
+    u = found[0]
+    assert u.axis == "horizontal" and "23.0 mm" in u.depends_on
+    assert u.size == pytest.approx(_rms_held_out(data, hold, acc), rel=0.05)
+    assert u.to_dict()["period_m"] == PERIOD
+
+
+def test_the_options_bound_what_is_reported(model):
+    """max_per_axis = 0 reports nothing; a min_effect above the signature's size, or a min_gain
+    above its gain, reports nothing either (each option ignored would report it)."""
+
+    def acc(x3):
+        return AMPLITUDE * np.sin(2 * math.pi * x3 / PERIOD)
+
+    periods = [("horizontal", PERIOD)]
+    (u, *_), _, _ = _found(model, acc, periods=periods)
+    assert _found(model, acc, periods=periods, max_per_axis=0)[0] == []
+    s = SelectionSettings()
+    for change in ({"min_effect": 1.01 * u.size}, {"min_gain": 1.01 * u.gain}, {"min_z": 1.01 * u.z}):
+        kept = _found(model, acc, periods=periods, settings=dataclasses.replace(s, **change))[0]
+        assert all(v.depends_on != u.depends_on for v in kept), change

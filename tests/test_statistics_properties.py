@@ -1,0 +1,438 @@
+"""The statistics of the shared regression and of the diagnosis's selection, each against a
+computation made here from the rows themselves (numpy, scipy.stats), not from the Gram sums the
+code uses (issue 21, item 2).
+
+The data: the synthetic horizontal logs of ``tests/test_regression.py`` (the gap held, the
+position a sum of sines, the current that produced the acceleration known exactly), with viscous
+guide friction planted in the plant, everywhere or only where the fit looks. Everything here is
+numpy on a 30 s log (about 2 s of CPU for the file).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import stats
+
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.selection import (
+    SelectionSettings,
+    holdout_significance,
+    judge,
+    select,
+)
+from maglev_oc.regression.data import prepare
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.solve import fit_subset, residuals
+from maglev_oc.regression.terms import viscous_friction
+from tests.test_regression import GAP, RATE, _synthetic
+
+RATE_FRICTION = 2.0
+"""[1/s] the planted viscous friction, acc = -c v: large against the fit's noise (its long-run
+standard error here is about 5e-5 1/s, its held-out z about 17) and small against the inertial
+acceleration (the sines' RMS speed is about 0.03 m/s, so 0.06 m/s^2 against 0.19 m/s^2, the RMS
+of the sines' acceleration)."""
+
+
+def _log(model, *, friction: float, training_only: bool = False, seed: int = 3, force=None):
+    """The synthetic log with viscous friction -c v in the plant: the logged current is the one
+    that produces the sines' acceleration with friction present (on the first 75 % only with
+    ``training_only``: the held-out block of ``masks(0.25)`` is the last quarter). ``force``:
+    a further horizontal acceleration [m/s^2] as a function of the true position."""
+    log = _synthetic(model, seconds=30.0, position_noise=2e-6, seed=seed)
+    t = log.t
+    # the exact position and speed of the sines (the logged positions carry noise; the plant
+    # saw the true ones)
+    clean = _synthetic(model, seconds=30.0, seed=seed)
+    v = np.gradient(clean.x[2], 1.0 / RATE)
+    c = np.full(t.size, friction)
+    if training_only:
+        c[t >= 0.75 * t[-1]] = 0.0
+    f = -c * v + (0.0 if force is None else force(clean.x[2]))
+    l1 = float(model.coefficients(GAP)[0, 0])
+    # x3'' = -L1 u1 + f  =>  u1 = -(x3'' - f) / L1
+    u = log.u.copy()
+    u[0] = log.u[0] + f / l1
+    return dataclasses.replace(log, u=u)
+
+
+def _design(model, log):
+    data = prepare([log], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    terms = (viscous_friction("horizontal"), viscous_friction("vertical"))
+    return build_design(data, model, estimate=("C1",), terms=terms, fit=fit, holdout=hold)
+
+
+@pytest.fixture(scope="module")
+def with_friction(model):
+    return _design(model, _log(model, friction=RATE_FRICTION))
+
+
+@pytest.fixture(scope="module")
+def friction_in_training_only(model):
+    return _design(model, _log(model, friction=RATE_FRICTION, training_only=True))
+
+
+def _rows(design, index, samples):
+    """The weighted rows (X, y) of ``samples`` (a boolean mask or an index array, repeats kept)
+    on the axes with weight, stacked as the fit sees them."""
+    a = design.weights > 0
+    x = design.columns[index][:, a][:, :, samples] * design.weights[a][None, :, None]
+    y = design.target[a][:, samples] * design.weights[a][:, None]
+    return x.reshape(index.size, -1).T, y.reshape(-1)
+
+
+def _friction_candidate(axis="horizontal"):
+    return Candidate(
+        term=viscous_friction(axis),
+        family="friction",
+        variable="position_rate",
+        separate_by="a run at another speed",
+        plausible=lambda p: None,
+        describe=lambda p: "",
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# the fit's numbers from the rows
+
+
+def test_a_bootstrap_resample_is_least_squares_on_the_resampled_blocks_rows(with_friction):
+    """``fit_subset(blocks=...)`` (the selection's bootstrap) is ordinary least squares on the
+    rows of the drawn blocks, each drawn block's rows repeated as often as it is drawn."""
+    d = with_friction
+    rng = np.random.default_rng(5)
+    drawn = rng.integers(0, d.gram.shape[0], d.gram.shape[0])
+    sub = fit_subset(d, ["base", "viscous_horizontal"], blocks=drawn, compensate=False)
+    samples = np.concatenate([np.flatnonzero(d.block_of == b) for b in drawn])
+    x, y = _rows(d, sub.index, samples)
+    coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    # normal equations against QR on the same rows: the columns' condition number (about 1e2)
+    # squared times double precision is far below 1e-9
+    assert_allclose(sub.coef, coef, rtol=1e-9)
+    # and it is not the fit of all blocks (the resample is really used)
+    full = fit_subset(d, ["base", "viscous_horizontal"], compensate=False)
+    assert np.max(np.abs(full.coef / sub.coef - 1)) > 1e-6
+
+
+def test_chi_square_and_degrees_of_freedom_are_the_fitted_rows(with_friction):
+    """chi_square is the weighted residual sum of squares on the fitted rows of the axes with
+    weight, dof their number less the parameters, and the plain covariance s^2 (X'X)^-1 with
+    s^2 = chi_square / dof, every number computed here from the rows."""
+    d = with_friction
+    sub = fit_subset(d, ["base", "viscous_horizontal"], compensate=False)
+    x, y = _rows(d, sub.index, d.fit)
+    coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    r = y - x @ coef
+    assert sub.dof == y.size - sub.index.size
+    # a sum of squares from the Gram sums (yy - 2 b'X'y + b'X'Xb) against the residuals: the
+    # cancellation loses digits in proportion to yy / chi2 (about 1e3 here), so 1e-9
+    assert_allclose(sub.chi_square, r @ r, rtol=1e-9)
+    assert_allclose(sub.naive, (r @ r) / (y.size - coef.size) * np.linalg.inv(x.T @ x), rtol=1e-8)
+
+
+def test_friction_is_recovered_with_its_sign_size_and_an_honest_standard_error(model):
+    """The planted friction is found at its size within a few standard errors, on three seeds
+    with opposite friction signs; both the plain and the long-run standard errors are positive
+    and their z-scores are within 4 (four standard errors: a false alarm once in 15 000 per
+    seed if the errors are right; a covariance not scaled by the residual variance is off by
+    orders of magnitude here)."""
+    for seed, c in ((3, RATE_FRICTION), (4, -RATE_FRICTION), (6, 0.5 * RATE_FRICTION)):
+        d = _design(model, _log(model, friction=c, seed=seed))
+        sub = fit_subset(d, ["base", "viscous_horizontal"])
+        est = sub.value("viscous_horizontal.rate")
+        se_long = sub.stderr("viscous_horizontal.rate")
+        k = list(sub.names).index("viscous_horizontal.rate")
+        se_plain = float(np.sqrt(sub.naive[k, k]))
+        assert se_long > 0 and se_plain > 0
+        assert abs(est - c) / se_long < 4, (seed, est, se_long)
+        # the friction is large against its error: the sign and size are not a matter of luck
+        assert abs(est - c) < 0.05 * abs(c), (seed, est)
+
+
+def test_a_column_on_a_locked_axis_is_zero_with_no_variance(with_friction):
+    """The vertical axis does not move on these logs: its friction column vanishes on every
+    fitted row, gets coefficient 0 and zero (co)variance, and leaves the other estimates as
+    they are without it."""
+    d = with_friction
+    with_dead = fit_subset(d, ["base", "viscous_horizontal", "viscous_vertical"])
+    without = fit_subset(d, ["base", "viscous_horizontal"])
+    k = list(with_dead.names).index("viscous_vertical.rate")
+    assert with_dead.coef[k] == 0.0
+    assert np.all(with_dead.covariance[k] == 0.0) and np.all(with_dead.covariance[:, k] == 0.0)
+    live = [i for i in range(with_dead.index.size) if i != k]
+    # the same solve on the same live columns: equal up to rounding
+    assert_allclose(with_dead.coef[live], without.coef, rtol=1e-10)
+    assert_allclose(with_dead.covariance[np.ix_(live, live)], without.covariance, rtol=1e-8)
+
+
+def test_extra_columns_fit_as_their_group_does(with_friction):
+    """``extra`` single columns (the selection's generic rivals) enter the fit like a group."""
+    d = with_friction
+    grouped = fit_subset(d, ["base", "viscous_horizontal"], compensate=False)
+    extra = fit_subset(d, ["base"], compensate=False, extra=list(d.groups["viscous_horizontal"]))
+    assert_allclose(extra.coef, grouped.coef, rtol=1e-12)
+    assert_allclose(extra.holdout_rms, grouped.holdout_rms, rtol=1e-12, equal_nan=True)
+
+
+def test_held_out_rms_is_the_held_out_residuals_and_drops_with_the_true_effect(with_friction):
+    """The held-out RMS per axis is the RMS of the residuals on the held-out samples (the
+    residuals recomputed from the coefficients), NaN on the axis without weight, and adding the
+    effect the plant has lowers it."""
+    d = with_friction
+    a = int(np.argmax(d.weights))
+    for groups in (["base"], ["base", "viscous_horizontal"]):
+        sub = fit_subset(d, groups)
+        r = residuals(d, sub)
+        # a quadratic form of the held-out Gram sums against the residuals themselves: 1e-9
+        assert_allclose(sub.holdout_rms[a], np.sqrt(np.mean(r[a, d.holdout] ** 2)), rtol=1e-9)
+    base = fit_subset(d, ["base"]).holdout_rms[a]
+    better = fit_subset(d, ["base", "viscous_horizontal"]).holdout_rms[a]
+    assert better < 0.5 * base  # the friction is most of the base fit's held-out error
+
+
+# --------------------------------------------------------------------------------------------
+# the held-out test
+
+
+def test_held_out_z_is_calibrated_under_no_change_and_powerful_under_a_real_one(with_friction):
+    """holdout_significance over 200 seeds: when r1 is an independent draw of the same noise as r0
+    (no candidate helps), z behaves like a standard score: |z| >= 3 in at most 3 % of the seeds
+    (2.7e-3 for a normal score; the long-run variance from a few Fourier frequencies makes it a t
+    with few degrees of freedom, whose tail at 3 is a few %); its mean is near 0 and its spread
+    near 1 (within 0.35: the t's spread and the sampling of 200 seeds). When r1 is r0 shrunk by
+    10 % everywhere (a real improvement, gain 19 %), z is large on every seed. A standard error
+    off by the square root of the block count, or a mean taken over samples instead of blocks,
+    fails one side or the other."""
+    d = with_friction
+    n = int(d.holdout.sum())
+    axes = np.array([int(np.argmax(d.weights))])
+    rng = np.random.default_rng(0)
+    null, alt = [], []
+    for _ in range(200):
+        r0 = rng.standard_normal((2, n))
+        r1 = rng.standard_normal((2, n))
+        null.append(holdout_significance(d, r0, r1, axes)[1])
+        alt.append(holdout_significance(d, r0, 0.9 * r0 + 0.01 * r1, axes)[1])
+    null = np.array(null)
+    assert np.mean(np.abs(null) >= 3) <= 0.03
+    assert abs(np.mean(null)) < 0.35
+    assert 0.65 < np.std(null) < 1.6
+    assert np.min(alt) > 10
+
+
+def test_held_out_test_is_antisymmetric_and_scale_free(with_friction):
+    """On one axis, swapping before and after flips z's sign exactly and the gain becomes
+    1 - 1/(1 - gain); scaling both residuals by one factor changes neither (they are ratios)."""
+    d = with_friction
+    n = int(d.holdout.sum())
+    axes = np.array([int(np.argmax(d.weights))])
+    rng = np.random.default_rng(1)
+    r0 = rng.standard_normal((2, n))
+    r1 = r0 * rng.uniform(0.5, 1.1, (2, n))
+    g, z = holdout_significance(d, r0, r1, axes)
+    g_swap, z_swap = holdout_significance(d, r1, r0, axes)
+    g_scaled, z_scaled = holdout_significance(d, 7.0 * r0, 7.0 * r1, axes)
+    # log-ratios and their mean negate; the standard error is that of the same series
+    assert z_swap == pytest.approx(-z, rel=1e-9)
+    assert g_swap == pytest.approx(1 - 1 / (1 - g), rel=1e-9)
+    assert (g_scaled, z_scaled) == pytest.approx((g, z), rel=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# one candidate judged: every number recomputed
+
+
+def test_judgement_numbers_are_recomputed_from_the_rows(with_friction):
+    """judge() on the planted friction: its gain is the drop of the held-out mean square of the
+    residuals of two independent least-squares fits; its Wald statistic is b' V^-1 b with V the
+    fit's long-run covariance and its threshold the upper alpha tail of chi-square with one
+    degree of freedom (scipy.stats); its contribution is the RMS change of the held-out
+    prediction; its variance inflation 1 / (1 - R^2) of the friction column regressed on the
+    constant's column over the fitted rows."""
+    d = with_friction
+    settings = SelectionSettings()
+    cand = _friction_candidate()
+    base = fit_subset(d, ["base"])
+    a = int(np.argmax(d.weights))
+    r0 = residuals(d, base)[:, d.holdout]
+    mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+    j = judge(d, cand, ["base"], base, r0, mse0, settings)
+
+    idx0, idx1 = d.groups["base"], np.concatenate([d.groups["base"], d.groups["viscous_horizontal"]])
+    x0, y0 = _rows(d, idx0, d.fit)
+    x1, _ = _rows(d, idx1, d.fit)
+    b0 = np.linalg.lstsq(x0, y0, rcond=None)[0]
+    b1 = np.linalg.lstsq(x1, y0, rcond=None)[0]
+    h0 = d.target[a, d.holdout] - b0 @ d.columns[idx0][:, a][:, d.holdout]
+    h1 = d.target[a, d.holdout] - b1 @ d.columns[idx1][:, a][:, d.holdout]
+    # compensation: the synthetic currents carry no logging error, so OLS and the compensated
+    # fit differ by the estimated floor only; 1e-3 relative on the gain (a 40x drop of the mean
+    # square here) and on the contribution
+    assert j.gain == pytest.approx(1 - np.mean(h1**2) / np.mean(h0**2), rel=1e-3)
+    assert j.gain_axes[a] == pytest.approx(j.gain, rel=1e-12)  # one moving axis: the same number
+    assert np.isnan(j.gain_axes[1 - a])
+    assert j.contribution_rms[a] == pytest.approx(np.sqrt(np.mean((h1 - h0) ** 2)), rel=1e-3)
+    assert j.contribution_rms[1 - a] == 0.0
+    coef, cov = j.fit.group(d, "viscous_horizontal")
+    assert j.wald == pytest.approx(float(coef[0] ** 2 / cov[0, 0]), rel=1e-9)
+    assert j.wald_threshold == pytest.approx(stats.chi2.isf(settings.alpha, 1), rel=1e-12)
+    xc = x1[:, -1]
+    fitted = x0 @ np.linalg.lstsq(x0, xc, rcond=None)[0]
+    r2 = 1 - np.sum((xc - fitted) ** 2) / np.sum(xc**2)  # uncentred, as the Gram matrix is
+    assert j.vif == pytest.approx(1 / (1 - r2), rel=1e-6)
+    assert j.verdict == "passes" and j.z > settings.min_z
+    # the physical parameter is the coefficient with the fit's standard error
+    est = j.physical["rate"]
+    assert est.value == pytest.approx(coef[0], rel=1e-12)
+    assert est.stderr == pytest.approx(np.sqrt(cov[0, 0]), rel=1e-12)
+
+
+def test_selection_rejects_a_candidate_that_helps_training_only(friction_in_training_only, with_friction):
+    """Friction present only in the fitted part: adding it lowers the training chi-square a lot
+    but not the held-out error, so it is not selected. With friction on the whole log it is,
+    with its sign and size (a control on the same design recipe)."""
+    cand = _friction_candidate()
+    d = friction_in_training_only
+    base = fit_subset(d, ["base"])
+    both = fit_subset(d, ["base", "viscous_horizontal"])
+    assert both.chi_square < 0.2 * base.chi_square  # it explains most of the training error
+    sel = select(d, [cand], SelectionSettings(bootstrap=0))
+    assert sel.selected == []
+    assert sel.last["viscous_horizontal"].gain < SelectionSettings().min_gain
+    chosen = select(with_friction, [cand], SelectionSettings(bootstrap=0))
+    assert chosen.selected == ["viscous_horizontal"]
+    # within 5 % of the planted 2 1/s (its standard error is under 1 %)
+    assert chosen.final.value("viscous_horizontal.rate") == pytest.approx(RATE_FRICTION, rel=0.05)
+
+
+# --------------------------------------------------------------------------------------------
+# every threshold of the selection decides on its own side (issue 21, item 3): each option set
+# just above the measured quantity turns the verdict, just below leaves it; an option ignored or
+# compared the wrong way fails one of the two
+
+
+def _judged(design, settings, rivals=None, plausible=None):
+    cand = _friction_candidate()
+    if plausible is not None:
+        cand = dataclasses.replace(cand, plausible=plausible)
+    base = fit_subset(design, ["base"])
+    r0 = residuals(design, base)[:, design.holdout]
+    mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+    return judge(design, cand, ["base"], base, r0, mse0, settings, rivals)
+
+
+UP, DOWN = 1 + 1e-6, 1 - 1e-6
+"""Just above and just below a measured value: the judgement's numbers are deterministic and
+recomputed identically with any threshold (they do not depend on it), so 1e-6 separates."""
+
+
+@pytest.fixture(scope="module")
+def measured(with_friction):
+    j = _judged(with_friction, SelectionSettings())
+    assert j.verdict == "passes"
+    return j
+
+
+@pytest.mark.parametrize(
+    "option, value, verdict",
+    [
+        ("min_gain", lambda j: j.gain * UP, "not significant"),
+        ("min_gain", lambda j: j.gain * DOWN, "passes"),
+        ("min_effect", lambda j: j.contribution_rms.max() * UP, "too small"),
+        ("min_effect", lambda j: j.contribution_rms.max() * DOWN, "passes"),
+        ("max_vif", lambda j: j.vif * DOWN, "not separable"),
+        ("max_vif", lambda j: j.vif * UP, "passes"),
+    ],
+)
+def test_each_threshold_turns_the_verdict_at_the_measured_value(
+    with_friction, measured, option, value, verdict
+):
+    settings = dataclasses.replace(SelectionSettings(), **{option: value(measured)})
+    assert _judged(with_friction, settings).verdict == verdict
+
+
+def test_the_held_out_z_threshold_and_the_strong_path(with_friction, measured):
+    """z must reach min_z, or min_z_strong together with a Wald statistic of strong_wald times its
+    threshold (a strong effect whose held-out blocks are few)."""
+    z, ratio = measured.z, measured.wald / measured.wald_threshold
+    off = {"strong_wald": np.inf}  # the strong path closed: min_z alone decides
+    s = SelectionSettings()
+    assert _judged(with_friction, dataclasses.replace(s, min_z=z * UP, **off)).verdict == "not significant"
+    assert _judged(with_friction, dataclasses.replace(s, min_z=z * DOWN, **off)).verdict == "passes"
+    # min_z out of reach: the strong path decides, on both of its conditions
+    strong = dict(min_z=np.inf)
+    both = {"min_z_strong": z * DOWN, "strong_wald": ratio * DOWN}
+    assert _judged(with_friction, dataclasses.replace(s, **strong, **both)).verdict == "passes"
+    for change in ({"min_z_strong": z * UP}, {"strong_wald": ratio * UP}):
+        change = {**both, **change}
+        assert _judged(with_friction, dataclasses.replace(s, **strong, **change)).verdict == "not significant"
+
+
+def test_the_wald_threshold_follows_alpha(with_friction):
+    """The threshold is chi-square's upper alpha quantile for the candidate's one coefficient at
+    every alpha (scipy.stats), larger for a smaller alpha."""
+    for alpha in (0.05, 1e-4, 1e-12):
+        j = _judged(with_friction, SelectionSettings(alpha=alpha))
+        assert j.wald_threshold == pytest.approx(stats.chi2.isf(alpha, 1), rel=1e-12)
+
+
+def test_a_correlation_above_max_correlation_is_confounded(with_friction, measured):
+    """max_correlation: the candidate's estimate correlated with C1's (from the inverse normal
+    matrix) by more than it is confounded with C1, by less is not."""
+    g = measured.fit.naive  # proportional to the inverse normal matrix: the same correlations
+    rho = abs(g[0, 1]) / np.sqrt(g[0, 0] * g[1, 1])
+    s = dataclasses.replace(SelectionSettings(), max_vif=np.inf)
+    low = _judged(with_friction, dataclasses.replace(s, max_correlation=rho * DOWN))
+    assert low.verdict == "not separable" and low.confounded_with == ("C1",)
+    high = _judged(with_friction, dataclasses.replace(s, max_correlation=rho * UP))
+    assert high.verdict == "passes" and high.confounded_with == ()
+
+
+def test_a_generic_rival_better_by_more_than_the_margin_takes_the_residual(with_friction, measured):
+    """rival_margin: a smooth function of another variable with the same number of coefficients
+    that explains more than the candidate plus the margin makes it 'not specific'; within the
+    margin the candidate passes."""
+    own, margin = measured.gain, SelectionSettings().rival_margin
+    for rival, verdict in ((own + margin + 1e-3, "not specific"), (own + margin - 1e-3, "passes")):
+        rivals = {("horizontal", 1): (rival, "position")}
+        assert _judged(with_friction, SelectionSettings(), rivals).verdict == verdict
+    wider = SelectionSettings(rival_margin=margin + 2e-3)
+    rivals = {("horizontal", 1): (own + margin + 1e-3, "position")}
+    assert _judged(with_friction, wider, rivals).verdict == "passes"
+
+
+def test_an_implausible_size_is_never_claimed(with_friction):
+    j = _judged(with_friction, SelectionSettings(), plausible=lambda p: "negative friction")
+    assert (j.verdict, j.reason) == ("implausible", "negative friction")
+
+
+def test_max_effects_bounds_the_selection(with_friction):
+    """max_effects = 0 claims nothing however strong the effect; 1 claims it."""
+    cand = [_friction_candidate()]
+    assert select(with_friction, cand, SelectionSettings(max_effects=0, bootstrap=0)).selected == []
+    assert select(with_friction, cand, SelectionSettings(max_effects=1, bootstrap=0)).selected == [
+        "viscous_horizontal"
+    ]
+
+
+def test_slow_samples_stop_counting_once_friction_is_chosen(with_friction):
+    """evidence(): no friction chosen, every held-out sample counts (None); friction chosen on the
+    horizontal axis, exactly its held-out samples at |v| >= slow_speed count there (the speeds
+    read here from the prepared states), the vertical axis untouched."""
+    from maglev_oc.diagnosis.selection import evidence
+
+    d = with_friction
+    cand = _friction_candidate()
+    s = SelectionSettings()
+    assert evidence(d, [], s) is None
+    v = d.prepared.x[3, d.holdout]
+    for slow in (s.slow_speed, 0.02):
+        counted = evidence(d, [cand], dataclasses.replace(s, slow_speed=slow))
+        assert np.array_equal(counted[1], np.abs(v) >= slow)
+        assert counted[0].all()
+        # the sines' speeds spread over 0..0.07 m/s: both speeds leave some samples out, not all
+        assert 0 < counted[1].sum() < counted[1].size
