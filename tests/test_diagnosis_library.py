@@ -290,7 +290,8 @@ def test_end_effects_are_lost_thrust_and_attraction_towards_the_ends(plant):
 @pytest.mark.parametrize("gain", [4.0, -4.0])
 def test_the_attraction_departing_from_the_field_model_with_the_gap(plant, name, gain):
     # the attraction changes by a(x1) = gain (x1 - mean gap) (4 /m: 1 % over 2.5 mm); the magnet
-    # field (B ~ sqrt of the attraction) changes the thrust and the currents' normal force by a/2
+    # field (B ~ sqrt of the attraction) changes the thrust by a/2, which is what the field's
+    # candidate fits (its attraction share is left to C2..C4, with which it is confounded)
     x = plant.data.x
     cand = _candidate(plant, name)
     thrust, attraction, _ = _parts(plant)
@@ -299,9 +300,7 @@ def test_the_attraction_departing_from_the_field_model_with_the_gap(plant, name,
     vertical = -attraction * a
     horizontal = np.zeros_like(a)
     if name == "magnet_field_gap_dependence":
-        L = plant.model.coefficients(x[0])
-        currents_field = L[2] * plant.data.u[1]  # the C3 part of the normal force
-        vertical -= currents_field * a / 2
+        vertical = np.zeros_like(a)
         horizontal = thrust * a / 2
     # a gain over the gap is partly a change of C2..C4's shape: recovered with the constants known
     # (10 %: the planted change is linear, the candidate's basis adds a quadratic)
