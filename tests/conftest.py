@@ -50,6 +50,9 @@ def twin_log(model: StageModel, truth_model: StageModel) -> Log:
     return excitation_log(truth_model, duration=6.0, seed=7, controller_model=model)
 
 
+# C objects and the NMPC's libraries compiled once per run, shared by the workers
+from tests.compile_support import object_cache, shared_compile_cache  # noqa: E402, F401
+
 # the independent generator's logs and their diagnoses, shared by the diagnosis test files
 from tests.diagnosis_support import diagnosed, generated  # noqa: E402, F401
 

@@ -40,18 +40,25 @@ ALLOWED_UNDEFINED = {
 TOLERANCE_A = 1e-9
 
 
-def _build(export, tmp_path, flags=("-O1",)) -> ctypes.CDLL:
-    cc = c_compiler()
+def _objects(export, tmp_path, object_cache, flags=("-O1",)) -> list:
+    """The export's sources compiled as a user would; an object the session compiled before from
+    the same preprocessed source with the same flags is reused (tests/compile_support.py: the
+    NMPC's generated file is the same for every budget of the dual solver)."""
     objects = []
     for src in export.sources:
         obj = tmp_path / (src.stem + ".o")
         # -std=c99 -Wall -Werror on every file (the issue's bar); the interface also -Wextra
         # -pedantic (CasADi's generated code has unused parameters by design)
         extra = ["-Wextra", "-pedantic"] if src.name == f"{export.prefix}.c" else []
-        cmd = [cc, "-std=c99", "-Wall", "-Werror", *extra]
-        cmd += [*flags, "-fPIC", "-c", str(src), "-o", str(obj)]
-        subprocess.run(cmd, check=True, capture_output=True)
+        cmd = [c_compiler(), "-std=c99", "-Wall", "-Werror", *extra, *flags, "-fPIC"]
+        object_cache.compile(cmd, src, obj)
         objects.append(obj)
+    return objects
+
+
+def _build(export, tmp_path, object_cache) -> ctypes.CDLL:
+    cc = c_compiler()
+    objects = _objects(export, tmp_path, object_cache)
     undefined, defined = set(), set()
     for obj in objects:
         out = subprocess.run(["nm", "-u", str(obj)], check=True, capture_output=True, text=True).stdout
@@ -112,13 +119,15 @@ class _InTheLoop:
 
 
 @pytest.mark.parametrize("name", ["fl", "pid"])
-def test_exported_controller_in_closed_loop_with_the_twin_tracks_like_python(model, tmp_path, name):
+def test_exported_controller_in_closed_loop_with_the_twin_tracks_like_python(
+    model, tmp_path, object_cache, name
+):
     # the export drives the rig twin (noise, 10 um encoders, amplifier limits, friction) through
     # ctypes; the runs agree with the Python controller's: the same commands to round-off, so the
     # same trajectory (1e-9 m: round-off grown through 1.5 s of a stable loop) and diagnostics
     ctrl = build_controller(name, model)
     export = export_controller(ctrl, tmp_path / "export")
-    c = _Exported(_build(export, tmp_path), export.prefix)
+    c = _Exported(_build(export, tmp_path, object_cache), export.prefix)
     sc = dataclasses.replace(paper_scenarios()["setpoint_steps"], duration=1.5)
     py = ClosedLoop(RigTwin(model), ctrl).run(sc)
     cc = ClosedLoop(RigTwin(model), _InTheLoop(c, ctrl)).run(sc)
@@ -146,10 +155,10 @@ def _python_commands(ctrl, y, r, c0):
 
 
 @pytest.mark.parametrize("name", ["fl", "linear", "lqr", "pid"])
-def test_exported_controller_gives_the_python_commands(model, tmp_path, name):
+def test_exported_controller_gives_the_python_commands(model, tmp_path, object_cache, name):
     ctrl = build_controller(name, model)
     export = export_controller(ctrl, tmp_path / "export")
-    lib = _build(export, tmp_path)
+    lib = _build(export, tmp_path, object_cache)
     c = _Exported(lib, export.prefix)
     assert c.size() == export.memory_bytes  # the struct's size as the export reports it
     y, r = _recorded(ctrl, model, 1.5)  # 7500 samples at 5 kHz, through the step at t = 1 s
@@ -219,7 +228,7 @@ def test_cli_exports_and_refuses_unknown_controllers(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
-def test_cli_export_params_and_prefix_are_the_controller_and_its_names(model, tmp_path, capsys):
+def test_cli_export_params_and_prefix_are_the_controller_and_its_names(model, tmp_path, object_cache, capsys):
     # --params: the exported LQR is the one designed on the file's constants (here C3 20 % low:
     # other equilibrium currents and gains), step for step; --prefix names every symbol.
     from maglev_oc.model.loading import load_model
@@ -234,7 +243,7 @@ def test_cli_export_params_and_prefix_are_the_controller_and_its_names(model, tm
     assert manifest["prefix"] == "rig_lqr" and (out / "rig_lqr.c").is_file()
     assert "maglev_lqr" not in "".join(p.read_text() for p in out.iterdir() if p.suffix in (".c", ".h"))
     export = SimpleNamespace(prefix="rig_lqr", sources=[out / name for name in manifest["sources"]])
-    c = _Exported(_build(export, tmp_path), "rig_lqr")
+    c = _Exported(_build(export, tmp_path, object_cache), "rig_lqr")
     ctrl = build_controller("lqr", load_model(stage))
     y, r = _recorded(ctrl, load_model(stage), 0.2)
     u0 = np.array([0.0, 1.9])
@@ -292,7 +301,7 @@ class _SplitInTheLoop(_InTheLoop):
 QP_TOLERANCE_A = 1e-6
 
 
-def _exported_nmpc(model, tmp_path, budget, qp_solver="dual"):
+def _exported_nmpc(model, tmp_path, object_cache, budget, qp_solver="dual"):
     from maglev_oc.control.nmpc import NonlinearMPC
     from maglev_oc.sim.compiled_nmpc import CompiledNMPC
 
@@ -301,7 +310,7 @@ def _exported_nmpc(model, tmp_path, budget, qp_solver="dual"):
     options = {"qp_iterations": budget} if qp_solver == "dual" else {}
     export = export_controller(ctrl, tmp_path / "nmpc", qp_solver=qp_solver, **options)
     assert export.qp_solver == qp_solver
-    c = _ExportedNMPC(_build(export, tmp_path), export)
+    c = _ExportedNMPC(_build(export, tmp_path, object_cache), export)
     assert c.size() == export.memory_bytes  # the struct as the export reports it (and reads it)
     return nmpc, ctrl, export, c
 
@@ -327,7 +336,9 @@ def _python_split_commands(nmpc, y, r, c0):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("qp_solver", "budget"), [("dual", 25), ("dual", 1), ("qrqp", 20), ("qrqp", 1)])
-def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, tmp_path, qp_solver, budget):
+def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(
+    model, tmp_path, object_cache, qp_solver, budget
+):
     # The NMPC's real-time iteration exported self-contained, against the same preparation and
     # feedback Functions in CasADi's virtual machine (with qrqp) on the large step's first 0.1 s:
     # the current constraints are active there, so the QP's active set is exercised, not only its
@@ -340,7 +351,7 @@ def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, t
     # prepare_for(r), feedback) and prepare then feedback give the same commands bit for bit:
     # the reference here is a set-point after the step at t = 0, so the predicted reference is r
     # itself and no feedback prepares late.
-    nmpc, ctrl, export, c = _exported_nmpc(model, tmp_path, budget, qp_solver)
+    nmpc, ctrl, export, c = _exported_nmpc(model, tmp_path, object_cache, budget, qp_solver)
     assert set(export.entry_points) >= {"prepare", "prepare_for", "feedback", "step"}
     sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.1)
     res = ClosedLoop(RigTwin(model), ctrl).run(sc)
@@ -383,7 +394,7 @@ def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(model, t
 
 
 @pytest.mark.slow
-def test_exported_nmpc_prepare_and_feedback_in_closed_loop_tracks_like_python(model, tmp_path):
+def test_exported_nmpc_prepare_and_feedback_in_closed_loop_tracks_like_python(model, tmp_path, object_cache):
     # The split on the rig twin through ctypes (prepare, then feedback with the reading, every
     # sample) against the Python controller (the one-Function RTI step, in CasADi's VM): 1 mm
     # set-point steps on both axes at 0.2 s and back at 0.4 s (unconstrained), and the papers'
@@ -398,7 +409,7 @@ def test_exported_nmpc_prepare_and_feedback_in_closed_loop_tracks_like_python(mo
     # late exactly at the reference's steps (the prediction is the last sample held).
     from maglev_oc.sim.scenarios import SetpointSequence
 
-    _, ctrl, _, c = _exported_nmpc(model, tmp_path, DUAL_QP_BUDGET)
+    _, ctrl, _, c = _exported_nmpc(model, tmp_path, object_cache, DUAL_QP_BUDGET)
     scenarios = paper_scenarios()
     small = SetpointSequence((0.0, 0.2, 0.4), ((20e-3, 0.0), (21e-3, 1e-3), (20e-3, 0.0)))
     for sc in (
@@ -494,17 +505,18 @@ _STEP_CALLS = "if ({prefix}_step(&m, data + 8 * k, data + 8 * k + 2, out + 2 * k
 
 
 @pytest.mark.parametrize("name", ["pid", pytest.param("nmpc", marks=pytest.mark.slow)])
-def test_no_heap_allocation_after_init(model, tmp_path, name):
+def test_no_heap_allocation_after_init(model, tmp_path, object_cache, name):
     # every entry point (for the NMPC: step, prepare and feedback, alternately; on the large
     # step's first 0.06 s, where the QP is solved) with an allocator that aborts after init; the
-    # commands are those of the same export through ctypes (same code, same numbers: bit for bit)
+    # commands are those of the same export through ctypes (the same objects linked into the
+    # driver: same code, same numbers, bit for bit)
     if name == "nmpc":
-        _, ctrl, export, c = _exported_nmpc(model, tmp_path, DUAL_QP_BUDGET)
+        _, ctrl, export, c = _exported_nmpc(model, tmp_path, object_cache, DUAL_QP_BUDGET)
         sc = dataclasses.replace(paper_scenarios()["large_step"], duration=0.06)
     else:
         ctrl = build_controller(name, model)
         export = export_controller(ctrl, tmp_path / "export")
-        c = _Exported(_build(export, tmp_path), export.prefix)
+        c = _Exported(_build(export, tmp_path, object_cache), export.prefix)
         sc = dataclasses.replace(paper_scenarios()["setpoint_steps"], duration=0.06)
     res = ClosedLoop(RigTwin(model), ctrl).run(sc)
     y, r = res.y, res.reference
@@ -512,8 +524,8 @@ def test_no_heap_allocation_after_init(model, tmp_path, name):
     (tmp_path / "driver.c").write_text(NO_HEAP_DRIVER.format(prefix=export.prefix, split_calls=calls))
     exe = tmp_path / "driver"
     cmd = [c_compiler(), "-std=c99", "-Wall", "-Werror", "-O1", f"-I{export.directory}"]
-    sources = [str(tmp_path / "driver.c"), *map(str, export.sources)]
-    subprocess.run([*cmd, *sources, "-o", str(exe), "-lm"], check=True)
+    objects = _objects(export, tmp_path, object_cache)
+    subprocess.run([*cmd, str(tmp_path / "driver.c"), *map(str, objects), "-o", str(exe), "-lm"], check=True)
     data = tmp_path / "data.bin"
     np.ascontiguousarray(np.vstack([y, r]).T).tofile(data)
     n = str(y.shape[1])

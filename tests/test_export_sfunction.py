@@ -138,9 +138,11 @@ class SimStruct(ctypes.Structure):
     ]
 
 
-def _build(export, tmp_path) -> ctypes.CDLL:
+def _build(export, tmp_path, object_cache) -> ctypes.CDLL:
     """The export and its S-function in one shared library; the S-function calls nothing but the
-    export's interface (no allocation: Simulink owns its memory)."""
+    export's interface (no allocation: Simulink owns its memory). An object the session compiled
+    before from the same preprocessed source with the same flags is reused
+    (tests/compile_support.py)."""
     (tmp_path / "simstruc.h").write_text(SIMSTRUC_H)
     (tmp_path / "cg_sfun.h").write_text(CG_SFUN_H)
     cc = c_compiler()
@@ -153,7 +155,7 @@ def _build(export, tmp_path) -> ctypes.CDLL:
         extra = [] if src.name.endswith("_generated.c") else ["-Wextra", "-pedantic"]
         cmd = [cc, "-std=c99", "-Wall", "-Werror", *extra, "-O1", "-fPIC"]
         cmd += [f"-I{tmp_path}", f"-I{export.directory}"]
-        subprocess.run([*cmd, "-c", str(src), "-o", str(obj)], check=True, capture_output=True)
+        object_cache.compile(cmd, src, obj)
         objects.append(obj)
     out = subprocess.run(["nm", "-u", str(objects[-1])], check=True, capture_output=True, text=True).stdout
     undefined = {line.split()[-1] for line in out.splitlines() if line.strip()}
@@ -277,12 +279,12 @@ def _controller(name: str, model):
 
 
 @pytest.mark.parametrize("name", ["fl", "pid", pytest.param("nmpc", marks=pytest.mark.slow)])
-def test_simulink_block_gives_the_exported_step_bit_for_bit(model, tmp_path, name):
+def test_simulink_block_gives_the_exported_step_bit_for_bit(model, tmp_path, object_cache, name):
     # fl/pid: the set-point steps through t = 1 s (7500 samples); nmpc: the large step's first
     # 0.1 s, where the current constraints are active and the QP solver runs
     ctrl, scenario, seconds = _controller(name, model)
     export = export_controller(ctrl, tmp_path / "export")
-    lib = _build(export, tmp_path)
+    lib = _build(export, tmp_path, object_cache)
     sc = dataclasses.replace(paper_scenarios()[scenario], duration=seconds)
     res = ClosedLoop(RigTwin(model), ctrl).run(sc)
     y, r = res.y, res.reference
