@@ -1,0 +1,91 @@
+"""The building blocks the diagnosis library's candidates are written with
+(``maglev_oc.diagnosis.candidate``), against closed forms and sampling: the delta method's
+standard error against the exact gradient and against Monte Carlo, the Legendre polynomials'
+orthogonality, the ranges and delays a library takes from its log. Numpy only, under a second."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from maglev_oc.diagnosis.candidate import LibraryContext, delta_method, fmt, legendre
+from maglev_oc.errors import InputError
+from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+from maglev_oc.regression.data import prepare
+from maglev_oc.results import Estimate
+from tests.test_statistics_properties import RATE_FRICTION, _log
+
+
+def test_delta_method_is_the_exact_gradient_propagated():
+    """f(p) = p0 p1^2 / p2: its gradient in closed form, sqrt(g' C g) with a full covariance;
+    central differences of step 1e-6 p agree to 1e-8 relative (truncation h^2 f''' / 6)."""
+    p = np.array([2.0, -3.0, 0.5])
+    cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, -0.02], [0.0, -0.02, 0.01]])
+
+    def f(q):
+        return q[0] * q[1] ** 2 / q[2]
+
+    g = np.array([p[1] ** 2 / p[2], 2 * p[0] * p[1] / p[2], -p[0] * p[1] ** 2 / p[2] ** 2])
+    e = delta_method(f, p, cov, "N")
+    assert e.value == f(p) and e.unit == "N"
+    assert e.stderr == pytest.approx(math.sqrt(g @ cov @ g), rel=1e-8)
+
+
+def test_delta_method_matches_the_scatter_of_sampled_parameters():
+    """For small errors the delta method is the spread of f over parameters drawn from their
+    covariance: 40 000 draws give the standard deviation to 0.35 % (1/sqrt(2 n)), and a 1 %
+    relative parameter error keeps the nonlinearity's share below that; 3 % covers both."""
+    rng = np.random.default_rng(0)
+    p = np.array([1.5, 0.8])
+    cov = np.diag((0.01 * p) ** 2)
+    cov[0, 1] = cov[1, 0] = 0.5 * 0.01 * p[0] * 0.01 * p[1]
+
+    def f(q):
+        return np.hypot(q[0], q[1]) * np.exp(-q[1])
+
+    draws = rng.multivariate_normal(p, cov, 40_000)
+    spread = float(np.std([f(q) for q in draws]))
+    assert delta_method(f, p, cov, "").stderr == pytest.approx(spread, rel=0.03)
+
+
+def test_legendre_polynomials_are_orthogonal_with_their_norms():
+    """int_-1^1 P_m P_n = 2 / (2 n + 1) delta_mn, by Gauss-Legendre quadrature of order 10 (exact
+    for degree 19 polynomials); P_n(1) = 1 and P_n(-1) = (-1)^n."""
+    xi, w = np.polynomial.legendre.leggauss(10)
+    orders = (1, 2, 3, 4)
+    ps = legendre(xi, orders)
+    gram = np.array([[np.sum(w * a * b) for b in ps] for a in ps])
+    assert_allclose(gram, np.diag([2 / (2 * n + 1) for n in orders]), atol=1e-14)
+    ends = legendre(np.array([1.0, -1.0]), orders)
+    for n, v in zip(orders, ends, strict=True):
+        assert_allclose(v, [1.0, (-1.0) ** n], atol=1e-15)
+    with pytest.raises(InputError):
+        legendre(xi, (5,))
+
+
+def test_fmt_scales_value_and_error_alike():
+    assert fmt(Estimate(0.0123, 0.0004, "m"), 1e3, "mm") == "12 ± 0.4 mm"
+    assert fmt(Estimate(2.0, 0.3, "N")) == "2 ± 0.3 N"
+
+
+def test_library_context_takes_its_ranges_and_delay_from_the_log(model):
+    """The gap and position ranges are the 1st-99th percentiles of the valid samples, the gap's
+    median their median, the command's hold delay half a control period (the rig's 5 kHz when
+    the log does not say), masses and weights the model's, and a reference ratio reference /
+    fitted (1 for a constant the fit does not have)."""
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    ctx = LibraryContext(model, data)
+    x = data.x[:, data.valid]
+    assert ctx.position_range == pytest.approx(tuple(np.percentile(x[2], [1, 99])), rel=1e-12)
+    assert ctx.gap_range == pytest.approx(tuple(np.percentile(x[0], [1, 99])), rel=1e-12)
+    assert ctx.gap_median == pytest.approx(float(np.median(x[0])), rel=1e-12)
+    assert ctx.hold_delay == pytest.approx(0.5 * RIG_SAMPLE_TIME, rel=1e-12)
+    p = model.params
+    assert ctx.mass("vertical") == p.mass_vertical and ctx.mass("horizontal") == p.mass_horizontal
+    assert ctx.weight("horizontal") == pytest.approx(p.mass_horizontal * p.gravity, rel=1e-12)
+    c2 = model.constants.C2
+    assert ctx.reference_ratio("C2", {"C2": 2 * c2}) == pytest.approx(0.5, rel=1e-12)
+    assert ctx.reference_ratio("C2", {}) == 1.0
