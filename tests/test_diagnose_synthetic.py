@@ -85,3 +85,40 @@ def test_an_effects_force_is_its_acceleration_times_the_mass(with_friction, mode
     v = d.data.x[3, hold]
     planted = np.sqrt(np.mean(((COULOMB * np.sign(v) + VISCOUS * v) / m) ** 2))
     assert e.contribution_rms.horizontal == pytest.approx(planted, rel=0.15)
+
+
+def test_the_stage_file_carries_the_refitted_constant_and_a_compensation_that_opposes_friction(
+    with_friction, model
+):
+    """The stage file of the diagnosis: C1 (the moving axis's constant) refitted with its
+    standard error, C2..C4 the model's (their axis did not move, so no covariance); the effect's
+    acceleration is the fitted term's, and its compensable part is the friction force itself
+    (the holding share, a nuisance, left out): at a speed far above the friction's reversal
+    speed it is -(Coulomb sign(v) + viscous v) / M_h with the reported sizes, opposing the
+    motion, which a feedforward cancels by adding the opposite (within 1 %: the smoothed sign at
+    20x the reversal speed)."""
+    from maglev_oc.diagnosis.stage_file import diagnosis_stage_file
+    from maglev_oc.model.stagefile import Provenance
+
+    d = with_friction
+    sf = diagnosis_stage_file(d, model, Provenance.now((), "test"))
+    c = sf.constants
+    assert c.C1 == d.constants_final["C1"].value and c.C1 != model.constants.C1
+    assert (c.C2, c.C3, c.C4) == (model.constants.C2, model.constants.C3, model.constants.C4)
+    assert sf.covariance is None and sf.stderr["C1"] == d.constants_final["C1"].stderr > 0
+    assert all(math.isnan(sf.stderr[k]) for k in ("C2", "C3", "C4"))  # unknown, not zero
+    (effect,) = sf.effects
+    e = d.effects[0]
+    assert effect.name == e.name == "guide_friction_horizontal"
+    m = model.params.mass_horizontal
+    p = e.parameters
+    for v in (0.1, -0.1):  # [m/s]
+        x = np.array([0.02, 0.0, 0.01, v])
+        i = np.array([0.3, 1.2])
+        whole = effect.acceleration_function(x, i).full().ravel()
+        term = e.candidate.term.acceleration(e.coefficients)(x, i, np.zeros(2)).full().ravel()
+        np.testing.assert_allclose(whole, term, rtol=1e-12, atol=1e-15)
+        comp = effect.compensation_function(x).full().ravel()
+        expected = -(p["coulomb"].value * np.sign(v) + p["viscous"].value * v) / m
+        assert comp[0] == 0.0
+        assert comp[1] == pytest.approx(expected, rel=0.01)
