@@ -76,3 +76,24 @@ def test_report_states_each_value_error_and_the_timing_parts(fit):
     assert "total" not in inside
     assert [p.split()[0] for p in inside.split(", ")] == [k for k in fit.timings if k != "total"]
     assert not math.isnan(total)
+
+
+def test_a_npfsi_only_outcome_is_validated_without_a_gap_offset(model):
+    """identify with NPFSI alone has no least-squares fit (best is None): its validation uses
+    NPFSI's constants with no gap offset and no terms, i.e. it is ``validate`` called with those
+    (same numbers); on this exact synthetic log that model follows the measured position over
+    0.1 s windows to better than 99 % (measured 99.9 %; a 1 m offset would leave nothing)."""
+    from maglev_oc.identification.pipeline import VALIDATION_BANDWIDTH, identify
+    from maglev_oc.regression.data import prepare
+    from maglev_oc.validation import validate
+
+    log = _log(model, friction=0.0)
+    out = identify([log], model, estimate=("C1",), methods=("npfsi",), npfsi_eps=(0.01,))
+    assert out.best is None and out.equation_error is None and len(out.npfsi) == 1
+    data = prepare([log], bandwidth=VALIDATION_BANDWIDTH)
+    fitted = model.with_constants(out.constants())
+    direct = validate(data, data.valid, fitted, [], description="d", data_description="d", gap_offset=0.0)
+    for got, want in zip(out.validation.fits, direct.fits, strict=True):
+        assert got.fit["horizontal"] == pytest.approx(want.fit["horizontal"], rel=1e-12)
+    assert out.validation.fits[0].horizon == pytest.approx(0.1)
+    assert out.validation.fits[0].fit["horizontal"] > 99.0
