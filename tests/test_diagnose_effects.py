@@ -8,6 +8,7 @@ import math
 
 import pytest
 
+from maglev_oc.diagnosis.selection import SMOOTH_POSITION, SelectionSettings
 from tests.diagnosis_support import diagnose_path, relative_errors
 from tests.independent.scoring import score
 from tests.independent.sets import named_set
@@ -55,11 +56,6 @@ def test_each_effect_alone_is_found_first_and_sized(generated, stem, name):
 
 KNOWN_PAIR_FAILURES = {
     "pairs_02": FIELD_SHAPE,
-    "pairs_03": pytest.mark.xfail(
-        strict=True,
-        reason="a 1.5 % end effect beside a 4 mrad misalignment with 8 um waviness at 60 mm: the waviness's "
-        "along-guide force is named a detent force at the pole pitch (57 mm) and the end effect is not found",
-    ),
     "pairs_05": pytest.mark.xfail(
         strict=True,
         reason="the amplifier lag next to vertical friction: the lag fits the training part (1.6 ms against "
@@ -71,7 +67,11 @@ KNOWN_PAIR_FAILURES = {
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "stem",
-    [pytest.param(stem, marks=KNOWN_PAIR_FAILURES.get(stem, ()), id=stem) for stem, _ in named_set("pairs")],
+    [
+        pytest.param(stem, marks=KNOWN_PAIR_FAILURES.get(stem, ()), id=stem)
+        for stem, _ in named_set("pairs")
+        if stem != "pairs_03"  # its own test below
+    ],
 )
 def test_two_effects_together_are_both_found(generated, stem):
     path, truth = generated("pairs", stem)
@@ -80,6 +80,30 @@ def test_two_effects_together_are_both_found(generated, stem):
     assert s.true_first, s.claimed
     assert s.no_false_claim, s.claimed
     assert s.size_right, (s.claimed, s.notes)  # both found, each within 30 %
+
+
+@pytest.mark.slow
+def test_a_periodic_force_over_too_few_periods_is_not_claimed_and_the_residual_is_reported(generated):
+    # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 1.5 % end effect. The
+    # travel (about 70 mm) covers 1.2 pole pitches: the end effect's smooth fall of the thrust
+    # towards the ends fits a 57 mm detent as well as a bowl. Such a force is not separable from
+    # a smooth dependence on the position (SelectionSettings.min_periods = 1.5): listed with that
+    # reason, never claimed, and the position dependence it stood for reported as unexplained.
+    # (The end effect itself, 2.6 % at +-40 mm, is not found: its held-out z is 1.2.)
+    path, truth = generated("pairs", "pairs_03")
+    d = diagnose_path(path)
+    s = score("pairs_03", truth, d.to_dict()["effects"])
+    assert s.true_first and s.no_false_claim, s.claimed
+    assert [e.name for e in d.effects] == ["guide_misalignment"]
+    # within 30 % of the truth (the bound)
+    assert d.effects[0].parameters["slope"].value == pytest.approx(0.004, rel=0.3)
+    periodic = {n.name: n for n in d.not_separable if SMOOTH_POSITION in n.confounded_with}
+    assert "cogging_horizontal_57mm" in periodic, [n.name for n in d.not_separable]
+    assert "fewer than 1.5" in periodic["cogging_horizontal_57mm"].reason
+    assert any(u.axis == "horizontal" and u.depends_on == "position" for u in d.unexplained), d.unexplained
+    # with the rule off the same log names the detent (the failure the rule fixes)
+    off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
+    assert "cogging_horizontal_57mm" in [e.name for e in off.effects]
 
 
 @pytest.mark.slow

@@ -54,6 +54,7 @@ from maglev_oc.diagnosis.refit import (
 )
 from maglev_oc.diagnosis.result import ERROR_METRIC, Diagnosis, Effect, NotSeparable
 from maglev_oc.diagnosis.selection import (
+    SMOOTH_POSITION,
     Judgement,
     Selection,
     SelectionSettings,
@@ -360,7 +361,9 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
     periods = unexplained_periods(tr)
     while True:
         chosen = [by_name[n] for n in sel.selected]
-        explained = chosen + [by_name[n.name] for n in not_sep]
+        # a periodic force seen over too few periods explains nothing: the residual's position
+        # dependence it stands for is still reported
+        explained = chosen + [by_name[n.name] for n in not_sep if SMOOTH_POSITION not in n.confounded_with]
         unexplained = find_unexplained(
             session.data,
             fitted,

@@ -23,7 +23,10 @@ effects already chosen (bias-compensated least squares on the training blocks,
    ``max_correlation``. A confounded candidate goes to ``not_separable`` with what it is
    confounded with; it is never claimed (a constant vertical force, for example, is nearly
    collinear with a common scale of the vertical magnetic force, which near equilibrium always
-   carries the weight).
+   carries the weight). A force periodic in the position at one of the motor's periods is, in the
+   same way, not separable from a smooth dependence on the position when the logged travel covers
+   fewer than ``min_periods`` of its periods (a sine over 1.2 periods is a bowl: the end effects
+   of pairs_03 of the independent set passed for a 57 mm detent).
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -59,7 +62,20 @@ from maglev_oc.regression.design import Design
 from maglev_oc.regression.solve import SubsetFit, fit_subset
 from maglev_oc.regression.terms import Estimate
 
-__all__ = ["Judgement", "Selection", "SelectionSettings", "evidence", "fitted_constants", "judge", "select"]
+__all__ = [
+    "SMOOTH_POSITION",
+    "Judgement",
+    "Selection",
+    "SelectionSettings",
+    "evidence",
+    "fitted_constants",
+    "judge",
+    "select",
+]
+
+
+SMOOTH_POSITION = "a smooth dependence on the position"
+"""What a position-periodic candidate seen over too few periods is confounded with."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +90,7 @@ class SelectionSettings:
     min_effect: float = 2.25e-3
     max_vif: float = 100.0
     max_correlation: float = 0.99
+    min_periods: float = 1.5
     parameter_penalty: float = 0.002
     rival_margin: float = 0.05
     max_effects: int = 4
@@ -247,6 +264,7 @@ def judge(
     contrib = np.sqrt(np.sum((r0 - r1) ** 2, axis=1) / n_counted)
     # separability from the normal matrix of the joint fit
     vif, partners = _separability(design, cand, fit, settings)
+    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
     measured = Judgement(
         cand.name,
         "passes",
@@ -262,8 +280,14 @@ def judge(
         cand.term.physical_parameters(coef, cov, fitted_constants(fit)),
         fit,
     )
-    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals)
-    confounded = partners or (("C1..C4",) if verdict == "not separable" else ())
+    seen = _periods_seen(cand, measured.physical, travel)
+    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen)
+    if verdict != "not separable":
+        confounded: tuple[str, ...] = ()
+    elif seen is not None and seen < settings.min_periods:
+        confounded = (SMOOTH_POSITION,)
+    else:
+        confounded = partners or ("C1..C4",)
     return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
 
 
@@ -274,8 +298,10 @@ def _verdict(
     cur_fit: SubsetFit,
     settings: SelectionSettings,
     rivals: dict[tuple[str, int], tuple[float, str]] | None,
+    periods_seen: float | None = None,
 ) -> tuple[str, str]:
-    """(verdict, reason) from the measured evidence, the tests in the module doc's order."""
+    """(verdict, reason) from the measured evidence, the tests in the module doc's order;
+    ``periods_seen``: the logged travel in periods of a position-periodic candidate."""
     gain, z, wald, threshold, contrib = j.gain, j.z, j.wald, j.wald_threshold, j.contribution_rms
     if j.fit.compensation < cur_fit.compensation:
         return "not significant", (
@@ -297,6 +323,14 @@ def _verdict(
     if j.vif > settings.max_vif or j.confounded_with:
         what = ", ".join(j.confounded_with) if j.confounded_with else "the base constants"
         return "not separable", f"confounded with {what} on this log (variance inflation {j.vif:.3g})"
+    if periods_seen is not None and periods_seen < settings.min_periods:
+        period = j.physical["period"].value
+        return "not separable", (
+            f"the logged travel covers {periods_seen:.1f} periods of {period * 1e3:.1f} mm, fewer than "
+            f"{settings.min_periods:g}: a force periodic over that length is not told from a smooth "
+            f"dependence on the position (a travel of {settings.min_periods * period * 1e3:.0f} mm or more "
+            "separates them)"
+        )
     why = cand.plausible(j.physical)
     if why:
         return "implausible", why
@@ -310,6 +344,18 @@ def _verdict(
                 "this effect's shape"
             )
     return "passes", ""
+
+
+def _periods_seen(cand: Candidate, physical: dict[str, Estimate], travel: float) -> float | None:
+    """The logged travel in periods of a force periodic in the position at one of the motor's
+    periods (None for others). Guide waviness is not held to it: its period is the one the
+    residual's spatial spectrum shows, and the guide's shape, which a misalignment's waviness
+    is, stands for what the position dependence is (without it a straight-guide log's waviness
+    went to the 38 mm cogging, single_12 of the independent set)."""
+    period = physical.get("period")
+    if cand.family != "periodic" or cand.variable != "position" or period is None or not period.value > 0:
+        return None
+    return travel / period.value
 
 
 def _separability(
