@@ -55,7 +55,6 @@ def test_each_effect_alone_is_found_first_and_sized(generated, stem, name):
 
 
 KNOWN_PAIR_FAILURES = {
-    "pairs_02": FIELD_SHAPE,
     "pairs_05": pytest.mark.xfail(
         strict=True,
         reason="the amplifier lag next to vertical friction: the lag fits the training part (1.6 ms against "
