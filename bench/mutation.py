@@ -17,6 +17,12 @@ printed with its 95 % Wilson interval, so the estimate says how far it can be of
 timed-out mutants count as detected; "no tests" (a function no quick test reaches) and
 "survived" count against the score. Surviving diffs go to ``survivors.txt`` in the work folder.
 Not run in CI.
+
+Each mutant's tests run in a child of mutmut's fork server (never of the process that ran the
+whole suite), with one BLAS/OpenMP thread and a wall-clock limit that allows for the fixtures a
+fresh process builds again (:data:`TIMEOUT_CONSTANT`); the report gives the score both with the
+timeouts as detected and without them. ``--commit C`` measures commit C (default HEAD), e.g. the
+tests before a change against the same sample.
 """
 
 from __future__ import annotations
@@ -34,10 +40,29 @@ import sys
 import tarfile
 from pathlib import Path
 
+# One thread per numerical library in every process mutmut starts. mutmut forks a child per mutant
+# from a process that has imported numpy and CasADi; a thread pool started there (OpenBLAS's, an
+# OpenMP runtime's) can hold a lock at the fork, and the child then sleeps on it forever (runs of
+# 2026-11-23 left children asleep with no CPU, counted as "timeout", i.e. as killed). Set before
+# any subprocess starts, so it reaches pytest before numpy is imported.
+THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+os.environ.update(THREADS)
+
 ROOT = Path(__file__).resolve().parents[1]
 WORK = ROOT / "bench" / "out" / "mutation"
 PACKAGES = ("model", "control", "region", "identification", "diagnosis", "regression")
 DETECTED = ("killed", "timeout", "segfault")
+TIMEOUT_MULTIPLIER = 3.0
+TIMEOUT_CONSTANT = 90.0
+"""A mutant's run is stopped after TIMEOUT_MULTIPLIER x (its tests' clean duration +
+TIMEOUT_CONSTANT) seconds of wall time (twice that of CPU) and counted as "timeout". mutmut's
+defaults (15 x (duration + 1 s)) misjudge this suite both ways. Too short: a test's clean duration
+is measured in one session, where a module or session fixture's setup is charged to the first
+test that asks for it; a mutant's tests run in a fresh process and build their fixtures again
+(a twin log, a diagnosis, a region certificate: 5-60 s under load), so mutants whose tests were
+charged 0.02 s were stopped after 4-15 s while building them and counted as killed (15 of the
+first 40 of a run of 2026-11-24). Too long: a child that hangs holds a slot for hours. 90 s covers
+the largest fixture setup seen, and 3x the clean time covers a run sharing the two cores."""
 
 
 def main() -> None:
@@ -47,6 +72,9 @@ def main() -> None:
     parser.add_argument("--tests", nargs="+", help="test files to run (default: the quick suite)")
     parser.add_argument("--sample", type=int, default=120, help="mutants per package; 0 runs all")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--commit", default="HEAD", help="the commit whose sources and tests are copied (default HEAD)"
+    )
     parser.add_argument("--children", type=int, default=2)
     parser.add_argument("--fresh", action="store_true", help="start from a new copy of the sources")
     parser.add_argument("--show", action="store_true", help="print the surviving mutants' diffs")
@@ -54,18 +82,20 @@ def main() -> None:
     parser.add_argument(
         "--verify",
         action="store_true",
-        help="rerun each survivor against the current sources and quick tests that import its module",
+        help="rerun each survivor against HEAD's sources and the quick tests that import its module",
     )
     parser.add_argument("--budget", type=float, default=3600.0, help="seconds --verify may take")
     parser.add_argument(
-        "--since", help="with --verify: the commit the run was made at (modules changed since are not rerun)"
+        "--since",
+        help="with --verify: the commit the run was made at (default the run's own, commit.txt; modules "
+        "changed since are not rerun)",
     )
     args = parser.parse_args()
     if shutil.which("mutmut") is None:
         raise SystemExit('mutmut is missing: pip install -e ".[mutation]"')
     paths = [args.mutate] if args.mutate else [f"maglev_oc/{p}" for p in args.packages]
     if not args.report_only:
-        _prepare(paths, args.tests, fresh=args.fresh)
+        _prepare(paths, args.tests, fresh=args.fresh, commit=args.commit)
     status = _status()
     groups = _by_package(status, paths)
     chosen = _sample(groups, args.sample, args.seed)
@@ -90,29 +120,16 @@ def main() -> None:
         print(text)
 
 
-def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool) -> None:
+def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool, commit: str = "HEAD") -> None:
     """Copy the sources into WORK and let mutmut generate the mutants and its test map."""
     if fresh and WORK.exists():
         shutil.rmtree(WORK)
     WORK.mkdir(parents=True, exist_ok=True)
-    # the committed sources (HEAD), not the work tree: the score belongs to a commit, and edits
-    # made while the run goes on do not reach it
-    for name in ("maglev_oc", "tests"):
-        if (WORK / name).exists():
-            shutil.rmtree(WORK / name)
-    archive = subprocess.run(
-        ["git", "archive", "--format=tar", "HEAD", "maglev_oc", "tests", "analyses"],
-        cwd=ROOT,
-        capture_output=True,
-        check=True,
-    ).stdout
-    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-        tar.extractall(WORK, filter="data")
-    # the analyses ship as maglev_oc.analyses (an editable install maps them to ROOT/analyses):
-    # inside the copied package they are found first
-    shutil.move(WORK / "analyses", WORK / "maglev_oc" / "analyses")
+    # the committed sources (HEAD or --commit), not the work tree: the score belongs to a commit,
+    # and edits made while the run goes on do not reach it
+    _extract(commit)
     (WORK / "commit.txt").write_text(
-        subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+        subprocess.run(["git", "rev-parse", commit], cwd=ROOT, capture_output=True, text=True).stdout
     )
     sources = ", ".join(f'"{p}"' for p in paths)
     selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
@@ -128,11 +145,36 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool) -> None:
         f"pytest_add_cli_args_test_selection = [{selection}]\n"
         f"{marker}"
         'also_copy = ["tests/", "maglev_oc/"]\n'
+        # the mutants run in children of a fork server that has only collected the tests, not of
+        # the process that ran the whole suite to map tests to functions (its Dask clusters, event
+        # loops and thread pools are not inherited)
+        'process_isolation = "forkserver"\n'
+        # the limits of a mutant's run (see TIMEOUT_CONSTANT)
+        f"timeout_multiplier = {TIMEOUT_MULTIPLIER}\n"
+        f"timeout_constant = {TIMEOUT_CONSTANT}\n"
     )
     (WORK / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text() + config)
     # A pattern that matches no mutant: mutmut generates the mutants and collects which tests
     # reach which function, then stops before running any mutant.
     subprocess.run(["mutmut", "run", "no-such-mutant-*"], cwd=WORK, capture_output=True)
+
+
+def _extract(commit: str) -> None:
+    """The package and tests of ``commit`` into WORK (replacing the copies there)."""
+    for name in ("maglev_oc", "tests"):
+        if (WORK / name).exists():
+            shutil.rmtree(WORK / name)
+    archive = subprocess.run(
+        ["git", "archive", "--format=tar", commit, "maglev_oc", "tests", "analyses"],
+        cwd=ROOT,
+        capture_output=True,
+        check=True,
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(WORK, filter="data")
+    # the analyses ship as maglev_oc.analyses (an editable install maps them to ROOT/analyses):
+    # inside the copied package they are found first
+    shutil.move(WORK / "analyses", WORK / "maglev_oc" / "analyses")
 
 
 def _status() -> dict[str, str]:
@@ -179,9 +221,13 @@ def _report(
         # a run stopped early leaves mutants "not checked": they count neither way
         judged = max(len(run) - n_eq - counts["not checked"], 1)
         low, high = _wilson(detected, judged)
+        # a timeout is a mutant that made its tests loop, or a child that hung for another reason:
+        # the score without them is the bound that does not rely on the timeouts being real
+        strict = (detected - counts["timeout"]) / judged
         print(
             f"{path:<30}{len(names):>8}{len(run):>5}{detected:>7}{n_eq:>6}{detected / judged:>7.1%}"
-            f"   {low:.1%} - {high:.1%}   ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))})"
+            f"   {low:.1%} - {high:.1%}   ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))};"
+            f" {strict:.1%} with timeouts as survivors)"
         )
         # each package weighted by its number of mutants for the overall estimate
         if run:
@@ -192,33 +238,28 @@ def _report(
 
 
 def _verify(names: list[str], budget: float, since: str | None) -> set[str]:
-    """Survivors killed when rerun against the current sources and quick tests.
+    """Survivors killed when rerun against the committed sources and quick tests (HEAD).
 
     mutmut runs for each mutant only the tests it saw reach the mutated function; a function
     first reached inside a session fixture is attributed to whichever test built the fixture,
     so a test that uses the fixture later is not rerun and the mutant is reported as surviving;
-    and tests written after the run are not in its map. Here the work copy takes the current
-    sources and tests, each survivor is applied to it and the test files that import its module
-    (or its package) run, stopping at the first failure; the file is restored after each. A
-    survivor in a module changed since the run is left as it is (its mutant was made from the
-    old code). Stops after ``budget`` seconds."""
-    import filecmp
+    and tests written after the run are not in its map. Here the work copy takes HEAD's sources
+    and tests (as a run does: not the work tree, where others' edits may be half done), each
+    survivor is applied to it and the test files that import its module (or its package) run,
+    stopping at the first failure; the file is restored after each. A survivor in a module
+    changed since the run is left as it is (its mutant was made from the old code). Stops after
+    ``budget`` seconds."""
     import time
 
-    changed = set()
-    if since:
-        diff = subprocess.run(
-            ["git", "diff", "--name-only", since, "--", "maglev_oc"], cwd=ROOT, capture_output=True, text=True
-        )
-        changed = {".".join(Path(p).with_suffix("").parts) for p in diff.stdout.split()}
-    else:
-        for path in (ROOT / "maglev_oc").rglob("*.py"):
-            old = WORK / path.relative_to(ROOT)
-            if not old.is_file() or not filecmp.cmp(path, old, shallow=False):
-                changed.add(".".join(path.relative_to(ROOT).with_suffix("").parts))
-    for name in ("maglev_oc", "tests"):
-        shutil.rmtree(WORK / name)
-        shutil.copytree(ROOT / name, WORK / name, ignore=shutil.ignore_patterns("__pycache__"))
+    since = since or (WORK / "commit.txt").read_text().strip()
+    diff = subprocess.run(
+        ["git", "diff", "--name-only", since, "HEAD", "--", "maglev_oc"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    changed = {".".join(Path(p).with_suffix("").parts) for p in diff.stdout.split()}
+    _extract("HEAD")
     killed = set()
     clean: dict[tuple, bool] = {}
     # tests that read the repository's files (README, exports) are not about a mutant's effect
