@@ -52,8 +52,8 @@ def test_a_force_that_depends_on_the_position_is_reported_with_its_variable_and_
     """A spring-and-cubic force in the position: reported once, horizontal, depending on the
     position, with the RMS of the planted acceleration on the held-out block as its size (within
     5 %: the probe's Legendre orders reproduce a cubic exactly, but the size is the net change of
-    the prediction and the refit of C1 and the friction takes a little of it; measured 2.5 %) and that size times
-    the horizontal mass as its force."""
+    the prediction and the refit of C1 and the friction takes a little of it; measured 2.5 %) and
+    that size times the horizontal mass as its force."""
 
     def acc(x3):
         return -2.0 * x3 + 3000.0 * x3**3  # [m/s^2] at x3 in m: 0.04 and 0.08 m/s^2 at 20 mm
