@@ -122,3 +122,14 @@ def test_the_stage_file_carries_the_refitted_constant_and_a_compensation_that_op
         expected = -(p["coulomb"].value * np.sign(v) + p["viscous"].value * v) / m
         assert comp[0] == 0.0
         assert comp[1] == pytest.approx(expected, rel=0.01)
+
+
+def test_both_models_are_validated_on_the_held_out_block(with_friction):
+    """The diagnosis validates the base model and the model with the effects, both on the held
+    out block, and the friction it found makes the second follow the measured position better
+    (fit over the shortest windows, measured 95.4 % before and 99.9 % after)."""
+    d = with_friction
+    before, after = d.validation_before, d.validation_after
+    assert before is not None and after is not None
+    assert "base model" in before.model and "guide_friction_horizontal" in after.model
+    assert after.fits[0].fit["horizontal"] > before.fits[0].fit["horizontal"]

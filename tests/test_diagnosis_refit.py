@@ -101,3 +101,25 @@ def ca_put(expr):
     import casadi as ca
 
     return ca.vertcat(0, expr)
+
+
+def test_the_refit_with_the_effects_does_not_see_the_held_out_block(model):
+    """converged_references fits the constants with the chosen effects on the training samples
+    only: changing the measured accelerations on the held-out block leaves its constants exactly
+    as they were, while the same change on the training block moves them."""
+    from maglev_oc.diagnosis.refit import converged_references
+
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    train, hold = data.masks(0.25)
+    chosen = ["guide_friction_horizontal"]
+
+    def refit(d):
+        m = converged_references(model, model, d, chosen, train, hold, np.array([0.0, 1.0]))
+        return np.asarray(m.constants.as_array(), dtype=float)
+
+    ref = refit(data)
+    for mask, same in ((hold, True), (train, False)):
+        acc = data.acc.copy()
+        acc[1, mask] *= 1.2
+        got = refit(dataclasses.replace(data, acc=acc))
+        assert np.array_equal(got, ref) == same
