@@ -89,3 +89,29 @@ def test_library_context_takes_its_ranges_and_delay_from_the_log(model):
     c2 = model.constants.C2
     assert ctx.reference_ratio("C2", {"C2": 2 * c2}) == pytest.approx(0.5, rel=1e-12)
     assert ctx.reference_ratio("C2", {}) == 1.0
+
+
+def test_every_candidates_physical_parameters_are_numbers_with_units(model):
+    """Every candidate of the library turns any coefficient vector (with its covariance) into
+    physical parameters that are finite numbers with a non-negative finite standard error and a
+    unit; the fixed periods a candidate reports are the motor's own (slot pitch and pole pitch
+    for the thrust ripple)."""
+    from maglev_oc.diagnosis.library import candidate_library
+
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    library = candidate_library(model, data)
+    assert len(library) >= 15
+    constants = {k: getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    for cand in library:
+        k = cand.term.n_parameters
+        q = 0.01 * (1 + np.arange(k))  # small, distinct, positive
+        params = cand.term.physical_parameters(q, 1e-6 * np.eye(k), constants)
+        assert params, cand.name
+        for name, e in params.items():
+            assert isinstance(e.value, float) and math.isfinite(e.value), (cand.name, name, e)
+            assert math.isfinite(e.stderr) and e.stderr >= 0, (cand.name, name, e)
+            assert isinstance(e.unit, str), (cand.name, name, e)
+    (ripple,) = [c for c in library if c.name == "thrust_ripple"]
+    params = ripple.term.physical_parameters(np.array([0.01, 0.0, 0.0, 0.02]), 1e-6 * np.eye(4), constants)
+    assert params["period"].value == model.params.slot_pitch
+    assert params["period_pole_pitch"].value == model.params.pole_pitch
