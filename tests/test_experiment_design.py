@@ -199,3 +199,14 @@ def test_doptimal_keeps_to_a_budget_smaller_than_the_papers(model, designer):
     assert d.prediction.peak_current[1] <= budget.vertical * (1 + 1e-9)
     assert d.prediction.log_det < d.baseline.log_det  # measured 60.0 against 73.5
     assert d.settings["duration_s"] == DURATION and d.settings["vertical"] != "papers' sum of sines"
+
+
+def test_a_multisine_design_fills_the_papers_budget_and_records_its_settings(model, designer):
+    """The multisine is scaled to the largest amplitudes within the papers' current budget: no
+    axis above it, one axis at it (within 5 %: the scaling's search stops there), and its result
+    records the duration and seed beside the shapes, as every kind does (0.9 s of CPU)."""
+    d = design_experiment("multisine", DURATION, model=model, designer=designer)
+    ratio = np.array(d.prediction.peak_current) / np.array([d.budget.horizontal, d.budget.vertical])
+    assert np.all(ratio <= 1 + 1e-9) and np.max(ratio) > 0.95, ratio
+    assert d.settings["duration_s"] == DURATION and d.settings["seed"] == 0
+    assert set(d.settings["vertical"]) == {"band_hz", "tones", "tilt"}
