@@ -115,3 +115,42 @@ def test_every_candidates_physical_parameters_are_numbers_with_units(model):
     params = ripple.term.physical_parameters(np.array([0.01, 0.0, 0.0, 0.02]), 1e-6 * np.eye(4), constants)
     assert params["period"].value == model.params.slot_pitch
     assert params["period_pole_pitch"].value == model.params.pole_pitch
+
+
+def test_reported_sizes_are_read_off_the_candidates_own_acceleration(model):
+    """A candidate's physical size must describe the acceleration it adds: with the model's
+    constants as the fit's, the end effects' thrust loss at the ends is the change of its
+    horizontal acceleration from the centre of the travel to an end, per unit of the thrust
+    -L1 u1; the magnets' field departure at the smallest gap is twice the relative change of
+    the thrust there from the centre of the logged gaps (the attraction follows B^2, the thrust
+    B). Both evaluated here from the terms' functions and the model's L1 (1e-9: the same
+    arithmetic in another order)."""
+    from maglev_oc.diagnosis.library import candidate_library
+
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    by_name = {c.name: c for c in candidate_library(model, data)}
+    constants = {k: getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    u = np.array([0.7, 1.4])
+
+    def acc_h(cand, q, gap, x3):
+        x = np.array([gap, 0.0, x3, 0.0])
+        return float(cand.term.acceleration(q)(x, u, np.zeros(2)).full()[1, 0])
+
+    def thrust(gap):
+        return -float(model.coefficients(gap)[0, 0]) * u[0]
+
+    end = by_name["end_effects"]
+    p = end.term.physical_parameters(np.array([0.1, 0.0]), np.eye(2) * 1e-8, constants)
+    lo, hi = p["low_end_position"].value, p["high_end_position"].value
+    gap = 0.02
+    change = (acc_h(end, [0.1, 0.0], gap, lo) - acc_h(end, [0.1, 0.0], gap, 0.5 * (lo + hi))) / thrust(gap)
+    assert p["thrust_loss_at_ends"].value == pytest.approx(-change, rel=1e-9)
+
+    field = by_name["magnet_field_gap_dependence"]
+    q = np.array([0.03, -0.02])
+    p = field.term.physical_parameters(q, np.eye(2) * 1e-8, constants)
+    small, large = p["smallest_gap"].value, p["largest_gap"].value
+    centre, half = 0.5 * (small + large), max(0.5 * (large - small), 1e-4)
+    for key, g in (("at_smallest_gap", centre - half), ("at_largest_gap", centre + half)):
+        rel = acc_h(field, q, g, 0.0) / thrust(g) - acc_h(field, q, centre, 0.0) / thrust(centre)
+        assert p[f"attraction_change_{key}"].value == pytest.approx(2 * rel, rel=1e-9)
