@@ -436,3 +436,32 @@ def test_slow_samples_stop_counting_once_friction_is_chosen(with_friction):
         assert counted[0].all()
         # the sines' speeds spread over 0..0.07 m/s: both speeds leave some samples out, not all
         assert 0 < counted[1].sum() < counted[1].size
+
+
+# --------------------------------------------------------------------------------------------
+# errors-in-variables compensation that cannot be complete
+
+
+def test_compensation_stops_where_the_normal_matrix_stops_being_positive_definite(model):
+    """Logged currents (measured, so their whole noise floor is error) with 5 A of white noise:
+    the estimated errors exceed the columns' signal, and removing all of them would leave an
+    indefinite normal matrix. The fit removes the largest share that keeps it positive definite
+    (bisection to 2^-30), says so, and that share is the boundary: the matrix is positive
+    definite at it and not at 1 % more (eigenvalues computed here)."""
+    rng = np.random.default_rng(0)
+    log = _log(model, friction=RATE_FRICTION)
+    noisy = dataclasses.replace(log, u=log.u + 5.0 * rng.standard_normal(log.u.shape), currents_measured=True)
+    d = _design(model, noisy)
+    fit = fit_subset(d, ["base", "viscous_horizontal"])
+    assert 0 < fit.compensation < 1 and not fit.compensated
+    assert f"only {fit.compensation:.0%}" in fit.message
+    idx = fit.index
+    gram, noise = d.gram.sum(axis=0)[np.ix_(idx, idx)], d.noise.sum(axis=0)[np.ix_(idx, idx)]
+    assert np.min(np.linalg.eigvalsh(gram - fit.compensation * noise)) > 0
+    assert np.min(np.linalg.eigvalsh(gram - min(fit.compensation + 0.01, 1.0) * noise)) < 0
+    assert np.min(np.linalg.eigvalsh(gram - noise)) < 0  # the full removal really is indefinite
+
+
+def test_a_design_indexes_no_groups_as_no_columns(with_friction):
+    assert with_friction.indices([]).size == 0 and with_friction.indices([]).dtype.kind == "i"
+    assert list(with_friction.indices(["base", "viscous_horizontal"])) == [0, 1]
