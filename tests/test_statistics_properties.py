@@ -465,3 +465,16 @@ def test_compensation_stops_where_the_normal_matrix_stops_being_positive_definit
 def test_a_design_indexes_no_groups_as_no_columns(with_friction):
     assert with_friction.indices([]).size == 0 and with_friction.indices([]).dtype.kind == "i"
     assert list(with_friction.indices(["base", "viscous_horizontal"])) == [0, 1]
+
+
+def test_linearization_values_given_by_name_take_the_defaults_for_the_rest(model):
+    """build_design(at=...) as a mapping: the names it gives are used, the others keep their
+    defaults (the model's constants, the terms' initial values): an empty mapping is no mapping,
+    and naming C1 at its default changes nothing."""
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    terms = (viscous_friction("horizontal"),)
+    plain = build_design(data, model, estimate=("C1",), terms=terms, fit=fit, holdout=hold)
+    for at in ({}, {"C1": model.constants.C1}):
+        d = build_design(data, model, estimate=("C1",), terms=terms, fit=fit, holdout=hold, at=at)
+        assert np.array_equal(d.at, plain.at) and np.array_equal(d.gram, plain.gram)
