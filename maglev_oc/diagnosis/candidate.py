@@ -81,6 +81,11 @@ class Candidate:
     """The candidate this one stands in for when that one's fit is physically implausible: the same
     effect with a parameter held at its physical bound (the bound-constrained least-squares fit when
     the unconstrained one lies beyond it). Judged only then, and reported under that name."""
+    fallback_when: Plausibility | None = field(default=None, repr=False)
+    """For a fallback: the parent's physical parameters -> the reason its free fit lies beyond the
+    bound this one holds (None: it does not, and the fallback is not judged). An implausible parent
+    for another reason is no case for holding that parameter (a pure viscous friction refused for
+    "no Coulomb" is not a Coulomb friction with its viscous part held at zero)."""
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:

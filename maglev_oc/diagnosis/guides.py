@@ -81,6 +81,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                     _friction_words(axis, viscous),
                     nuisance=("holding",),
                     fallback_for=None if viscous else name,
+                    fallback_when=None if viscous else not_below("viscous", "viscous friction"),
                 )
             )
     return out

@@ -346,6 +346,14 @@ def _verdict(
     return "passes", ""
 
 
+def _stands_in(cand: Candidate, implausible: dict[str, Judgement]) -> bool:
+    """Whether fallback ``cand`` is judged: its parent implausible, beyond the bound it holds."""
+    parent = implausible.get(cand.fallback_for) if cand.fallback_for else None
+    if parent is None:
+        return False
+    return cand.fallback_when is None or cand.fallback_when(parent.physical) is not None
+
+
 def _periods_seen(cand: Candidate, physical: dict[str, Estimate], travel: float) -> float | None:
     """The logged travel in periods of a force periodic in the position at one of the motor's
     periods (None for others). Guide waviness is not held to it: its period is the one the
@@ -485,13 +493,13 @@ def select(
             if by_name[n].fallback_for is None
         }
         # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
-        # is physically implausible
-        implausible = {n for n, j in judged.items() if j.verdict == "implausible"}
+        # is physically implausible because that parameter lies beyond the bound
+        implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
         judged.update(
             {
                 n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted)
                 for n in pool
-                if by_name[n].fallback_for in implausible
+                if _stands_in(by_name[n], implausible)
             }
         )
         last.update(judged)

@@ -47,6 +47,7 @@ __all__ = [
     "DEFAULT_MAX_RATE",
     "PreparedLogs",
     "as_log_list",
+    "control_rate_of",
     "delayed_inputs",
     "logging_error_share",
     "matching_kernel",
@@ -104,6 +105,24 @@ def matching_kernel(differentiator: SavitzkyGolay) -> np.ndarray:
     return kernel / kernel.sum()
 
 
+def control_rate_of(log: Log, control_rate: float | None = None) -> float:
+    """[Hz] The rate of the loop that commanded ``log``'s currents: ``control_rate`` if given, else
+    the log's ``control_rate_hz`` metadata, else the rig's 5 kHz
+    (:data:`~maglev_oc.model.hardware.RIG_SAMPLE_TIME`). A value that is not a positive number is
+    an error naming the log."""
+    if control_rate is None:
+        raw = log.metadata.get("control_rate_hz")
+        try:
+            control_rate = float(raw) if raw is not None else 1.0 / RIG_SAMPLE_TIME
+        except ValueError as err:
+            raise LogError(
+                log.source, f"metadata control_rate_hz: expected a number [Hz], got {raw!r}"
+            ) from err
+    if not (math.isfinite(control_rate) and control_rate > 0):
+        raise LogError(log.source, f"metadata control_rate_hz must be positive, got {control_rate!r}")
+    return control_rate
+
+
 def logging_error_share(log: Log, control_rate: float | None = None) -> float:
     """The share of the logged currents' white noise floor that did not reach the plant.
 
@@ -121,17 +140,7 @@ def logging_error_share(log: Log, control_rate: float | None = None) -> float:
     """
     if log.currents_measured:
         return 1.0
-    if control_rate is None:
-        raw = log.metadata.get("control_rate_hz")
-        try:
-            control_rate = float(raw) if raw is not None else 1.0 / RIG_SAMPLE_TIME
-        except ValueError as err:
-            raise LogError(
-                log.source, f"metadata control_rate_hz: expected a number [Hz], got {raw!r}"
-            ) from err
-    if not (math.isfinite(control_rate) and control_rate > 0):
-        raise LogError(log.source, f"metadata control_rate_hz must be positive, got {control_rate!r}")
-    q = control_rate * log.sample_time
+    q = control_rate_of(log, control_rate) * log.sample_time
     return max(0.0, 1.0 - 1.0 / q) if q > 1.0 + 1e-9 else 0.0
 
 
@@ -386,6 +395,8 @@ def prepare(
             "sg_windows": (sg.velocity_window, sg.acceleration_window),
             "edge_samples": edge,
             "logging_error_share": [float(s) for s in shares],
+            # the loop's rate (the lag candidate's hold delay); logs of several rates: the slowest
+            "control_rate_hz": min(control_rate_of(log, control_rate) for log in logs),
             "max_rate_hz": max_rate,
         },
     )

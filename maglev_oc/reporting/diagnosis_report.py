@@ -428,6 +428,7 @@ _SETTING_WORDS = {
     "edge_samples": "filter edge left out [samples]",
     "logging_error_share": "share of the current error from logging",
     "max_rate_hz": "highest sample rate kept [Hz]",
+    "control_rate_hz": "control loop's rate [Hz]",
 }
 
 
