@@ -53,6 +53,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     coefficient takes up the friction model's misfit, so a fit can turn it negative while the
     Coulomb force is clear)."""
     out = []
+    negative_viscous = not_below("viscous", "viscous friction")
     for axis in ("vertical", "horizontal"):
         for viscous in (True, False):
             name = f"guide_friction_{axis}"
@@ -69,7 +70,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                 within("holding", 1.5, "share of the force held while sticking"),
             ]
             if viscous:
-                plausible.insert(1, not_below("viscous", "viscous friction"))
+                plausible.insert(1, negative_viscous)
             out.append(
                 Candidate(
                     with_physical(term, _friction_physical(ctx, term, axis)),
@@ -81,7 +82,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                     _friction_words(axis, viscous),
                     nuisance=("holding",),
                     fallback_for=None if viscous else name,
-                    fallback_when=None if viscous else not_below("viscous", "viscous friction"),
+                    fallback_when=None if viscous else negative_viscous,
                 )
             )
     return out

@@ -264,7 +264,6 @@ def judge(
     contrib = np.sqrt(np.sum((r0 - r1) ** 2, axis=1) / n_counted)
     # separability from the normal matrix of the joint fit
     vif, partners = _separability(design, cand, fit, settings)
-    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
     measured = Judgement(
         cand.name,
         "passes",
@@ -280,7 +279,7 @@ def judge(
         cand.term.physical_parameters(coef, cov, fitted_constants(fit)),
         fit,
     )
-    seen = _periods_seen(cand, measured.physical, travel)
+    seen = _periods_seen(cand, measured.physical, design)
     verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen)
     if verdict != "not separable":
         confounded: tuple[str, ...] = ()
@@ -354,7 +353,7 @@ def _stands_in(cand: Candidate, implausible: dict[str, Judgement]) -> bool:
     return cand.fallback_when is None or cand.fallback_when(parent.physical) is not None
 
 
-def _periods_seen(cand: Candidate, physical: dict[str, Estimate], travel: float) -> float | None:
+def _periods_seen(cand: Candidate, physical: dict[str, Estimate], design: Design) -> float | None:
     """The logged travel in periods of a force periodic in the position at one of the motor's
     periods (None for others). Guide waviness is not held to it: its period is the one the
     residual's spatial spectrum shows, and the guide's shape, which a misalignment's waviness
@@ -363,6 +362,7 @@ def _periods_seen(cand: Candidate, physical: dict[str, Estimate], travel: float)
     period = physical.get("period")
     if cand.family != "periodic" or cand.variable != "position" or period is None or not period.value > 0:
         return None
+    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
     return travel / period.value
 
 
