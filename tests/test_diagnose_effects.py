@@ -86,7 +86,7 @@ def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
     # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 1.5 % end effect. The
     # travel (about 70 mm) covers 1.2 pole pitches: the end effect's smooth fall of the thrust
     # towards the ends fits a 57 mm detent as well as a bowl. Such a force is not separable from
-    # a smooth dependence on the position (SelectionSettings.min_periods = 1.5): judged so, never
+    # a smooth dependence on the position (SelectionSettings.min_periods = 1.25): judged so, never
     # claimed. (The end effect itself, 2.6 % at +-40 mm, is not found: its held-out z is 1.2.)
     path, truth = generated("pairs", "pairs_03")
     d = diagnose_path(path)
@@ -97,7 +97,7 @@ def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
     assert d.effects[0].parameters["slope"].value == pytest.approx(0.004, rel=0.3)
     judged = [st.judgements["cogging_horizontal_57mm"] for st in d.selection.steps]
     assert any(j.verdict == "not separable" and SMOOTH_POSITION in j.confounded_with for j in judged)
-    assert any("fewer than 1.5" in j.reason for j in judged)
+    assert any("fewer than 1.25" in j.reason for j in judged)
     # with the rule off the same log names the detent (the failure the rule fixes)
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" in [e.name for e in off.effects]

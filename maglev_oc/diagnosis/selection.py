@@ -25,8 +25,11 @@ effects already chosen (bias-compensated least squares on the training blocks,
    collinear with a common scale of the vertical magnetic force, which near equilibrium always
    carries the weight). A force periodic in the position at one of the motor's periods is, in the
    same way, not separable from a smooth dependence on the position when the logged travel covers
-   fewer than ``min_periods`` of its periods (a sine over 1.2 periods is a bowl: the end effects
-   of pairs_03 of the independent set passed for a 57 mm detent).
+   fewer than ``min_periods`` of its periods (a sine over 1.1 periods is a bowl: the end effects
+   of pairs_03 of the independent set passed for a 57 mm detent). 1.25: over that travel a sine of
+   any phase shows both a maximum and a minimum at least an eighth of a period inside its ends (an
+   interval of one period holds two of its extrema, which are half a period apart); 1.5 refused the
+   38 mm normal cogging of the closing-the-loop report's twin, logged over 1.3 periods.
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -90,7 +93,7 @@ class SelectionSettings:
     min_effect: float = 2.25e-3
     max_vif: float = 100.0
     max_correlation: float = 0.99
-    min_periods: float = 1.5
+    min_periods: float = 1.25
     parameter_penalty: float = 0.002
     rival_margin: float = 0.05
     max_effects: int = 4
