@@ -29,7 +29,10 @@ effects already chosen (bias-compensated least squares on the training blocks,
    of pairs_03 of the independent set passed for a 57 mm detent). 1.25: over that travel a sine of
    any phase shows both a maximum and a minimum at least an eighth of a period inside its ends (an
    interval of one period holds two of its extrema, which are half a period apart); 1.5 refused the
-   38 mm normal cogging of the closing-the-loop report's twin, logged over 1.3 periods.
+   38 mm normal cogging of the closing-the-loop report's twin, logged over 1.3 periods. Nor is
+   it separable from a chosen force of the position alone on one of its axes whose period the
+   travel does not tell from its own (fewer than ``min_beats`` cycles of drift between the two
+   over the travel, :func:`_unresolved`).
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -94,6 +97,7 @@ class SelectionSettings:
     max_vif: float = 100.0
     max_correlation: float = 0.99
     min_periods: float = 1.25
+    min_beats: float = 1.0
     parameter_penalty: float = 0.002
     rival_margin: float = 0.05
     max_effects: int = 4
@@ -240,9 +244,11 @@ def judge(
     settings: SelectionSettings,
     rivals: dict[tuple[str, int], tuple[float, str]] | None = None,
     counted: np.ndarray | None = None,
+    beside: Sequence[tuple[Candidate, float]] = (),
 ) -> Judgement:
     """``r0``, ``mse0``: the held-out residual of ``current`` and its mean square, zero and left out
-    where ``counted`` is False (:func:`evidence`)."""
+    where ``counted`` is False (:func:`evidence`); ``beside``: the effects already chosen with their
+    spatial periods, which a periodic candidate's must be told from (:func:`_unresolved`)."""
     axes = _axes(cand, design.moving)
     fit = fit_subset(design, [*current, cand.name], covariance=False)
     r1 = _holdout_residual(design, fit, counted)
@@ -283,11 +289,14 @@ def judge(
         fit,
     )
     seen = _periods_seen(cand, measured.physical, design)
-    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen)
+    unresolved = _unresolved(cand, measured.physical, beside, design, settings)
+    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen, unresolved)
     if verdict != "not separable":
         confounded: tuple[str, ...] = ()
     elif seen is not None and seen < settings.min_periods:
         confounded = (SMOOTH_POSITION,)
+    elif unresolved and not (measured.vif > settings.max_vif or partners):
+        confounded = tuple(name for name, _ in unresolved)
     else:
         confounded = partners or ("C1..C4",)
     return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
@@ -301,9 +310,11 @@ def _verdict(
     settings: SelectionSettings,
     rivals: dict[tuple[str, int], tuple[float, str]] | None,
     periods_seen: float | None = None,
+    unresolved: Sequence[tuple[str, float]] = (),
 ) -> tuple[str, str]:
     """(verdict, reason) from the measured evidence, the tests in the module doc's order;
-    ``periods_seen``: the logged travel in periods of a position-periodic candidate."""
+    ``periods_seen``: the logged travel in periods of a position-periodic candidate;
+    ``unresolved``: chosen effects whose spatial period the travel does not tell from its own."""
     gain, z, wald, threshold, contrib = j.gain, j.z, j.wald, j.wald_threshold, j.contribution_rms
     if j.fit.compensation < cur_fit.compensation:
         return "not significant", (
@@ -332,6 +343,15 @@ def _verdict(
             f"{settings.min_periods:g}: a force periodic over that length is not told from a smooth "
             f"dependence on the position (a travel of {settings.min_periods * period * 1e3:.0f} mm or more "
             "separates them)"
+        )
+    if unresolved:
+        name, beats = unresolved[0]
+        period = j.physical["period"].value
+        return "not separable", (
+            f"its period of {period * 1e3:.1f} mm and that of {name.replace('_', ' ')} drift apart by "
+            f"{beats:.2f} of a cycle over the logged travel, less than {settings.min_beats:g}: the travel "
+            f"does not tell the two periods apart (a travel {settings.min_beats / beats:.1f} times as long "
+            "does)"
         )
     why = cand.plausible(j.physical)
     if why:
@@ -365,8 +385,54 @@ def _periods_seen(cand: Candidate, physical: dict[str, Estimate], design: Design
     period = physical.get("period")
     if cand.family != "periodic" or cand.variable != "position" or period is None or not period.value > 0:
         return None
-    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
-    return travel / period.value
+    return _travel(design) / period.value
+
+
+def _travel(design: Design) -> float:
+    """[m] the logged travel along the track (1st to 99th percentile of the training samples)."""
+    return float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
+
+
+def _spatial_period(cand: Candidate, physical: dict[str, Estimate]) -> float | None:
+    """[m] the period of a force that depends on the position alone and periodically (cogging, a
+    detent, guide waviness); None for others (thrust ripple scales with the current)."""
+    period = physical.get("period")
+    if cand.variable != "position" or cand.family not in ("periodic", "geometry") or period is None:
+        return None
+    return period.value if period.value > 0 else None
+
+
+def _unresolved(
+    cand: Candidate,
+    physical: dict[str, Estimate],
+    beside: Sequence[tuple[Candidate, float]],
+    design: Design,
+    settings: SelectionSettings,
+) -> list[tuple[str, float]]:
+    """Chosen effects (``beside``: each with its spatial period) on an axis of ``cand`` whose period
+    the logged travel does not tell from ``cand``'s: (name, beats), beats = travel |1/P - 1/P'|
+    fewer than ``min_beats``.
+
+    Two sines of periods P and P' drift apart by that many cycles over the travel; under one they
+    stay correlated over it for some phases (Rayleigh's resolution: 1/travel in spatial frequency),
+    so which of the two periods the data show is not told. On a log of set-point steps of the
+    independent generator a guide waviness of 60 mm, estimated at 77 mm from the residual's
+    spectrum, left its misfit to a 57 mm detent that is not there: both forces of the position
+    alone on the horizontal axis, 0.3-0.5 of a cycle apart over 70-100 mm.
+    """
+    period = _spatial_period(cand, physical)
+    if period is None:
+        return []
+    travel = _travel(design)
+    out = []
+    for other, p in beside:
+        shared = "both" in (cand.axis, other.axis) or cand.axis == other.axis
+        if not shared or other.reported_name == cand.reported_name:
+            continue
+        beats = travel * abs(1.0 / period - 1.0 / p)
+        if beats < settings.min_beats:
+            out.append((other.reported_name, beats))
+    return out
 
 
 def _separability(
@@ -490,8 +556,9 @@ def select(
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
         sizes = {(by_name[n].axis, _reported(by_name[n])) for n in pool}
         rivals = _rival_gains(design, current, mse0, probes, sizes, counted) if probes else None
+        beside = _periodic_beside(current, by_name, last)
         judged = {
-            n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted)
+            n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted, beside)
             for n in pool
             if by_name[n].fallback_for is None
         }
@@ -500,7 +567,7 @@ def select(
         implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
         judged.update(
             {
-                n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted)
+                n: judge(design, by_name[n], current, cur_fit, r0, mse0, settings, rivals, counted, beside)
                 for n in pool
                 if _stands_in(by_name[n], implausible)
             }
@@ -550,7 +617,8 @@ def select(
             mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
             sizes = {(by_name[name].axis, _reported(by_name[name]))}
             rivals = _rival_gains(design, others, mse0, probes, sizes, counted) if probes else None
-            j = judge(design, by_name[name], others, fit_o, r0, mse0, settings, rivals, counted)
+            beside = _periodic_beside(others, by_name, last)
+            j = judge(design, by_name[name], others, fit_o, r0, mse0, settings, rivals, counted, beside)
             if j.verdict != "passes":
                 current = others
                 steps = [st for st in steps if st.chosen != name]
@@ -558,6 +626,18 @@ def select(
                 dropped = True
                 break
     return Selection(steps, base, fit_subset(design, current), last)
+
+
+def _periodic_beside(
+    current: list[str], by_name: dict[str, Candidate], last: dict[str, Judgement]
+) -> list[tuple[Candidate, float]]:
+    """The chosen effects of ``current`` that are forces periodic in the position, with their periods."""
+    out = []
+    for name in current[1:]:
+        period = _spatial_period(by_name[name], last[name].physical) if name in last else None
+        if period is not None:
+            out.append((by_name[name], period))
+    return out
 
 
 def fitted_constants(fit: SubsetFit) -> dict[str, float]:
