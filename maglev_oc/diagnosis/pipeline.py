@@ -69,7 +69,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread
 from maglev_oc.progress import progress
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
-from maglev_oc.regression.design import Design, build_design
+from maglev_oc.regression.design import Design, build_design, reusing_columns
 from maglev_oc.regression.solve import fit_subset, predicted, residuals
 from maglev_oc.results import AXES, Estimate, PerAxis
 from maglev_oc.validation import Validation, validate
@@ -159,6 +159,15 @@ def diagnose(
     clock = _Clock(timings)
     model = StageModel() if model is None else model
     data, train, hold = clock("prepare", _prepare, list(logs), holdout_fraction, bandwidth, min_duration)
+    # the library's design is built two or three times (references moved, waviness added) and a
+    # dozen designs of some of its terms beside it: each term's columns are evaluated once
+    with reusing_columns(data):
+        return _diagnose(data, train, hold, model, clock, holdout_fraction, bandwidth, settings, exclude)
+
+
+def _diagnose(data, train, hold, model, clock, holdout_fraction, bandwidth, settings, exclude) -> Diagnosis:
+    """The steps after the data preparation (see the module doc)."""
+    timings = clock.timings
     design0 = build_design(data, model, fit=train, holdout=hold)
     session = _Session(
         data, model, train, hold, design0.weights, settings or SelectionSettings(), smooth_probes(data)

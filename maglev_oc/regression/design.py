@@ -24,7 +24,10 @@ block scores as a time series (:mod:`~maglev_oc.regression.solve`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections import OrderedDict
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -38,7 +41,7 @@ from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.terms import AccelerationTerm
 
-__all__ = ["DEFAULT_BLOCK", "Design", "build_design"]
+__all__ = ["COLUMN_CACHE_BYTES", "DEFAULT_BLOCK", "ColumnCache", "Design", "build_design", "reusing_columns"]
 
 DEFAULT_BLOCK = 0.5
 """[s] Block length: the covariance's spectral window (0.25 Hz) is well inside the block
@@ -103,6 +106,18 @@ class Design:
     def held_out_target(self) -> np.ndarray:
         """(2, n_hold) the target on the held-out samples."""
         return self.target[:, self.holdout]
+
+    @cached_property
+    def blocks_last(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(gram, noise, rhs) with the block index last: (P, P, B) (column, row, block) and (P, B),
+        copied once. A fit of a subset gathers its rows and columns of every block it sums from these
+        in one copy, laid out as ``gram[blocks][:, idx][:, :, idx]`` lays them out (so its sums are
+        the same to the bit), instead of first copying every column of every block."""
+        return (
+            np.ascontiguousarray(self.gram.transpose(2, 1, 0)),
+            np.ascontiguousarray(self.noise.transpose(2, 1, 0)),
+            np.ascontiguousarray(self.rhs.T),
+        )
 
     @property
     def moving(self) -> np.ndarray:
@@ -177,6 +192,191 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     return fn, np.array(where, dtype=int).reshape(-1, 4)
 
 
+def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
+    """The terms' part of :func:`_symbolic` (no gap offset), each term's expressions built as there:
+    Function (x, u, du) -> (columns (2, P), known parts (2, K), sensitivities (m,)), the sensitivities'
+    (column, axis, input, kind) and, per term, the positions in the known parts of its
+    acceleration at the linearization point and of its columns times that point (-1 where
+    structurally zero: a linear term linearized at zero has neither)."""
+    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    delta = ca.SX.sym("delta")
+    xs = ca.vertcat(x[0] + delta, x[1], x[2], x[3])
+    cols, parts, slots = [], [], []
+    for term, p_at in zip(terms, at, strict=True):
+        p0 = ca.DM(p_at)
+        acc = term.function(xs, u, du, p0)
+        p = ca.SX.sym("p", term.n_parameters)
+        acc_p = term.function(xs, u, du, p)
+        jac = ca.substitute(ca.jacobian(acc_p, p), p, p0)
+        cols.extend(jac[:, i] for i in range(term.n_parameters))
+        slot = []
+        for part in (acc, jac @ p0):
+            part = ca.substitute(part, delta, 0.0)
+            if all(part[i].is_zero() for i in range(2)):
+                slot.append(-1)
+            else:
+                slot.append(len(parts))
+                parts.append(part)
+        slots.append(tuple(slot))
+    cols_m = ca.substitute(ca.horzcat(*cols), delta, 0.0)
+    flat = ca.reshape(cols_m, -1, 1)
+    outs, where = [], []
+    for kind, var in enumerate((u, du)):
+        jac = ca.jacobian(flat, var)
+        rows, cols_ = jac.sparsity().get_triplet()
+        outs.append(jac.nz[:] if rows else ca.SX.zeros(0, 1))
+        where.extend((r // 2, r % 2, c, kind) for r, c in zip(rows, cols_, strict=True))
+    known = ca.horzcat(*parts) if parts else ca.SX.zeros(2, 0)
+    fn = ca.Function(
+        "design_terms",
+        [x, u, du],
+        [cols_m, known, ca.vertcat(*outs)],
+        ["x", "u", "du"],
+        ["cols", "known", "sensitivities"],
+    )
+    return fn, np.array(where, dtype=int).reshape(-1, 4), slots
+
+
+@dataclass(frozen=True, eq=False)
+class _Evaluated:
+    """One piece of a design (the base columns, or one term's) evaluated on every sample."""
+
+    columns: np.ndarray  # (p, 2, n) filtered
+    sens: np.ndarray  # (m, n) sensitivities, unscaled
+    where: np.ndarray  # (m, 4) (column within the piece, axis, input, kind)
+    known: tuple[np.ndarray | None, ...]  # unfiltered (2, n) parts of the known output (None: zero)
+
+    @property
+    def nbytes(self) -> int:
+        return self.columns.nbytes + self.sens.nbytes + sum(k.nbytes for k in self.known if k is not None)
+
+
+COLUMN_CACHE_BYTES = 256 * 2**20
+"""[bytes] What a :class:`ColumnCache` keeps at most, the least recently used pieces dropped first:
+the diagnosis's library on a 60 s log at 1 kHz takes about 95 MB (its designs reuse all of it); on
+:data:`~maglev_oc.diagnosis.pipeline.MAX_SAMPLES` samples about 470 MB (a part is reused)."""
+
+
+class ColumnCache:
+    """The filtered columns of the pieces of designs built on one :class:`PreparedLogs`, each piece
+    (the base parameters' columns, or one term's) evaluated once and reused by every later design
+    that holds it: a term is the same piece when its CasADi Function (serialized) and linearization
+    point are. Active within :func:`reusing_columns`; every value is the one a design built
+    without it has (the same expressions evaluated on the same samples, filtered alike)."""
+
+    def __init__(self, prepared: PreparedLogs, max_bytes: int = COLUMN_CACHE_BYTES) -> None:
+        self.prepared = prepared
+        self.max_bytes = int(max_bytes)
+        self._pieces: OrderedDict[tuple, _Evaluated] = OrderedDict()
+        self._bytes = 0
+
+    def __len__(self) -> int:
+        return len(self._pieces)
+
+    def _get(self, key: tuple) -> _Evaluated | None:
+        piece = self._pieces.get(key)
+        if piece is not None:
+            self._pieces.move_to_end(key)
+        return piece
+
+    def _keep(self, key: tuple, piece: _Evaluated) -> None:
+        if key in self._pieces:
+            return
+        self._pieces[key] = piece
+        self._bytes += piece.nbytes
+        while self._bytes > self.max_bytes and self._pieces:
+            self._bytes -= self._pieces.popitem(last=False)[1].nbytes
+
+    def columns(self, model: StageModel, estimate, terms: Sequence[AccelerationTerm], at: np.ndarray, P: int):
+        """(columns (P, 2, n) filtered, known (2, n), sensitivities (m, n), where (m, 4)) of a design,
+        as :func:`build_design` computes them in one Function."""
+        prep = self.prepared
+        k = len([c for c in CONSTANT_NAMES if c in estimate])
+        base_fn, base_where = _symbolic(model, estimate, (), at[:k])
+        base_key = ("base", base_fn.serialize())
+        base = self._get(base_key)
+        if base is None:
+            cols, known, sens = _evaluate(base_fn, prep, k, len(base_where))
+            base = _Evaluated(prep.filter(cols, inplace=True), sens, base_where, (known,))
+        starts = np.cumsum([k, *(t.n_parameters for t in terms)])
+        term_at = [at[a : a + t.n_parameters] for a, t in zip(starts[:-1], terms, strict=True)]
+        keys = [("term", t.function.serialize(), a.tobytes()) for t, a in zip(terms, term_at, strict=True)]
+        found = {key: self._get(key) for key in keys}
+        missing = [j for j, key in enumerate(keys) if found[key] is None and keys.index(key) == j]
+        if missing:
+            new = self._evaluate([terms[j] for j in missing], [term_at[j] for j in missing])
+            found.update(zip((keys[j] for j in missing), new, strict=True))
+        out = _assembled([base, *(found[key] for key in keys)], prep.n, P)
+        self._keep(base_key, base)
+        for key in keys:
+            self._keep(key, found[key])
+        return out
+
+    def _evaluate(self, terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]) -> list[_Evaluated]:
+        """The pieces of ``terms``, evaluated through one Function and filtered together, each
+        piece then a copy of its own (so that dropping one frees its memory)."""
+        prep = self.prepared
+        fn, where, slots = _term_symbolic(terms, at)
+        P = sum(t.n_parameters for t in terms)
+        cols, known, sens = _evaluate(fn, prep, P, len(where), fn.size2_out(1))
+        cols = prep.filter(cols, inplace=True)
+        out, start = [], 0
+        for term, slot in zip(terms, slots, strict=True):
+            stop = start + term.n_parameters
+            mine = (where[:, 0] >= start) & (where[:, 0] < stop)
+            piece_where = where[mine]
+            piece_where[:, 0] -= start
+            parts = tuple(None if s < 0 else known[s].copy() for s in slot)
+            out.append(_Evaluated(cols[start:stop].copy(), sens[mine], piece_where, parts))
+            start = stop
+        return out
+
+
+def _assembled(pieces: Sequence[_Evaluated], n: int, P: int):
+    """A design's columns, known output and sensitivities from its pieces, in :func:`_symbolic`'s
+    order: the known output summed as it does ((known + acceleration) - columns x point, term after
+    term), the sensitivities ordered as its Jacobians' nonzeros (by kind, input, then the flattened
+    (axis, column) row)."""
+    columns = np.empty((P, 2, n))
+    base = pieces[0]
+    known = base.known[0].copy()
+    sens, where, start = [], [], 0
+    for piece in pieces:
+        p = piece.columns.shape[0]
+        columns[start : start + p] = piece.columns
+        if piece is not base:
+            acc, jp = piece.known
+            if acc is not None:
+                known += acc
+            if jp is not None:
+                known -= jp
+        w = piece.where.copy()
+        w[:, 0] += start
+        sens.append(piece.sens)
+        where.append(w)
+        start += p
+    where_all = np.concatenate(where) if where else np.zeros((0, 4), dtype=int)
+    sens_all = np.concatenate(sens) if sens else np.zeros((0, n))
+    order = np.lexsort((where_all[:, 1] + 2 * where_all[:, 0], where_all[:, 2], where_all[:, 3]))
+    return columns, known, sens_all[order], where_all[order]
+
+
+_REUSED: ContextVar[ColumnCache | None] = ContextVar("maglev_oc_design_columns", default=None)
+
+
+@contextmanager
+def reusing_columns(prepared: PreparedLogs, max_bytes: int = COLUMN_CACHE_BYTES) -> Iterator[ColumnCache]:
+    """Within the block, every :func:`build_design` on ``prepared`` (without a gap offset) takes the
+    columns of the pieces it shares with an earlier one from a :class:`ColumnCache` instead of
+    evaluating and filtering them again (a diagnosis builds the library's design two or three
+    times and a dozen designs of some of its terms)."""
+    token = _REUSED.set(ColumnCache(prepared, max_bytes))
+    try:
+        yield _REUSED.get()
+    finally:
+        _REUSED.reset(token)
+
+
 def _blocks(fit: np.ndarray, segment: np.ndarray, size: int) -> list[np.ndarray]:
     """Index arrays of the fitted samples cut into blocks of ``size`` (a last piece shorter than
     half a block joins its predecessor); blocks never cross a log or a gap in the mask."""
@@ -229,9 +429,13 @@ def build_design(
     names, groups, at_vec = _parameters(model, estimate, terms, at)
     prep = prepared
     n, P = prep.n, len(names)
-    fn, where = _symbolic(model, estimate, terms, at_vec)
-    columns, known, sens = _evaluate(fn, prep, P, len(where))
-    columns = prep.filter(columns, inplace=True)
+    cache = _REUSED.get()
+    if cache is not None and cache.prepared is prep and GAP_OFFSET not in estimate:
+        columns, known, sens, where = cache.columns(model, estimate, terms, at_vec, P)
+    else:
+        fn, where = _symbolic(model, estimate, terms, at_vec)
+        columns, known, sens = _evaluate(fn, prep, P, len(where))
+        columns = prep.filter(columns, inplace=True)
     target = prep.acc - prep.filter(known)
 
     fit = prep.valid.copy() if fit is None else np.asarray(fit, dtype=bool) & prep.valid
@@ -277,22 +481,25 @@ def _held_out_normal_equations(columns: np.ndarray, target: np.ndarray, holdout:
     return gram, rhs
 
 
-def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int):
+def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int, n_known: int | None = None):
     """``fn`` over every sample, ``_CHUNK`` samples per mapped call into preallocated arrays:
-    columns (P, 2, n), known (2, n), sensitivities (m, n). (One map over all samples would hold
-    its output and the rearranged copy, each of the size of the columns, at once.)"""
+    columns (P, 2, n), known (2, n) (or, given ``n_known``, the (n_known, 2, n) columns of a known
+    output (2, n_known)), sensitivities (m, n). (One map over all samples would hold its output and
+    the rearranged copy, each of the size of the columns, at once.)"""
     n = prep.n
-    cols, known, sens = np.empty((P, 2, n)), np.empty((2, n)), np.empty((m, n))
+    parts = 1 if n_known is None else n_known
+    cols, known, sens = np.empty((P, 2, n)), np.empty((parts, 2, n)), np.empty((m, n))
     mapped: dict[int, NumpyCall] = {}
     for a in range(0, n, _CHUNK):
         b = min(a + _CHUNK, n)
-        f = mapped.setdefault(b - a, NumpyCall(fn.map(b - a)))
-        c, k, s = f(prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b])
+        if b - a not in mapped:  # one mapped Function per chunk length (two at most)
+            mapped[b - a] = NumpyCall(fn.map(b - a))
+        c, k, s = mapped[b - a](prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b])
         # mapped outputs are concatenated sample by sample: (2, k P) -> (P, 2, k)
         cols[:, :, a:b] = c.reshape(2, b - a, P).transpose(2, 0, 1)
-        known[:, a:b] = k
+        known[:, :, a:b] = k.reshape(2, b - a, parts).transpose(2, 0, 1)
         sens[:, a:b] = s.reshape(m, b - a)
-    return cols, known, sens
+    return cols, (known[0] if n_known is None else known), sens
 
 
 _CHUNK = 5_000

@@ -120,10 +120,16 @@ def fit_subset(
     the fit falls back to ordinary least squares and says so in ``message``.
     """
     idx = np.concatenate([design.indices(groups), np.asarray(extra, dtype=int)])
+    # each block's rows and columns of the subset, gathered in one copy with the block index first in
+    # the layout that indexing the blocks, then the rows, then the columns, gives (summing over the
+    # blocks in the same order as that would, to the bit)
+    gram_t, noise_t, rhs_t = design.blocks_last
     sel = slice(None) if blocks is None else np.asarray(blocks)
-    gram_raw = design.gram[sel][:, idx][:, :, idx].sum(axis=0)
-    noise = design.noise[sel][:, idx][:, :, idx].sum(axis=0)
-    rhs = design.rhs[sel][:, idx].sum(axis=0)
+    pick = np.ix_(idx, idx) if blocks is None else np.ix_(idx, idx, sel)
+    gram_raw = gram_t[pick].transpose(2, 1, 0).sum(axis=0)
+    noise = noise_t[pick].transpose(2, 1, 0).sum(axis=0)
+    rhs = (rhs_t[idx] if blocks is None else rhs_t[np.ix_(idx, sel)]).T.sum(axis=0)
+    yy = float(design.yy[sel].sum())
     message = ""
     # columns that vanish on the fitted rows (they act only on a locked axis): coefficient 0
     dead = np.diag(gram_raw) <= 1e-12 * max(float(np.max(np.diag(gram_raw), initial=0.0)), 1e-300)
@@ -152,7 +158,6 @@ def fit_subset(
             "columns are dominated by them"
         )
     coef = np.where(dead, 0.0, coef)
-    yy = float(design.yy[sel].sum())
     chi2 = max(yy - 2 * coef @ rhs + coef @ gram_raw @ coef, 0.0)
     rows = int(np.sum(design.fit)) * int(np.sum(design.weights > 0))
     dof = max(rows - idx.size, 1)
@@ -201,14 +206,13 @@ def _long_run_meat(
     log whose answer is known, tests/test_regression.py)."""
     fit = design.fit
     w = design.weights
-    x = design.columns[idx][:, :, fit]  # (p, 2, n_fit)
+    x = _fitted_columns(design, idx)  # (p, 2, n_fit)
     r = design.target[:, fit] - np.einsum("p,pan->an", coef, x)
     scores = np.einsum("pan,an->pn", x, r * (w**2)[:, None])
     blocks = design.block_of[fit]
     sizes = np.bincount(blocks[blocks >= 0], minlength=design.gram.shape[0])
-    corr = (
-        share * np.einsum("bpq,q->bp", design.noise[:, idx][:, :, idx], coef) / np.maximum(sizes, 1)[:, None]
-    )
+    noise = design.blocks_last[1][np.ix_(idx, idx)].transpose(2, 1, 0)  # as design.noise[:, idx][:, :, idx]
+    corr = share * np.einsum("bpq,q->bp", noise, coef) / np.maximum(sizes, 1)[:, None]
     scores += corr[blocks].T
     segment = design.prepared.segment[fit]
     meat = np.zeros((idx.size, idx.size))
@@ -219,6 +223,15 @@ def _long_run_meat(
         meat += periodogram_long_run(s, m)
         total += m
     return 0.5 * (meat + meat.T), total
+
+
+def _fitted_columns(design: Design, idx: np.ndarray) -> np.ndarray:
+    """(p, 2, n_fit) the columns ``idx`` on the fitted samples: one copy of the slice when the fitted
+    samples are one run (one log), else the columns then the samples picked."""
+    at = np.flatnonzero(design.fit)
+    if at.size and at[-1] - at[0] + 1 == at.size:
+        return design.columns[idx, :, at[0] : at[-1] + 1]
+    return design.columns[idx][:, :, design.fit]
 
 
 def predicted(design: Design, fit: SubsetFit, group: str | None = None) -> np.ndarray:
