@@ -119,12 +119,12 @@ def test_every_candidates_physical_parameters_are_numbers_with_units(model):
 
 def test_reported_sizes_are_read_off_the_candidates_own_acceleration(model):
     """A candidate's physical size must describe the acceleration it adds: with the model's
-    constants as the fit's, the end effects' thrust loss at the ends is the change of its
-    horizontal acceleration from the centre of the travel to an end, per unit of the thrust
-    -L1 u1; the magnets' field departure at the smallest gap is twice the relative change of
-    the thrust there from the centre of the logged gaps (the attraction follows B^2, the thrust
-    B). Both evaluated here from the terms' functions and the model's L1 (1e-9: the same
-    arithmetic in another order)."""
+    constants as the fit's, the end effects' thrust loss at each end is the change of its
+    horizontal acceleration from the centre of the travel to that end, per unit of the thrust
+    -L1 u1, and the loss at the ends their mean; the magnets' field departure at the smallest gap
+    is twice the relative change of the thrust there from the centre of the logged gaps (the
+    attraction follows B^2, the thrust B). Both evaluated here from the terms' functions and the
+    model's L1 (1e-9: the same arithmetic in another order)."""
     from maglev_oc.diagnosis.library import candidate_library
 
     data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
@@ -140,11 +140,16 @@ def test_reported_sizes_are_read_off_the_candidates_own_acceleration(model):
         return -float(model.coefficients(gap)[0, 0]) * u[0]
 
     end = by_name["end_effects"]
-    p = end.term.physical_parameters(np.array([0.1, 0.0]), np.eye(2) * 1e-8, constants)
+    q_end = [0.1, 0.04, 0.0, 0.0]  # winding losses at the low and the high end; no magnet loss
+    p = end.term.physical_parameters(np.array(q_end), np.eye(4) * 1e-8, constants)
     lo, hi = p["low_end_position"].value, p["high_end_position"].value
     gap = 0.02
-    change = (acc_h(end, [0.1, 0.0], gap, lo) - acc_h(end, [0.1, 0.0], gap, 0.5 * (lo + hi))) / thrust(gap)
-    assert p["thrust_loss_at_ends"].value == pytest.approx(-change, rel=1e-9)
+    losses = []
+    for label, x3 in (("low", lo), ("high", hi)):
+        change = (acc_h(end, q_end, gap, x3) - acc_h(end, q_end, gap, 0.5 * (lo + hi))) / thrust(gap)
+        assert p[f"thrust_loss_at_{label}_end"].value == pytest.approx(-change, rel=1e-9)
+        losses.append(-change)
+    assert p["thrust_loss_at_ends"].value == pytest.approx(np.mean(losses), rel=1e-9)
 
     field = by_name["magnet_field_gap_dependence"]
     q = np.array([0.03, -0.02])

@@ -286,6 +286,27 @@ def test_end_effects_are_lost_thrust_and_attraction_towards_the_ends(plant):
     _close(p["attraction_loss_at_ends"], 0.05 * drop, 0.30, "attraction loss at the ends")
 
 
+def test_end_effects_at_one_end_only_are_sized_at_that_end(plant):
+    # a log nearer one end of the stator: 10 % of the thrust and 6 % of the attraction lost where the
+    # high end's profile exp((x3 - 50 mm) / 20 mm) is 1, nothing at the low end (a loss shared by both
+    # ends did not fit such a log); each end's loss relative to the centre of the logged travel is
+    # reported (30 %, the size criterion)
+    x3 = plant.data.x[2]
+    w, end = 0.02, 0.05
+    thrust, attraction, normal = _parts(plant)
+    profile = np.exp((x3 - end) / w)
+    planted = np.vstack([(0.06 * attraction + 0.10 * normal) * profile, -0.10 * thrust * profile])
+    p = _fit(plant, _candidate(plant, "end_effects"), planted)
+    lo, hi = p["low_end_position"].value, p["high_end_position"].value
+
+    high_drop = math.exp((hi - end) / w) - math.exp((0.5 * (lo + hi) - end) / w)
+    _close(p["thrust_loss_at_high_end"], 0.10 * high_drop, 0.30, "thrust loss at the high end")
+    _close(p["attraction_loss_at_high_end"], 0.06 * high_drop, 0.30, "attraction loss at the high end")
+    # the low end's profile minus the centre's is negative and small: the loss reported there is under
+    # 30 % of the high end's (what tells a one-ended fall from a shared one)
+    assert abs(p["thrust_loss_at_low_end"].value) < 0.3 * 0.10 * high_drop
+
+
 @pytest.mark.parametrize("name", ["attraction_gap_dependence", "magnet_field_gap_dependence"])
 @pytest.mark.parametrize("gain", [4.0, -4.0])
 def test_the_attraction_departing_from_the_field_model_with_the_gap(plant, name, gain):
