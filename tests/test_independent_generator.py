@@ -16,7 +16,7 @@ from scipy import signal
 
 from tests.independent import core
 from tests.independent import effects as E
-from tests.independent.controller import K_H, K_V, OMEGA0, closed_loop_poles
+from tests.independent.controller import K_H, K_V, OMEGA0, closed_loop_poles, scaled_gains
 from tests.independent.generate import main as generate_main
 from tests.independent.logio import csv_text, write_log
 from tests.independent.physics import (
@@ -99,6 +99,17 @@ def test_printed_gains_move_the_poles():
     pv = closed_loop_poles(K_V)
     assert np.all(ph.real < -7) and np.all(pv.real < -9)  # stable, and all faster than 7 / 9 rad/s
     assert np.max(np.abs(ph.imag)) > 1.0  # complex pairs: noticeably moved from the real poles
+
+
+@pytest.mark.parametrize("scale", [0.6, 1.0, 1.5])
+def test_scaled_gains_put_every_pole_at_the_scale(scale):
+    # the experiments set's softer and stiffer loops: the poles of the re-placed gains are the
+    # printed gains' times the scale (place_poles is exact to rounding: 1e-6 relative)
+    for K in (K_H, K_V):
+        moved = closed_loop_poles(scaled_gains(K, scale))
+        np.testing.assert_allclose(
+            np.sort_complex(moved), np.sort_complex(closed_loop_poles(K) * scale), rtol=1e-6
+        )
 
 
 # --- the closed loop -------------------------------------------------------------------------

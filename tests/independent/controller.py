@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 from scipy.linalg import expm
+from scipy.signal import place_poles
 
 from .physics import PAPERS_CONSTANTS, G, model_functions
 
@@ -104,3 +105,12 @@ def feedback_transformation(
     u1 = -np.asarray(v1) / L1
     R = np.maximum(L3 * L3 - 4.0 * L4 * (L4 * u1 * u1 + L2 - G + np.asarray(v2)), 0.0)
     return u1, (-L3 - np.sqrt(R)) / (2.0 * L4)
+
+
+def scaled_gains(K: tuple[float, ...], scale: float, omega0: float = OMEGA0) -> tuple[float, ...]:
+    """Gains on (e, e', xi1, xi2, xi3) that put every closed-loop pole of ``K`` at ``scale`` times
+    its place (a softer loop for ``scale`` < 1, a stiffer one above)."""
+    A, B = augmented_matrices(omega0)
+    poles = closed_loop_poles(K, omega0) * scale
+    # place_poles places the eigenvalues of A - B G; here the loop is A + B K
+    return tuple(float(g) for g in -place_poles(A, B, poles).gain_matrix[0])

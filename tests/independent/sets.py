@@ -13,12 +13,20 @@ single
     Each effect alone at its ``small()`` and ``large()`` size (seeds 301-324).
 pairs
     Six logs with two effects together (seeds 401-406).
+experiments
+    A user's experiments unlike the other sets' (which all excite both axes with sines of
+    0.05-2 Hz, 4-5 mm around 19.5 mm and 35-40 mm along the travel, for 60 s, with the papers'
+    gains): set-point steps, a small excursion, faster sines, a short log, an off-centre travel,
+    softer and stiffer gains, constants further from the papers'. Each records a clean log and six
+    effects alone at their large size (seeds 501-507, the same seed per effect in every
+    experiment); the stem is ``experiments_<nn>``, the scenario's name ``<experiment>_<effect>``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
+from .controller import K_H, K_V, scaled_gains
 from .effects import (
     AmplifierDynamics,
     CableCarrier,
@@ -33,7 +41,8 @@ from .effects import (
     ThrustRipple,
     TiltedBase,
 )
-from .simulate import Scenario
+from .reference import ReferenceSpec
+from .simulate import Rig, Scenario
 
 SINGLE_EFFECTS: dict[str, Callable[[str], Effect]] = {
     "guide_friction_horizontal": lambda size: getattr(GuideFriction, size)("horizontal"),
@@ -86,7 +95,62 @@ def _pairs() -> list[tuple[str, tuple[Effect, ...]]]:
     ]
 
 
-SET_NAMES = ("clean", "eleven", "single", "pairs")
+EXPERIMENTS: dict[str, dict] = {
+    "steps": {
+        "reference": {
+            "n_sines": 2,
+            "gap_peak_range": (0.002, 0.0025),
+            "steps_v": ((15.0, 0.002), (30.0, -0.004), (45.0, 0.002)),
+            "steps_h": ((10.0, 0.02), (25.0, -0.04), (40.0, 0.02)),
+        }
+    },
+    "small_travel": {
+        "reference": {"gap_peak_range": (0.0015, 0.002), "horizontal_peak_range": (0.012, 0.015)}
+    },
+    "fast_sines": {"reference": {"f_min": 0.2, "f_max": 5.0, "horizontal_peak_range": (0.02, 0.025)}},
+    "short_log": {"duration": 20.0},
+    "off_centre": {
+        "reference": {"horizontal_center": 0.02, "horizontal_peak_range": (0.02, 0.025), "gap_center": 0.017}
+    },
+    "soft_gains": {"gain_scale": 0.6},
+    "stiff_gains": {"gain_scale": 1.5},
+    "far_constants": {"constant_spread": (0.06, 0.10)},
+}
+"""A user's experiment by name: fields of ``ReferenceSpec`` (``reference``), of ``Scenario`` (the
+rest), and ``gain_scale``: the papers' regulator gains re-placed with every closed-loop pole scaled
+by it (:func:`~tests.independent.controller.scaled_gains`; a softer or stiffer loop)."""
+
+EXPERIMENT_EFFECTS = (
+    "guide_friction_vertical",
+    "detent_force",
+    "end_effect",
+    "thrust_ripple",
+    "guide_misalignment",
+    "amplifier_dynamics",
+)
+"""The effects each experiment records (large), beside a clean log: those an experiment changes most."""
+
+
+def experiment_scenario(experiment: str, effect: str | None, seed: int, duration: float = 60.0) -> Scenario:
+    """One log of an experiment of :data:`EXPERIMENTS`: ``effect`` (a key of :data:`SINGLE_EFFECTS`,
+    at its large size, or None for a clean log)."""
+    spec = dict(EXPERIMENTS[experiment])
+    reference = ReferenceSpec(**spec.pop("reference", {}))
+    scale = spec.pop("gain_scale", None)
+    rig = Rig() if scale is None else Rig(K_h=scaled_gains(K_H, scale), K_v=scaled_gains(K_V, scale))
+    spec.setdefault("duration", duration)
+    return Scenario(
+        name=f"{experiment}_{effect or 'clean'}",
+        seed=seed,
+        effects=() if effect is None else (SINGLE_EFFECTS[effect]("large"),),
+        reference=reference,
+        rig=rig,
+        description=f"set experiments: {experiment}, {effect or 'no effect'}",
+        **spec,
+    )
+
+
+SET_NAMES = ("clean", "eleven", "single", "pairs", "experiments")
 """The named sets."""
 
 
@@ -153,6 +217,14 @@ def named_set(name: str, duration: float = 60.0) -> list[tuple[str, Scenario]]:
                     ),
                 )
             )
+    elif name == "experiments":
+        n = 0
+        for experiment in EXPERIMENTS:
+            for k, effect in enumerate((None, *EXPERIMENT_EFFECTS)):
+                n += 1
+                out.append(
+                    (f"experiments_{n:02d}", experiment_scenario(experiment, effect, 501 + k, duration))
+                )
     else:
         raise ValueError(f"unknown set {name!r}; the sets are {', '.join(SET_NAMES)}")
     return out
