@@ -1,6 +1,7 @@
 """What the diagnosis reuses between designs and fits changes no value: designs built inside
 ``reusing_columns`` equal, to the bit, those built alone, and a subset fit's block sums are those of
-indexing every block's Gram matrix (the fit's own way before it gathered them in one copy)."""
+indexing every block's Gram matrix (the fit's own way before it gathered them in one copy); the
+long-run periodogram by its twiddle factors is the FFT's to rounding."""
 
 from __future__ import annotations
 
@@ -98,3 +99,17 @@ def test_subset_fits_sum_the_blocks_as_indexing_every_block_does(model, data):
             inv = np.linalg.inv(np.linalg.cholesky(g))
             coef = np.where(dead, 0.0, inv.T @ inv @ np.where(dead, 0.0, rhs))
             assert_array_equal(f.coef, coef)
+
+
+@pytest.mark.parametrize(("n", "m"), [(44854, 11), (1000, 4), (31, 4), (30, 15), (7, 4)])
+def test_the_long_run_periodogram_by_its_twiddles_is_the_ffts(n, m, monkeypatch):
+    # the m lowest Fourier coefficients as one product with their twiddle factors (a 60 s log's
+    # 44 854 fitted samples, 2 x 41 x 547, are slow for an FFT); the FFT's values to rounding,
+    # Nyquist included when m reaches it
+    from maglev_oc.regression import covariance
+
+    d = np.random.default_rng(n).standard_normal((3, n))
+    direct = covariance.periodogram_long_run(d, m)
+    monkeypatch.setattr(covariance, "DIRECT_DFT_SIZE", 0)
+    by_fft = covariance.periodogram_long_run(d, m)
+    np.testing.assert_allclose(direct, by_fft, rtol=1e-12, atol=1e-12 * np.max(np.abs(by_fft)))
