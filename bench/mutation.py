@@ -134,9 +134,16 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool, commit: 
     sources = ", ".join(f'"{p}"' for p in paths)
     selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
     # tests that read the sources as text (exports, README commands) see mutmut's trampolines
-    # one process (-n 0): mutmut's trampolines and test map live in the pytest process
+    # one process (-n 0): mutmut's trampolines and test map live in the pytest process.
+    # The interrupt test sends SIGINT 3 s after starting the CLI, "past the imports": with
+    # control/ mutated the trampolined sources take longer than that to import (2026-11-24, load
+    # 3), the child dies inside an import and the test fails without any mutant, which stops
+    # mutmut's test map (it runs with -x)
     quick = (
-        "" if tests else ', "-m", "not slow", "--ignore=tests/test_house.py", "--ignore=tests/test_readme.py"'
+        ""
+        if tests
+        else ', "-m", "not slow", "--ignore=tests/test_house.py", "--ignore=tests/test_readme.py", '
+        '"--deselect=tests/test_bad_input.py::test_interrupt_ends_with_one_line_and_130"'
     )
     marker = f'pytest_add_cli_args = ["-n", "0", "-p", "no:cacheprovider"{quick}]\n'
     config = (
