@@ -35,6 +35,7 @@ from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
+from maglev_oc.results import Estimate
 from tests.independent import write_log
 from tests.independent.sets import named_set
 from tests.independent.simulate import simulate
@@ -305,6 +306,32 @@ def test_end_effects_at_one_end_only_are_sized_at_that_end(plant):
     # the low end's profile minus the centre's is negative and small: the loss reported there is under
     # 30 % of the high end's (what tells a one-ended fall from a shared one)
     assert abs(p["thrust_loss_at_low_end"].value) < 0.3 * 0.10 * high_drop
+
+
+@pytest.mark.parametrize("name", ["attraction_gap_dependence", "magnet_field_gap_dependence"])
+def test_a_gap_dependence_steeper_than_half_the_models_own_is_implausible(plant, name):
+    # the model's attraction falls with the gap at |d log L2 / d y| (about 120 /m, computed here from
+    # L2 at +-10 um); a departure whose change over the logged gaps is steeper than half of that is
+    # refused (a field error of that size is no error of the magnets' geometry), one under it passes
+    cand = _candidate(plant, name)
+    lo, hi = (
+        cand.term.physical_parameters(np.zeros(2), np.eye(2), {})[k].value
+        for k in ("smallest_gap", "largest_gap")
+    )
+    centre, h = 0.5 * (lo + hi), 1e-5
+    L2 = lambda y: float(plant.model.coefficients(np.array([y]))[1, 0])  # noqa: E731
+    own = abs(math.log(L2(centre + h)) - math.log(L2(centre - h))) / (2 * h)
+
+    def estimates(slope):
+        half = 0.5 * slope * (hi - lo)
+        return {
+            "attraction_change_at_smallest_gap": Estimate(half, 0.0, "1"),
+            "attraction_change_at_largest_gap": Estimate(-half, 0.0, "1"),
+        }
+
+    # the bound is relative to the model's own slope (the constants scale L2 and leave its log-slope)
+    assert cand.plausible(estimates(0.45 * own)) is None
+    assert "half the model's own" in cand.plausible(estimates(0.55 * own))
 
 
 @pytest.mark.parametrize("name", ["attraction_gap_dependence", "magnet_field_gap_dependence"])

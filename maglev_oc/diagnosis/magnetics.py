@@ -261,16 +261,30 @@ def _gap_candidate(ctx: LibraryContext, *, field: bool) -> Candidate:
         out["largest_gap"] = Estimate(hi, 0.0, "m")
         return out
 
+    # the model's own log-slope of the attraction with the gap at the centre of the logged gaps
+    # (about -120 /m: the field falls as exp(-pi y / tau), the attraction as its square)
+    h = 1e-5
+    own_slope = abs(
+        math.log(float(ctx.shapes([centre + h])[1])) - math.log(float(ctx.shapes([centre - h])[1]))
+    ) / (2 * h)
+
     def bounded(e):
-        worst = max(
-            abs(e["attraction_change_at_smallest_gap"].value),
-            abs(e["attraction_change_at_largest_gap"].value),
+        small, large = (
+            e["attraction_change_at_smallest_gap"].value,
+            e["attraction_change_at_largest_gap"].value,
         )
-        return (
-            None
-            if worst <= 0.3
-            else "attraction off the field model by more than 30 % within the logged gaps"
-        )
+        if max(abs(small), abs(large)) > 0.3:
+            return "attraction off the field model by more than 30 % within the logged gaps"
+        # a departure that changes the gap dependence by half the model's own is no field error: the
+        # magnets' geometry fixes it far better (a logged gap range of 4 mm let 2 N of sticking
+        # vertical friction pass for a +-20 % attraction change on an independent log)
+        slope = abs(large - small) / max(hi - lo, 1e-9)
+        if slope > 0.5 * own_slope:
+            return (
+                f"the attraction's change with the gap departs from the field model's by {slope:.0f} /m, "
+                f"more than half the model's own {own_slope:.0f} /m"
+            )
+        return None
 
     name, axis, explanation, signature, separates = _GAP_TEXTS[field]
     opening = (
