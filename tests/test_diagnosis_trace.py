@@ -140,3 +140,20 @@ def test_a_delayed_current_rate_correlates_at_its_delay_on_its_own_axis(signals,
         assert sign * tr.lag_correlation[a, k] == pytest.approx(1 / math.sqrt(2), abs=0.03)
     crossed = trace(x, du[::-1], r, StageParameters(), TS)
     assert np.max(np.abs(crossed.lag_correlation)) < 0.03
+
+
+def test_traces_of_several_residuals_are_each_ones_own_trace(signals):
+    """The pipeline traces the base fit's residual and the selection's together (their spatial
+    spectra share the sines of the position): each is, to the bit, the trace of that residual alone."""
+    from maglev_oc.diagnosis.trace import traces
+
+    x, du = (a[:, : N // 4] for a in signals)  # a quarter of the samples: the comparison is exact
+    rng = np.random.default_rng(2)
+    residuals = [rng.standard_normal((2, N // 4)), np.vstack([np.sin(2 * math.pi * x[2] / 0.019), x[1]])]
+    for together, residual in zip(traces(x, du, residuals, StageParameters(), TS), residuals, strict=True):
+        alone = trace(x, du, residual, StageParameters(), TS)
+        np.testing.assert_array_equal(together.spectrum, alone.spectrum)
+        np.testing.assert_array_equal(together.lag_correlation, alone.lag_correlation)
+        assert together.peaks == alone.peaks
+        for name, binned in alone.binned.items():
+            np.testing.assert_array_equal(together.binned[name].mean, binned.mean)

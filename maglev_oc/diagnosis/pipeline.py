@@ -62,7 +62,7 @@ from maglev_oc.diagnosis.selection import (
     judge,
     select,
 )
-from maglev_oc.diagnosis.trace import trace, unexplained_periods
+from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
@@ -172,9 +172,9 @@ def _diagnose(data, train, hold, model, clock, holdout_fraction, bandwidth, sett
     session = _Session(
         data, model, train, hold, design0.weights, settings or SelectionSettings(), smooth_probes(data)
     )
-    base0, fitted, tr = clock("base_fit", _base_fit, session, design0)
+    base0, fitted, res0 = clock("base_fit", _base_fit, session, design0)
     library, design, sel, fitted = clock("selection", _select, session, fitted, tuple(exclude))
-    periods = clock("waviness", _waviness_periods, session, fitted, design, sel)
+    tr, periods = clock("waviness", _waviness_periods, session, fitted, design, sel, res0)
     if periods:
         del design, sel  # the design with the waviness replaces this one: never hold both
         library, design, sel = clock("waviness", _with_waviness, session, fitted, library, periods)
@@ -273,13 +273,11 @@ def _prepare(logs: list[Log], holdout_fraction: float, bandwidth: float, min_dur
 
 
 def _base_fit(session: _Session, design0: Design):
-    """Step 2: C1..C4 alone (bias-compensated) and the trace of their residual."""
+    """Step 2: C1..C4 alone (bias-compensated) and their residual (its trace is computed with the
+    selection's, :func:`_waviness_periods`)."""
     base0 = fit_subset(design0, ["base"])
     fitted = fitted_model(session.model, base0, session.data.moving, "diagnose: base fit")
-    res0 = residuals(design0, base0)
-    data, train = session.data, session.train
-    tr = trace(data.x[:, train], data.du[:, train], res0[:, train], session.model.params, data.sample_time)
-    return base0, fitted, tr
+    return base0, fitted, residuals(design0, base0)
 
 
 def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
@@ -309,6 +307,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             session.hold,
             session.weights,
             held=shares,
+            library=full if shares == held else None,  # the first round's library, built above
         )
         if moved(converged, fitted) <= REFIT_TOLERANCE and shares == held:
             break
@@ -330,19 +329,28 @@ def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, f
     return shares
 
 
-def _waviness_periods(session: _Session, fitted: StageModel, design: Design, sel: Selection) -> list[float]:
-    """Step 5b: periodicities of the residual that no motor period explains, at refined periods."""
+def _waviness_periods(
+    session: _Session, fitted: StageModel, design: Design, sel: Selection, res0: np.ndarray
+) -> tuple[Trace, list[float]]:
+    """Step 5b: the trace of the base fit's residual ``res0`` (step 3), and the periodicities of the
+    selection's residual that no motor period explains, at refined periods. The two residuals'
+    traces are computed together: their spatial spectra share the sines of the position."""
     data, train = session.data, session.train
     res = residuals(design, sel.final)
-    tr_after = trace(
-        data.x[:, train], data.du[:, train], res[:, train], session.model.params, data.sample_time
+    tr, tr_after = traces(
+        data.x[:, train],
+        data.du[:, train],
+        [res0[:, train], res[:, train]],
+        session.model.params,
+        data.sample_time,
     )
-    return sorted(
+    periods = sorted(
         {
             round(refine_waviness_period(fitted, data, res, session.weights, train, lam), 4)
             for _, lam in unexplained_periods(tr_after, tolerance=0.03)
         }
     )
+    return tr, periods
 
 
 def _with_waviness(session: _Session, fitted: StageModel, library, periods: list[float]):

@@ -75,6 +75,7 @@ def converged_references(
     tolerance: float = 1e-3,
     max_rounds: int = 12,
     held: Mapping[str, float] | None = None,
+    library: Sequence[Candidate] | None = None,
 ) -> StageModel:
     """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
     the effects' magnetic references (which scale some of their columns) agree with them.
@@ -82,9 +83,11 @@ def converged_references(
     Terms such as the commutation offset are bilinear in a constant and their own parameter;
     their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
     repeated here (a few tenths of a second each: only the chosen effects' columns) until the
-    constants move by less than ``tolerance``. ``held``: as :func:`candidate_library` takes it."""
-    for _ in range(max_rounds):
-        by_name = {c.name: c for c in candidate_library(fitted, data, held)}
+    constants move by less than ``tolerance``. ``held``: as :func:`candidate_library` takes it;
+    ``library``: ``candidate_library(fitted, data, held)`` when the caller has it (the first round's)."""
+    for k in range(max_rounds):
+        current = library if k == 0 and library is not None else candidate_library(fitted, data, held)
+        by_name = {c.name: c for c in current}
         terms = [by_name[n].term for n in chosen]
         design = build_design(data, fitted, terms=terms, fit=train, holdout=hold, weights=weights)
         refit = fitted_model(

@@ -18,6 +18,7 @@ The periodogram's peaks that match no motor period become data-driven candidates
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,7 @@ import numpy as np
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.results import AXES
 
-__all__ = ["Binned", "Trace", "motor_periods", "trace", "unexplained_periods"]
+__all__ = ["Binned", "Trace", "motor_periods", "trace", "traces", "unexplained_periods"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,8 @@ def motor_periods(params: StageParameters) -> dict[str, float]:
 
 
 def _spatial_periodogram(x3: np.ndarray, residual: np.ndarray, periods: np.ndarray) -> np.ndarray:
-    """Share of each row of ``residual`` (2, n) explained by a sinusoid in ``x3`` per period."""
+    """Share of each row of ``residual`` (r, n) explained by a sinusoid in ``x3`` per period (each
+    row's value does not depend on the other rows)."""
     r = residual - residual.mean(axis=1, keepdims=True)
     total = np.sum(r**2, axis=1)
     out = np.zeros((r.shape[0], periods.size))
@@ -100,10 +102,32 @@ def trace(
     min_share: float = 0.02,
 ) -> Trace:
     """Analyse ``residual`` (2, n) at states ``x`` (4, n) and current rates ``du`` (2, n)."""
+    return traces(x, du, [residual], params, sample_time, min_share=min_share)[0]
+
+
+def traces(
+    x: np.ndarray,
+    du: np.ndarray,
+    residuals: Sequence[np.ndarray],
+    params: StageParameters,
+    sample_time: float,
+    *,
+    min_share: float = 0.02,
+) -> list[Trace]:
+    """:func:`trace` of each of ``residuals`` (each (2, n), at the same samples): their spatial
+    spectra in one pass over the periods (the sines of the position, most of a trace's cost, are
+    computed once for all; each residual's values are those of its own trace)."""
     span = float(np.ptp(x[2]))
     hi = max(min(1.5 * span, 0.15), 0.01)
     periods = np.geomspace(4e-3, hi, 300)
-    spec = _spatial_periodogram(x[2], residual, periods)
+    stacked = _spatial_periodogram(x[2], np.vstack(residuals), periods)
+    return [
+        _trace(x, du, residual, params, sample_time, periods, stacked[2 * k : 2 * k + 2].copy(), min_share)
+        for k, residual in enumerate(residuals)
+    ]
+
+
+def _trace(x, du, residual, params, sample_time, periods, spec, min_share) -> Trace:
     mp = motor_periods(params)
     peaks = []
     for a in range(2):
