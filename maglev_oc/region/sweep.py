@@ -116,7 +116,7 @@ class PlantSet:
             s = np.asarray(self.shape, dtype=float)
             if s.shape != (4, 4) or not np.all(np.isfinite(s)) or not np.allclose(s, s.T):
                 raise InputError(f"PlantSet.shape must be a symmetric finite 4 x 4 matrix, got {s.shape}")
-            if np.linalg.eigvalsh(s).min() < -1e-12 * max(1.0, np.abs(s).max()):
+            if np.linalg.eigvalsh(_relative(s, c)).min() < -1e-12:
                 raise InputError("PlantSet.shape must be positive semidefinite")
         else:
             lo, hi = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
@@ -146,7 +146,7 @@ class PlantSet:
         cov = np.asarray(covariance, dtype=float)
         if cov.shape != (4, 4):
             raise InputError(f"covariance must be 4 x 4 over (C1, C2, C3, C4), got {cov.shape}")
-        eig = np.linalg.eigvalsh(0.5 * (cov + cov.T))
+        eig = np.linalg.eigvalsh(_relative(cov, m))
         rank = int(np.sum(eig > 1e-12 * max(eig.max(), 1e-300)))
         q = float(chi2.ppf(level, max(rank, 1)))
         return cls(
@@ -183,8 +183,7 @@ class PlantSet:
         if self.kind == "box":
             lo, hi = np.asarray(self.lower)[:, None], np.asarray(self.upper)[:, None]
             return lo + (hi - lo) * rng.uniform(0.0, 1.0, (4, n))
-        s = np.asarray(self.shape, dtype=float)
-        eig, vec = np.linalg.eigh(0.5 * (s + s.T))
+        eig, vec = np.linalg.eigh(_relative(self.shape, self.center))
         keep = eig > 1e-12 * max(eig.max(), 1e-300)
         k = int(keep.sum())
         if k == 0:
@@ -192,7 +191,7 @@ class PlantSet:
         g = rng.standard_normal((k, n))
         g /= np.linalg.norm(g, axis=0, keepdims=True)
         radius = rng.uniform(0.0, 1.0, n) ** (1.0 / k)
-        return c + vec[:, keep] @ (np.sqrt(eig[keep])[:, None] * g * radius)
+        return c + c * (vec[:, keep] @ (np.sqrt(eig[keep])[:, None] * g * radius))
 
     def contains(self, constants) -> np.ndarray:
         """Whether each column of ``constants`` (4, n) lies in the set: (n,) bool."""
@@ -201,11 +200,26 @@ class PlantSet:
         if self.kind == "box":
             lo, hi = np.asarray(self.lower)[:, None], np.asarray(self.upper)[:, None]
             return np.all((C >= lo) & (C <= hi), axis=0)
-        s = np.asarray(self.shape, dtype=float)
+        # relative to the centre's constants (see _relative): d' S^+ d is unchanged by the scaling
+        s = _relative(self.shape, self.center)
+        d = d / np.asarray(self.center)[:, None]
         pinv = np.linalg.pinv(s, rcond=1e-12, hermitian=True)
         inside = np.einsum("in,ij,jn->n", d, pinv, d) <= 1 + 1e-9
-        off = d - s @ pinv @ d  # components outside the ellipsoid's span
-        return inside & np.all(np.abs(off) <= 1e-12 * np.abs(C).max(), axis=0)
+        off = d - s @ pinv @ d  # components outside the ellipsoid's span, relative to the centre
+        return inside & np.all(np.abs(off) <= 1e-9, axis=0)
+
+
+def _relative(matrix, center) -> np.ndarray:
+    """A (4, 4) matrix over (C1..C4) in units of the centre's constants, S_ij / (c_i c_j), symmetrised.
+
+    The constants differ by up to six orders of magnitude (C4 ~ 2e-3, C2 ~ 8e2): an eigenvalue
+    threshold relative to the largest one, applied to the covariance itself, took a correlated
+    covariance's well-determined direction for a fixed one (its eigenvalue ~1e-12 of the largest),
+    and S S^+ of a point off by rounding for a point off the span (contains() then refused 99.99 %
+    of draws from the estimate's own distribution). Relative to the centre the scales are alike."""
+    c = np.asarray(center, dtype=float)
+    s = np.asarray(matrix, dtype=float) / np.outer(c, c)
+    return 0.5 * (s + s.T)
 
 
 def _constants_array(value) -> np.ndarray:
