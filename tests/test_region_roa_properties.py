@@ -184,3 +184,11 @@ def test_the_current_level_is_where_the_commanded_current_can_reach_the_limit(lo
         ).level_current
         == math.inf
     )
+
+
+def test_a_setpoint_on_a_stopper_certifies_nothing(model, linear):
+    """No room to the stopper: the level is 0, and the result says that nothing is certified."""
+    res = certify_roa(model, linear, TARGET, feasible=FeasibleSet(model, gap_range=(0.008, TARGET.gap)))
+    assert res.level_travel == 0.0 and res.level == 0.0
+    assert not res.success and res.status == "not_certified"
+    assert res.value(np.zeros(10)) == math.inf  # no start is inside an empty certificate
