@@ -1,0 +1,55 @@
+"""The robust certificate's conservativeness figures (maglev_oc.region.robust_certificate.coverage)
+recomputed from the runs they summarise: shares of the safe starts inside each certified set,
+unsafe starts counted inside each, the verdict on the robust set, and the sweep's own time."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.robust_certificate import coverage
+from maglev_oc.results import check_result
+
+
+def _sweep(ratio, violating, level=4.0, total=12.5):
+    ratio, violating = np.asarray(ratio, float), np.asarray(violating, bool)
+    spec = SimpleNamespace(P=np.eye(10), level=level)
+    return SimpleNamespace(
+        spec=spec, start_ratio=ratio, violating=violating, n=ratio.size, timings={"total": total}
+    )
+
+
+def test_coverage_is_recomputed_from_the_runs():
+    rng = np.random.default_rng(2)
+    ratio = rng.uniform(0, 1, 400)
+    v = 4.0 * ratio
+    violating = v > 3.0  # every unsafe start lies beyond V = 3
+    nominal, robust = 2.5, 1.5
+    got = coverage(_sweep(ratio, violating), nominal, robust)
+    check_result(got)
+    safe = ~violating
+    assert got.runs == 400 and got.safe == int(safe.sum()) and got.probe_level == 4.0
+    assert got.nominal == pytest.approx(np.mean(v[safe] <= nominal), rel=1e-12)
+    assert got.robust == pytest.approx(np.mean(v[safe] <= robust), rel=1e-12)
+    assert 0 < got.robust < got.nominal < 1  # the smaller set covers less of the safe starts
+    assert got.unsafe_in_nominal == got.unsafe_in_robust == 0 and got.success and got.status == "sound"
+    assert got.timings["sweep"] == 12.5  # the sweep's wall time [s], carried over
+
+
+def test_an_unsafe_start_inside_the_robust_set_is_a_violation():
+    ratio = np.array([0.1, 0.2, 0.5, 0.7, 0.9])
+    violating = np.array([False, True, False, True, False])  # V = 0.8 and 2.8 left F
+    got = coverage(_sweep(ratio, violating), 3.0, 1.0)  # nominal, robust levels
+    assert got.unsafe_in_robust == 1 and got.unsafe_in_nominal == 2
+    assert not got.success and got.status == "violated"
+    # the safe starts have V = 0.4, 2.0 and 3.6
+    assert got.nominal == pytest.approx(2 / 3) and got.robust == pytest.approx(1 / 3)
+
+
+def test_a_sweep_from_a_fixed_start_has_no_coverage():
+    sweep = _sweep([0.5], [False])
+    sweep.spec.P = None
+    with pytest.raises(ValueError, match="level set"):
+        coverage(sweep, 1.0, 1.0)
