@@ -91,3 +91,19 @@ def test_a_lag_counts_only_beyond_half_the_hold_and_two_standard_errors(value, s
     assert (reason is None) == (value > max(0.5 * hold, 2.0 * stderr))
     if reason:
         assert reason.startswith("no lag beyond the loop's zero-order hold")
+
+
+def test_a_log_with_only_confounded_candidates_is_not_said_to_be_explained_to_its_noise():
+    # the status line and the report's words: with candidates that explain part of the residual
+    # but are not separable, "the base model explains the log to its noise" would be false (a
+    # small-excursion log with 2 N of sticking vertical friction kept a vertical held-out error 20x
+    # the horizontal one and was told so)
+    from maglev_oc.diagnosis.pipeline import _outcome
+
+    sel = SimpleNamespace(base=SimpleNamespace(compensated=True))
+    data = SimpleNamespace(current_noise=np.zeros(2))
+    status, success, message = _outcome([], ["gap_sensor_offset"], [], sel, data)
+    assert status == "nothing_found" and success
+    assert "to its noise" not in message and "1 candidate(s) not separable" in message
+    _, _, message = _outcome([], [], [], sel, data)
+    assert "explains the log to its noise" in message

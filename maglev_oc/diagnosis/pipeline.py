@@ -478,6 +478,10 @@ def _outcome(effects, not_sep, unexplained, sel: Selection, data: PreparedLogs) 
         )
     elif unexplained:
         status, message = "unexplained_only", "no named effect found, but part of the residual is unexplained"
+    elif not_sep:
+        # the base model does not explain the log to its noise: these candidates explain part of the
+        # residual, but this log cannot tell them from the constants (what would is in not_separable)
+        status, message = "nothing_found", "no effect this log can separate from the constants found"
     else:
         status, message = (
             "nothing_found",

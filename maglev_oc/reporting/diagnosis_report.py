@@ -181,6 +181,11 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
             f"{k}. {plain(e.name).capitalize()}: {e.finding} {e.explanation}"
             for k, e in enumerate(diag.effects, 1)
         ]
+    elif diag.not_separable:
+        out.append(
+            "No effect found that this log can tell from the lumped constants: the candidates below "
+            "explain part of the residual, but only an experiment that separates them can say which."
+        )
     else:
         out.append("No missing effect found: the papers' model, refitted, explains the log to its noise.")
     out += [
