@@ -1,0 +1,65 @@
+"""The operating-region study (maglev_oc.region.study) on a tiny configuration: its random starts
+follow the configuration's seed (the same seed, the same study; another seed, other starts),
+and its progress says each step in words."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.study import StudyConfig, operating_region_study
+
+TINY = StudyConfig(
+    setpoints_mm=(20.0,),
+    sinusoid=False,
+    sdp=False,
+    samples=8,
+    slice_setpoints_mm=(20.0,),
+    slice_points=5,
+    linear=False,
+    quantization_samples=8,
+    map_points=11,
+    horizon=0.2,
+    compile=False,
+    threads=1,
+    robust_runs=6,
+    robust_probe_runs=4,
+    certify_runs=8,
+)
+"""One set-point and a few runs of every kind, the robust part included (about 1.3 s of CPU)."""
+
+
+@pytest.fixture(scope="module")
+def studies(model):
+    """(messages, study) for seeds 0, 0 and 1."""
+    out = []
+    for seed in (0, 0, 1):
+        messages = []
+        st = operating_region_study(model, dataclasses.replace(TINY, seed=seed), progress=messages.append)
+        out.append((messages, st))
+    return out
+
+
+def _starts(st) -> list[np.ndarray]:
+    """The V / level of every sampled start of the study (inside checks and quantisation runs)."""
+    rs = st.references[0]
+    return [c.start_ratio for c in rs.checks.values()] + [st.quantization.start_ratio]
+
+
+def test_the_seed_determines_the_study(studies):
+    (_, a), (_, b), (_, c) = studies
+    for x, y in zip(_starts(a), _starts(b), strict=True):
+        np.testing.assert_array_equal(x, y)  # bit for bit: the same draws, the same arithmetic
+    full_a, full_c = _starts(a)[0], _starts(c)[0]
+    assert full_a.size == full_c.size == 8 and not np.allclose(full_a, full_c)
+    assert [(r.runs, r.violations) for r in a.robust.rows] == [(r.runs, r.violations) for r in b.robust.rows]
+
+
+def test_progress_names_every_step_in_words(studies):
+    messages, st = studies[0]
+    assert messages and all(isinstance(m, str) and m.strip() for m in messages)
+    for words in ("Procedure 2", "Monte Carlo", "slices", "quantising", "robust"):
+        assert any(words in m for m in messages), (words, messages)
+    assert st.robust is not None and st.robust.certified is not None  # the robust steps did run
