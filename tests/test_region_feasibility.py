@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -121,3 +123,20 @@ def test_bisection_finds_the_sign_change_in_its_bracket(root, width, slope, fall
     found = _bisect(g, lo, hi, np.array([root, slope, -1.0 if falling else 1.0]))
     assert lo <= found <= hi
     assert found == pytest.approx(root, abs=1e-12)
+
+
+@pytest.mark.parametrize("margin", [0.5, -0.5])
+def test_a_refused_setpoint_names_its_reason_on_either_side_of_r_zero(model, margin):
+    # a stage whose passive attraction C2 leaves R / (4 L4) at rest at 20 mm = +-0.5 m/s^2 (C2
+    # moved by the margin's change over L2's shape at 20 mm): just above R = 0 the equilibrium
+    # exists and it is the current (far above 0.5 A there) that refuses it; just below, R < 0
+    gap = 0.02
+    _, L2, L3, L4 = np.asarray(model.coefficients([gap]))[:, 0]
+    at_rest = L3**2 / (4 * L4) + model.params.gravity - L2
+    c = model.constants
+    moved = model.with_constants(dataclasses.replace(c, C2=c.C2 + (at_rest - margin) * c.C2 / L2))
+    feasible = FeasibleSet(moved, current_limit=0.5)
+    assert feasible.evaluate(gap, 0.0, 0.0)[0] == pytest.approx(margin, rel=1e-9)
+    why = "needs \\|u\\| > 0.5 A" if margin > 0 else "no equilibrium \\(R < 0\\)"
+    with pytest.raises(InputError, match=why):
+        feasible.check_setpoint(gap)
