@@ -1,15 +1,22 @@
 """The robust certificate's conservativeness figures (maglev_oc.region.robust_certificate.coverage)
 recomputed from the runs they summarise: shares of the safe starts inside each certified set,
-unsafe starts counted inside each, the verdict on the robust set, and the sweep's own time."""
+unsafe starts counted inside each, the verdict on the robust set, and the sweep's own time; and the
+robust SDP's choice of P does not depend on how the nominal certificate's V is normalised."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from maglev_oc.region.robust_certificate import coverage
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibleSet
+from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.region.robust import assumed_covariance
+from maglev_oc.region.robust_certificate import RobustCertifier, coverage, robust_lyapunov_matrix
+from maglev_oc.region.sweep import PlantSet
 from maglev_oc.results import check_result
 
 
@@ -53,3 +60,20 @@ def test_a_sweep_from_a_fixed_start_has_no_coverage():
     sweep.spec.P = None
     with pytest.raises(ValueError, match="level set"):
         coverage(sweep, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e4])
+def test_the_robust_p_does_not_depend_on_the_normalisation_of_v(model, scale):
+    """{z' P z <= c} is the same set as {z' (k P) z <= k c}: the robust SDP, handed the nominal
+    certificate in either form, returns the same P (normalised to level 1). Measured agreement
+    5e-5 relative (the SDP solver's tolerance), asserted to 1e-3."""
+    loop = RegulatorLoop()
+    feasible = FeasibleSet(model)
+    nominal = Procedure2(feasible, loop).run(Reference.setpoint(0.025))
+    certifier = RobustCertifier(feasible, loop, max_boxes=1000, ladder=(1.0,))
+    plants = PlantSet.confidence(model.constants, assumed_covariance(model.constants), 0.9)
+    P, msg = robust_lyapunov_matrix(certifier, nominal, plants, alphas=(1.0,))
+    scaled = dataclasses.replace(nominal, P=scale * nominal.P, level=scale * nominal.level)
+    Q, msg_q = robust_lyapunov_matrix(certifier, scaled, plants, alphas=(1.0,))
+    assert P is not None and Q is not None, (msg, msg_q)
+    np.testing.assert_allclose(Q, P, rtol=1e-3, atol=1e-3 * np.abs(P).max())
