@@ -1,0 +1,66 @@
+"""The boundary search that bounds a certificate from above (maglev_oc.region.boundary): its
+rays start where the constraint first fails, what it returns lies on the boundary, and a search
+that meets no boundary says so."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.region.boundary import BoundaryMinimizer
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.ellipsoid import ellipsoid_image
+from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet
+from maglev_oc.results import check_result
+
+REF = Reference.setpoint(0.02)
+
+
+@pytest.fixture(scope="module")
+def search(model):
+    loop = RegulatorLoop()
+    return BoundaryMinimizer(FeasibleSet(model), loop), loop.lyapunov_matrix()
+
+
+@pytest.mark.parametrize("constraint", NONLINEAR)
+def test_each_ray_starts_at_the_first_point_where_the_constraint_fails(search, constraint):
+    minimizer, P = search
+    img = ellipsoid_image(minimizer.loop, P)
+    F = minimizer.loop.offset_coefficients(REF)
+    fn = minimizer.feasible.loop_function(minimizer.loop, REF)
+    j = NONLINEAR.index(constraint)
+    rng = np.random.default_rng(4)
+    crossed = 0
+    for d in rng.standard_normal((12, 3)):
+        d /= np.linalg.norm(d)
+        start = minimizer._ray_start(img, F, d, 0.0, j)
+        if start is None:  # a ray that leaves the gap domain before the constraint fails
+            continue
+        crossed += 1
+        z = start[0][:-1]
+        assert np.asarray(fn(z, 0.0)).ravel()[j] < 0  # infeasible at the start
+        # and feasible a grid step (a factor 1e6^(1/240) along the ray) closer to the set-point
+        assert np.asarray(fn(z / 10 ** (6 / 240), 0.0)).ravel()[j] >= 0
+    assert crossed >= 3
+
+
+def test_the_least_v_found_is_on_the_boundary(search):
+    minimizer, P = search
+    res = minimizer.minimize(REF, P, "headroom", starts=6)
+    check_result(res)
+    assert res.success and res.status == "found" and 0 < res.converged <= res.starts == 6
+    fn = minimizer.feasible.loop_function(minimizer.loop, REF)
+    h = np.asarray(fn(res.state, res.phase)).ravel()
+    assert abs(h[1]) < 1e-6  # [A^2]: IPOPT's tolerance 1e-10 on the scaled problem
+    assert res.state @ P @ res.state == pytest.approx(res.level, rel=1e-9)
+    assert res.level == pytest.approx(res.levels.min(), rel=0)
+
+
+def test_a_search_that_meets_no_boundary_says_so(search):
+    minimizer, P = search
+    res = minimizer.minimize(REF, P, "margin", starts=0)
+    check_result(res)
+    assert not res.success and res.status == "not_found" and "no start" in res.message
+    assert res.level == math.inf and res.state is None and res.converged == 0
