@@ -77,3 +77,23 @@ def test_the_robust_p_does_not_depend_on_the_normalisation_of_v(model, scale):
     Q, msg_q = robust_lyapunov_matrix(certifier, scaled, plants, alphas=(1.0,))
     assert P is not None and Q is not None, (msg, msg_q)
     np.testing.assert_allclose(Q, P, rtol=1e-3, atol=1e-3 * np.abs(P).max())
+
+
+def test_the_robust_certificate_reports_its_share_of_the_nominal_level(model):
+    """With the nominal plant alone and a ladder starting at half the nominal level, the first
+    rung is certified (Delta = 0: V decreases): level = c_nom / 2 exactly, said so in the message
+    and in ``ratio``. A nominal certificate that failed gives a robust one that did too,
+    carrying the nominal it was given."""
+    loop = RegulatorLoop()
+    feasible = FeasibleSet(model)
+    nominal = Procedure2(feasible, loop).run(Reference.setpoint(0.02))
+    certifier = RobustCertifier(feasible, loop, max_boxes=100_000, ladder=(0.5,))
+    res = certifier.run(nominal, PlantSet.point(model.constants))
+    check_result(res)
+    assert res.status == "certified" and res.level == 0.5 * nominal.level and res.ratio == 0.5
+    assert ": 0.5 of it" in res.message
+    failed = dataclasses.replace(nominal, success=False, status="not_certified", level=0.0, message="none")
+    out = certifier.run(failed, PlantSet.point(model.constants))
+    check_result(out)
+    assert not out.success and out.status == "not_certified" and out.level == 0.0
+    assert out.nominal is failed and "the nominal certificate failed: none" in out.message
