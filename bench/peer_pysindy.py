@@ -816,8 +816,9 @@ def main() -> int:
                 "sizes": s_peer.sizes,
                 "notes": s_peer.notes,
                 "wall_s": peer["wall"],
-                "n_terms": peer["n_terms"],
-                "chosen_threshold": peer["chosen_threshold"],
+                "n_terms": peer.get("n_terms"),
+                "chosen_threshold": peer.get("chosen_threshold"),
+                "error": peer.get("error"),
             },
         }
         for k, v in enumerate((s_peer.true_first, s_peer.no_false_claim, s_peer.size_right)):
