@@ -65,11 +65,14 @@ def test_designs_built_with_reused_columns_equal_those_built_alone(model, data):
     # the moved friction, force; nothing new; the held periodic force (the renamed force is the same
     # Function and point: reused); nothing new
     assert sizes == [3, 5, 5, 6, 6]
-    # a cache too small for any piece keeps none and changes nothing
-    with reusing_columns(data, max_bytes=1) as cache:
+    # a design whose new pieces do not fit empties the cache and turns it off (a long log's library:
+    # no more memory than without it); nothing changes
+    with reusing_columns(data, max_bytes=cache.nbytes - 1) as small:
         for (m, t), expected in zip(builds, alone, strict=True):
             _same(build_design(data, m, terms=t, fit=fit, holdout=hold, weights=weights), expected)
-        assert len(cache) == 0
+            if (m, t) == builds[0]:
+                assert len(small) == 3  # the first design fits
+        assert len(small) == 0 and not small.active and small.nbytes == 0
     # another data set in the block is evaluated as without it
     other = prepare([_synthetic(model, seconds=12.0, seed=5)], bandwidth=10.0)
     with reusing_columns(data) as cache:

@@ -24,7 +24,6 @@ block scores as a time series (:mod:`~maglev_oc.regression.solve`).
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -106,18 +105,6 @@ class Design:
     def held_out_target(self) -> np.ndarray:
         """(2, n_hold) the target on the held-out samples."""
         return self.target[:, self.holdout]
-
-    @cached_property
-    def blocks_last(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(gram, noise, rhs) with the block index last: (P, P, B) (column, row, block) and (P, B),
-        copied once. A fit of a subset gathers its rows and columns of every block it sums from these
-        in one copy, laid out as ``gram[blocks][:, idx][:, :, idx]`` lays them out (so its sums are
-        the same to the bit), instead of first copying every column of every block."""
-        return (
-            np.ascontiguousarray(self.gram.transpose(2, 1, 0)),
-            np.ascontiguousarray(self.noise.transpose(2, 1, 0)),
-            np.ascontiguousarray(self.rhs.T),
-        )
 
     @property
     def moving(self) -> np.ndarray:
@@ -252,9 +239,11 @@ class _Evaluated:
 
 
 COLUMN_CACHE_BYTES = 256 * 2**20
-"""[bytes] What a :class:`ColumnCache` keeps at most, the least recently used pieces dropped first:
-the diagnosis's library on a 60 s log at 1 kHz takes about 95 MB (its designs reuse all of it); on
-:data:`~maglev_oc.diagnosis.pipeline.MAX_SAMPLES` samples about 470 MB (a part is reused)."""
+"""[bytes] What a :class:`ColumnCache` keeps at most. The diagnosis's library on a 60 s log at 1 kHz
+takes about 95 MB, and every later design of the diagnosis reuses it. On
+:data:`~maglev_oc.diagnosis.pipeline.MAX_SAMPLES` samples it would take about 470 MB: the first
+design that does not fit empties the cache and turns it off, so that such a diagnosis holds no more
+memory than without it (each design then evaluated in one Function, as outside the cache)."""
 
 
 class ColumnCache:
@@ -267,56 +256,70 @@ class ColumnCache:
     def __init__(self, prepared: PreparedLogs, max_bytes: int = COLUMN_CACHE_BYTES) -> None:
         self.prepared = prepared
         self.max_bytes = int(max_bytes)
-        self._pieces: OrderedDict[tuple, _Evaluated] = OrderedDict()
+        self._pieces: dict[tuple, _Evaluated] = {}
         self._bytes = 0
+        self.active = True
 
     def __len__(self) -> int:
         return len(self._pieces)
 
-    def _get(self, key: tuple) -> _Evaluated | None:
-        piece = self._pieces.get(key)
-        if piece is not None:
-            self._pieces.move_to_end(key)
-        return piece
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the pieces kept."""
+        return self._bytes
 
-    def _keep(self, key: tuple, piece: _Evaluated) -> None:
-        if key in self._pieces:
-            return
-        self._pieces[key] = piece
-        self._bytes += piece.nbytes
-        while self._bytes > self.max_bytes and self._pieces:
-            self._bytes -= self._pieces.popitem(last=False)[1].nbytes
+    def _off(self) -> None:
+        self._pieces.clear()
+        self._bytes = 0
+        self.active = False
 
     def columns(self, model: StageModel, estimate, terms: Sequence[AccelerationTerm], at: np.ndarray, P: int):
         """(columns (P, 2, n) filtered, known (2, n), sensitivities (m, n), where (m, 4)) of a design,
-        as :func:`build_design` computes them in one Function."""
+        as :func:`build_design` computes them in one Function; None when the cache is off or this
+        design's new pieces would not fit in it (it is then turned off)."""
+        if not self.active:
+            return None
         prep = self.prepared
         k = len([c for c in CONSTANT_NAMES if c in estimate])
         base_fn, base_where = _symbolic(model, estimate, (), at[:k])
         base_key = ("base", base_fn.serialize())
-        base = self._get(base_key)
-        if base is None:
-            cols, known, sens = _evaluate(base_fn, prep, k, len(base_where))
-            base = _Evaluated(prep.filter(cols, inplace=True), sens, base_where, (known,))
         starts = np.cumsum([k, *(t.n_parameters for t in terms)])
         term_at = [at[a : a + t.n_parameters] for a, t in zip(starts[:-1], terms, strict=True)]
         keys = [("term", t.function.serialize(), a.tobytes()) for t, a in zip(terms, term_at, strict=True)]
-        found = {key: self._get(key) for key in keys}
-        missing = [j for j, key in enumerate(keys) if found[key] is None and keys.index(key) == j]
+        found = {key: self._pieces.get(key) for key in keys}
+        missing: list[tuple[tuple, int]] = []  # (key, its first term) of the pieces to evaluate
+        for j, key in enumerate(keys):
+            if found[key] is None and all(key != m for m, _ in missing):
+                missing.append((key, j))
+        fn = (
+            _term_symbolic([terms[j] for _, j in missing], [term_at[j] for _, j in missing])
+            if missing
+            else None
+        )
+        base = self._pieces.get(base_key)
+        rows = (0 if base else 2 * k + len(base_where) + 2) + (
+            2 * fn[0].size2_out(0) + fn[0].size1_out(2) + 2 * fn[0].size2_out(1) if fn else 0
+        )
+        if self._bytes + 8 * prep.n * rows > self.max_bytes:
+            self._off()
+            return None
+        if base is None:
+            cols, known, sens = _evaluate(base_fn, prep, k, len(base_where))
+            base = _Evaluated(prep.filter(cols, inplace=True), sens, base_where, (known,))
+            self._pieces[base_key] = base
+            self._bytes += base.nbytes
         if missing:
-            new = self._evaluate([terms[j] for j in missing], [term_at[j] for j in missing])
-            found.update(zip((keys[j] for j in missing), new, strict=True))
-        out = _assembled([base, *(found[key] for key in keys)], prep.n, P)
-        self._keep(base_key, base)
-        for key in keys:
-            self._keep(key, found[key])
-        return out
+            new = self._evaluate([terms[j] for _, j in missing], fn)
+            for (key, _), piece in zip(missing, new, strict=True):
+                found[key] = self._pieces[key] = piece
+                self._bytes += piece.nbytes
+        return _assembled([base, *(found[key] for key in keys)], prep.n, P)
 
-    def _evaluate(self, terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]) -> list[_Evaluated]:
-        """The pieces of ``terms``, evaluated through one Function and filtered together, each
-        piece then a copy of its own (so that dropping one frees its memory)."""
+    def _evaluate(self, terms: Sequence[AccelerationTerm], symbolic) -> list[_Evaluated]:
+        """The pieces of ``terms``, evaluated through their one Function (:func:`_term_symbolic`) and
+        filtered together (each piece's columns a view of the evaluated array)."""
         prep = self.prepared
-        fn, where, slots = _term_symbolic(terms, at)
+        fn, where, slots = symbolic
         P = sum(t.n_parameters for t in terms)
         cols, known, sens = _evaluate(fn, prep, P, len(where), fn.size2_out(1))
         cols = prep.filter(cols, inplace=True)
@@ -327,7 +330,7 @@ class ColumnCache:
             piece_where = where[mine]
             piece_where[:, 0] -= start
             parts = tuple(None if s < 0 else known[s].copy() for s in slot)
-            out.append(_Evaluated(cols[start:stop].copy(), sens[mine], piece_where, parts))
+            out.append(_Evaluated(cols[start:stop], sens[mine], piece_where, parts))
             start = stop
         return out
 
@@ -430,8 +433,11 @@ def build_design(
     prep = prepared
     n, P = prep.n, len(names)
     cache = _REUSED.get()
+    reused = None
     if cache is not None and cache.prepared is prep and GAP_OFFSET not in estimate:
-        columns, known, sens, where = cache.columns(model, estimate, terms, at_vec, P)
+        reused = cache.columns(model, estimate, terms, at_vec, P)
+    if reused is not None:
+        columns, known, sens, where = reused
     else:
         fn, where = _symbolic(model, estimate, terms, at_vec)
         columns, known, sens = _evaluate(fn, prep, P, len(where))

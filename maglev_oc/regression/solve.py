@@ -120,15 +120,10 @@ def fit_subset(
     the fit falls back to ordinary least squares and says so in ``message``.
     """
     idx = np.concatenate([design.indices(groups), np.asarray(extra, dtype=int)])
-    # each block's rows and columns of the subset, gathered in one copy with the block index first in
-    # the layout that indexing the blocks, then the rows, then the columns, gives (summing over the
-    # blocks in the same order as that would, to the bit)
-    gram_t, noise_t, rhs_t = design.blocks_last
     sel = slice(None) if blocks is None else np.asarray(blocks)
-    pick = np.ix_(idx, idx) if blocks is None else np.ix_(idx, idx, sel)
-    gram_raw = gram_t[pick].transpose(2, 1, 0).sum(axis=0)
-    noise = noise_t[pick].transpose(2, 1, 0).sum(axis=0)
-    rhs = (rhs_t[idx] if blocks is None else rhs_t[np.ix_(idx, sel)]).T.sum(axis=0)
+    gram_raw = _blocks_of(design.gram, sel, idx).sum(axis=0)
+    noise = _blocks_of(design.noise, sel, idx).sum(axis=0)
+    rhs = _blocks_of(design.rhs, sel, idx).sum(axis=0)
     yy = float(design.yy[sel].sum())
     message = ""
     # columns that vanish on the fitted rows (they act only on a locked axis): coefficient 0
@@ -211,7 +206,7 @@ def _long_run_meat(
     scores = np.einsum("pan,an->pn", x, r * (w**2)[:, None])
     blocks = design.block_of[fit]
     sizes = np.bincount(blocks[blocks >= 0], minlength=design.gram.shape[0])
-    noise = design.blocks_last[1][np.ix_(idx, idx)].transpose(2, 1, 0)  # as design.noise[:, idx][:, :, idx]
+    noise = _blocks_of(design.noise, slice(None), idx)
     corr = share * np.einsum("bpq,q->bp", noise, coef) / np.maximum(sizes, 1)[:, None]
     scores += corr[blocks].T
     segment = design.prepared.segment[fit]
@@ -223,6 +218,17 @@ def _long_run_meat(
         meat += periodogram_long_run(s, m)
         total += m
     return 0.5 * (meat + meat.T), total
+
+
+def _blocks_of(a: np.ndarray, blocks, idx: np.ndarray) -> np.ndarray:
+    """``a[blocks][:, idx][:, :, idx]`` ((B, P, P) Grams) or ``a[blocks][:, idx]`` ((B, P) right-hand
+    sides): the same values in the same memory layout (the block index fastest, as numpy lays out
+    that indexing), so that sums over the blocks add in the same order, to the bit; gathered
+    directly rather than copying every column of the chosen blocks first."""
+    rows = np.arange(a.shape[0])[blocks]
+    picked = a[np.ix_(rows, idx, idx)] if a.ndim == 3 else a[np.ix_(rows, idx)]
+    order = tuple(range(picked.ndim))[::-1]
+    return np.ascontiguousarray(picked.transpose(order)).transpose(order)
 
 
 def _fitted_columns(design: Design, idx: np.ndarray) -> np.ndarray:
