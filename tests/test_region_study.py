@@ -9,6 +9,22 @@ import pytest
 from maglev_oc.region.study import StudyConfig, operating_region_study
 from maglev_oc.results import check_result
 
+TINY = StudyConfig(
+    setpoints_mm=(20.0,),
+    sinusoid=False,
+    sdp=False,
+    samples=8,
+    slice_setpoints_mm=(20.0,),
+    slice_points=5,
+    linear=False,
+    quantization_samples=8,
+    map_points=11,
+    horizon=0.2,
+    compile=False,
+    threads=1,
+)
+"""One set-point, a few runs, no SDP or linear regulators: about a second."""
+
 
 @pytest.fixture(scope="module")
 def quick(shared_region_report):
@@ -46,21 +62,7 @@ def test_quick_study_numbers(quick):
 def test_tiny_study_follows_the_result_convention(model):
     """One set-point, a few runs, no SDP or linear regulators (about a second): the study is a
     result (success, status word, message, timings by step, JSON-able to_dict, report)."""
-    cfg = StudyConfig(
-        setpoints_mm=(20.0,),
-        sinusoid=False,
-        sdp=False,
-        samples=8,
-        slice_setpoints_mm=(20.0,),
-        slice_points=5,
-        linear=False,
-        quantization_samples=8,
-        map_points=11,
-        horizon=0.2,
-        compile=False,
-        threads=1,
-    )
-    st = operating_region_study(model, cfg)
+    st = operating_region_study(model, TINY)
     check_result(st)
     assert st.success and st.status == "certified"
     assert st.inside_totals() == {"runs": 16, "violations": 0}  # 8 full + 8 at rest

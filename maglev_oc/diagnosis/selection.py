@@ -347,11 +347,11 @@ def _verdict(
     if unresolved:
         name, beats = unresolved[0]
         period = j.physical["period"].value
+        longer = settings.min_beats / max(beats, 1e-9)
         return "not separable", (
             f"its period of {period * 1e3:.1f} mm and that of {name.replace('_', ' ')} drift apart by "
             f"{beats:.2f} of a cycle over the logged travel, less than {settings.min_beats:g}: the travel "
-            f"does not tell the two periods apart (a travel {settings.min_beats / beats:.1f} times as long "
-            "does)"
+            f"does not tell the two periods apart (a travel {longer:.3g} times as long does)"
         )
     why = cand.plausible(j.physical)
     if why:
@@ -421,7 +421,7 @@ def _unresolved(
     alone on the horizontal axis, 0.3-0.5 of a cycle apart over 70-100 mm.
     """
     period = _spatial_period(cand, physical)
-    if period is None:
+    if period is None or not beside:
         return []
     travel = _travel(design)
     out = []

@@ -120,6 +120,27 @@ class Design:
         raise KeyError(name)
 
 
+def _linearized(term: AccelerationTerm, xs, u, du, p0: ca.DM):
+    """A term's acceleration at the parameters ``p0`` and its Jacobian in them there."""
+    acc = term.function(xs, u, du, p0)
+    p = ca.SX.sym("p", term.n_parameters)
+    jac = ca.substitute(ca.jacobian(term.function(xs, u, du, p), p), p, p0)
+    return acc, jac
+
+
+def _sensitivities(flat, u, du) -> tuple[list, list]:
+    """Sensitivities of the column-major columns ``flat`` to the currents and their rates: only
+    their structural nonzeros, as vectors, with (column, axis, input, kind) of each; kind 0 = d/du,
+    1 = d/d(du)."""
+    outs, where = [], []
+    for kind, var in enumerate((u, du)):
+        jac = ca.jacobian(flat, var)
+        rows, cols = jac.sparsity().get_triplet()
+        outs.append(jac.nz[:] if rows else ca.SX.zeros(0, 1))
+        where.extend((r // 2, r % 2, c, kind) for r, c in zip(rows, cols, strict=True))
+    return outs, where
+
+
 def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[AccelerationTerm], at: np.ndarray):
     """CasADi Function (x, u, du) -> (columns (2, P), known (2,), sensitivities (m,)) and, for each of
     the m sensitivities, (column, axis, input, kind): d column / d u_input (kind 0) or
@@ -144,10 +165,7 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     term_acc = []
     for term in terms:
         p0 = ca.DM(at[k : k + term.n_parameters])
-        acc = term.function(xs, u, du, p0)
-        p = ca.SX.sym("p", term.n_parameters)
-        acc_p = term.function(xs, u, du, p)
-        jac = ca.substitute(ca.jacobian(acc_p, p), p, p0)
+        acc, jac = _linearized(term, xs, u, du, p0)
         cols.extend(jac[:, i] for i in range(term.n_parameters))
         known = known + acc - jac @ p0
         term_acc.append(acc)
@@ -161,14 +179,7 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     cols_m = ca.substitute(cols_m, delta, delta0)
     known = ca.substitute(known, delta, delta0)
     flat = ca.reshape(cols_m, -1, 1)  # column-major: (axis, column) -> axis + 2 column
-    # sensitivities to the currents and their rates: only their structural nonzeros, as vectors,
-    # with (column, axis, input) of each; kind 0 = d/du, 1 = d/d(du)
-    outs, where = [], []
-    for kind, var in enumerate((u, du)):
-        jac = ca.jacobian(flat, var)
-        rows, cols_ = jac.sparsity().get_triplet()
-        outs.append(jac.nz[:] if rows else ca.SX.zeros(0, 1))
-        where.extend((r // 2, r % 2, c, kind) for r, c in zip(rows, cols_, strict=True))
+    outs, where = _sensitivities(flat, u, du)
     fn = ca.Function(
         "design",
         [x, u, du],
@@ -191,10 +202,7 @@ def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
     cols, parts, slots = [], [], []
     for term, p_at in zip(terms, at, strict=True):
         p0 = ca.DM(p_at)
-        acc = term.function(xs, u, du, p0)
-        p = ca.SX.sym("p", term.n_parameters)
-        acc_p = term.function(xs, u, du, p)
-        jac = ca.substitute(ca.jacobian(acc_p, p), p, p0)
+        acc, jac = _linearized(term, xs, u, du, p0)
         cols.extend(jac[:, i] for i in range(term.n_parameters))
         slot = []
         for part in (acc, jac @ p0):
@@ -207,12 +215,7 @@ def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
         slots.append(tuple(slot))
     cols_m = ca.substitute(ca.horzcat(*cols), delta, 0.0)
     flat = ca.reshape(cols_m, -1, 1)
-    outs, where = [], []
-    for kind, var in enumerate((u, du)):
-        jac = ca.jacobian(flat, var)
-        rows, cols_ = jac.sparsity().get_triplet()
-        outs.append(jac.nz[:] if rows else ca.SX.zeros(0, 1))
-        where.extend((r // 2, r % 2, c, kind) for r, c in zip(rows, cols_, strict=True))
+    outs, where = _sensitivities(flat, u, du)
     known = ca.horzcat(*parts) if parts else ca.SX.zeros(2, 0)
     fn = ca.Function(
         "design_terms",
