@@ -122,15 +122,18 @@ def main() -> None:
 
 def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool, commit: str = "HEAD") -> None:
     """Copy the sources into WORK and let mutmut generate the mutants and its test map."""
-    if fresh and WORK.exists():
+    sha = subprocess.run(["git", "rev-parse", commit], cwd=ROOT, capture_output=True, text=True).stdout
+    previous = (WORK / "commit.txt").read_text() if (WORK / "commit.txt").is_file() else sha
+    # Another commit's sources need new mutants: mutmut regenerates a file's mutants only when the
+    # source is newer than them, and the extracted sources carry their commit's time (git archive),
+    # usually older than mutants made earlier today, so the old commit's mutants would be run
+    if (fresh or previous != sha) and WORK.exists():
         shutil.rmtree(WORK)
     WORK.mkdir(parents=True, exist_ok=True)
     # the committed sources (HEAD or --commit), not the work tree: the score belongs to a commit,
     # and edits made while the run goes on do not reach it
     _extract(commit)
-    (WORK / "commit.txt").write_text(
-        subprocess.run(["git", "rev-parse", commit], cwd=ROOT, capture_output=True, text=True).stdout
-    )
+    (WORK / "commit.txt").write_text(sha)
     sources = ", ".join(f'"{p}"' for p in paths)
     selection = ", ".join(f'"{t}"' for t in tests) if tests else '"tests/"'
     # tests that read the sources as text (exports, README commands) see mutmut's trampolines
