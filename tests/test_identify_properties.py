@@ -866,3 +866,30 @@ def test_a_non_term_is_refused_naming_its_type(model, twin_log, bad, type_name):
             make()
     with pytest.raises(TypeError, match="StageModel, got str"):
         ParameterLayout("model", ("C2",))
+
+
+def test_fit_report_gives_each_parameter_its_own_unit_and_none_to_a_parameter_without_one(ee_fit):
+    """Each [[Variables]] line ends with the parameter's SI unit in brackets (regression.base
+    UNITS, the units the fit's constants are defined in), and a parameter without a known unit
+    (here C4 renamed) gets no bracket rather than a made-up unit."""
+    from maglev_oc.regression.base import UNITS
+
+    text = ee_fit.report()
+    for k in ee_fit.names:
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"    {k}"))
+        assert line.endswith(f"  [{UNITS[k]}]"), line
+    rename = {k: ("k_unitless" if k == "C4" else k) for k in ee_fit.names}
+
+    def moved(m):
+        return {rename[k]: v for k, v in m.items()}
+
+    other = dataclasses.replace(
+        ee_fit,
+        names=tuple(rename[k] for k in ee_fit.names),
+        values=moved(ee_fit.values),
+        stderr=moved(ee_fit.stderr),
+        stderr_naive=moved(ee_fit.stderr_naive),
+        initial=moved(ee_fit.initial),
+    )
+    line = next(ln for ln in other.report().splitlines() if ln.startswith("    k_unitless"))
+    assert "[" not in line, line

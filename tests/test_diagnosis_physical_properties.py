@@ -1,0 +1,76 @@
+"""Every candidate's physical parameters as functions of its fitted coefficients
+(``Candidate.term.physical_parameters``), checked against what any error propagation must give:
+the value depends on the coefficients only (not on their covariance), and its standard error is
+the first-order propagation sqrt(g' C g) of the coefficients' covariance C through the value's
+own gradient g, taken here by central differences of the reported values (not through the
+candidate's code for the errors). Numpy and the library's CasADi terms, a few seconds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.regression.data import prepare
+from tests.test_statistics_properties import RATE_FRICTION, _log
+
+
+@pytest.fixture(scope="module")
+def library_and_constants(model):
+    from maglev_oc.diagnosis.library import candidate_library
+
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    constants = {k: getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    return candidate_library(model, data), constants
+
+
+def _covariance(k: int, rng: np.random.Generator, scale: float) -> np.ndarray:
+    """A full positive definite covariance with standard errors ~scale and correlations up to ~0.5."""
+    a = rng.standard_normal((k, k))
+    c = a @ a.T + k * np.eye(k)
+    d = np.sqrt(np.diag(c))
+    return scale**2 * c / np.outer(d, d)
+
+
+def test_each_physical_standard_error_is_the_propagated_covariance(library_and_constants):
+    """For every candidate and every parameter it reports: at coefficients away from zero (where
+    an amplitude or a ratio is smooth) the value is the same for two covariances, and the
+    standard error is sqrt(g' C g) with g the central difference of the value (step 1e-6 of the
+    coefficient's size: truncation ~1e-12 relative, rounding ~1e-10), to 1e-4 relative plus
+    1e-12 of the value (a delta method from an exact gradient agrees far closer; 1e-4 leaves room
+    for a candidate that differentiates its own value numerically). Parameters that do not depend
+    on the coefficients (a period, an end position) must then have a zero error."""
+    library, constants = library_and_constants
+    rng = np.random.default_rng(5)
+    checked = 0
+    for cand in library:
+        k = cand.term.n_parameters
+        q = 0.02 * (1.0 + rng.random(k)) * rng.choice([-1.0, 1.0], k)
+        cov = _covariance(k, rng, 1e-4)
+        params = cand.term.physical_parameters(q, cov, constants)
+        other = cand.term.physical_parameters(q, 4.0 * cov, constants)
+        grads = {name: np.zeros(k) for name in params}
+        for i in range(k):
+            h = 1e-6 * abs(q[i])
+            up, down = q.copy(), q.copy()
+            up[i] += h
+            down[i] -= h
+            p_up = cand.term.physical_parameters(up, cov, constants)
+            p_down = cand.term.physical_parameters(down, cov, constants)
+            for name in params:
+                grads[name][i] = (p_up[name].value - p_down[name].value) / (2 * h)
+        for name, e in params.items():
+            assert other[name].value == e.value, (cand.name, name)
+            g = grads[name]
+            expected = math.sqrt(float(g @ cov @ g))
+            assert e.stderr == pytest.approx(expected, rel=1e-4, abs=1e-12 * abs(e.value)), (
+                cand.name,
+                name,
+                e,
+                expected,
+            )
+            # four times the covariance, twice the error (first-order propagation is linear in C^1/2)
+            assert other[name].stderr == pytest.approx(2 * e.stderr, rel=1e-9, abs=1e-15), (cand.name, name)
+            checked += 1
+    assert checked >= 40
