@@ -48,3 +48,22 @@ def test_progress_names_every_step_in_words(studies):
     for words in ("Procedure 2", "Monte Carlo", "slices", "quantising", "robust"):
         assert any(words in m for m in messages), (words, messages)
     assert st.robust is not None and st.robust.certified is not None  # the robust steps did run
+
+
+@pytest.mark.parametrize("stoppers", [True, False])
+def test_the_maps_span_the_gaps_the_stage_can_reach(model, stoppers):
+    """The slices of F through the 20 mm set-point show the gap error over the stoppers' range
+    widened by 2 mm each side (so the stoppers' edges are in view), and without stoppers over
+    5-35 mm likewise: the e1 axis runs from that lower gap to that upper gap minus 20 mm
+    (1e-15 m: rounding of millimetre sums), increasing, through the set-point."""
+    from maglev_oc.region.feasibility import GAP_TRAVEL, FeasibleSet
+
+    feasible = FeasibleSet(model) if stoppers else FeasibleSet(model, gap_range=None)
+    lo, hi = GAP_TRAVEL if stoppers else (5e-3, 35e-3)
+    st = operating_region_study(model, dataclasses.replace(TINY, robust_runs=0), feasible=feasible)
+    maps = [m for m in st.maps if m.axes[0] == "e1"]
+    assert len(maps) >= 3
+    for m in maps:
+        assert m.x[0] == pytest.approx(lo - 2e-3 - 0.02, abs=1e-15)
+        assert m.x[-1] == pytest.approx(hi + 2e-3 - 0.02, abs=1e-15)
+        assert np.all(np.diff(m.x) > 0) and m.x[0] < 0 < m.x[-1]

@@ -479,6 +479,10 @@ class _Slice:
         boundary: dict[str, list] = {name: [] for name in CONSTRAINT_NAMES}
         failures = 0
         for j, name in enumerate(CONSTRAINT_NAMES):
+            if not ca.depends_on(hs[j], s):
+                # a constraint switched off (no stoppers, no travel limit) is a positive constant:
+                # no boundary, and a rootfinder on it cannot be built (structurally singular)
+                continue
             g = ca.Function("g", [s, ca.vertcat(p0, d)], [hs[j]])
             opts = {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False}
             solver = ca.rootfinder("root", "newton", g, opts)
