@@ -1,0 +1,76 @@
+"""Selection's judgement of a periodic candidate beside effects already chosen
+(``maglev_oc.diagnosis.selection.judge``), on a log whose answer is exact: the horizontal sweep of
+``tests/test_statistics_properties._log`` with a cogging force planted at the slot pitch
+(0.02 m/s^2, ~0.03 N). Two periods P, P' are told apart when the logged travel T (1st to 99th
+percentile of the training positions, recomputed here) sees them drift apart by at least
+``min_beats`` cycles, T |1/P - 1/P'|; otherwise the candidate is not separable and names the
+effect it is confounded with. A candidate the held-out test rejects gets no Wald statistic.
+Numpy and one design, about a second."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.diagnosis.selection import SelectionSettings, judge
+from maglev_oc.regression.data import prepare
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.solve import fit_subset, residuals
+from tests.test_statistics_properties import _log
+
+
+@pytest.fixture(scope="module")
+def cogged(model):
+    """(design, library by name): the cogging and friction candidates' columns beside C1."""
+    from maglev_oc.diagnosis.library import candidate_library
+
+    period = model.params.slot_pitch
+    log = _log(model, friction=0.0, force=lambda x3: 0.02 * np.sin(2 * math.pi * x3 / period + 0.5))
+    data = prepare([log], bandwidth=10.0)
+    lib = {c.name: c for c in candidate_library(model, data)}
+    fit, hold = data.masks(0.25)
+    terms = (lib["cogging_horizontal_19mm"].term, lib["guide_friction_horizontal"].term)
+    design = build_design(data, model, estimate=("C1",), terms=terms, fit=fit, holdout=hold)
+    return design, lib
+
+
+def _judge(design, cand, settings, beside=()):
+    base = fit_subset(design, ["base"])
+    r0 = residuals(design, base)[:, design.holdout]
+    mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+    return judge(design, cand, ["base"], base, r0, mse0, settings, beside=beside)
+
+
+def test_a_period_the_travel_cannot_tell_from_a_chosen_ones_is_confounded_with_it(cogged, model):
+    """Alone, the planted cogging passes; beside a chosen horizontal effect whose period drifts
+    from its own by min_beats x (1 - 1e-3) cycles over the travel it is not separable and
+    confounded with that effect, by min_beats x (1 + 1e-3) it passes (1e-3: far above the rounding
+    of the percentiles, far below the steps of the travel between samples); an effect on the
+    other axis never confounds it, whatever its period."""
+    design, lib = cogged
+    cog, other = lib["cogging_horizontal_19mm"], lib["cogging_horizontal_57mm"]
+    settings = SelectionSettings()
+    assert _judge(design, cog, settings).verdict == "passes"
+    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
+    period = model.params.slot_pitch
+    for factor, verdict in ((1 - 1e-3, "not separable"), (1 + 1e-3, "passes")):
+        beats = factor * settings.min_beats
+        p_other = 1.0 / (1.0 / period - beats / travel)  # T |1/P - 1/P'| = beats
+        j = _judge(design, cog, settings, beside=[(other, p_other)])
+        assert j.verdict == verdict, (factor, j.reason)
+        assert j.confounded_with == ((other.reported_name,) if verdict == "not separable" else ())
+    vertical = lib["cogging_vertical_19mm"]
+    assert _judge(design, cog, settings, beside=[(vertical, period)]).verdict == "passes"
+
+
+def test_a_candidate_the_held_out_test_rejects_has_no_wald_statistic(cogged):
+    """Friction on a log without friction: the held-out error does not fall enough, its
+    covariance is never estimated, and it is reported with a Wald statistic of zero at any alpha
+    (not a number it was never given), below every threshold."""
+    design, lib = cogged
+    for alpha in (0.05, 0.9):
+        j = _judge(design, lib["guide_friction_horizontal"], SelectionSettings(alpha=alpha))
+        assert j.verdict == "not significant"
+        assert j.wald == 0.0 and j.wald < j.wald_threshold
