@@ -223,10 +223,14 @@ def _long_run_meat(
 def _blocks_of(a: np.ndarray, blocks, idx: np.ndarray) -> np.ndarray:
     """``a[blocks][:, idx][:, :, idx]`` ((B, P, P) Grams) or ``a[blocks][:, idx]`` ((B, P) right-hand
     sides): the same values in the same memory layout (the block index fastest, as numpy lays out
-    that indexing), so that sums over the blocks add in the same order, to the bit; gathered
-    directly rather than copying every column of the chosen blocks first."""
-    rows = np.arange(a.shape[0])[blocks]
-    picked = a[np.ix_(rows, idx, idx)] if a.ndim == 3 else a[np.ix_(rows, idx)]
+    that indexing), so that sums over the blocks add in the same order, to the bit; the chosen
+    columns taken first (never every column of the chosen blocks), then the blocks: np.take copies
+    runs of memory where an open mesh (np.ix_) gathers element by element, 1.6x slower here."""
+    picked = a.take(idx, axis=1)
+    if a.ndim == 3:
+        picked = picked.take(idx, axis=2)
+    if not (isinstance(blocks, slice) and blocks == slice(None)):
+        picked = picked.take(np.arange(a.shape[0])[blocks], axis=0)
     order = tuple(range(picked.ndim))[::-1]
     return np.ascontiguousarray(picked.transpose(order)).transpose(order)
 
