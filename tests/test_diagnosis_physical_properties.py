@@ -74,3 +74,35 @@ def test_each_physical_standard_error_is_the_propagated_covariance(library_and_c
             assert other[name].stderr == pytest.approx(2 * e.stderr, rel=1e-9, abs=1e-15), (cand.name, name)
             checked += 1
     assert checked >= 40
+
+
+def test_each_model_form_variant_is_another_model_form(library_and_constants, model):
+    """A candidate's variants are the alternative forms its model-form spread is taken over
+    (``with_model_form_spread``: half the range of the parameters refitted with each): every
+    variant must differ from the nominal form and from every other variant, or the spread
+    understates the form's uncertainty. Compared on 200 states across the logged gaps and
+    positions with the same coefficients: somewhere they must differ by more than 1e-6 of the
+    accelerations' size (the forms differ by O(1) there; rounding is 1e-16)."""
+    library, _ = library_and_constants
+    rng = np.random.default_rng(8)
+    n = 200
+    x = np.vstack(
+        [
+            rng.uniform(0.012, 0.03, n),
+            rng.uniform(-0.05, 0.05, n),
+            rng.uniform(-0.04, 0.04, n),
+            rng.uniform(-0.2, 0.2, n),
+        ]
+    )
+    u, du = rng.uniform(-3, 3, (2, n)), rng.uniform(-50, 50, (2, n))
+    with_variants = [c for c in library if c.term.variants]
+    assert with_variants
+    for cand in with_variants:
+        q = 0.05 * (1 + np.arange(cand.term.n_parameters))
+        forms = [cand.term.function, *cand.term.variants]
+        acc = [np.asarray(f.map(n)(x, u, du, np.repeat(q[:, None], n, 1))) for f in forms]
+        size = max(np.max(np.abs(a)) for a in acc)
+        assert size > 0, cand.name
+        for i in range(len(acc)):
+            for k in range(i):
+                assert np.max(np.abs(acc[i] - acc[k])) > 1e-6 * size, (cand.name, k, i)
