@@ -102,6 +102,15 @@ def _solve_spd(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, bo
     return ginv @ r, ginv, True
 
 
+def _positive_definite(g: np.ndarray) -> bool:
+    """Whether a symmetric matrix is positive definite (its Cholesky factor exists)."""
+    try:
+        np.linalg.cholesky(g)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
 def fit_subset(
     design: Design,
     groups: Sequence[str],
@@ -145,7 +154,7 @@ def fit_subset(
         lo, hi = 0.0, 1.0
         for _ in range(30):
             mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _solve_spd(system(mid), rhs)[2] else (lo, mid)
+            lo, hi = (mid, hi) if _positive_definite(system(mid)) else (lo, mid)
         share = lo
         coef, ginv, _ = _solve_spd(system(share), rhs)
         message = (
@@ -160,7 +169,7 @@ def fit_subset(
     ho = np.full(2, np.nan)
     if design.hold_n:
         for a in range(2):
-            hg = design.hold_gram[a][np.ix_(idx, idx)]
+            hg = design.hold_gram[a].take(idx, axis=0).take(idx, axis=1)
             sse = design.hold_yy[a] - 2 * coef @ design.hold_rhs[a][idx] + coef @ hg @ coef
             ho[a] = np.sqrt(max(sse, 0.0) / design.hold_n)
     cov = np.full((idx.size, idx.size), np.nan)
