@@ -100,4 +100,4 @@ def test_a_better_training_fit_alone_is_not_a_finding(clean_diagnosis):
     assert len(fitting) >= 5  # measured 11 of 17 on this log
     assert len(d.effects) == 0
     for j in fitting:
-        assert j.verdict != "passes" and j.gain < SelectionSettings().min_gain, (j.name, j.gain)
+        assert j.verdict != "passes" and j.own_gain < SelectionSettings().min_gain, (j.name, j.own_gain)

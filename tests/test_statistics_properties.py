@@ -277,6 +277,17 @@ def test_judgement_numbers_are_recomputed_from_the_rows(with_friction):
     assert np.isnan(j.gain_axes[1 - a])
     assert j.contribution_rms[a] == pytest.approx(np.sqrt(np.mean((h1 - h0) ** 2)), rel=1e-3)
     assert j.contribution_rms[1 - a] == 0.0
+    # the size the selection judges: the same RMS over the held-out 0.5 s block where it is
+    # largest, the blocks cut here from the held-out samples of each log
+    seg, per = d.prepared.segment[d.holdout], round(d.block_seconds * RATE)
+    change = h1 - h0
+    blocks = [
+        change[np.flatnonzero(seg == s)][k * per : (k + 1) * per]
+        for s in np.unique(seg)
+        for k in range(np.count_nonzero(seg == s) // per)
+    ]
+    assert j.contribution_peak[a] == pytest.approx(max(np.sqrt(np.mean(b**2)) for b in blocks), rel=1e-3)
+    assert j.contribution_peak[a] > j.contribution_rms[a] and j.contribution_peak[1 - a] == 0.0
     coef, cov = j.fit.group(d, "viscous_horizontal")
     assert j.wald == pytest.approx(float(coef[0] ** 2 / cov[0, 0]), rel=1e-9)
     assert j.wald_threshold == pytest.approx(stats.chi2.isf(settings.alpha, 1), rel=1e-12)
@@ -302,7 +313,7 @@ def test_selection_rejects_a_candidate_that_helps_training_only(friction_in_trai
     assert both.chi_square < 0.2 * base.chi_square  # it explains most of the training error
     sel = select(d, [cand], SelectionSettings(bootstrap=0))
     assert sel.selected == []
-    assert sel.last["viscous_horizontal"].gain < SelectionSettings().min_gain
+    assert sel.last["viscous_horizontal"].own_gain < SelectionSettings().min_gain
     chosen = select(with_friction, [cand], SelectionSettings(bootstrap=0))
     assert chosen.selected == ["viscous_horizontal"]
     # within 5 % of the planted 2 1/s (its standard error is under 1 %)
@@ -340,10 +351,10 @@ def measured(with_friction):
 @pytest.mark.parametrize(
     "option, value, verdict",
     [
-        ("min_gain", lambda j: j.gain * UP, "not significant"),
-        ("min_gain", lambda j: j.gain * DOWN, "passes"),
-        ("min_effect", lambda j: j.contribution_rms.max() * UP, "too small"),
-        ("min_effect", lambda j: j.contribution_rms.max() * DOWN, "passes"),
+        ("min_gain", lambda j: j.own_gain * UP, "not significant"),
+        ("min_gain", lambda j: j.own_gain * DOWN, "passes"),
+        ("min_effect", lambda j: j.contribution_peak.max() * UP, "too small"),
+        ("min_effect", lambda j: j.contribution_peak.max() * DOWN, "passes"),  # strong: the peak decides
         ("max_vif", lambda j: j.vif * DOWN, "not separable"),
         ("max_vif", lambda j: j.vif * UP, "passes"),
     ],
@@ -370,6 +381,22 @@ def test_the_held_out_z_threshold_and_the_strong_path(with_friction, measured):
     for change in ({"min_z_strong": z * UP}, {"strong_wald": ratio * UP}):
         change = {**both, **change}
         assert _judged(with_friction, dataclasses.replace(s, **strong, **change)).verdict == "not significant"
+
+
+def test_a_strong_effect_is_sized_where_it_is_largest(with_friction, measured):
+    """min_effect between the change's RMS over the held-out part and its RMS over the largest
+    held-out block: a strong effect (z >= min_z_strong, Wald >= strong_wald times its threshold)
+    passes, judged where it is largest; with the strong path closed it is too small."""
+    rms, peak = measured.contribution_rms.max(), measured.contribution_peak.max()
+    assert peak > 1.1 * rms  # the planted friction acts with the speed, unevenly over the blocks
+    between = {"min_effect": np.sqrt(rms * peak)}
+    ratio = measured.wald / measured.wald_threshold
+    s = SelectionSettings()
+    assert _judged(with_friction, dataclasses.replace(s, **between)).verdict == "passes"
+    weak = dataclasses.replace(s, **between, strong_wald=ratio * UP)
+    assert _judged(with_friction, weak).verdict == "too small"
+    low = dataclasses.replace(s, min_effect=rms * DOWN, strong_wald=ratio * UP)
+    assert _judged(with_friction, low).verdict == "passes"
 
 
 def test_the_wald_threshold_follows_alpha(with_friction):
