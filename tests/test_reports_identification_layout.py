@@ -386,3 +386,14 @@ def test_report_prints_the_study(identification_report):
             assert float(row[first]) == pytest.approx(fit.values[k], rel=1e-5)
             z = (fit.values[k] - truth[k]) / fit.stderr[k]
             assert float(row[first + 3]) == pytest.approx(z, abs=0.006)  # printed to 0.01
+
+
+def test_a_small_drop_of_the_error_is_not_printed_as_zero():
+    """The diagnose scorecard's drops: one decimal below 10 % (a claimed effect that lowers the
+    held-out error by 0.5 % read "−0 %"), whole per cent above; no drop without a base error."""
+    from maglev_oc.reporting.diagnosis_report import _drop
+
+    assert _drop(1.0, 0.995) == "0.5 %"
+    assert _drop(0.02, 0.01) == "50 %"
+    assert _drop(1.0, 1.02) == "-2.0 %"
+    assert _drop(0.0, 1.0) == "—"

@@ -78,7 +78,11 @@ def effect_sizes(effect: Effect) -> str:
 
 
 def _drop(before: float, after: float) -> str:
-    return f"{100 * (1 - after / before):.0f} %" if before > 0 else "—"
+    """The relative drop in per cent, one decimal below 10 % (a 0.3 % drop is not "0 %")."""
+    if not before > 0:
+        return "—"
+    drop = 100 * (1 - after / before)
+    return f"{drop:.{0 if abs(drop) >= 10 else 1}f} %"
 
 
 def outcome_rows(diag: Diagnosis, study: CompensationStudy | None) -> list[tuple[str, str, str]]:
@@ -127,8 +131,8 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             plain(e.name),
             effect_sizes(e),
-            f"claimed: held-out error −{100 * e.gain:.0f} % (z = {e.z:.1f}), chosen in "
-            f"{100 * e.confidence:.0f} % of resamples",
+            f"claimed: held-out error −{100 * e.gain:.{0 if abs(e.gain) >= 0.1 else 1}f} % (z = {e.z:.1f}), "
+            f"chosen in {100 * e.confidence:.0f} % of resamples",
         )
         for e in diag.effects
     ]
