@@ -154,7 +154,7 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool, commit: 
         f"source_paths = [{sources}]\n"
         f"pytest_add_cli_args_test_selection = [{selection}]\n"
         f"{marker}"
-        'also_copy = ["tests/", "maglev_oc/"]\n'
+        'also_copy = ["tests/", "maglev_oc/", "bench/"]\n'
         # the mutants run in children of a fork server that has only collected the tests, not of
         # the process that ran the whole suite to map tests to functions (its Dask clusters, event
         # loops and thread pools are not inherited)
@@ -171,11 +171,19 @@ def _prepare(paths: list[str], tests: list[str] | None, *, fresh: bool, commit: 
 
 def _extract(commit: str) -> None:
     """The package and tests of ``commit`` into WORK (replacing the copies there)."""
-    for name in ("maglev_oc", "tests"):
+    for name in ("maglev_oc", "tests", "bench"):
         if (WORK / name).exists():
             shutil.rmtree(WORK / name)
+    # the C harness the code generation reads from a source checkout (codegen.REPO_HARNESS,
+    # ROOT/bench/nmpc_c): quick tests read it too, and without it they fail without any mutant,
+    # which stops mutmut's test map (a run of 2026-11-24 collected no stats)
+    extra = [
+        path
+        for path in ("bench/nmpc_c",)
+        if subprocess.run(["git", "cat-file", "-e", f"{commit}:{path}"], cwd=ROOT).returncode == 0
+    ]
     archive = subprocess.run(
-        ["git", "archive", "--format=tar", commit, "maglev_oc", "tests", "analyses"],
+        ["git", "archive", "--format=tar", commit, "maglev_oc", "tests", "analyses", *extra],
         cwd=ROOT,
         capture_output=True,
         check=True,
