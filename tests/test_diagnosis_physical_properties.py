@@ -106,3 +106,27 @@ def test_each_model_form_variant_is_another_model_form(library_and_constants, mo
         for i in range(len(acc)):
             for k in range(i):
                 assert np.max(np.abs(acc[i] - acc[k])) > 1e-6 * size, (cand.name, k, i)
+
+
+def test_systematic_errors_are_added_in_quadrature_never_more():
+    """``with_model_form_spread`` without model-form variants: an angle's or a length's error is
+    the fit's alone; any other parameter's is sqrt(stderr^2 + (1 % of its value)^2) (the
+    differentiator's calibration, ``refit.CALIBRATION``). Summed linearly, or the error's square
+    replaced by anything else, it exceeds that; exact to rounding."""
+    from types import SimpleNamespace
+
+    from maglev_oc.diagnosis.refit import CALIBRATION, with_model_form_spread
+    from maglev_oc.regression.terms import Estimate
+
+    params = {
+        "angle": Estimate(0.02, 0.003, "rad"),
+        "gap": Estimate(0.015, 2e-4, "m"),
+        "force": Estimate(-1.5, 0.04, "N"),
+        "tiny": Estimate(3.0, 1e-6, "1"),
+    }
+    cand = SimpleNamespace(name="x", term=SimpleNamespace(variants=()))
+    out = with_model_form_spread(params, None, None, [], cand, None, None, None)
+    for k, v in params.items():
+        systematic = 0.0 if v.unit in ("rad", "m") else CALIBRATION * abs(v.value)
+        assert out[k].value == v.value and out[k].unit == v.unit
+        assert out[k].stderr == pytest.approx(math.hypot(v.stderr, systematic), rel=1e-12), k
