@@ -544,3 +544,24 @@ def test_the_estimated_current_error_part_is_what_noise_adds_to_the_normal_matri
     ratio = np.mean(increase, axis=0) / np.mean(estimate, axis=0)
     assert ratio[1] == pytest.approx(1.0, abs=0.12)  # rate_probe
     assert 0.5 < ratio[2] < 2.0  # current_probe
+
+
+def test_min_gain_is_judged_on_the_axes_the_candidate_acts_on(with_friction, measured):
+    """On a log where both axes move, a horizontal candidate's ``gain`` (the ranking's, averaged
+    over the moving axes) is about half its drop on its own axis; ``min_gain`` is held against the
+    latter (``own_gain``). The measured judgement is moved onto such a log by setting the vertical
+    axis's drop to 0 (what a horizontal term leaves there): a min_gain between the average and
+    the own-axis drop passes, just above the own-axis drop does not."""
+    from maglev_oc.diagnosis.selection import _verdict
+
+    a = int(np.argmax(with_friction.weights))
+    own = measured.gain_axes[a]
+    both = np.zeros(2)
+    both[a] = own
+    j = dataclasses.replace(measured, gain=float(np.mean(both)), gain_axes=np.where(both != 0, both, np.nan))
+    assert j.own_gain == own and j.gain == pytest.approx(own / 2, rel=1e-12)
+    axes, cur = np.array([a]), fit_subset(with_friction, ["base"])
+    between = dataclasses.replace(SelectionSettings(), min_gain=0.75 * own)
+    assert _verdict(j, _friction_candidate(), axes, cur, between, None)[0] == "passes"
+    above = dataclasses.replace(SelectionSettings(), min_gain=own * UP)
+    assert _verdict(j, _friction_candidate(), axes, cur, above, None)[0] == "not significant"

@@ -140,12 +140,17 @@ class Judgement:
     def own_gain(self) -> float:
         """The relative drop of the held-out MSE on the axes it acts on (``gain`` averages over
         every moving axis, which ranks candidates by their total improvement)."""
-        finite = self.gain_axes[np.isfinite(self.gain_axes)]
-        return float(np.mean(finite)) if finite.size else 0.0
+        return _own_gain(self.gain_axes)
 
     @property
     def significant(self) -> bool:
         return self.verdict not in ("not significant", "too small")
+
+
+def _own_gain(gain_axes: np.ndarray) -> float:
+    """The mean of the per-axis gains on the axes a candidate acts on (NaN elsewhere), 0 if none."""
+    finite = gain_axes[np.isfinite(gain_axes)]
+    return float(np.mean(finite)) if finite.size else 0.0
 
 
 @dataclass(frozen=True)
@@ -257,23 +262,29 @@ class _Around:
         return ss / self.residual.shape[1]
 
 
-def _block_peak(design: Design, change: np.ndarray, counted: np.ndarray | None) -> np.ndarray:
-    """(2,) the largest RMS of ``change`` (2, n_hold) over the held-out blocks of
-    ``design.block_seconds`` (samples not ``counted`` left out of each block's mean)."""
+def _held_out_blocks(design: Design) -> list[tuple[int, np.ndarray]]:
+    """(log, (blocks, samples) indices into the held-out samples) per log: its held-out samples cut
+    into whole blocks of ``design.block_seconds`` (a shorter rest left out)."""
     seg = design.prepared.segment[design.holdout]
     size = max(1, round(design.block_seconds / design.prepared.sample_time))
-    sq = change**2
-    ones = np.ones_like(sq) if counted is None else counted.astype(float)
-    peak = np.zeros(2)
+    out = []
     for s in np.unique(seg):
         idx = np.flatnonzero(seg == s)
         nb = idx.size // size
-        if nb == 0:
-            continue
-        cut = idx[: nb * size]
-        sums = sq[:, cut].reshape(2, nb, size).sum(axis=2)
-        counts = ones[:, cut].reshape(2, nb, size).sum(axis=2)
-        peak = np.maximum(peak, np.sqrt(np.max(sums / np.maximum(counts, 1.0), axis=1)))
+        out.append((int(s), idx[: nb * size].reshape(nb, size)))
+    return out
+
+
+def _block_peak(design: Design, change: np.ndarray, counted: np.ndarray | None) -> np.ndarray:
+    """(2,) the largest RMS of ``change`` (2, n_hold) over the held-out blocks (samples not
+    ``counted`` left out of each block's mean)."""
+    sq = change**2
+    ones = np.ones_like(sq) if counted is None else counted.astype(float)
+    peak = np.zeros(2)
+    for _, cut in _held_out_blocks(design):
+        if cut.size:
+            sums, counts = sq[:, cut].sum(axis=2), ones[:, cut].sum(axis=2)
+            peak = np.maximum(peak, np.sqrt(np.max(sums / np.maximum(counts, 1.0), axis=1)))
     return peak
 
 
@@ -318,14 +329,9 @@ def holdout_significance(
     gain = float(np.mean(1.0 - np.mean(r1[axes] ** 2, axis=1) / mse0))
     e0 = np.sum(r0[axes] ** 2 / mse0[:, None], axis=0)
     e1 = np.sum(r1[axes] ** 2 / mse0[:, None], axis=0)
-    seg = design.prepared.segment[design.holdout]
-    size = max(1, round(design.block_seconds / design.prepared.sample_time))
     ratios, logs = [], []
-    for s in np.unique(seg):
-        idx = np.flatnonzero(seg == s)
-        nb = idx.size // size
-        for b in range(nb):
-            sel = idx[b * size : (b + 1) * size]
+    for s, cut in _held_out_blocks(design):
+        for sel in cut:
             ratios.append(np.log(max(e0[sel].sum(), 1e-300) / max(e1[sel].sum(), 1e-300)))
             logs.append(s)
     ratios, logs = np.array(ratios), np.array(logs)
@@ -369,8 +375,7 @@ def judge(
     # the gain counts every moving axis alike, so an effect on both axes is not diluted
     moving = np.flatnonzero(design.moving)
     gain = float(np.mean(1.0 - mse1[moving] / mse0[moving]))
-    own_gain = float(np.mean(gain_axes[axes])) if axes.size else 0.0
-    if own_gain >= settings.min_gain and z >= min(settings.min_z, settings.min_z_strong):
+    if _own_gain(gain_axes) >= settings.min_gain and z >= min(settings.min_z, settings.min_z_strong):
         fit = fit_subset(design, [*current, cand.name])  # the long-run covariance, for the Wald test
     coef, cov = fit.group(design, cand.name)
     try:

@@ -131,7 +131,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             plain(e.name),
             effect_sizes(e),
-            f"claimed: held-out error −{100 * e.gain:.{0 if abs(e.gain) >= 0.1 else 1}f} % (z = {e.z:.1f}), "
+            f"claimed: held-out error −{_drop(1.0, 1.0 - e.gain)} (z = {e.z:.1f}), "
             f"chosen in {100 * e.confidence:.0f} % of resamples",
         )
         for e in diag.effects
