@@ -11,6 +11,7 @@ import scipy.io
 from numpy.testing import assert_allclose
 
 from maglev_oc.cli import main
+from maglev_oc.errors import SolverError
 from maglev_oc.identification.design import (
     CurrentBudget,
     ExperimentDesigner,
@@ -130,6 +131,31 @@ def test_reference_files_round_trip(doptimal, tmp_path):
     assert summary["targets"] == ["C1", "C2", "C3", "C4"]
     assert set(summary["predicted"]["stderr"]) == {"C1", "C2", "C3", "C4"}
     assert not list((tmp_path / "out").glob(".*"))  # no temporary files left
+
+
+def test_a_grid_shape_that_cannot_be_fitted_is_kept_with_its_reason(model, designer, monkeypatch, tmp_path):
+    """A shape of the D-optimal grid whose scaling fails (here the first: its fit raises, as
+    ``fit_to_budget`` does when no scaling fits the feasibility set and the budget) is not
+    dropped: the candidates and design.json list it as infeasible with the solver's reason, and
+    the design is made from the shapes that fit (1.7 s of CPU a shape)."""
+    fit = designer.fit_to_budget
+    calls = []
+
+    def first_fails(make, budget, **kwargs):
+        calls.append(make(1e-3, 1e-3).name)
+        if len(calls) == 1:
+            raise SolverError("planted: no scaling fits")
+        return fit(make, budget, **kwargs)
+
+    monkeypatch.setattr(designer, "fit_to_budget", first_fails)
+    d = design_experiment("doptimal", DURATION, model=model, designer=designer, grid=SMALL_GRID)
+    grid_rows = [r for r in d.candidates if r["shape"] != "papers' sum of sines"]
+    assert [r["feasible"] for r in grid_rows] == [False, True]
+    assert grid_rows[0]["shape"] == SMALL_GRID[0].to_dict()
+    assert grid_rows[0]["message"] == "planted: no scaling fits"
+    assert d.settings["vertical"] in (SMALL_GRID[1].to_dict(), "papers' sum of sines")
+    summary = json.loads(write_design(tmp_path / "out", d)["json"].read_text())
+    assert summary["candidates"][0]["message"] == "planted: no scaling fits"
 
 
 def test_cli_bad_options_are_clear_errors(tmp_path, capsys):

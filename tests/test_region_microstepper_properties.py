@@ -37,3 +37,24 @@ def test_a_pass_names_a_failing_constraint_only_when_it_refutes(setpoint):
     assert set(seen) == set(ORDER)
     ranks = [ORDER[s] for s in seen]
     assert ranks == sorted(ranks), seen
+
+
+def test_the_reported_box_count_is_the_work_of_every_pass():
+    """``largest_level`` reports the boxes of all its branch-and-bound passes: the set-point's own
+    check, the pass at the refuted level and each bisection step. The passes are counted here
+    beside the method (the same object's ``certify``, observed, not re-implemented). A budget
+    of 256 boxes a pass and a 30 % bracket keep it to a few passes."""
+    region = MicrostepperRegion(PLATFORM)
+    seen = []
+    certify = region.certify
+
+    def counted(*args, **kwargs):
+        out = certify(*args, **kwargs)
+        seen.append(out[1])
+        return out
+
+    region.certify = counted
+    res = region.largest_level((0.0, 0.0, 0.025), rel_tol=0.3, max_boxes=1)
+    assert len(seen) >= 3, seen  # the set-point, the refuted level, at least one bisection step
+    assert all(b > 0 for b in seen)
+    assert res.boxes == sum(seen), (res.boxes, seen)

@@ -10,7 +10,7 @@ import pytest
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import ellipsoid_image, max_rectangle
 from maglev_oc.region.feasibility import FeasibleSet
-from maglev_oc.region.procedure2 import Procedure2
+from maglev_oc.region.procedure2 import Procedure2, _UpperBounds
 from maglev_oc.results import PerAxis, check_result
 
 
@@ -106,6 +106,20 @@ def test_results_follow_the_convention(at20):
     assert at20.attempts[-1].status == "certified" and all(m.status == "found" for m in at20.minima)
     rect = at20.initial_conditions.rectangle
     assert isinstance(rect, PerAxis) and at20.to_dict()["initial_conditions"]["rectangle"] == rect.to_dict()
+
+
+def test_with_no_infeasible_point_known_no_witness_is_invented(proc, at20):
+    """When neither the stoppers (switched off: infinite levels) nor IPOPT nor the branch and
+    bound found a point that breaks a constraint, the result says nothing was certified or
+    refuted: no witness state, an infinite upper bound. (A witness is a state at which the
+    binding constraint fails; only a stopper's is computed in closed form.)"""
+    travel = dict.fromkeys(("gap_low", "gap_high", "position_low", "position_high"), math.inf)
+    nothing = {"margin": math.inf, "headroom": math.inf}
+    bounds = _UpperBounds(nothing, dict.fromkeys(nothing, (None, 0.0)), 1.0)
+    res = proc._result(at20.reference, at20.P, travel, bounds, 0.0, (), ())
+    assert not res.success and res.status == "not_certified"
+    assert res.witness is None and res.level_upper == math.inf
+    assert res.binding in nothing  # the first named of the undecided constraints, not a stopper
 
 
 def test_rejects_a_non_lyapunov_matrix(proc):
