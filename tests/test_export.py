@@ -26,6 +26,7 @@ from maglev_oc.numerics import c_compiler
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
+from tests.compile_support import cflags_for
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler to build the export")
 
@@ -43,14 +44,15 @@ TOLERANCE_A = 1e-9
 def _objects(export, tmp_path, object_cache, flags=("-O1",)) -> list:
     """The export's sources compiled as a user would; an object the session compiled before from
     the same preprocessed source with the same flags is reused (tests/compile_support.py: the
-    NMPC's generated file is the same for every budget of the dual solver)."""
+    NMPC's generated file is the same for every budget of the dual solver). CasADi's generated
+    files at -O0 (tests/compile_support.py, ``GENERATED_CFLAGS``)."""
     objects = []
     for src in export.sources:
         obj = tmp_path / (src.stem + ".o")
         # -std=c99 -Wall -Werror on every file (the issue's bar); the interface also -Wextra
         # -pedantic (CasADi's generated code has unused parameters by design)
         extra = ["-Wextra", "-pedantic"] if src.name == f"{export.prefix}.c" else []
-        cmd = [c_compiler(), "-std=c99", "-Wall", "-Werror", *extra, *flags, "-fPIC"]
+        cmd = [c_compiler(), "-std=c99", "-Wall", "-Werror", *extra, *cflags_for(src, flags), "-fPIC"]
         object_cache.compile(cmd, src, obj)
         objects.append(obj)
     return objects

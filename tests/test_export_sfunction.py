@@ -28,6 +28,7 @@ from maglev_oc.numerics import c_compiler
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.scenarios import paper_scenarios
 from maglev_oc.sim.twin import RigTwin
+from tests.compile_support import cflags_for
 
 pytestmark = pytest.mark.skipif(c_compiler() is None, reason="no C compiler to build the export")
 
@@ -153,7 +154,7 @@ def _build(export, tmp_path, object_cache) -> ctypes.CDLL:
         # -std=c99 -Wall -Werror on every file; the interface and the block also -Wextra -pedantic
         # (CasADi's generated code has unused parameters by design)
         extra = [] if src.name.endswith("_generated.c") else ["-Wextra", "-pedantic"]
-        cmd = [cc, "-std=c99", "-Wall", "-Werror", *extra, "-O1", "-fPIC"]
+        cmd = [cc, "-std=c99", "-Wall", "-Werror", *extra, *cflags_for(src), "-fPIC"]
         cmd += [f"-I{tmp_path}", f"-I{export.directory}"]
         object_cache.compile(cmd, src, obj)
         objects.append(obj)

@@ -31,12 +31,12 @@ from maglev_oc.model.linearization import linearize
 from maglev_oc.model.parameters import PAPER_CONSTANTS
 from maglev_oc.numerics import c_compiler
 from maglev_oc.results import check_result
-from maglev_oc.sim.compiled_nmpc import COMPILE_FLAGS
 from maglev_oc.sim.effects import TwinEffects
 from maglev_oc.sim.engine import ClosedLoop
 from maglev_oc.sim.nmpc_instances import record_instances
 from maglev_oc.sim.scenarios import Scenario, SetpointSequence, paper_scenarios
 from maglev_oc.sim.twin import RigTwin
+from tests.compile_support import GENERATED_CFLAGS
 
 MM = 1e-3
 TS = 2e-4
@@ -538,8 +538,9 @@ def test_generated_c_matches_python(model, tmp_path, qp_solver):
     # The C export of the RTI step gives the Python Function's outputs on instances recorded in
     # closed loop (the large step: unconstrained and constrained samples). Same operations in the
     # same order, IEEE arithmetic (no -ffast-math at any -O level): the difference is at
-    # round-off; tolerance 1e-9 absolute (A, m, m/s). Compiled at -O1 here (as the closed-loop
-    # runs compile it, sim.compiled_nmpc.COMPILE_FLAGS): a third of -O3's gcc time on 1.3 MB.
+    # round-off; tolerance 1e-9 absolute (A, m, m/s). Compiled at -O0 here (GENERATED_CFLAGS,
+    # tests/compile_support.py: the same values as the closed-loop runs' -O1, in 40 % of the gcc
+    # time on 1.3 MB; 150 instances run).
     codegen = pytest.importorskip("maglev_oc.control.codegen")
     if c_compiler() is None:
         pytest.skip("no C compiler (gcc/cc) available to compile the generated code")
@@ -549,7 +550,7 @@ def test_generated_c_matches_python(model, tmp_path, qp_solver):
     inst = record_instances(ctrl, RigTwin(model), sc, every=10)
     assert len(inst) == 150
     code = codegen.generate_c(ctrl, tmp_path / "gen")
-    lib = codegen.compile_shared(code, cflags=COMPILE_FLAGS)
+    lib = codegen.compile_shared(code, cflags=GENERATED_CFLAGS)
     external = ca.external(code.function, str(lib))
     expected = codegen.evaluate_instances(ctrl.rti_step, inst)
     got = codegen.evaluate_instances(external, inst)
@@ -559,7 +560,7 @@ def test_generated_c_matches_python(model, tmp_path, qp_solver):
     # generated source (qrqp) or linked against the library just checked (hpipm, whose library
     # links HPIPM in turn; one gcc run of the source instead of two)
     library = lib if qp_solver == "hpipm" else None
-    exe = codegen.build_harness(code, tmp_path / "harness", cflags=COMPILE_FLAGS, library=library)
+    exe = codegen.build_harness(code, tmp_path / "harness", cflags=GENERATED_CFLAGS, library=library)
     path = codegen.write_instances(tmp_path / "inst.bin", inst)
     timing = codegen.run_harness(exe, path, tmp_path / "out.bin", repeat=2)
     assert timing.instances == 150 and timing.failed_calls == 0 and timing.median > 0
