@@ -81,7 +81,10 @@ def _spatial_periodogram(x3: np.ndarray, residual: np.ndarray, periods: np.ndarr
         ss = np.einsum("kn,kn->k", sin, sin) - n * ms * ms
         cc = np.einsum("kn,kn->k", cos, cos) - n * mc * mc
         sc = np.einsum("kn,kn->k", sin, cos) - n * ms * mc
-        rs, rc = sin @ r.T, cos @ r.T  # (k, rows)
+        # (k, rows), row by row (a matrix-vector product each: a row's sums do not depend on how
+        # many rows are traced together, to the bit)
+        rs = np.stack([sin @ row for row in r], axis=1)
+        rc = np.stack([cos @ row for row in r], axis=1)
         det = ss * cc - sc * sc
         ok = det > 1e-12 * np.maximum(ss * cc, 1e-300)
         q = (cc[:, None] * rs * rs - 2 * sc[:, None] * rs * rc + ss[:, None] * rc * rc) / np.where(
