@@ -39,13 +39,13 @@ QUICK = {"guide_friction_horizontal_small", "normal_cogging_large", "cable_carri
 FIELD_SHAPE = pytest.mark.xfail(
     strict=True,
     reason="the attraction's part is absorbed by the constants (see test_field_shape_...), and the thrust's "
-    "part is too weak in these seeds' held-out quarter (z 0.6 and 1.6; eleven's large one, z 2.8, is found)",
+    "part of the small one is too weak on this log (z 0.6 over the held-out quarter)",
 )
 
 
 def _marks(name: str) -> list:
     marks = [] if name in QUICK else [pytest.mark.slow]
-    return marks + ([FIELD_SHAPE] if name.startswith("field_shape") else [])
+    return marks + ([FIELD_SHAPE] if name == "field_shape_small" else [])
 
 
 @pytest.mark.parametrize(
@@ -99,17 +99,19 @@ def test_two_effects_together_are_both_found(generated, stem):
 
 @pytest.mark.slow
 def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
-    # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 1.5 % end effect. The
-    # travel (about 70 mm) covers 1.2 pole pitches: the end effect's smooth fall of the thrust
-    # towards the ends fits a 57 mm detent as well as a bowl. Such a force is not separable from
-    # a smooth dependence on the position (SelectionSettings.min_periods = 1.25): judged so, never
-    # claimed. (The end effect itself, 2.6 % at +-40 mm, is not found: its held-out z is 1.2.)
+    # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 5 % end effect at +-50 mm
+    # (2.6 % at +-40 mm). The travel (about 70 mm) covers 1.2 pole pitches: the end effect's
+    # smooth fall of the thrust towards the ends fits a 57 mm detent as well as a bowl. Such a
+    # force is not separable from a smooth dependence on the position
+    # (SelectionSettings.min_periods = 1.25): judged so, never claimed. The end effect itself is
+    # claimed beside the misalignment (its z 1.5 over the held-out quarter, 3.8 with the
+    # cross-fitted training parts).
     path, truth = generated("pairs", "pairs_03")
     d = diagnose_path(path)
     s = score("pairs_03", truth, d.to_dict()["effects"])
     assert s.true_first and s.no_false_claim, s.claimed
-    assert [e.name for e in d.effects] == ["guide_misalignment"]
-    # within 30 % of the truth (the issue's bound)
+    assert s.size_right, s.notes  # both within 30 % of the truth (the issue's bound)
+    assert [e.name for e in d.effects] == ["guide_misalignment", "end_effects"]
     assert d.effects[0].parameters["slope"].value == pytest.approx(0.004, rel=0.3)
     judged = [st.judgements["cogging_horizontal_57mm"] for st in d.selection.steps]
     assert any(j.verdict == "not separable" and SMOOTH_POSITION in j.confounded_with for j in judged)
@@ -120,21 +122,22 @@ def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
 
 
 @pytest.mark.slow
-def test_field_shape_is_absorbed_by_the_constants_and_nothing_is_claimed(diagnosed_here):
+def test_a_field_shapes_attraction_is_absorbed_by_the_constants_and_its_thrust_is_found(diagnosed_here):
     # A field weaker/stronger with the gap (B times exp(-k1 d - k2 d^2)) multiplies the attraction
     # by a smooth function of the gap. On a closed-loop log the levitation current follows the
     # gap (it is the equilibrium current plus small transients), so C3 l3(g) i_d(g) and
-    # C4 l4(g) i_d(g)^2 span the same smooth functions of the gap: the base fit absorbs the field
-    # shape into C3, C4 and the model still predicts the held-out data to its noise. Nothing is
-    # claimed, nothing false either; the experiment that shows it is the papers' equilibrium
-    # currents over 10-25 mm (000 Sec. V-B), where the gap is swept with the current held.
+    # C4 l4(g) i_d(g)^2 span the same smooth functions of the gap: the base fit absorbs the
+    # attraction's part into C3, C4 (the experiment that shows it is the papers' equilibrium
+    # currents over 10-25 mm, 000 Sec. V-B, where the gap is swept with the current held). The
+    # thrust's part, where the stage pushes at small gaps, is what is found: with the
+    # cross-fitted training parts its z is 5.3 (1.6 over the held-out quarter alone).
     stem = next(s for s, sc in named_set("single") if sc.name == "field_shape_large")
-    d, truth = diagnosed_here("single", stem)  # shared with the strict xfail of the single effects
-    assert d.effects == []
-    before, after = d.error_before["vertical"], d.error_after["vertical"]
-    assert after == pytest.approx(before)
+    d, truth = diagnosed_here("single", stem)  # shared with the test of the single effects
+    assert [e.name for e in d.effects] == ["magnet_field_gap_dependence"]
+    j = d.selection.steps[0].judgements["magnet_field_gap_dependence"]
+    assert j.z >= SelectionSettings().min_z > j.z_holdout
     err = relative_errors(d, truth)
-    assert abs(err["C4"]) > 0.2  # the field shape went into C4 (measured +145 %)
+    assert abs(err["C4"]) > 0.2  # the attraction's part went into C4 (measured +136 %)
 
 
 @pytest.mark.slow

@@ -41,7 +41,7 @@ class Effect:
     parameters: dict[str, Estimate]
     confidence: float  # bootstrap share choosing it at its step
     gain: float  # relative drop of the held-out error on its axes when it was added
-    z: float
+    z: float  # its significance: the held-out quarter and the cross-fitted training parts pooled
     contribution_rms: PerAxis  # held-out RMS of its acceleration per axis [m/s^2]
     force_rms: PerAxis  # the same in N
     runner_up: str

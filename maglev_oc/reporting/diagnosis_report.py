@@ -259,7 +259,8 @@ _PARAMETER_NOTE = (
 )
 _VERDICT_NOTE = (
     "Each candidate is fitted jointly with C1..C4 and the effects chosen before it. It is claimed only if "
-    "it lowers the held-out error significantly (z ≥ 3 on 0.5 s blocks with a long-run standard error), "
+    "it lowers the held-out error significantly (z ≥ 3 on the 0.5 s blocks of the held-out quarter and of "
+    "the training data held out in turn, with a long-run standard error), "
     "its coefficients pass a Wald test (p < 1e-4), it changes the prediction by more than the "
     "2.25e-3 m/s² a 15 rad/s loop turns into one encoder count, it is separable from the constants and "
     "the other effects (variance inflation ≤ 100) and it is physically plausible."
