@@ -378,9 +378,40 @@ class _CrossFit:
             samples = np.flatnonzero(np.isin(design.block_of, held))
             self.blocks.append(np.flatnonzero(~near))
             self.samples.append(samples)
-            self.columns.append(design.columns[:, :, samples])
-            self.target.append(design.target[:, samples])
+            # contiguous copies (the design's columns are a strided view): a fit's columns are
+            # gathered from them for every candidate
+            self.columns.append(np.ascontiguousarray(design.columns[:, :, samples]))
+            self.target.append(np.ascontiguousarray(design.target[:, samples]))
             self.labels.append(design.block_of[samples])
+        # the 0.5 s blocks of the held-out quarter and of every part, each with its log and first
+        # sample: :func:`pooled_significance` takes them in the order of these two
+        hold_index = np.flatnonzero(design.holdout)
+        cuts = _held_out_blocks(design)
+        self.held_cuts = [cut for _, cut in cuts]
+        logs = [np.full(cut.shape[0], s) for s, cut in cuts]
+        firsts = [hold_index[cut[:, 0]] for cut in self.held_cuts]
+        self.where = []  # per part, each sample's block among the part's blocks
+        for samples, labels in zip(self.samples, self.labels, strict=True):
+            blocks, first, where = np.unique(labels, return_index=True, return_inverse=True)
+            self.where.append(where)
+            logs.append(design.block_log[blocks])
+            firsts.append(samples[first])
+        self.order = np.lexsort((np.concatenate(firsts), np.concatenate(logs)))
+        self.logs = np.concatenate(logs)[self.order]
+        # each part's fit blocks summed once: a fit of any groups is then one block's solve (the
+        # same normal equations as ``fit_subset(design, groups, blocks=...)``, summed in another order)
+        self.summed = [
+            dataclasses.replace(
+                design,
+                gram=design.gram[b].sum(axis=0)[None],
+                noise=design.noise[b].sum(axis=0)[None],
+                rhs=design.rhs[b].sum(axis=0)[None],
+                yy=design.yy[b].sum(keepdims=True),
+                block_log=design.block_log[b[:1]],
+                hold_n=0,
+            )
+            for b in self.blocks
+        ]
         self._fits: dict[tuple[str, ...], list[np.ndarray]] = {}
 
     def residuals(self, groups: Sequence[str]) -> list[np.ndarray]:
@@ -388,8 +419,8 @@ class _CrossFit:
         key = tuple(groups)
         if key not in self._fits:
             out = []
-            for blocks, cols, target in zip(self.blocks, self.columns, self.target, strict=True):
-                fit = fit_subset(self.design, groups, blocks=blocks, covariance=False)
+            for summed, cols, target in zip(self.summed, self.columns, self.target, strict=True):
+                fit = fit_subset(summed, groups, covariance=False)
                 out.append(target - np.tensordot(fit.coef, cols[fit.index], axes=1))
             self._fits[key] = out
         return self._fits[key]
@@ -447,21 +478,18 @@ def pooled_significance(
     every = [held, *parts]
     n = sum(r0.shape[1] for r0, _ in every)
     mse0 = np.maximum(sum(np.sum(r0[axes] ** 2, axis=1) for r0, _ in every) / n, 1e-300)
-    rows = []  # (log, first sample, log-ratio)
-    e0, e1 = (np.sum(held[k][axes] ** 2 / mse0[:, None], axis=0) for k in (0, 1))
-    hold_index = np.flatnonzero(design.holdout)
-    for s, cut in _held_out_blocks(design):
-        for sel in cut:
-            rows.append((s, hold_index[sel[0]], _log_ratio(e0[sel].sum(), e1[sel].sum())))
-    for (r0, r1), samples, labels in zip(parts, cross.samples, cross.labels, strict=True):
+    sums0, sums1 = [], []
+    e0, e1 = (np.sum(r[axes] ** 2 / mse0[:, None], axis=0) for r in held)
+    for cut in cross.held_cuts:
+        sums0.append(e0[cut].sum(axis=1))
+        sums1.append(e1[cut].sum(axis=1))
+    for (r0, r1), where in zip(parts, cross.where, strict=True):
         e0, e1 = (np.sum(r[axes] ** 2 / mse0[:, None], axis=0) for r in (r0, r1))
-        blocks, where = np.unique(labels, return_inverse=True)
-        s0, s1 = np.bincount(where, e0, blocks.size), np.bincount(where, e1, blocks.size)
-        first = samples[np.unique(where, return_index=True)[1]]
-        for k, b in enumerate(blocks):
-            rows.append((int(design.block_log[b]), first[k], _log_ratio(s0[k], s1[k])))
-    rows.sort()
-    return _block_z(np.array([r[2] for r in rows]), np.array([r[0] for r in rows]), design.block_seconds)
+        size = int(where.max()) + 1 if where.size else 0
+        sums0.append(np.bincount(where, e0, size))
+        sums1.append(np.bincount(where, e1, size))
+    s0, s1 = (np.maximum(np.concatenate(x), 1e-300)[cross.order] for x in (sums0, sums1))
+    return _block_z(np.log(s0 / s1), cross.logs, design.block_seconds)
 
 
 def _log_ratio(ss0: float, ss1: float) -> float:
