@@ -91,6 +91,10 @@ def test_batch_matches_the_engine(model):
 
 def test_slice_certified_starts_are_safe(sim, loop, cert):
     s = fl_slice(sim, loop, REF, cert.P, cert.level, ("e1", "e2"), (-0.008, 0.008), (-0.01, 0.01), n=5)
+    # the grid asked for: n points per axis from end to end of each range
+    np.testing.assert_allclose(s.x, np.linspace(-0.008, 0.008, 5), rtol=0, atol=0)
+    np.testing.assert_allclose(s.y, np.linspace(-0.01, 0.01, 5), rtol=0, atol=0)
+    assert s.certified.shape == (5, 5)
     assert s.unsafe_certified == 0
     assert s.certified.sum() > 0 and 0 < s.coverage <= 1
     check_result(s)
