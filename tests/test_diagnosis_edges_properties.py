@@ -1,0 +1,42 @@
+"""Edges of the diagnosis that the scenario tests do not reach: what it says when it has nothing
+to predict or only confounded candidates to show (issue 21: survivors of a mutation run at
+31d4cd9, seed 33, each turned into a property)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from maglev_oc.diagnosis.pipeline import _outcome
+from maglev_oc.diagnosis.prediction import output_error
+from maglev_oc.regression.data import prepare
+from tests.test_regression import _synthetic
+
+
+def test_with_no_window_in_the_held_out_block_the_output_error_is_undefined_on_both_axes(model):
+    """No held-out sample, so no 50 ms window to simulate: both axes' output error are NaN (not
+    a number for one axis and a crash for the other); with the held-out quarter, the moving
+    (horizontal) axis gets a finite error and the held vertical axis stays NaN."""
+    data = prepare([_synthetic(model, seconds=12.0, position_noise=2e-6)], bandwidth=10.0)
+    none = output_error(data, np.zeros(data.n, dtype=bool), model)
+    assert math.isnan(none["vertical"]) and math.isnan(none["horizontal"])
+    _, hold = data.masks(0.25)
+    some = output_error(data, hold, model)
+    assert math.isnan(some["vertical"]) and math.isfinite(some["horizontal"])
+
+
+def test_a_diagnosis_with_only_confounded_candidates_says_none_was_separable():
+    """Nothing claimed and nothing unexplained, but candidates that explain part of the residual
+    and cannot be told from the constants: the outcome says no effect could be separated (not
+    that the base model explains the log to its noise) and how many were not separable."""
+    sel = SimpleNamespace(base=SimpleNamespace(compensated=True))
+    data = SimpleNamespace(current_noise=np.zeros(2))
+    status, success, message = _outcome([], ["a", "b"], [], sel, data)
+    assert status == "nothing_found" and success
+    assert message == (
+        "no effect this log can separate from the constants found; 2 candidate(s) not separable on this log"
+    )
+    _, _, clean = _outcome([], [], [], sel, data)
+    assert clean == "no missing effect found: the base model explains the log to its noise"
