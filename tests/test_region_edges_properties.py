@@ -52,6 +52,13 @@ def test_the_bisection_stops_once_the_bracket_is_within_one_percent(model, linea
     assert cert.decrease_margin(res.P, cert.jacobian_box(res.P, above)) >= 0
 
 
+def test_with_no_step_allowed_nothing_is_certified_and_no_step_is_counted(model, linear):
+    """``iterations=0``: no level is tried, nothing is certified, and the result says 0 steps."""
+    res = certify_roa(model, linear, Reference.setpoint(0.02), iterations=0)
+    assert not res.success and res.status == "not_certified"
+    assert res.bisections == 0 and res.level == 0.0
+
+
 @pytest.mark.parametrize("entry", [0.0, -1.0])
 def test_a_matrix_with_a_non_positive_diagonal_certifies_nothing(model, linear, entry):
     """The decrease margin of a P with a zero or negative diagonal entry is +inf (not certified),

@@ -23,7 +23,8 @@ def builder(model):
 def _refused(poly, words):
     check_result(poly)
     assert not poly.success and poly.status == "not_proved" and words in poly.message
-    assert poly.vertices.shape == (2, 0) and poly.offsets.size == 0
+    # no faces either: normals n' dv <= b, each a 2-vector, none of them
+    assert poly.vertices.shape == (2, 0) and poly.normals.shape == (0, 2) and poly.offsets.shape == (0,)
 
 
 def test_a_polygon_reaching_a_closed_gap_is_not_proved(builder):
