@@ -11,6 +11,7 @@ import numpy as np
 
 from maglev_oc.diagnosis.pipeline import _outcome
 from maglev_oc.diagnosis.prediction import output_error
+from maglev_oc.diagnosis.trace import Trace, unexplained_periods
 from maglev_oc.regression.data import prepare
 from tests.test_regression import _synthetic
 
@@ -40,3 +41,18 @@ def test_a_diagnosis_with_only_confounded_candidates_says_none_was_separable():
     )
     _, _, clean = _outcome([], [], [], sel, data)
     assert clean == "no missing effect found: the base model explains the log to its noise"
+
+
+def test_the_strongest_unexplained_peak_of_an_axis_is_the_one_reported():
+    """Periodogram peaks that match no motor period are waviness candidates, at most one per axis:
+    the one explaining the largest share, whatever its period; a peak at a motor period (within
+    1.5 %) is never one."""
+    motor = {"slot_pitch": 0.012, "pole_pitch": 0.024}
+    peaks = [
+        ("horizontal", 0.0171, 0.04),
+        ("horizontal", 0.0452, 0.21),  # the strongest unexplained
+        ("horizontal", 0.0241, 0.5),  # the pole pitch, 0.4 % off: explained
+        ("vertical", 0.061, 0.03),
+    ]
+    tr = Trace(np.zeros(0), np.zeros((2, 0)), motor, peaks, {}, np.zeros(0), np.zeros((2, 0)))
+    assert unexplained_periods(tr) == [("horizontal", 0.0452), ("vertical", 0.061)]

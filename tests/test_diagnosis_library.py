@@ -455,3 +455,23 @@ def test_every_candidate_can_travel_in_a_stage_file(plant):
     names = [c.reported_name for c in candidate_library(StageModel(), plant.data)]
     assert len(names) > 10
     assert [n for n in names if not known_effect(n)] == []
+
+
+SI_UNITS = {"m", "N", "1", "rad", "N s/m", "N/m", "s"}
+"""The units a candidate's physical parameters are reported in (SPEC 3: SI; "1" for a ratio)."""
+
+
+def test_every_candidate_says_how_to_separate_it_and_reports_in_si_units(plant):
+    """Each candidate of the library names the experiment that separates it from the constants
+    (what ``not_separable`` prints), leaves out of the separability test only parameters it has
+    (``nuisance``), and turns any coefficients into physical parameters in SI units that its
+    sentence describes (with numbers, never a missing value)."""
+    constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    for cand in candidate_library(StageModel(), plant.data):
+        assert isinstance(cand.separate_by, str) and len(cand.separate_by) > 20, cand.name
+        assert set(cand.nuisance) <= set(cand.term.parameter_names), cand.name
+        n = cand.term.n_parameters
+        physical = cand.term.physical_parameters(np.full(n, 1e-3), 1e-10 * np.eye(n), constants)
+        assert {e.unit for e in physical.values()} <= SI_UNITS, (cand.name, physical)
+        sentence = cand.describe(physical)
+        assert "None" not in sentence and "nan" not in sentence and any(ch.isdigit() for ch in sentence)
