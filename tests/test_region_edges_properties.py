@@ -19,9 +19,11 @@ import pytest
 
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.errors import InputError
-from maglev_oc.region.closed_loop import Reference
+from maglev_oc.region.closed_loop import Reference, RegulatorLoop
+from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.microstepper import MicrostepperRegion
 from maglev_oc.region.roa import LinearizedLoop, RoaCertifier, certify_roa
+from maglev_oc.region.robust_certificate import RobustCertifier
 from tests.test_microstepper_region import PLATFORM
 
 
@@ -77,3 +79,10 @@ def test_a_matrix_with_a_non_positive_diagonal_certifies_nothing(model, linear, 
 def test_the_microstepper_names_the_gains_it_refuses(option):
     with pytest.raises(InputError, match=rf"^{option} must be 5 finite gains"):
         MicrostepperRegion(PLATFORM, **{option: np.ones(4)})
+
+
+@pytest.mark.parametrize(("given", "kind"), [("20 mm", "str"), (None, "NoneType"), (0.02, "float")])
+def test_the_robust_certifier_names_what_it_got_instead_of_a_nominal_certificate(model, given, kind):
+    certifier = RobustCertifier(FeasibleSet(model), RegulatorLoop(), max_boxes=1000, ladder=(1.0,))
+    with pytest.raises(TypeError, match=rf"^nominal must be a Procedure2Result, got {kind}$"):
+        certifier.run(given, None)
