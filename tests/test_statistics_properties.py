@@ -471,6 +471,16 @@ def test_each_threshold_turns_the_verdict_at_the_measured_value(
     assert _judged(with_friction, settings).verdict == verdict
 
 
+def test_a_too_small_effect_is_told_in_encoder_counts(with_friction, measured):
+    """The reason a real but small effect is not claimed says what the size threshold means on the
+    rig (one encoder count through the regulated loop) and gives the effect's size in m/s^2."""
+    settings = dataclasses.replace(SelectionSettings(), min_effect=measured.contribution_peak.max() * 10)
+    j = _judged(with_friction, settings)
+    assert j.verdict == "too small"
+    assert "one encoder count" in j.reason and "m/s^2" in j.reason
+    assert f"{np.max(measured.contribution_rms):.2g}" in j.reason
+
+
 def test_the_held_out_z_threshold_and_the_strong_path(with_friction, measured):
     """z must reach min_z, or min_z_strong together with a Wald statistic of strong_wald times its
     threshold (a strong effect whose held-out blocks are few)."""
