@@ -86,3 +86,16 @@ def test_the_robust_certifier_names_what_it_got_instead_of_a_nominal_certificate
     certifier = RobustCertifier(FeasibleSet(model), RegulatorLoop(), max_boxes=1000, ladder=(1.0,))
     with pytest.raises(TypeError, match=rf"^nominal must be a Procedure2Result, got {kind}$"):
         certifier.run(given, None)
+
+
+def test_a_missing_row_of_the_robust_study_names_the_plant_sets_it_has():
+    """Asking a sampled robustness study for a row it does not hold raises KeyError with the
+    set-point and plant set asked for and the plant sets the study has, in table order."""
+    from maglev_oc.region.study import RobustStudy
+    from maglev_oc.region.sweep import PlantSet
+
+    box = PlantSet.box([14.0, 2.0, 2.0, 0.1], [16.0, 3.0, 3.0, 0.2])
+    study = RobustStudy(np.eye(4), "assumed", True, (0.9, 0.99), box, {}, (), (), 10, 5)
+    with pytest.raises(KeyError) as err:
+        study.row("20 mm", "0.95")
+    assert err.value.args[0] == "no row ('20 mm', '0.95'); plant sets: ('nominal', '0.9', '0.99', 'box')"
