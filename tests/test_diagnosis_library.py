@@ -475,3 +475,18 @@ def test_every_candidate_says_how_to_separate_it_and_reports_in_si_units(plant):
         assert {e.unit for e in physical.values()} <= SI_UNITS, (cand.name, physical)
         sentence = cand.describe(physical)
         assert "None" not in sentence and "nan" not in sentence and any(ch.isdigit() for ch in sentence)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_guide_tilt_larger_than_the_weight_is_a_vertical_track_not_an_error(plant, sign):
+    """A fitted constant horizontal force beyond the platform's weight (a wild fit, which the
+    plausibility bound then rejects) still converts: the tilt saturates at +-90 degrees with
+    the force's sign instead of leaving asin's domain."""
+    (cand,) = [
+        c for c in candidate_library(StageModel(), plant.data) if c.name == "horizontal_guides_not_level"
+    ]
+    constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    weight = plant.mh * 9.81
+    physical = cand.term.physical_parameters(np.array([sign * 3 * weight]), np.eye(1), constants)
+    assert physical["tilt"].value == pytest.approx(sign * math.pi / 2, rel=1e-12)
+    assert cand.plausible(physical) is not None  # and it is not a finding
