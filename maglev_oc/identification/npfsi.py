@@ -69,9 +69,12 @@ PAPER_GAMMA = 1.1
 DEFAULT_Q0_SECONDS = 1e-3
 """Default Sigma(0): the diagonal of the mean A'A over the log times 1 ms."""
 CHUNK = 1_000
-"""Samples per mapaccum call: CasADi's build time grows with the length (0.45 s for 10^4), each
-run builds its own, and a Python loop over 1 s chunks costs little (a 60 s log: 0.8 s against
-1.4 s with 10^4)."""
+"""Samples per mapaccum call: CasADi's build time grows with the length (0.45 s for 10^4), and a
+Python loop over 1 s chunks costs little (a 60 s log: 0.8 s against 1.4 s with 10^4)."""
+
+_CHUNKS: dict[tuple, ca.Function] = {}
+"""The chunk Functions by (eps, gamma, Q, m, p, h, size), shared by every estimator of the process:
+the eps studies run the same few settings on many logs (each built once: 25 ms)."""
 
 
 class NpfsiEstimator:
@@ -105,7 +108,6 @@ class NpfsiEstimator:
         self.gamma = float(gamma)
         self.Q = None if Q is None else self._matrix(Q, "Q", definite=False)
         self.Q0 = None if Q0 is None else self._matrix(Q0, "Q0", definite=True)
-        self._functions: dict[tuple[int, int, float], ca.Function] = {}
 
     @staticmethod
     def _matrix(value, name: str, *, definite: bool) -> np.ndarray:
@@ -118,30 +120,40 @@ class NpfsiEstimator:
             raise InputError(f"{name} must be positive definite (eigenvalues {np.linalg.eigvalsh(a)})")
         return a
 
+    def _chunk(self, m: int, p: int, h: float, size: int) -> ca.Function:
+        """``size`` steps of the estimator (a mapaccum of :meth:`_step`): (z, data (nd, size)) ->
+        (z after the last step, theta after each step (p, size)); the states in between are not
+        returned (converting them to numpy cost more than the steps)."""
+        key = (self.eps, self.gamma, None if self.Q is None else self.Q.tobytes(), m, p, h, size)
+        if key not in _CHUNKS:
+            step = self._step(m, p, h)
+            z = ca.MX.sym("z", step.size1_in(0))
+            data = ca.MX.sym("data", step.size1_in(1), size)
+            zs, th = step.mapaccum("npfsi_steps", size)(z, data)
+            _CHUNKS[key] = ca.Function("npfsi_chunk", [z, data], [zs[:, -1], th])
+        return _CHUNKS[key]
+
     def _step(self, m: int, p: int, h: float) -> ca.Function:
-        key = (m, p, h)
-        if key not in self._functions:
-            eps, gamma = self.eps, self.gamma
-            phi = math.exp(-h / eps)
-            beta = h - eps * (1 - phi)
-            theta = ca.SX.sym("theta", p)
-            e = ca.SX.sym("e", m)
-            sig = ca.SX.sym("sigma", p, p)
-            A = ca.SX.sym("A", m, p)
-            b = ca.SX.sym("b", m)
-            dy = ca.SX.sym("dy", m)
-            ata = A.T @ A
-            rhs = sig @ theta + A.T @ ((1 - phi) * e + beta * (dy - b))
-            theta_next = ca.solve(sig + beta * ata, rhs)
-            e_next = phi * e + eps * (1 - phi) * (dy - A @ theta_next - b)
-            q = ata if self.Q is None else ca.DM(self.Q)
-            sig_next = sig + h * (ata - q / gamma**2)
-            z = ca.vertcat(theta, e, ca.vec(sig))
-            d = ca.vertcat(ca.vec(A), b, dy)
-            z_next = ca.vertcat(theta_next, e_next, ca.vec(sig_next))
-            step = ca.Function("npfsi_step", [z, d], [z_next, theta_next])
-            self._functions[key] = step
-        return self._functions[key]
+        """One sample of the estimator: (z, d) -> (z next, theta next), z = (theta, e, vec Sigma)."""
+        eps, gamma = self.eps, self.gamma
+        phi = math.exp(-h / eps)
+        beta = h - eps * (1 - phi)
+        theta = ca.SX.sym("theta", p)
+        e = ca.SX.sym("e", m)
+        sig = ca.SX.sym("sigma", p, p)
+        A = ca.SX.sym("A", m, p)
+        b = ca.SX.sym("b", m)
+        dy = ca.SX.sym("dy", m)
+        ata = A.T @ A
+        rhs = sig @ theta + A.T @ ((1 - phi) * e + beta * (dy - b))
+        theta_next = ca.solve(sig + beta * ata, rhs)
+        e_next = phi * e + eps * (1 - phi) * (dy - A @ theta_next - b)
+        q = ata if self.Q is None else ca.DM(self.Q)
+        sig_next = sig + h * (ata - q / gamma**2)
+        z = ca.vertcat(theta, e, ca.vec(sig))
+        d = ca.vertcat(ca.vec(A), b, dy)
+        z_next = ca.vertcat(theta_next, e_next, ca.vec(sig_next))
+        return ca.Function("npfsi_step", [z, d], [z_next, theta_next])
 
     def run(
         self,
@@ -170,7 +182,7 @@ class NpfsiEstimator:
         dy[:-1] = np.diff(y, axis=0) / h
         data = np.concatenate([A.transpose(0, 2, 1).reshape(n, m * p), b, dy], axis=1).T  # (nd, n)
         z0 = np.concatenate([theta, np.zeros(m), q0.ravel(order="F")])
-        traj, z, status, message = self._integrate(self._step(m, p, h), z0, data, h)
+        traj, z, status, message = self._integrate(m, p, z0, data, h)
         sigma = z[p + m :].reshape(p, p, order="F")
         success = status == "completed"
         if success:
@@ -240,21 +252,18 @@ class NpfsiEstimator:
             raise InputError(f"the data carry no information on {bad} (zero regressor)")
         return DEFAULT_Q0_SECONDS * np.diag(diag)
 
-    def _integrate(self, step: ca.Function, z: np.ndarray, data: np.ndarray, h: float):
-        """(trajectory (p, n), final state, status, message): ``step`` mapped over chunks of
+    def _integrate(self, m: int, p: int, z: np.ndarray, data: np.ndarray, h: float):
+        """(trajectory (p, n), final state, status, message): the estimator run over chunks of
         CHUNK samples; stops at the first non-finite state."""
-        n, p = data.shape[1], step.size1_out(1)
+        n = data.shape[1]
         traj = np.empty((p, n))
         traj[:, 0] = z[:p]
         k, steps = 0, n - 1
-        chunk_fn: dict[int, ca.Function] = {}
         while k < steps:
             size = min(CHUNK, steps - k)
-            if size not in chunk_fn:
-                chunk_fn[size] = step.mapaccum("npfsi_chunk", size)
-            zs, th = chunk_fn[size](z, data[:, k : k + size])
+            z_last, th = self._chunk(m, p, h, size)(z, data[:, k : k + size])
             traj[:, k + 1 : k + 1 + size] = np.asarray(th)
-            z = np.asarray(zs)[:, -1]
+            z = np.asarray(z_last).ravel()
             k += size
             if not np.all(np.isfinite(z)):
                 traj[:, k + 1 :] = np.nan
