@@ -383,7 +383,7 @@ def test_report_jobs_runs_analyses_at_once_and_a_failure_stops_none(tmp_path, st
     assert "failed on purpose" in runs[2].error and not (tmp_path / "two" / "broken.pdf").exists()
     texts = [dict(line.split(" = ") for line in r.path.read_text().splitlines()) for r in runs[:2]]
     assert all(t["C3"] == repr(WEAK_C3.C3) for t in texts)  # --params reaches every worker
-    # two processes whose runs overlap in time: the two 1.5 s analyses ran at once
+    # two processes whose runs overlap in time: each analysis waited until the other had started
     assert texts[0]["pid"] != texts[1]["pid"]
     start, end = [float(t["started"]) for t in texts], [float(t["ended"]) for t in texts]
     assert max(start) < min(end)
