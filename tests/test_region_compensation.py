@@ -143,6 +143,24 @@ def test_compensated_certificate_holds_on_the_twin_with_the_effect(model, loop, 
     assert outside.violations == 1, outside.message
 
 
+def test_the_compensated_batch_simulator_puts_the_effect_in_the_twin(model):
+    """fl_batch_simulator with a compensation: the twin has the force the regulator cancels. A
+    constant 0.5 m/s^2 vertical force, from rest at the 20 mm set-point: cancelled, the gap stays
+    within 1 nm (rounding) over 0.2 s; the same regulator on the twin without the force (what a
+    simulator that dropped the effect would run) moves the gap by more than 1 um (the 10 um encoder
+    count / 10)."""
+    from maglev_oc.region.montecarlo import BatchSimulator
+    from maglev_oc.sim.twin import RigTwin
+
+    x0, ref = np.array([[0.02], [0.0], [0.0], [0.0]]), np.array([0.02, 0, 0, 0, 0, 0])
+    sim = fl_batch_simulator(model, compensation=_compensation(vertical=0.5), duration=0.2, compile=False)
+    c0 = np.vstack([x0, np.zeros((sim.controller.n_state - 4, 1))])
+    held = sim.run(x0, c0, ref)
+    assert held.max_gap[0] - 0.02 < 1e-9 and 0.02 - held.min_gap[0] < 1e-9
+    lost = BatchSimulator(RigTwin(model), sim.controller, duration=0.2, compile=False).run(x0, c0, ref)
+    assert lost.max_gap[0] - lost.min_gap[0] > 1e-6
+
+
 def test_sdp_and_robust_refuse_a_compensated_set(model, loop):
     from maglev_oc.region.robust_certificate import RobustCertifier
 

@@ -8,6 +8,8 @@ what a bad input or a degenerate matrix gives (issue 21: the survivors of a muta
 * A matrix with a non-positive diagonal is no Lyapunov candidate: the decrease test says "not
   certified" (an infinite margin) instead of taking square roots of negative numbers.
 * Gains of the wrong size are refused with the name of the option that carries them.
+* The large step's maps judge the current against the limit in force, and none when there is none.
+* The robust ladder bisects between its certified rung and the rung above.
 """
 
 from __future__ import annotations
@@ -99,3 +101,72 @@ def test_a_missing_row_of_the_robust_study_names_the_plant_sets_it_has():
     with pytest.raises(KeyError) as err:
         study.row("20 mm", "0.95")
     assert err.value.args[0] == "no row ('20 mm', '0.95'); plant sets: ('nominal', '0.9', '0.99', 'box')"
+
+
+@pytest.fixture(scope="module")
+def start_target_maps(model):
+    """The large step's start x target maps (FL and linear regulators) on 2 x 2 pairs, 3 s each (the
+    study's horizon), judged against no current limit and against 4.5 A (the pairs peak at 3.2-6.4 A:
+    some over it, some not)."""
+    import dataclasses
+
+    from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+    from maglev_oc.region.study import _Run, _start_target_maps
+    from maglev_oc.sim.twin import RigTwin
+    from tests.test_region_study import TINY
+
+    loop = RegulatorLoop()
+    config = dataclasses.replace(TINY, linear_horizon=3.0)
+    starts, targets = np.array([0.022, 0.026]), np.array([0.018, 0.020])
+    out = {}
+    for limit in (None, 4.5):
+        run = _Run(
+            model, config, FeasibleSet(model, current_limit=limit), loop, np.random.default_rng(0), print, {}
+        )
+        fl = FeedbackLinearizingRegulator(model, loop.K_h, loop.K_v, omega0=loop.omega0)
+        sim = run.simulator(RigTwin(model), fl, 3.0)
+        out[limit] = _start_target_maps(run, sim, [paper_linear_regulator(model)], starts, targets)
+    return out
+
+
+def test_the_start_target_maps_judge_the_current_against_the_limit_in_force(start_target_maps):
+    """The same runs judged twice: with no limit no pair is "over the current limit" (code 1); with
+    4.5 A exactly the pairs that converged and peaked above 4.5 A are, every other pair keeping
+    its outcome. Not vacuous: each controller has pairs on both sides of the limit."""
+    free, limited = start_target_maps[None], start_target_maps[4.5]
+    assert free.keys() == limited.keys() and len(free) == 2
+    for name in free:
+        a, b = free[name]["outcome"], limited[name]["outcome"]
+        assert a.shape == (2, 2) and not np.any(a == 1), (name, a)
+        over = limited[name]["max_current"] > 4.5
+        assert np.any(b == 1) and np.any(b == 0), (name, b)
+        np.testing.assert_array_equal(b == 1, (a == 0) & over)
+        np.testing.assert_array_equal(a, np.where(b == 1, 0, b))
+
+
+def test_the_robust_ladder_refines_between_the_certified_rung_and_the_one_above(model, monkeypatch):
+    """With a branch and bound that certifies exactly the levels below 0.8 c_nom and refutes the
+    others (a stand-in: the real one rarely fails a rung and passes a lower one on this stage),
+    the ladder (1, 0.6, 0.3) certifies 0.6 and bisects [0.6, 1] three times (REFINE_STEPS):
+    0.8 refuted, 0.7 and 0.75 certified. The certified level is 0.75 c_nom, the least refuted
+    level 0.8 c_nom, and every attempt is in the order made."""
+    from maglev_oc.region.procedure2 import Procedure2
+    from maglev_oc.region.robust_certificate import REFINE_STEPS, RobustSearch
+    from maglev_oc.region.sweep import PlantSet
+
+    feasible, loop = FeasibleSet(model), RegulatorLoop()
+    nominal = Procedure2(feasible, loop).run(Reference.setpoint(0.02))
+    c_nom = nominal.level
+
+    def search(self, reference, P, level, plants, geo, t0):
+        ok = level < 0.8 * c_nom * (1 - 1e-12)
+        status = "certified" if ok else "refuted"
+        return RobustSearch(ok, status, status, level, 1, None, 0.0, None, -1.0 if ok else 1.0)
+
+    monkeypatch.setattr(RobustCertifier, "_search", search)
+    certifier = RobustCertifier(feasible, loop, max_boxes=1000, ladder=(1.0, 0.6, 0.3))
+    res = certifier.run(nominal, PlantSet.point(model.constants.as_array()))
+    assert REFINE_STEPS == 3
+    assert [a.level / c_nom for a in res.attempts] == pytest.approx([1.0, 0.6, 0.8, 0.7, 0.75])
+    assert res.status == "certified" and res.level == pytest.approx(0.75 * c_nom)
+    assert res.level_upper == pytest.approx(0.8 * c_nom)

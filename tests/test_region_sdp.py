@@ -78,3 +78,23 @@ def test_a_reference_at_the_stoppers_is_infeasible(proc):
     res = enlarge(proc, ref)
     check_result(res)
     assert not res.success and res.status == "infeasible" and res.certified is None
+
+
+def test_a_solver_stopped_before_optimality_gives_no_matrix(proc, builder, monkeypatch):
+    """Clarabel stopped after 3 iterations leaves cvxpy values in the variables (status
+    "user_limit"), but they are not a solution: solve_sdp returns no Q and says why, and enlarge
+    certifies nothing from it (a Q read from an unfinished solve would be a certificate built on
+    an arbitrary matrix)."""
+    import cvxpy as cp
+
+    from maglev_oc.region.sdp import solve_sdp
+
+    solve = cp.Problem.solve
+    monkeypatch.setattr(cp.Problem, "solve", lambda self, **kw: solve(self, **kw, max_iter=3))
+    ref = Reference.setpoint(0.02)
+    poly = builder.build(ref, 5e-3)
+    status, Q, _ = solve_sdp(proc.loop, ref, poly, proc.feasible, 0.05, (1.0, 1.0))
+    assert status not in ("optimal", "optimal_inaccurate") and Q is None, status
+    res = enlarge(proc, ref, fractions=(0.75,), builder=builder)
+    check_result(res)
+    assert not res.success and res.certified is None

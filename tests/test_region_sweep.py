@@ -206,6 +206,24 @@ def test_missing_dask_names_the_extra(monkeypatch):
 
 
 @pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        (dict(n=0), "n"),
+        (dict(n=2.0), "n"),
+        (dict(task_size=0), "task_size"),
+        (dict(seed=-1), "seed"),
+        (dict(seed=1.5), "seed"),
+    ],
+)
+def test_run_sweep_refuses_counts_and_seeds_that_are_not_non_negative_integers(spec20, kw, field):
+    """Each argument is checked before any run: a negative integer seed (which SeedSequence
+    would refuse with its own message) and a float one are refused by name, like n and task_size."""
+    args = {"n": 10, **kw}
+    with pytest.raises(InputError, match=rf"^{field} must be a (positive|non-negative) integer, got"):
+        run_sweep(spec20, args.pop("n"), **args)
+
+
+@pytest.mark.parametrize(
     ("args", "needle"),
     [
         (["--robust", "--box", "C9=1:2"], "--box"),
