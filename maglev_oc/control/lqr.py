@@ -53,11 +53,18 @@ class AxisWeights:
     internal_model: tuple[float, float, float]
     current: float
 
+    def __post_init__(self) -> None:
+        if len(self.internal_model) != 3:
+            raise InputError(f"internal_model must hold 3 maxima, got {self.internal_model!r}")
+        for name in ("error", "error_rate", "internal_model", "current"):
+            value = getattr(self, name)
+            values = np.atleast_1d(np.asarray(value, dtype=float))
+            if not np.all(np.isfinite(values) & (values > 0)):
+                raise InputError(f"Bryson maxima must be positive and finite: {name} = {value!r}")
+
     def matrices(self) -> tuple[np.ndarray, np.ndarray]:
         """(Q (5, 5), R (1, 1)): the inverse squared maxima on the diagonals."""
         scales = np.array([self.error, self.error_rate, *self.internal_model], dtype=float)
-        if np.any(scales <= 0) or self.current <= 0:
-            raise InputError(f"Bryson maxima must be positive, got {self}")
         return np.diag(1.0 / scales**2), np.array([[1.0 / self.current**2]])
 
 
