@@ -174,6 +174,24 @@ def test_sweeps_draw_effect_scales_in_their_ranges_beside_the_same_plants(model,
         dataclasses.replace(spec, effect_ranges=((1.0, 0.5), (0, 1), (0, 1)))
 
 
+def test_the_empirical_robust_level_sweeps_the_twin_it_was_given(model, spec20):
+    """empirical_robust_level shrinks the level of ``spec`` over another plant set and keeps every
+    other setting: a spec with the rig's effects at scales up to 3x is swept with them (the effect
+    scales of its runs span their ranges), not on the ideal twin."""
+    from maglev_oc.region.robust import empirical_robust_level
+
+    C = np.asarray(model.constants.as_array())
+    spec = dataclasses.replace(
+        spec20, effects=TwinEffects.rig(), effect_ranges=((0.5, 2.0), (0.0, 3.0), (1.0, 1.0))
+    )
+    out = empirical_robust_level("20 mm", spec, PlantSet.box(0.99 * C, 1.01 * C), runs=40, task_size=40)
+    swept = out.check  # the last sweep
+    assert swept.spec.effects == spec.effects and swept.spec.effect_ranges == spec.effect_ranges
+    k = swept.effect_scales
+    assert np.all(k[0] >= 0.5) and np.all(k[0] <= 2.0) and np.ptp(k[1]) > 1.0
+    assert swept.spec.level == out.level and swept.spec.plants.label == out.plants
+
+
 def test_seeds_change_the_samples_and_repeat_them(model, spec20):
     C = np.asarray(model.constants.as_array())
     spec = spec20.with_plants(PlantSet.box(0.95 * C, 1.05 * C))

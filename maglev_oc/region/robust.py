@@ -19,7 +19,7 @@ never a proof.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -235,17 +235,7 @@ def empirical_robust_level(
     level = spec.level
     for k in range(max_rounds):
         res = run_sweep(
-            SweepSpec(
-                plants,
-                spec.reference,
-                spec.controller,
-                spec.constants,
-                spec.params,
-                spec.P,
-                level,
-                duration=spec.duration,
-                current_limit=spec.current_limit,
-            ),
+            replace(spec, plants=plants, level=level),  # every other setting (effects, ...) kept
             runs,
             seed=seed + k,
             task_size=task_size,
