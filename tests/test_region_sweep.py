@@ -192,6 +192,40 @@ def test_the_empirical_robust_level_sweeps_the_twin_it_was_given(model, spec20):
     assert swept.spec.level == out.level and swept.spec.plants.label == out.plants
 
 
+def test_the_empirical_level_ends_below_every_violating_start_it_saw(monkeypatch, spec20):
+    """Each round's level lies below the V/c of every violating run of the round before (0.95 x
+    the least ratio), so no start seen to violate stays inside; runs that did not violate do not
+    move it; seeds advance by round. A stub sweep plants the violations (ratios of start V to the
+    level swept), so the rule is checked exactly, to round-off."""
+    from types import SimpleNamespace
+
+    from maglev_oc.region import robust
+
+    planted = [np.array([0.9, 0.5, 0.7, 0.2]), np.array([0.8, 0.99, 0.95]), np.array([0.5])]
+    violating = [np.array([True, True, False, False]), np.array([False, True, True]), np.array([False])]
+    seen = []
+
+    def sweep(spec, runs, *, seed, task_size, client):
+        k = len(seen)
+        seen.append((spec.level, seed))
+        return SimpleNamespace(
+            violations=int(violating[k].sum()), start_ratio=planted[k], violating=violating[k], spec=spec
+        )
+
+    monkeypatch.setattr(robust, "run_sweep", sweep)
+    out = robust.empirical_robust_level("20 mm", spec20, spec20.plants, runs=4, seed=7)
+    level0 = spec20.level
+    levels = [s[0] for s in seen]
+    assert [s[1] for s in seen] == [7, 8, 9]
+    assert levels[1] == pytest.approx(level0 * 0.95 * 0.5, rel=1e-12)  # the least violating ratio
+    assert levels[2] == pytest.approx(levels[1] * 0.95 * 0.95, rel=1e-12)
+    # the property itself: every start that violated lies above the final level
+    for k in range(2):
+        v_starts = planted[k][violating[k]] * levels[k]
+        assert np.all(v_starts > out.level)
+    assert out.level == levels[2] and out.rounds == 3 and out.ratio == pytest.approx(levels[2] / level0)
+
+
 def test_seeds_change_the_samples_and_repeat_them(model, spec20):
     C = np.asarray(model.constants.as_array())
     spec = spec20.with_plants(PlantSet.box(0.95 * C, 1.05 * C))
