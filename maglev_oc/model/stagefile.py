@@ -509,12 +509,16 @@ def _check_covariance(cov: np.ndarray, error) -> None:
         raise error(None, None, f"expected 4 x 4 (C1..C4), got {' x '.join(map(str, cov.shape))}")
     for i in range(4):
         if not cov[i, i] >= 0:
-            raise error(i, i, f"a variance must be >= 0, got {cov[i, i]!r}")
+            raise error(i, i, f"a variance must be >= 0, got {float(cov[i, i])!r}")
     for i in range(4):
         for j in range(i):
             scale = math.sqrt(cov[i, i] * cov[j, j])
             if abs(cov[i, j] - cov[j, i]) > _SYMMETRY_TOL * max(scale, 1e-300):
-                raise error(i, j, f"{cov[i, j]!r} differs from [{j}][{i}] = {cov[j, i]!r}: not symmetric")
+                raise error(
+                    i,
+                    j,
+                    f"{float(cov[i, j])!r} differs from [{j}][{i}] = {float(cov[j, i])!r}: not symmetric",
+                )
     d = np.sqrt(np.diag(cov))
     scaled = np.where(np.outer(d, d) > 0, cov / np.where(np.outer(d, d) > 0, np.outer(d, d), 1.0), 0.0)
     lowest = float(np.linalg.eigvalsh(0.5 * (scaled + scaled.T)).min())
