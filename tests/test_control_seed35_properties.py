@@ -174,12 +174,13 @@ def test_the_exported_nmpcs_readme_documents_its_interface_and_diagnostics(model
     export = export_controller(CompiledNMPC(nmpc, backend="vm"), tmp_path / "nmpc")
     assert export.qp_solver == "dual"
     readme = (tmp_path / "nmpc" / "README.md").read_text()
-    # how to call it: the start and every sample's entry points the export has, the split's
-    # prepare / prepare_for / feedback among them (reset and mem_size: the header's comments)
-    calls = ("init", "step", "prepare", "prepare_for", "feedback")
-    assert set(calls) <= set(export.entry_points)
+    # how to call it: every entry point the export has, the split's prepare / prepare_for /
+    # feedback among them, the restart and the memory's size for hosts that allocate it
+    calls = ("init", "reset", "step", "prepare", "prepare_for", "feedback")
+    assert set(calls) | {"mem_size"} == set(export.entry_points)
     for entry in calls:
         assert f"{export.prefix}_{entry}(&m" in readme, entry
+    assert f"{export.prefix}_mem_size()" in readme
     # every diagnostic row with its meaning; the dual solver's qp_status its status codes
     rows = {}
     for line in readme.split("## Diagnostics", 1)[1].splitlines():

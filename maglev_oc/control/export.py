@@ -869,7 +869,12 @@ In Simulink/QUARC: the block `sfun_{prefix}` (below).
 {prefix}_init(&m, y0, r0, u0);       /* u0: the current flowing at start, or NULL */
 /* every sample: */
 int err = {prefix}_step(&m, y, r, u); /* 0 on success */
+/* to restart (a new run, after a fault): the same arguments as init, nothing reallocated */
+{prefix}_reset(&m, y0, r0, u0);
 ```
+
+A host that allocates the memory itself (a pool, a shared segment) asks its size with
+`{prefix}_mem_size()` (bytes, `sizeof({prefix}_mem)`).
 {_SPLIT_README.format(prefix=prefix) if split else ""}{qp}
 ## In Simulink / QUARC at {1 / controller.sample_time:g} Hz
 
