@@ -16,6 +16,7 @@ files of their own so that pytest-xdist spreads them over the cores: the twenty 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,9 @@ def test_json_follows_the_spec_contract(generated, tmp_path):
     assert "m" in j["output_error_metric"]
     assert set(e) >= {"finding", "parameter_details", "confidence", "holdout_gain", "z", "runner_up"}
     assert set(e["parameter_details"]["coulomb"]) >= {"value", "stderr", "unit"}
+    # the friction's reversal speed is fixed by the candidate; its standard errors include the spread
+    # over half and twice it, and the JSON says which range that was
+    assert re.fullmatch(r"reversal speed [\d.]+-[\d.]+ mm/s", e["model_form_variants"])
     ranking = {r["name"]: r["holdout_gain"] for r in j["candidate_ranking"]}
     assert ranking["guide_friction_horizontal"] == pytest.approx(e["holdout_gain"])
     first = j["selection_steps"][0]

@@ -131,6 +131,8 @@ class Diagnosis(Result):
                     "force_rms_N": e.force_rms.to_dict(),
                     "runner_up": e.runner_up,
                     "evidence": e.signature,
+                    # the hyper-parameters the model-form spread in the standard errors ranges over
+                    "model_form_variants": e.candidate.term.variant_note,
                 }
                 for e in self.effects
             ],

@@ -231,6 +231,15 @@ def _effect_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _variant_notes(diag: Diagnosis) -> list[str]:
+    """What each found effect's model-form variants range over (its fixed hyper-parameter)."""
+    return [
+        f"{plain(e.name).capitalize()}: model-form variants over {e.candidate.term.variant_note}."
+        for e in diag.effects
+        if e.candidate.term.variant_note
+    ]
+
+
 def _constant_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     return [
         (
@@ -355,7 +364,7 @@ def write_diagnosis_report(
                     "The found effects' parameters",
                     ("effect", "parameter", "value ± standard error", "unit"),
                     _effect_rows(diag),
-                    notes=[_PARAMETER_NOTE],
+                    notes=[_PARAMETER_NOTE, *_variant_notes(diag)],
                 )
             )
         constants = Table(
