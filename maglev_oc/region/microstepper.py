@@ -217,7 +217,7 @@ class MicrostepperRegion:
                 break
             boxes += lo.shape[1]
             hlo, _ = self._ifn([lo, par_l, gap0], [hi, par_l, gap0])  # the parameters broadcast over boxes
-            ok = np.all(np.vstack(hlo) >= 0, axis=0) if len(hlo) > 1 else np.all(hlo[0] >= 0, axis=0)
+            ok = np.all(np.vstack(hlo) >= 0, axis=0)  # every constraint's lower bound, per box
             lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if not lo.shape[1]:
                 break
