@@ -301,6 +301,6 @@ class MicrostepperRegion:
         half = {a: float(math.sqrt(lo) * self._spread[j]) for j, a in enumerate(AXES)}
         message = f"certified V <= {lo:.4g}; {binding} fails at V = {hi:.4g}{note}"
         return MicrostepperRegionResult(
-            lo > 0, "certified" if lo > 0 else "undecided", message, setpoint, lo, hi, binding, linear,
+            bool(lo > 0), "certified" if lo > 0 else "undecided", message, setpoint, lo, hi, binding, linear,
             half, total, witness, {"total": time.perf_counter() - t0},
         )  # fmt: skip
