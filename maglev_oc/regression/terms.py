@@ -246,6 +246,11 @@ class AccelerationTerm:
         acc = self.function(x, u, du, p)
         return bool(ca.depends_on(acc, u) or ca.depends_on(acc, du))
 
+    def depends_on_rates(self) -> bool:
+        """Whether the term depends on the currents' rates du (an amplifier's lag)."""
+        x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+        return bool(ca.depends_on(self.function(x, u, du, ca.SX.sym("p", self.n_parameters)), du))
+
     def acceleration(self, parameters) -> ca.Function:
         """(x, u, du) -> acc (2) with the parameters fixed."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
