@@ -244,6 +244,9 @@ def test_the_peak_contribution_is_over_the_counted_samples_of_each_block(cogged)
             c = counted[a, sl]
             expected[a] = max(expected[a], math.sqrt(np.sum(change[a, sl][c] ** 2) / max(c.sum(), 1)))
     np.testing.assert_allclose(_block_peak(design, change, counted), expected, rtol=1e-12)
+    # and the same whatever the caller left at the samples not counted (it need not zero them)
+    noisy = np.where(counted, change, 1e3)
+    np.testing.assert_allclose(_block_peak(design, noisy, counted), expected, rtol=1e-12)
 
 
 def test_diagnose_refuses_a_held_out_share_below_five_percent(model):

@@ -287,7 +287,7 @@ def _held_out_blocks(design: Design) -> list[tuple[int, np.ndarray]]:
 def _block_peak(design: Design, change: np.ndarray, counted: np.ndarray | None) -> np.ndarray:
     """(2,) the largest RMS of ``change`` (2, n_hold) over the held-out blocks (samples not
     ``counted`` left out of each block's mean)."""
-    sq = change**2
+    sq = change**2 if counted is None else np.where(counted, change**2, 0.0)  # whatever the caller left there
     ones = np.ones_like(sq) if counted is None else counted.astype(float)
     peak = np.zeros(2)
     for _, cut in _held_out_blocks(design):
