@@ -10,15 +10,19 @@ Each test checks what a user of ``maglev_oc/control/`` relies on:
   positive bound is accepted;
 - a shooting grid refuses an ``interval_samples`` that is not a positive integer (0, a
   negative count, a float, a count given as a string) with a message naming the field and
-  the value given, as it does for ``sample_time`` and ``horizon``.
+  the value given, as it does for ``sample_time`` and ``horizon``;
+- the per-axis augmented system refuses a zero or non-finite input gain (each, not only one of
+  the two conditions) and carries any other into B.
 """
 
 from __future__ import annotations
 
+import math
 import re
 
 import pytest
 
+from maglev_oc.control.gains import augmented_axis
 from maglev_oc.control.nmpc import NMPCSettings, NMPCWeights, NonlinearMPC
 from maglev_oc.control.nmpc.grid import ShootingGrid
 from maglev_oc.errors import InputError
@@ -84,3 +88,18 @@ def test_a_good_grid_is_one_sample_then_whole_intervals():
         grid = ShootingGrid(TS, m, 4)
         assert grid.node_offsets.tolist() == [0, 1, 1 + m, 1 + 2 * m, 1 + 3 * m]
         assert grid.intervals.tolist() == [TS] + [m * TS] * 3
+
+
+@pytest.mark.parametrize("gain", [0.0, -0.0, math.inf, -math.inf, math.nan])
+def test_an_augmented_axis_refuses_a_zero_or_non_finite_input_gain(gain):
+    """The input gain divides the pole placement (B = (0, g, 0, 0, 0)'): zero makes the axis
+    uncontrollable and inf or nan propagates into every gain, so each is refused by name."""
+    with pytest.raises(InputError, match="input_gain must be finite and nonzero"):
+        augmented_axis(input_gain=gain)
+
+
+def test_an_augmented_axis_carries_its_input_gain_into_b():
+    """Any finite nonzero gain, either sign, is accepted and is B's only nonzero entry (e')."""
+    for gain in (1e-3, -2.5, 40.0):
+        _, b = augmented_axis(input_gain=gain)
+        assert b.ravel().tolist() == [0.0, gain, 0.0, 0.0, 0.0]

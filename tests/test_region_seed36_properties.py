@@ -6,16 +6,21 @@ user sees, not of one line:
   ``maglev-oc region --microstepper`` prints and the other results use (simulations, the
   feasibility and SDP certificates, the region study), whether the set-point is certified or
   found infeasible; and ``success`` is a Python bool (``res.success is True`` held for every result
-  but this one, whose certified case returned numpy's ``np.True_``).
+  but this one, whose certified case returned numpy's ``np.True_``);
+* a Lyapunov matrix handed to the region code is refused with a message that says what is wrong
+  with it (not square 10 x 10 and finite, or not symmetric), and a symmetric one is taken as is.
 """
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
+from maglev_oc.errors import InputError
 from maglev_oc.model.platform import microstepper
+from maglev_oc.region.ellipsoid import checked_p
 from maglev_oc.region.microstepper import MicrostepperRegion
 from maglev_oc.results import check_result
 
@@ -46,3 +51,17 @@ def test_the_microstepper_level_reports_its_total_wall_time(limit, setpoint, sta
     assert 0 < res.timings["total"] <= wall
     assert "timings [s]: total " in res.report()
     check_result(res)  # success a Python bool (it was numpy's np.True_ when certified), the rest
+
+
+def test_a_lyapunov_matrix_is_refused_with_what_is_wrong_with_it():
+    """P defines the certified ellipsoid {e' P e <= c}: a P that is not symmetric (to 1e-10
+    relative) is a user's mistake (a transposed factor, a typo), refused saying "symmetric"; a
+    symmetric P comes back unchanged (its symmetrisation is the identity)."""
+    rng = np.random.default_rng(36)
+    a = rng.normal(size=(10, 10))
+    with pytest.raises(InputError, match="P must be symmetric"):
+        checked_p(a @ a.T + np.triu(np.full((10, 10), 1e-3), 1))
+    with pytest.raises(InputError, match="P must be a finite 10 x 10 matrix, got shape \\(9, 9\\)"):
+        checked_p(np.eye(9))
+    p = a @ a.T
+    np.testing.assert_array_equal(checked_p(p), 0.5 * (p + p.T))

@@ -10,17 +10,22 @@ run (issue 21): each test states a property of a result a user sees, not the mut
 * The amplitude and phase of (a sin + b cos) take their standard errors from the (a, b) block of the
   covariance alone, also when the term has further parameters (a gap exponent): the delta method
   sqrt(g' C g) computed here from its closed-form gradients.
+* A log too short for the differentiator (its two edges and 10 samples between) is refused with the
+  length it needs; a log of exactly that length is accepted.
 """
 
 from __future__ import annotations
 
 import math
+import re
 
 import casadi as ca
 import numpy as np
 import pytest
 
+from maglev_oc.data.logs import Log, LogError
 from maglev_oc.model.parameters import StageParameters
+from maglev_oc.regression.data import prepare
 from maglev_oc.regression.terms import (
     REFERENCE_GAP,
     AccelerationTerm,
@@ -145,3 +150,25 @@ def test_a_periodic_force_with_a_gap_exponent_as_a_parameter_reports_its_amplitu
     assert out["amplitude"].value == pytest.approx(amp, rel=1e-12)
     assert out["amplitude"].stderr == pytest.approx(math.sqrt(g_amp @ cov[:2, :2] @ g_amp), rel=1e-12)
     assert out["phase"].stderr == pytest.approx(math.sqrt(g_phase @ cov[:2, :2] @ g_phase), rel=1e-12)
+
+
+@pytest.mark.filterwarnings("ignore:nperseg")  # the logged currents' noise floor from a short log
+def test_a_log_shorter_than_the_differentiators_need_is_refused_by_name_and_one_that_long_is_not():
+    """The differentiator's filters run off both ends of a log (``edge`` samples each) and keep 10
+    samples between: a log one sample shorter than the need the error states is refused with that
+    need, a log of exactly that length is prepared (with all of its samples outside the edges valid)."""
+    t = np.arange(20_000) * 1e-3
+    x = np.vstack([0.02 + 1e-3 * np.sin(t), np.zeros_like(t), 0.01 * np.cos(t), np.zeros_like(t)])
+    u = np.vstack([np.sin(3.0 * t), np.cos(2.0 * t)])
+
+    def log(n: int) -> Log:
+        return Log(t[:n], x[:, :n], u[:, :n], source=f"short{n}.csv")
+
+    with pytest.raises(LogError, match=r"short40\.csv.*needs at least \d+") as err:
+        prepare([log(40)], bandwidth=10.0)
+    need = int(re.search(r"needs at least (\d+)", str(err.value)).group(1))
+    assert need > 40
+    with pytest.raises(LogError, match=rf"needs at least {need}\b"):
+        prepare([log(need - 1)], bandwidth=10.0)
+    data = prepare([log(need)], bandwidth=10.0)
+    assert data.n == need and data.valid.sum() == 10
