@@ -163,7 +163,8 @@ class BoundaryMinimizer:
 
     def _ray_start(self, img, F: np.ndarray, d: np.ndarray, phi0: float, j: int):
         """(start (11,), constraint scale) on the boundary of constraint j along the ray zeta = t d
-        (the first sign change of h_j inside the gap domain), or None if the ray never crosses it."""
+        (the first sign change of h_j inside the gap domain), or None if the ray never crosses it. The
+        scale is |h_j| at the ray's first point, next to the set-point (at least 1)."""
         ts = np.geomspace(1e-3, 1e3, 241)
         zs = np.outer(img.Pinv_Mt @ np.linalg.solve(img.S, img.chol @ d), ts)
         hv_all = np.asarray(self._h.map(ts.size)(zs, phi0, F.ravel(order="F")))
@@ -172,7 +173,10 @@ class BoundaryMinimizer:
         neg = np.nonzero((hv < 0) & inside)[0]
         if neg.size == 0:
             return None
-        return np.concatenate([zs[:, neg[0]], [phi0]]), max(1.0, abs(hv[inside]).max())
+        # the constraint's own size: its value at the set-point end of the ray (the current headroom
+        # there is I^2 - |u|^2 <= 81 A^2), not the largest met along it: far out on a ray |h| reaches
+        # 1e9 A^2, and 1e-7 of that would count a point where the limit holds as on its boundary
+        return np.concatenate([zs[:, neg[0]], [phi0]]), max(1.0, abs(hv[0]))
 
 
 def _bounds(ng: int, periodic: bool) -> dict[str, np.ndarray]:
