@@ -16,6 +16,7 @@ Physical estimates are :class:`Estimate` (value, standard error, unit); per-axis
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Mapping
 from typing import Any, Literal
@@ -141,6 +142,11 @@ class Result:
         return "\n".join(lines)
 
 
+def _plain_floats(timings: Mapping[str, float]) -> dict[str, float]:
+    """``timings`` as the JSON holds them (plain floats)."""
+    return {k: float(v) for k, v in timings.items()}
+
+
 def check_result(result: Any) -> None:
     """Raise AssertionError unless ``result`` follows the convention (for tests)."""
     assert isinstance(result.success, bool), f"{type(result).__name__}.success is not a bool"
@@ -149,5 +155,14 @@ def check_result(result: Any) -> None:
     assert isinstance(result.timings, Mapping), f"{type(result).__name__}.timings is not a mapping"
     assert all(isinstance(v, float) for v in result.timings.values()), "timings must be floats [s]"
     d = result.to_dict()
+    name = type(result).__name__
     assert isinstance(d, dict) and {"success", "status", "message"} <= set(d)
-    assert isinstance(result.report(), str)
+    # the JSON says what the object says, and is JSON (a script reads one, a person the other)
+    for key in ("success", "status", "message"):
+        assert d[key] == getattr(result, key), f"{name}.to_dict()[{key!r}] differs from .{key}"
+    if "timings" in d:
+        assert d["timings"] == _plain_floats(result.timings), f"{name}.to_dict() changes the timings"
+    json.dumps(d, allow_nan=False)
+    text = result.report()
+    assert isinstance(text, str)
+    assert result.status in text, f"{name}.report() does not name its status {result.status!r}"

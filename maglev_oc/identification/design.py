@@ -638,22 +638,25 @@ class Prediction(Result):
         )
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "stderr": self.stderr,
-            "relative_stderr": {
-                k: v / abs(n) for (k, v), n in zip(self.stderr.items(), self.nominal, strict=True)
-            },
-            "log_det_relative_information": self.log_det,
-            "peak_current_A": {"i_q": self.peak_current[0], "i_d": self.peak_current[1]},
-            "rms_current_A": self.rms_current,
-            "gap_range_m": self.gap_range,
-            "position_range_m": self.position_range,
-            "violations": list(self.violations),
-            "success": self.success,
-            "status": self.status,
-            "message": self.message,
-            "timings": dict(self.timings),
-        }
+        """JSON-ready (plain floats and lists; a singular information's -inf log det -> None)."""
+        return jsonable(
+            {
+                "stderr": self.stderr,
+                "relative_stderr": {
+                    k: v / abs(n) for (k, v), n in zip(self.stderr.items(), self.nominal, strict=True)
+                },
+                "log_det_relative_information": self.log_det,
+                "peak_current_A": {"i_q": self.peak_current[0], "i_d": self.peak_current[1]},
+                "rms_current_A": self.rms_current,
+                "gap_range_m": self.gap_range,
+                "position_range_m": self.position_range,
+                "violations": list(self.violations),
+                "success": self.success,
+                "status": self.status,
+                "message": self.message,
+                "timings": dict(self.timings),
+            }
+        )
 
 
 def _twin_backend() -> str:
@@ -970,7 +973,8 @@ class ExperimentDesign(Result):
         lines.append(
             f"  peak currents i_q {self.prediction.peak_current[0]:.3f} A, "
             f"i_d {self.prediction.peak_current[1]:.3f} A "
-            f"(budget {self.budget.horizontal:.3f} / {self.budget.vertical:.3f} A); {self.message}"
+            f"(budget {self.budget.horizontal:.3f} / {self.budget.vertical:.3f} A); "
+            f"{self.status}: {self.message}"
         )
         return "\n".join(lines)
 
