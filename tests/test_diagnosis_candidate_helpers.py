@@ -71,6 +71,17 @@ def test_fmt_scales_value_and_error_alike():
     assert fmt(Estimate(2.0, 0.3, "N")) == "2 ± 0.3 N"
 
 
+def test_fmt_writes_a_finding_in_positional_notation_to_its_significant_digits():
+    """A finding a person reads: two significant digits for the value and one for its error, as %g
+    rounds them, but without %g's exponent for the sizes the findings print (0.001 to 99 999):
+    a 0.3 mm guide waviness in um read "3e+02 ± 1e+01 um" before."""
+    assert fmt(Estimate(3e-4, 1e-5, "m"), 1e6, "um") == "300 ± 10 um"
+    assert fmt(Estimate(347.0, 12.0, "N")) == "350 ± 10 N"
+    assert fmt(Estimate(0.0999, 0.0096, "m")) == "0.1 ± 0.01 m"  # rounded up a decade
+    assert fmt(Estimate(-1234.0, 55.0, "N")) == "-1200 ± 60 N"
+    assert fmt(Estimate(1e-5, 2e-6, "m")) == "1e-05 ± 2e-06 m"  # outside the range: as %g
+
+
 def test_library_context_takes_its_ranges_and_delay_from_the_log(model):
     """The gap and position ranges are the 1st-99th percentiles of the valid samples, the gap's
     median their median, the command's hold delay half a control period (the rig's 5 kHz when

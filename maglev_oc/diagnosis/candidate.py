@@ -157,8 +157,23 @@ def all_of(*checks: Plausibility) -> Plausibility:
 
 
 def fmt(e: Estimate, scale: float = 1.0, unit: str | None = None, digits: int = 2) -> str:
+    """The estimate as "value ± standard error unit", with ``digits`` and 1 significant digits, in
+    positional notation from 0.001 to 99 999 (a 0.3 mm wave reads "300 ± 10 um", not
+    "3e+02 ± 1e+01 um")."""
     u = e.unit if unit is None else unit
-    return f"{e.value * scale:.{digits}g} ± {e.stderr * scale:.1g} {u}".strip()
+    return f"{_significant(e.value * scale, digits)} ± {_significant(e.stderr * scale, 1)} {u}".strip()
+
+
+def _significant(x: float, digits: int) -> str:
+    """``x`` to ``digits`` significant digits as %g writes them, but positional for 1e-3 <= |x| < 1e5."""
+    if not math.isfinite(x) or x == 0 or not 1e-3 <= abs(x) < 1e5:
+        return f"{x:.{digits}g}"
+    decimals = digits - 1 - math.floor(math.log10(abs(x)))
+    rounded = round(x, decimals)
+    if rounded and math.floor(math.log10(abs(rounded))) > math.floor(math.log10(abs(x))):
+        decimals -= 1  # rounded up a decade (0.0999 -> 0.10): one decimal fewer
+    text = f"{round(x, decimals):.{max(decimals, 0)}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text  # no trailing zeros, as %g
 
 
 def delta_method(f: Callable[[np.ndarray], float], p: np.ndarray, cov: np.ndarray, unit: str) -> Estimate:
