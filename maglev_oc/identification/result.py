@@ -196,7 +196,7 @@ class FitResult(Result):
             if truth is not None and k in truth:
                 t = truth[k]
                 err = f"{100 * (v - t) / t:+.3g}%" if t != 0 else f"{v - t:+.3g}"
-                line += f"  truth {t:.6g}, error {err}, z {(v - t) / s:+.2f}" if s > 0 else ""
+                line += f"  truth {t:.6g}, error {err}" + (f", z {(v - t) / s:+.2f}" if s > 0 else "")
             unit = UNITS.get(k, "")
             if unit:
                 line += f"  [{unit}]"
