@@ -8,17 +8,22 @@ cores.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.diagnosis.result import Diagnosis
+from maglev_oc.results import Estimate, PerAxis
 from tests.independent import write_log
 from tests.independent.sets import named_set
 from tests.independent.simulate import simulate
 
-__all__ = ["diagnose_path", "diagnosed", "generated", "relative_errors"]
+__all__ = ["diagnose_path", "diagnosed", "generated", "relative_errors", "stub_diagnosis"]
 
 
 @pytest.fixture(scope="session")
@@ -66,3 +71,48 @@ def diagnose_path(path: Path, **kw):
 def relative_errors(d, truth: dict) -> dict[str, float]:
     true = truth["plant"]["constants_true"]
     return {k: d.constants_final[k].value / true[k] - 1 for k in true}
+
+
+def stub_diagnosis(
+    success: bool = True,
+    status: str = "nothing_found",
+    message: str = "no missing effect found",
+    *,
+    sources: tuple[str, ...] = ("a.csv",),
+    ranking: list = (),
+    validation_before=None,
+    validation_after=None,
+) -> Diagnosis:
+    """A Diagnosis with known fields and no computation behind it, for tests of what it writes: C1
+    14.7 +- 0.1 before and after, held-out errors (0.5, 0.25) -> (0.4, 0.2) m/s^2, two fitted samples
+    and one held out, settings {"holdout_fraction": 0.25}, timings {"total": 1.5}."""
+    nan = PerAxis(math.nan, math.nan)
+    est = {"C1": Estimate(14.7, 0.1, "N/A^2")}
+    selection = SimpleNamespace(ranking=list(ranking), steps=[], last={})
+    return Diagnosis(
+        success,
+        status,
+        message,
+        sources,
+        est,
+        est,
+        [],
+        [],
+        [],
+        [],
+        PerAxis(0.5, 0.25),
+        PerAxis(0.4, 0.2),
+        nan,
+        nan,
+        selection,
+        None,
+        np.zeros((2, 3)),
+        np.zeros((2, 3)),
+        None,
+        np.array([True, True, False]),
+        np.array([False, False, True]),
+        {"holdout_fraction": 0.25},
+        {"total": 1.5},
+        validation_before=validation_before,
+        validation_after=validation_after,
+    )

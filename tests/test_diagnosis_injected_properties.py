@@ -54,6 +54,7 @@ from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset, residuals
 from maglev_oc.results import Estimate
+from tests.test_diagnosis_selection_properties import cogged_design
 from tests.test_statistics_properties import _log
 
 
@@ -61,16 +62,7 @@ from tests.test_statistics_properties import _log
 def cogged(model):
     """(design, library by name): the horizontal sweep with a cogging force planted at the slot
     pitch (0.02 m/s^2), the cogging and friction candidates' columns beside C1."""
-    from maglev_oc.diagnosis.library import candidate_library
-
-    period = model.params.slot_pitch
-    log = _log(model, friction=0.0, force=lambda x3: 0.02 * np.sin(2 * math.pi * x3 / period + 0.5))
-    data = prepare([log], bandwidth=10.0)
-    lib = {c.name: c for c in candidate_library(model, data)}
-    fit, hold = data.masks(0.25)
-    terms = (lib["cogging_horizontal_19mm"].term, lib["guide_friction_horizontal"].term)
-    design = build_design(data, model, estimate=("C1",), terms=terms, fit=fit, holdout=hold)
-    return design, lib
+    return cogged_design(model)
 
 
 # --- significance --------------------------------------------------------------------------------------

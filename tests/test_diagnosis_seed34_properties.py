@@ -23,10 +23,10 @@ import pytest
 from maglev_oc.data.log import Log
 from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.diagnosis.refit import fitted_model
-from maglev_oc.diagnosis.result import Diagnosis
 from maglev_oc.diagnosis.selection import _block_z
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES
-from maglev_oc.results import AXES, Estimate, PerAxis, check_result
+from maglev_oc.results import AXES, check_result
+from tests.diagnosis_support import stub_diagnosis
 from tests.test_regression import GAP, _synthetic
 
 
@@ -55,37 +55,6 @@ def test_a_refit_keeps_the_models_constant_where_the_fit_is_not_positive(model, 
         assert got[name] == (fitted[name] if moving else c0[name]), name
 
 
-def _diagnosis(success: bool, status: str, message: str) -> Diagnosis:
-    nan = PerAxis(math.nan, math.nan)
-    est = {"C1": Estimate(14.7, 0.1, "N/A^2")}
-    selection = SimpleNamespace(ranking=[("cogging", 0.12)], steps=[], last={})
-    return Diagnosis(
-        success,
-        status,
-        message,
-        ("a.csv", "b.csv"),
-        est,
-        est,
-        [],
-        [],
-        [],
-        [],
-        PerAxis(0.5, 0.25),
-        PerAxis(0.4, 0.2),
-        nan,
-        nan,
-        selection,
-        None,
-        np.zeros((2, 3)),
-        np.zeros((2, 3)),
-        None,
-        np.array([True, True, False]),
-        np.array([False, False, True]),
-        {"holdout_fraction": 0.25},
-        {"total": 1.5},
-    )
-
-
 @pytest.mark.parametrize(
     ("success", "status", "message"),
     [(True, "nothing_found", "no missing effect found"), (False, "unexplained_only", "a residual at 60 mm")],
@@ -94,7 +63,7 @@ def test_a_diagnosis_to_dict_carries_its_outcome_and_round_trips_through_json(su
     """The dict the CLI writes has the convention's success, status and message with the
     diagnosis's values (both outcomes, so a constant cannot pass), and the logs, holdout sizes,
     settings and timings; it is plain JSON (dumped and loaded, it is equal)."""
-    d = _diagnosis(success, status, message)
+    d = stub_diagnosis(success, status, message, sources=("a.csv", "b.csv"), ranking=[("cogging", 0.12)])
     check_result(d)
     out = d.to_dict()
     assert out["success"] is success and out["status"] == status and out["message"] == message

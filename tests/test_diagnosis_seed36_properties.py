@@ -24,7 +24,6 @@ import dataclasses
 import json
 import math
 import re
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -33,13 +32,13 @@ from maglev_oc.diagnosis.candidate import MAX_FORCE_SHARE, LibraryContext
 from maglev_oc.diagnosis.currents import lag_candidate
 from maglev_oc.diagnosis.guides import level_candidates
 from maglev_oc.diagnosis.magnetics import field_shape_candidate, gap_dependence_candidate
-from maglev_oc.diagnosis.result import Diagnosis
 from maglev_oc.diagnosis.selection import SelectionSettings, _CrossFit, select
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
-from maglev_oc.results import Estimate, PerAxis, check_result
+from maglev_oc.results import check_result
 from maglev_oc.validation import Validation
+from tests.diagnosis_support import stub_diagnosis
 from tests.test_statistics_properties import _log
 
 
@@ -76,39 +75,6 @@ def _validation(model: str, rms: tuple[float, float], status: str) -> Validation
     )
 
 
-def _diagnosis(before: Validation | None, after: Validation | None) -> Diagnosis:
-    nan = PerAxis(math.nan, math.nan)
-    est = {"C1": Estimate(14.7, 0.1, "N/A^2")}
-    selection = SimpleNamespace(ranking=[], steps=[], last={})
-    return Diagnosis(
-        True,
-        "nothing_found",
-        "no missing effect found",
-        ("a.csv",),
-        est,
-        est,
-        [],
-        [],
-        [],
-        [],
-        PerAxis(0.5, 0.25),
-        PerAxis(0.4, 0.2),
-        nan,
-        nan,
-        selection,
-        None,
-        np.zeros((2, 3)),
-        np.zeros((2, 3)),
-        None,
-        np.array([True, True, False]),
-        np.array([False, False, True]),
-        {"holdout_fraction": 0.25},
-        {"total": 1.5},
-        validation_before=before,
-        validation_after=after,
-    )
-
-
 def test_the_json_carries_the_validation_of_the_base_model_and_of_the_model_with_the_effects():
     """README (SPEC 3): the JSON holds the errors "before and after"; its validation block is keyed
     the same way, ``before`` the base model's and ``after`` the model's with the effects. The two
@@ -117,7 +83,7 @@ def test_the_json_carries_the_validation_of_the_base_model_and_of_the_model_with
     are there and null. The block is plain JSON (dumped and loaded it is equal)."""
     before = _validation("base model (C1..C4 refitted, no effects)", (2e-6, 4e-6), "invalid")
     after = _validation("model with the effects (cogging)", (1e-6, 1e-6), "valid")
-    d = _diagnosis(before, after)
+    d = stub_diagnosis(validation_before=before, validation_after=after)
     check_result(d)
     block = d.to_dict()["validation"]
     assert set(block) == {"before", "after"}
@@ -125,7 +91,7 @@ def test_the_json_carries_the_validation_of_the_base_model_and_of_the_model_with
     assert block["before"]["status"] == "invalid" and block["after"]["status"] == "valid"
     assert block["after"]["residual_rms_m"] == pytest.approx({"vertical": 1e-6, "horizontal": 1e-6})
     assert json.loads(json.dumps(block)) == block
-    assert _diagnosis(None, None).to_dict()["validation"] == {"before": None, "after": None}
+    assert stub_diagnosis().to_dict()["validation"] == {"before": None, "after": None}
 
 
 # --- a selection step's confidence -----------------------------------------------------------------------

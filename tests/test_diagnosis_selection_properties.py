@@ -24,6 +24,12 @@ from tests.test_statistics_properties import _log
 @pytest.fixture(scope="module")
 def cogged(model):
     """(design, library by name): the cogging and friction candidates' columns beside C1."""
+    return cogged_design(model)
+
+
+def cogged_design(model):
+    """(design, library by name): the horizontal sweep with a cogging force planted at the slot pitch
+    (0.02 m/s^2), the cogging and friction candidates' columns beside C1, a quarter held out."""
     from maglev_oc.diagnosis.library import candidate_library
 
     period = model.params.slot_pitch

@@ -38,6 +38,7 @@ from maglev_oc.identification.npfsi import PAPER_EPSILONS
 from maglev_oc.identification.pipeline import IdentificationOutcome
 from maglev_oc.identification.result import METHOD_TITLES, FitResult, NpfsiResult
 from maglev_oc.results import AXES
+from tests.test_identify_properties import OUTCOME_KEYS
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?:nan|inf)"
 
@@ -584,20 +585,7 @@ def test_outcome_report_and_json_name_the_constants_of_the_best_fit(model, oe_su
     assert printed["source"].startswith(f"identified ({best.method})")
 
     d = roundtrip(outcome.to_dict())
-    assert set(d) >= {
-        "sources",
-        "estimate",
-        "base_constants",
-        "identified_constants",
-        "equation_error",
-        "output_error",
-        "npfsi",
-        "success",
-        "status",
-        "message",
-        "timings",
-        "validation",
-    }
+    assert set(d) >= OUTCOME_KEYS
     for k in CONSTANT_NAMES:
         assert d["identified_constants"][k] == best.values[k]
         assert d["base_constants"][k] == getattr(model.constants, k)

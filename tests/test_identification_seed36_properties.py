@@ -17,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from maglev_oc.data.logs import Log
 from maglev_oc.errors import InputError
 from maglev_oc.identification import study
 from maglev_oc.identification.design import REFERENCE_RATE_HZ, SampledReference
@@ -29,7 +28,7 @@ from maglev_oc.identification.experiments import (
     verification_effects,
 )
 from maglev_oc.identification.npfsi import NpfsiEstimator
-from tests.test_regression import AMPS, FREQS, GAP
+from tests.test_identify_rate_properties import fast_log
 
 
 # --- NPFSI's report ------------------------------------------------------------------------------------
@@ -56,22 +55,6 @@ def test_the_npfsi_report_says_which_q_was_used(Q, words):
 
 
 # --- equation error on a fast log -------------------------------------------------------------------------
-def _fast_log(model, rate: float, seconds: float = 6.0) -> Log:
-    """The horizontal sines of tests.test_regression at ``rate`` with the current that drives them through
-    the model's L1 at a locked gap (tests/test_identify_rate_properties.py at another rate)."""
-    rng = np.random.default_rng(36)
-    t = np.arange(int(seconds * rate)) / rate
-    w = 2 * np.pi * FREQS
-    phases = rng.uniform(0, 2 * np.pi, FREQS.size)
-    x3 = np.sum(AMPS[:, None] * np.sin(np.outer(w, t) + phases[:, None]), axis=0)
-    acc = -np.sum((AMPS * w**2)[:, None] * np.sin(np.outer(w, t) + phases[:, None]), axis=0)
-    l1 = float(model.coefficients(GAP)[0, 0])
-    x = np.full((4, t.size), np.nan)
-    x[0], x[2] = GAP, x3 + 1e-6 * rng.standard_normal(t.size)
-    u = np.vstack([-acc / l1, np.full(t.size, 1.5)])
-    return Log(t, x, u, source=f"fast_{rate:g}.csv")
-
-
 @pytest.mark.parametrize("q", [2, 3])
 def test_a_reduced_mask_keeps_a_mean_iff_all_its_samples_are_chosen(q):
     """q-sample block means of a log: one entry per whole block (a partial block at the end is dropped, as
@@ -98,7 +81,7 @@ def test_equation_error_on_a_fast_log_fits_the_means_a_choice_covers_whole(model
     number of fitted means, the same C1 to rounding (1e-12: same samples), found to 1e-3 (the 1 um
     position noise through the differentiator). The count is that of the whole blocks inside less the
     differentiator's edge at each end of the log (none of which the choice reaches)."""
-    problem = EquationError(_fast_log(model, 1000.0 * q), model, estimate=("C1",))
+    problem = EquationError(fast_log(model, 6.0, rate=1000.0 * q, seed=36), model, estimate=("C1",))
     assert problem.sample_time == pytest.approx(1e-3, rel=1e-12)
     n = problem.logs[0].n
     start, stop = 1000 * q + 1, 5000 * q - 1  # 1 s to 5 s, each end one sample into a block

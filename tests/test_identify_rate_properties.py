@@ -17,11 +17,11 @@ RATE = 5000.0  # [Hz] the rig's loop rate; reduced by q = 5 to 1 kHz
 Q = 5
 
 
-def _fast_log(model, seconds: float = 8.0) -> Log:
-    """The horizontal sines of tests.test_regression at 5 kHz with the current that drives them
-    through the model's L1 at a locked gap (an exact answer for C1)."""
-    rng = np.random.default_rng(11)
-    t = np.arange(int(seconds * RATE)) / RATE
+def fast_log(model, seconds: float = 8.0, rate: float = RATE, seed: int = 11) -> Log:
+    """The horizontal sines of tests.test_regression at ``rate`` (the rig's 5 kHz by default) with the
+    current that drives them through the model's L1 at a locked gap (an exact answer for C1)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * rate)) / rate
     w = 2 * np.pi * FREQS
     phases = rng.uniform(0, 2 * np.pi, FREQS.size)
     x3 = np.sum(AMPS[:, None] * np.sin(np.outer(w, t) + phases[:, None]), axis=0)
@@ -30,12 +30,12 @@ def _fast_log(model, seconds: float = 8.0) -> Log:
     x = np.full((4, t.size), np.nan)
     x[0], x[2] = GAP, x3 + 1e-6 * rng.standard_normal(t.size)
     u = np.vstack([-acc / l1, np.full(t.size, 1.5)])
-    return Log(t, x, u, source="fast.csv")
+    return Log(t, x, u, source=f"fast_{rate:g}.csv")
 
 
 @pytest.fixture(scope="module")
 def problem(model):
-    return EquationError(_fast_log(model), model, estimate=("C1",))
+    return EquationError(fast_log(model), model, estimate=("C1",))
 
 
 def test_a_fast_log_is_fitted_at_1_khz(problem):
