@@ -237,19 +237,18 @@ class AccelerationTerm:
 
     def depends_on_inputs(self) -> bool:
         """Whether the term depends on the currents or their rates (not the state alone)."""
-        x, u, du, p = (
-            ca.SX.sym("x", 4),
-            ca.SX.sym("u", 2),
-            ca.SX.sym("du", 2),
-            ca.SX.sym("p", self.n_parameters),
-        )
-        acc = self.function(x, u, du, p)
+        acc, u, du = self._symbolic()
         return bool(ca.depends_on(acc, u) or ca.depends_on(acc, du))
 
     def depends_on_rates(self) -> bool:
         """Whether the term depends on the currents' rates du (an amplifier's lag)."""
+        acc, _, du = self._symbolic()
+        return bool(ca.depends_on(acc, du))
+
+    def _symbolic(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(acc, u, du): the term's accelerations in symbols (x, u, du, p)."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
-        return bool(ca.depends_on(self.function(x, u, du, ca.SX.sym("p", self.n_parameters)), du))
+        return self.function(x, u, du, ca.SX.sym("p", self.n_parameters)), u, du
 
     def acceleration(self, parameters) -> ca.Function:
         """(x, u, du) -> acc (2) with the parameters fixed."""
