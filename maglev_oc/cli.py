@@ -672,7 +672,7 @@ def _region_microstepper(args: argparse.Namespace, limit: float | None) -> int:
     from maglev_oc.fileio import write_text_atomic
     from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, STOPPER_POSITION
     from maglev_oc.model.platform import microstepper
-    from maglev_oc.region.microstepper import MicrostepperRegion
+    from maglev_oc.region.microstepper import PHYSICAL_GAP, MicrostepperRegion
 
     if args.setpoint is None:
         raise InputError("--stage microstepper needs --setpoint X Y GAP (millimetres)")
@@ -693,6 +693,8 @@ def _region_microstepper(args: argparse.Namespace, limit: float | None) -> int:
             f"x and y within +-{STOPPER_POSITION[1] * M_TO_MM:g} mm, gap in "
             f"[{MICROSTEPPER_STOPPER_GAP[0] * M_TO_MM:g}, {MICROSTEPPER_STOPPER_GAP[1] * M_TO_MM:g}] mm"
         )
+    else:
+        parts.append(f"gap >= {PHYSICAL_GAP * M_TO_MM:g} mm (the field model's domain)")
     constraints = "; ".join(parts)
     res = region.largest_level(np.array([x, y, gap]) * MM_TO_M)
     widths = {a: w * M_TO_MM for a, w in res.half_widths.items()}

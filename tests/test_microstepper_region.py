@@ -17,7 +17,7 @@ import pytest
 from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import microstepper
-from maglev_oc.region.microstepper import MicrostepperRegion
+from maglev_oc.region.microstepper import PHYSICAL_GAP, MicrostepperRegion
 
 PLATFORM = microstepper()
 TRANSFORM = MicrostepperTransformation(PLATFORM).function
@@ -48,6 +48,8 @@ def _violations(region: MicrostepperRegion, setpoint, z: np.ndarray) -> dict[str
         out["travel"] = int(
             np.sum((np.abs(e[0]) > STOPPER_POSITION[1]) | (np.abs(e[1]) > STOPPER_POSITION[1]))
         )
+    else:  # no stoppers: the gap still stays where the field model is defined
+        out["gap"] = int(np.sum(gap < PHYSICAL_GAP))
     return out
 
 
@@ -57,6 +59,8 @@ CASES = [
     (dict(), (0.04, -0.04, 0.021), "headroom"),  # near the stator: the 9 A limit first
     (dict(stoppers=False), (0.0, 0.0, 0.025), "headroom"),
     (dict(current_limit=None, stoppers=False), (0.04, -0.04, 0.022), "margin"),  # R >= 0 alone
+    # no stoppers, no limit, 4 mm: R >= 0 holds down to the 1 mm floor of the field model, which binds
+    (dict(current_limit=None, stoppers=False), (0.0, 0.0, 0.004), "gap"),
 ]
 
 

@@ -9,7 +9,8 @@ the transformation is defined and the currents fit:
 
 * R(gap, v) >= 0 (the minimum-norm allocation's discriminant),
 * each pair's current magnitude sqrt(i_q^2 + i_d^2) <= the amplifier limit (9 A),
-* the gap between the stoppers and x, y within the travel.
+* the gap between the stoppers and x, y within the travel; without the stoppers the gap still
+  stays at :data:`PHYSICAL_GAP` or more, where the field model is defined (a closed gap is not).
 
 V = z~' P z~ with A_cl' P + P A_cl = -Q (Q the acceleration-scaled identity, as for the 2-DOF
 loop) makes every {V <= c} invariant for the linear loop; the largest c for which {V <= c} lies
@@ -48,12 +49,16 @@ from maglev_oc.region.branch_and_bound import bisect_widest
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
-__all__ = ["MICROSTEPPER_CONSTRAINTS", "MicrostepperRegion", "MicrostepperRegionResult"]
+__all__ = ["MICROSTEPPER_CONSTRAINTS", "PHYSICAL_GAP", "MicrostepperRegion", "MicrostepperRegionResult"]
 
 MICROSTEPPER_CONSTRAINTS = ("margin", "headroom_A", "headroom_B")
 """The nonlinear constraints, in order: R >= 0 and each pair's current headroom [A^2]."""
 
 AXES = ("x", "y", "gap")
+
+PHYSICAL_GAP = 1e-3
+"""The least gap [m] the certificate and its refutations consider with the stoppers off: the field
+model (exp(-a (h_m + y)) terms, Carter's coefficient) is not a model of a closed gap."""
 
 
 @dataclass(frozen=True)
@@ -169,9 +174,9 @@ class MicrostepperRegion:
         for j, solver in enumerate(self._refuters):
             for _ in range(starts):
                 x0 = self.chol @ rng.normal(size=4) * 3.0
-                # the gap stays physical (1 mm or more): the field model is not defined at a closed gap
+                # the gap stays physical: the field model is not defined at a closed gap
                 bounds = {
-                    "lbx": [1e-3 - gap0, -ca.inf, -ca.inf, -ca.inf],
+                    "lbx": [PHYSICAL_GAP - gap0, -ca.inf, -ca.inf, -ca.inf],
                     "ubx": [0.1, ca.inf, ca.inf, ca.inf],
                 }
                 sol = solver(x0=x0, p=gap0, ubg=0.0, lbg=-ca.inf, **bounds)
@@ -184,13 +189,19 @@ class MicrostepperRegion:
         return best
 
     # ------------------------------------------------------------------------------------------
-    def linear_levels(self, setpoint) -> dict[str, float]:
-        """Largest c keeping each axis within its travel (or the gap within the stoppers)."""
+    def _limits(self) -> dict[str, tuple[float, float]]:
+        """Each linearly limited axis's (low, high) [m]: the travel and the stoppers, or, with the
+        stoppers off, the gap's physical floor alone."""
         if not self.stoppers:
-            return {}
+            return {"gap": (PHYSICAL_GAP, math.inf)}
+        return dict(zip(AXES, (STOPPER_POSITION, STOPPER_POSITION, MICROSTEPPER_STOPPER_GAP), strict=True))
+
+    def linear_levels(self, setpoint) -> dict[str, float]:
+        """Largest c keeping each axis within its travel (or the gap within the stoppers, or above
+        :data:`PHYSICAL_GAP` without them)."""
         out = {}
-        bounds = (STOPPER_POSITION, STOPPER_POSITION, MICROSTEPPER_STOPPER_GAP)
-        for j, (axis, (lo, hi)) in enumerate(zip(AXES, bounds, strict=True)):
+        for axis, (lo, hi) in self._limits().items():
+            j = AXES.index(axis)
             room = min(setpoint[j] - lo, hi - setpoint[j])
             if room <= 0:
                 where = f"[{lo * 1e3:g}, {hi * 1e3:g}] mm"
@@ -240,7 +251,7 @@ class MicrostepperRegion:
     def _linear_witness(self, setpoint, axis: str, level: float) -> np.ndarray:
         """The point of {V <= level} farthest along ``axis``'s error towards its nearer limit."""
         j = AXES.index(axis)
-        lo, hi = (STOPPER_POSITION, STOPPER_POSITION, MICROSTEPPER_STOPPER_GAP)[j]
+        lo, hi = self._limits()[axis]
         sign = 1.0 if hi - setpoint[j] <= setpoint[j] - lo else -1.0
         m = self.errors[j]
         p_inv_m = np.linalg.solve(self.P, m)
