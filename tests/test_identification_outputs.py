@@ -500,6 +500,8 @@ def test_npfsi_report_prints_the_runs_settings_and_estimates():
     check_npfsi_report(run)
     check_npfsi_report(run, {"C1": 14.1, "C2": 0.0})
     check_npfsi_report(make_npfsi(eps=0.001, Q=np.eye(2)), {"C1": 14.1, "C2": 800.0})
+    # a run built without timings (by a script, from a saved JSON) still reports, wall time unknown
+    assert "wall time          = nan s" in make_npfsi(timings={}).report()
 
 
 def test_npfsi_json_holds_the_runs_settings_and_estimates():

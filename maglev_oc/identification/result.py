@@ -342,7 +342,7 @@ class NpfsiResult(Result):
             f"    logs               = {', '.join(self.sources)}",
             f"    # samples          = {self.t.size}",
             f"    velocities         = {self.velocity_method}",
-            f"    wall time          = {self.timings['total']:.3f} s",
+            f"    wall time          = {self.timings.get('total', math.nan):.3f} s",
             "[[Variables]]",
         ]
         width = max(len(n) for n in self.names)
