@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from maglev_oc.region.interval import IntervalFunction
+from maglev_oc.region.interval import CenteredForm, IntervalFunction
 
 
 def _enclosure_violations(fn: ca.Function, ifn: IntervalFunction, lo, hi, rng, samples=9) -> int:
@@ -241,3 +241,92 @@ def test_integer_powers_never_reach_the_constpow_rule():
 
     with pytest.raises(NotImplementedError, match="integer"):
         _constpow(np.array([1.0]), np.array([2.0]), 3.0)
+
+
+# --- the centred (mean-value) form ------------------------------------------------------------------
+def _kinked(x, y):
+    """Smooth parts, a kink (fmax) and a division: what the constraints of F are made of."""
+    return ca.vertcat(ca.fmax(x * y, x - 2 * y) + ca.exp(0.3 * x), ca.sqrt(y**2 + 1) / (x + 4))
+
+
+def _random_boxes(rng, n, widest):
+    width = widest * rng.uniform(0, 1, (2, n)) ** 3  # many narrow boxes, some wide
+    start = rng.uniform(-2, 2 - width)
+    return [start[:1], start[1:]], [(start + width)[:1], (start + width)[1:]]
+
+
+def test_the_centred_form_comparisons_enclose_their_values():
+    """<= and < (which CasADi's derivatives of fmin/fmax contain): 1 or 0 where the intervals
+    cannot overlap, [0, 1] where they do."""
+    for op in (lambda x, y: x <= y, lambda x, y: x < y):
+        x, y = ca.SX.sym("x"), ca.SX.sym("y")
+        fn = ca.Function("cmp", [x, y], [op(x, y)])
+        rng = np.random.default_rng(11)
+        lo, hi = _random_boxes(rng, 400, 3.0)
+        assert _enclosure_violations(fn, IntervalFunction(fn), lo, hi, rng, samples=20) == 0
+        # ties: [1, 1] <= [1, 1] holds, [1, 1] < [1, 1] does not
+        one = [np.array([[1.0]])] * 2
+        (lo_,), (hi_,) = IntervalFunction(fn)(one, one)
+        expect = float(op(1.0, 1.0))
+        assert lo_[0, 0] == pytest.approx(expect, abs=1e-12) and hi_[0, 0] == pytest.approx(expect, abs=1e-12)
+
+
+def test_the_centred_form_encloses_sampled_values_and_is_never_looser():
+    """Soundness of f(m) + J(X)(X - m) intersected with the natural extension, on boxes narrow
+    and wide across the kink of fmax; the intersection is inside the natural enclosure."""
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    fn = ca.Function("kinked", [x, y], [_kinked(x, y)])
+    centred = CenteredForm(fn, boxed=2)
+    rng = np.random.default_rng(5)
+    lo, hi = _random_boxes(rng, 500, 3.0)
+    assert _enclosure_violations(fn, centred, lo, hi, rng, samples=20) == 0
+    (c_lo,), (c_hi,) = centred(lo, hi)
+    (n_lo,), (n_hi,) = IntervalFunction(fn)(lo, hi)
+    assert np.all(c_lo >= n_lo) and np.all(c_hi <= n_hi)
+    # the same with y a parameter interval (boxed=1): the form expands in x only
+    partial = CenteredForm(fn, boxed=1)
+    assert _enclosure_violations(fn, partial, lo, hi, rng, samples=20) == 0
+
+
+def test_the_centred_form_tightens_quadratically():
+    """Its excess over the true range falls 4x when the box halves (the natural extension's 2x,
+    test_width_converges_linearly): the mean-value form's O(h^2); 3.5-4.5 allows the O(h^3)
+    correction at these widths. Each variable occurs several times (the dependency effect that
+    makes the natural extension loose); a smooth point."""
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    fn = ca.Function("tangled", [x, y], [(x - y) * (x + 2 * y) - x * ca.exp(0.2 * y)])
+    centred = CenteredForm(fn, boxed=2)
+    excess = []
+    for h in (0.04, 0.02, 0.01):
+        lo = [np.array([[0.7 - h]]), np.array([[-0.3 - h]])]
+        hi = [np.array([[0.7 + h]]), np.array([[-0.3 + h]])]
+        (c_lo,), (c_hi,) = centred(lo, hi)
+        g = np.linspace(-h, h, 201)
+        X, Y = np.meshgrid(0.7 + g, -0.3 + g)
+        vals = np.asarray(fn.map(X.size)(X.reshape(1, -1), Y.reshape(1, -1))).ravel()
+        excess.append((c_hi[0, 0] - c_lo[0, 0]) - (vals.max() - vals.min()))
+    ratios = np.array(excess[:-1]) / np.array(excess[1:])
+    assert np.all((ratios > 3.5) & (ratios < 4.5)), ratios
+
+
+def test_the_centred_form_encloses_the_microsteppers_constraints():
+    """The constraints the microstepper's branch and bound decides with it (R and both pairs'
+    current headroom over zeta boxes of a level near c*), sampled inside random boxes."""
+    from maglev_oc.model.platform import microstepper
+    from maglev_oc.region.microstepper import MicrostepperRegion
+
+    region = MicrostepperRegion(microstepper())
+    par_l = (np.sqrt(4.0) * region.chol).ravel(order="F")[:, None]
+    gap0 = np.array([[0.021]])
+    rng = np.random.default_rng(2)
+    n = 300
+    width = 0.6 * rng.uniform(0, 1, (4, n)) ** 2
+    start = rng.uniform(-1, 1 - width)
+    lo, hi = [start, par_l, gap0], [start + width, par_l, gap0]
+    fn = region._centred.function
+    pts_lo = [start, np.repeat(par_l, n, axis=1), np.repeat(gap0, n, axis=1)]
+    pts_hi = [start + width, *pts_lo[1:]]
+    assert _enclosure_violations(fn, region._centred, pts_lo, pts_hi, rng, samples=10) == 0
+    (c_lo,), _ = region._centred(lo, hi)
+    (n_lo,), _ = region._ifn(lo, hi)
+    assert np.all(c_lo >= n_lo) and np.mean(c_lo > n_lo) > 0.5  # tighter on most of these boxes

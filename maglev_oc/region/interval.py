@@ -15,7 +15,8 @@ rigorous for the function as CasADi evaluates it in double precision, up to that
 libm.
 
 Supported operations are those the stage model and the region analyses use (arithmetic, square,
-square root, exp/log, sinh/cosh/tanh, atan, sin/cos, fabs, fmin/fmax, integer constant powers);
+square root, exp/log, sinh/cosh/tanh, atan, sin/cos, fabs, fmin/fmax, the comparisons <= and < that
+the derivatives of fmin/fmax contain, non-integer constant powers);
 any other operation raises ``NotImplementedError`` when the function is wrapped.
 """
 
@@ -29,7 +30,7 @@ import numpy as np
 
 from maglev_oc.errors import InputError
 
-__all__ = ["IntervalFunction"]
+__all__ = ["CenteredForm", "IntervalFunction"]
 
 _EPS = np.finfo(float).eps
 _PAD = 4 * _EPS  # relative outward padding per operation
@@ -169,6 +170,8 @@ class IntervalFunction:
             ca.OP_FMIN,
             ca.OP_FMAX,
             ca.OP_CONSTPOW,
+            ca.OP_LE,
+            ca.OP_LT,
             *_UNARY_MONOTONE_INCREASING,
         }
         for k in range(f.n_instructions()):
@@ -281,9 +284,77 @@ def _operation(op: int, a_lo, a_hi, b_lo, b_hi):
         return np.minimum(a_lo, b_lo), np.minimum(a_hi, b_hi)
     if op == ca.OP_FMAX:
         return np.maximum(a_lo, b_lo), np.maximum(a_hi, b_hi)
+    if op in (ca.OP_LE, ca.OP_LT):  # 1 or 0, or [0, 1] where the intervals overlap (derivatives of fmin/fmax)
+        strict = op == ca.OP_LT
+        always = a_hi < b_lo if strict else a_hi <= b_lo
+        never = a_lo >= b_hi if strict else a_lo > b_hi
+        return np.where(always, 1.0, 0.0), np.where(never, 0.0, 1.0)
     if op == ca.OP_CONSTPOW:
         expo = float(np.unique(b_lo)[0]) if np.all(b_lo == b_hi) else None
         if expo is None or np.unique(b_lo).size != 1:
             raise NotImplementedError("pow with a non-constant exponent")
         return _constpow(a_lo, a_hi, expo)
     raise NotImplementedError(op)  # pragma: no cover - screened in IntervalFunction.__post_init__
+
+
+@dataclass(frozen=True, eq=False)
+class CenteredForm:
+    """Enclosures that tighten quadratically with the box: the natural interval extension
+    intersected with the mean-value form.
+
+    For x in a box X with centre m, f(x) = f(m) + J(xi) (x - m) for some xi in X (the mean-value
+    theorem; where fmin/fmax kink, Lebourg's version with Clarke's generalized gradient, which the
+    interval extension of CasADi's derivative encloses: its comparisons are [0, 1] where the
+    arguments overlap). So f(X) lies in F(m) + sum_k [-1, 1] r_k max|J_k(X)|, r the half-widths.
+    The natural extension's excess over the true range shrinks like the width, this one like its
+    square: on the small boxes where branch and bound spends its budget it is the tighter of the two.
+    Where the Jacobian is unbounded on the box (a square root at 0, a pole) the natural
+    extension is kept.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        An SX Function with one output; the first ``boxed`` inputs range over the box, the others
+        are passed as intervals too (degenerate for parameters).
+    boxed : int
+        How many leading inputs the mean-value form expands in.
+
+    Called like :class:`IntervalFunction`, it returns ``([lo], [hi])``, each ``(size_out, n_boxes)``.
+    """
+
+    function: ca.Function
+    boxed: int = 1
+    natural: IntervalFunction = field(init=False, repr=False)
+    jacobian: IntervalFunction = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        f = self.function
+        if f.n_out() != 1 or not 1 <= self.boxed <= f.n_in():
+            raise InputError(f"{f.name()}: a centred form needs one output and 1..{f.n_in()} boxed inputs")
+        object.__setattr__(self, "natural", IntervalFunction(f))  # an SX Function, or TypeError
+        args = [ca.SX.sym(f.name_in(k), f.sparsity_in(k)) for k in range(f.n_in())]
+        x = ca.vertcat(*(ca.vec(a) for a in args[: self.boxed]))
+        jac = ca.densify(ca.jacobian(f(*args), x))
+        object.__setattr__(self, "jacobian", IntervalFunction(ca.Function(f"d_{f.name()}", args, [jac])))
+
+    def __call__(self, lo, hi) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        lo, hi, n = self.natural._boxes(lo, hi)
+        (nat_lo,), (nat_hi,) = self.natural(lo, hi)
+        mid = [0.5 * (a + b) if k < self.boxed else a for k, (a, b) in enumerate(zip(lo, hi, strict=True))]
+        mid_hi = [m if k < self.boxed else b for k, (m, b) in enumerate(zip(mid, hi, strict=True))]
+        (at_lo,), (at_hi,) = self.natural(mid, mid_hi)  # F(m), rounding enclosed
+        (j_lo,), (j_hi,) = self.jacobian(lo, hi)
+        radius = np.vstack([0.5 * (b - a) for a, b in zip(lo[: self.boxed], hi[: self.boxed], strict=True)])
+        m_out = nat_lo.shape[0]
+        # the densified Jacobian (m_out, d) arrives column-major: row k m_out + i is dh_i / dx_k
+        slope = np.maximum(np.abs(j_lo), np.abs(j_hi)).reshape(radius.shape[0], m_out, n)
+        with np.errstate(invalid="ignore"):
+            terms = np.where(radius[:, None, :] == 0.0, 0.0, slope * radius[:, None, :])
+        spread = np.sum(terms, axis=0)
+        spread[np.isnan(spread)] = np.inf
+        # the sum's own rounding: a few units in the last place of everything added
+        slack = (4 + 2 * radius.shape[0]) * _EPS * (np.abs(at_lo) + np.abs(at_hi) + spread) + _TINY
+        with np.errstate(invalid="ignore"):
+            mv_lo, mv_hi = at_lo - spread - slack, at_hi + spread + slack
+        # inf - inf: no bound from this form
+        return [np.fmax(nat_lo, mv_lo)], [np.fmin(nat_hi, mv_hi)]

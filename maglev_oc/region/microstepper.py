@@ -18,10 +18,11 @@ inside the constraints is certified. The constraints depend on z~ only through l
 v_y, v_gap) = M z~, which on {V <= c} ranges over the 4-D ellipsoid {l' S^-1 l <= c},
 S = M P^-1 M': the travel and stopper constraints (linear) give their level in closed form, the
 nonlinear ones are checked by branch and bound with interval arithmetic
-(:class:`~maglev_oc.region.interval.IntervalFunction`) over l = sqrt(c) chol(S) zeta, |zeta| <= 1.
-A box is accepted when every constraint's enclosure is >= 0; a sampled point of an undecided box
-that violates a constraint refutes the level. Bisection on c between a certified and a refuted
-level brackets c*.
+(:class:`~maglev_oc.region.interval.IntervalFunction`, and the tighter
+:class:`~maglev_oc.region.interval.CenteredForm` where that one spends its budget) over
+l = sqrt(c) chol(S) zeta, |zeta| <= 1. A box is accepted when every constraint's enclosure is
+>= 0; a sampled point of an undecided box that violates a constraint refutes the level.
+Bisection on c between a certified and a refuted level brackets c*.
 
 Assumptions (as for the 2-DOF certificate): the plant is the controller's model (the platform of
 :func:`~maglev_oc.model.platform.microstepper`), the loop is continuous with exact velocities and
@@ -46,7 +47,7 @@ from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMI
 from maglev_oc.model.platform import Platform, microstepper
 from maglev_oc.numerics import ColumnMap
 from maglev_oc.region.branch_and_bound import bisect_widest
-from maglev_oc.region.interval import IntervalFunction
+from maglev_oc.region.interval import CenteredForm, IntervalFunction
 from maglev_oc.results import Result
 
 __all__ = ["MICROSTEPPER_CONSTRAINTS", "PHYSICAL_GAP", "MicrostepperRegion", "MicrostepperRegionResult"]
@@ -55,6 +56,14 @@ MICROSTEPPER_CONSTRAINTS = ("margin", "headroom_A", "headroom_B")
 """The nonlinear constraints, in order: R >= 0 and each pair's current headroom [A^2]."""
 
 AXES = ("x", "y", "gap")
+
+CENTRED_AFTER = 0.5
+"""The share of a level's box budget the natural interval extension spends alone before the
+centred form joins it on the boxes it leaves undecided: easy levels stay as quick as before, hard
+ones (near c*, or near the stator where the field's exponentials make the natural extension loose)
+get the tighter enclosure (measured, default budget, the report's three set-points: 49 s instead
+of 27 s, the 21 mm bracket closed from 3 % to 0.8 %; 15 mm, 300 000 boxes: 5.61 certified instead
+of 2.76; 8 mm without stoppers: 1.40 instead of 0.21)."""
 
 PHYSICAL_GAP = 1e-3
 """The least gap [m] the certificate and its refutations consider with the stoppers off: the field
@@ -153,6 +162,7 @@ class MicrostepperRegion:
         zeta, lmat = ca.SX.sym("zeta", 4), ca.SX.sym("L", 4, 4)
         fn = ca.Function("h_zeta", [zeta, ca.vec(lmat), gap0], [self._h_of_l(ca.mtimes(lmat, zeta), gap0)])
         fn = fn.expand()
+        self._centred = CenteredForm(fn, boxed=1)  # tighter where the natural extension is undecided
         # the least V at which constraint j fails: min l' S^-1 l s.t. h_j(l) <= 0 (4-D, IPOPT)
         s_inv = ca.DM(np.linalg.inv(self.S))
         opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "ipopt.max_iter": 300}
@@ -213,7 +223,8 @@ class MicrostepperRegion:
         self, setpoint, level: float, *, max_boxes: int = 1_000_000
     ) -> tuple[str, int, str, np.ndarray | None]:
         """Branch and bound of the nonlinear constraints on {V <= level}: (status, boxes, binding,
-        the state z~ at which ``binding`` fails when refuted)."""
+        the state z~ at which ``binding`` fails when refuted). Boxes are decided by the natural
+        interval extension, and after :data:`CENTRED_AFTER` of the budget also by the centred form."""
         par_l = (math.sqrt(level) * self.chol).ravel(order="F")[:, None]
         gap0 = np.array([[float(setpoint[2])]])
         edges = np.linspace(-1, 1, 5)
@@ -230,6 +241,10 @@ class MicrostepperRegion:
             hlo, _ = self._ifn([lo, par_l, gap0], [hi, par_l, gap0])  # the parameters broadcast over boxes
             ok = np.all(np.vstack(hlo) >= 0, axis=0)  # every constraint's lower bound, per box
             lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
+            if boxes > CENTRED_AFTER * max_boxes and lo.shape[1]:
+                (clo,), _ = self._centred([lo, par_l, gap0], [hi, par_l, gap0])
+                ok = np.all(clo >= 0, axis=0)
+                lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if not lo.shape[1]:
                 break
             vals = self._columns(near, par_l, gap0)[0]
