@@ -131,3 +131,17 @@ def test_max_rectangle_closed_form():
     """For a diagonal P2 the largest-area box has half-sides sqrt(c / (2 p_ii))."""
     a, b = max_rectangle(np.diag([4.0, 1.0]), 2.0)
     np.testing.assert_allclose([a, b], [0.5, 1.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("gap", [0.030, 0.0305, 0.0075])
+def test_a_reference_on_or_beyond_a_stopper_is_answered_not_raised(proc, gap):
+    """A set-point on a stopper (30 mm, 8 mm is the other) or beyond it has no level set around it
+    inside F: the result says so (status ``infeasible_reference``, level 0, the stopper named)
+    instead of the branch and bound refusing a level of 0 from deep inside; 0.1 mm inside, a
+    positive level is certified (the stopper's exact level, which is (room / spread)^2 > 0)."""
+    res = proc.run(Reference.setpoint(gap))
+    check_result(res)
+    assert (res.success, res.status, res.level) == (False, "infeasible_reference", 0.0)
+    assert res.binding == ("gap_high" if gap > 0.02 else "gap_low") and res.binding in res.message
+    inside = proc.run(Reference.setpoint(0.0299 if gap > 0.02 else 0.0081))
+    assert inside.success and inside.level > 0

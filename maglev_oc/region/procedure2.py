@@ -193,8 +193,8 @@ class Procedure2:
         Returns
         -------
         Procedure2Result
-            ``status`` ``"certified"`` or ``"not_certified"`` (nothing within the branch-and-bound
-            budget).
+            ``status`` ``"certified"``, ``"not_certified"`` (nothing within the branch-and-bound
+            budget) or ``"infeasible_reference"`` (the reference itself reaches a stopper).
         """
         t0 = time.perf_counter()
         P = self.loop.lyapunov_matrix() if P is None else checked_p(P)
@@ -210,7 +210,10 @@ class Procedure2:
         timings["nlp"] = time.perf_counter() - t1
         bounds = _UpperBounds.of(minima, travel)
         t1 = time.perf_counter()
-        certified_nl, attempts = self._ladder(reference, P, min(travel.values()), bounds)
+        if min(travel.values()) > 0:
+            certified_nl, attempts = self._ladder(reference, P, min(travel.values()), bounds)
+        else:  # the reference itself reaches a stopper: no level set around it fits
+            certified_nl, attempts = 0.0, ()
         timings["certify"] = time.perf_counter() - t1
         result = self._result(reference, P, travel, bounds, certified_nl, attempts, minima)
         timings["total"] = time.perf_counter() - t0
@@ -256,7 +259,11 @@ class Procedure2:
         if binding in travel and wz is None:
             wz, wphi = self._travel_witness(reference, P, binding, level_upper)
         success = bool(level > 0)
-        if success and level >= cap and certified_nl >= cap:
+        status = "certified" if success else "not_certified"
+        if cap <= 0:
+            status = "infeasible_reference"
+            message = f"the reference itself reaches a stopper ({binding}): no level set around it fits in F"
+        elif success and level >= cap and certified_nl >= cap:
             message = f"certified up to the stoppers' exact level ({binding})"
         elif success:
             message = (
@@ -267,7 +274,7 @@ class Procedure2:
             message = "no level could be certified within the branch-and-bound budget"
         return Procedure2Result(
             success,
-            "certified" if success else "not_certified",
+            status,
             message,
             reference,
             P,
