@@ -25,7 +25,7 @@ from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, compensated_con
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
-__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest", "initial_boxes"]
+__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest", "initial_boxes", "meets_unit_ball"]
 
 
 @dataclass(frozen=True)
@@ -138,8 +138,7 @@ class LevelCertifier:
         boxes = 0
         while lo.shape[1] > 0:
             # boxes outside the unit ball hold no point of the ellipsoid's image
-            near = np.clip(0.0, lo[:d], hi[:d])
-            keep = np.sum(near**2, axis=0) <= 1.0
+            keep, near = meets_unit_ball(lo[:d], hi[:d])
             lo, hi, near = lo[:, keep], hi[:, keep], near[:, keep]
             n = lo.shape[1]
             if n == 0:
@@ -204,6 +203,15 @@ def _bisect_boxes(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, periodic: b
         scale = scale.copy()
         scale[-1] = 0.0
     return bisect_widest(lo, hi, scale)
+
+
+def meets_unit_ball(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which boxes (lo, hi) (d, k) hold a point of the closed unit ball (k,), and each box's point
+    nearest the origin (d, k), coordinate by coordinate the bound nearer 0 or 0 itself: a box meets
+    the ball exactly when that point lies in it. A box kept by its centre or a corner instead would
+    leave holes in the cover, and a certificate would skip the part of {V <= c} in them."""
+    near = np.clip(0.0, lo, hi)
+    return np.sum(near**2, axis=0) <= 1.0, near
 
 
 def bisect_widest(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None):

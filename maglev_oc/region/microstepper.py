@@ -46,7 +46,7 @@ from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import Platform, microstepper
 from maglev_oc.numerics import ColumnMap
-from maglev_oc.region.branch_and_bound import bisect_widest
+from maglev_oc.region.branch_and_bound import bisect_widest, meets_unit_ball
 from maglev_oc.region.interval import CenteredForm, IntervalFunction
 from maglev_oc.results import Result
 
@@ -232,8 +232,7 @@ class MicrostepperRegion:
         lo, hi = edges[grid], edges[grid + 1]
         boxes = 0
         while lo.shape[1]:
-            near = np.clip(0.0, lo, hi)
-            keep = np.sum(near**2, axis=0) <= 1.0
+            keep, near = meets_unit_ball(lo, hi)
             lo, hi, near = lo[:, keep], hi[:, keep], near[:, keep]
             if not lo.shape[1]:
                 break

@@ -51,6 +51,7 @@ from maglev_oc.control.linear_regulator import ScheduledLinearRegulator, axis_li
 from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium
 from maglev_oc.model.stage import StageModel
+from maglev_oc.region.branch_and_bound import meets_unit_ball
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference
 from maglev_oc.region.ellipsoid import InitialConditionSet, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
@@ -213,8 +214,7 @@ class RoaCertifier:
         edges = np.linspace(-1, 1, self.cover + 1)
         g = np.array(np.meshgrid(*(range(self.cover),) * 3, indexing="ij")).reshape(3, -1)
         lo, hi = edges[g], edges[g + 1]
-        near = np.clip(0.0, lo, hi)
-        keep = np.sum(near**2, axis=0) <= 1.0
+        keep, _ = meets_unit_ball(lo, hi)
         self._lo, self._hi = lo[:, keep], hi[:, keep]
 
     def jacobian_box(self, P, level: float) -> tuple[np.ndarray, np.ndarray]:

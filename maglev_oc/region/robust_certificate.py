@@ -90,7 +90,7 @@ from scipy.linalg import eigh, null_space
 
 from maglev_oc.errors import InputError
 from maglev_oc.numerics import ColumnMap
-from maglev_oc.region.branch_and_bound import bisect_widest, initial_boxes
+from maglev_oc.region.branch_and_bound import bisect_widest, initial_boxes, meets_unit_ball
 from maglev_oc.region.closed_loop import LOOP_VARIABLES, N_ERROR, Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import InitialConditionSet, checked_p, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
@@ -453,8 +453,7 @@ class RobustCertifier:
             )
 
         while lo.shape[1] > 0:
-            near = np.clip(0.0, lo[:N_IMAGE], hi[:N_IMAGE])
-            keep = np.sum(near**2, axis=0) <= 1.0
+            keep, _ = meets_unit_ball(lo[:N_IMAGE], hi[:N_IMAGE])
             lo, hi = lo[:, keep], hi[:, keep]
             if lo.shape[1] == 0:
                 break
