@@ -97,6 +97,10 @@ def test_the_json_carries_the_validation_of_the_base_model_and_of_the_model_with
 # --- a selection step's confidence -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def two_effects(model):
+    return two_effects_design(model)
+
+
+def two_effects_design(model):
     """(design, library by name): the 30 s horizontal sweep with guide friction (0.02 m/s^2 of Coulomb
     friction, 5 mm/s reversal) and a cogging force at the slot pitch (0.02 m/s^2) planted, the two
     candidates' columns beside C1."""
