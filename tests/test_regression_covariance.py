@@ -117,3 +117,14 @@ def test_correlation_from_a_covariance():
     corr = correlation_from(cov)
     assert_allclose(corr[:2, :2], [[1.0, 1 / 6], [1 / 6, 1.0]], rtol=1e-12)
     assert corr[2, 2] == 1.0 and np.all(corr[2, :2] == 0.0) and np.all(corr[:2, 2] == 0.0)
+
+
+def test_the_frequency_count_does_not_turn_on_the_last_bit_of_the_sample_time():
+    """At a whole band * n * T (8 Hz on a 1 s log at 1 kHz) logs cut from one record, whose sample
+    times differ in the last bits (0.001 against 0.0010000000000000009 or 0.0009999999999999998),
+    average the same 8 frequencies; away from a whole number the count is the floor of band n T
+    (at least 4, below n / 2)."""
+    for T in (0.001, np.nextafter(0.001, 1.0), np.nextafter(0.001, 0.0), 0.0010000000000000009):
+        assert frequencies_for(1000, T, 8.0) == 8
+    assert frequencies_for(1000, 0.001, 8.4) == 8 and frequencies_for(1000, 0.001, 7.9) == 7
+    assert frequencies_for(1000, 0.001, 1.0) == 4 and frequencies_for(10, 0.001, 1000.0) == 4

@@ -79,8 +79,12 @@ class LongRunCovariance:
 
 
 def frequencies_for(n: int, sample_time: float, band: float = DEFAULT_BAND) -> int:
-    """m = max(4, floor(band * n * sample_time)), at most n // 2 - 1."""
-    m = max(MIN_FREQUENCIES, math.floor(band * n * sample_time))
+    """m = max(4, floor(band * n * sample_time)), at most n // 2 - 1.
+
+    The floor allows 1e-9 relative for the sample time's last bits: logs cut from one record carry
+    0.001 or 0.0010000000000000009 s, and at a whole band * n * T (8 Hz on 1 s) they would otherwise
+    average 7 or 8 frequencies, so a fit's standard errors moved with the order of its logs."""
+    m = max(MIN_FREQUENCIES, math.floor(band * n * sample_time * (1 + 1e-9)))
     return int(max(1, min(m, n // 2 - 1)))
 
 
