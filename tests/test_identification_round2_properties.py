@@ -312,6 +312,20 @@ def test_the_output_error_hac_band_sets_the_frequencies_it_averages(oe_fits):
     assert ba.hac_frequencies > 2 * frequencies_for(1000, 1e-3, 0.25)
 
 
+def test_fit_output_error_passes_the_window_on(model, two_logs, oe_fits):
+    """``window_duration`` reaches the problem: 50 ms windows (one segment each, no continuity)
+    give the fit MultipleShooting gives with them (1e-9: the same computation), recorded in the
+    settings, and another fit than the default 0.2 s windows (continuity moves the estimates)."""
+    a, _ = two_logs
+    short = fit_output_error(a, model, initial=TRUTH, window_duration=0.05)
+    same = MultipleShooting(a, model, window_duration=0.05).fit(initial=TRUTH)
+    default = fit_output_error(a, model, initial=TRUTH)
+    assert short.settings["window_duration_s"] == 0.05 and default.settings["window_duration_s"] == 0.2
+    for k in CONSTANT_NAMES:
+        assert short.values[k] == pytest.approx(same.values[k], rel=1e-9)
+    assert max(abs(short.values[k] / default.values[k] - 1) for k in CONSTANT_NAMES) > 1e-6
+
+
 def test_the_plain_output_error_covariance_is_s2_times_the_inverse_kkt_block(model, two_logs):
     # the constrained least-squares covariance (theta block of the inverse KKT matrix) times the
     # residual variance s^2 = r'r / (residuals - (variables - constraints)), recomputed with dense

@@ -291,6 +291,7 @@ class MultipleShooting:
             sources=tuple(sg.source for sg in self.segments),
             settings={
                 "segment_duration_s": self.segment_duration,
+                "window_duration_s": self.window_duration,
                 "segments": [sg.J for sg in self.segments],
                 "integrator": "RK4, one step per sample, currents linear between samples",
                 "input_delay_s": self.input_delay,
@@ -435,6 +436,7 @@ def fit_output_error(
     terms: Sequence[AccelerationTerm] = (),
     segment_duration: float = DEFAULT_SEGMENT,
     input_delay: float = 0.0,
+    window_duration: float = DEFAULT_WINDOW,
     initial: FitResult | dict[str, float] | None = None,
     max_iterations: int = 30,
     hac_band: float = DEFAULT_BAND,
@@ -443,14 +445,14 @@ def fit_output_error(
 
     Parameters
     ----------
-    logs, model, estimate, terms, segment_duration, input_delay
+    logs, model, estimate, terms, segment_duration, input_delay, window_duration
         As for :class:`MultipleShooting`.
     initial : FitResult or dict, optional
-        Starting values (default: the model's constants; an equation-error fit is a good start).
+        Starting values by name (default: an equation-error fit on the same logs).
     max_iterations : int
         Constrained Gauss-Newton iterations at most.
     hac_band : float
-        Share of the Fourier band the long-run covariance averages.
+        [Hz] Spectral window of the long-run covariance.
 
     Returns
     -------
@@ -464,6 +466,7 @@ def fit_output_error(
         terms=terms,
         segment_duration=segment_duration,
         input_delay=input_delay,
+        window_duration=window_duration,
     )
     return problem.fit(initial=initial, max_iterations=max_iterations, hac_band=hac_band)
 
