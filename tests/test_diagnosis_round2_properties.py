@@ -34,6 +34,18 @@ Physical sizes:
 * a cable spring is bounded by its force at the far end of the travel; a periodogram peak 2 % off a
   motor period is that period within the tolerance asked for, and not within a smaller one.
 
+The selection's outcome and the reported effects (six bugs of that round the suite let through):
+
+* no effect of the final selection fails its judgement given the others, with two effects chosen
+  as with more (the backward step);
+* an effect's reported contribution and RMS force are over the held-out samples (recomputed from
+  its columns; the planted cogging's own RMS there);
+* an effect in the currents' rates is reported from the narrower band, half the two bands'
+  difference added to its standard error (both bands refitted here);
+* a diagnosis fails only when the logged currents carry errors that the base fit could not remove;
+* end effects are refused only when the thrust and the attraction together grow towards the ends
+  (the thrust's change checked on the term's own acceleration).
+
 Regression layer:
 
 * the plain covariance is s^2 (X'X)^-1 with s^2 = RSS / (rows - parameters) (numpy's lstsq);
@@ -54,11 +66,14 @@ import numpy as np
 import pytest
 from scipy.linalg import eigh, subspace_angles
 
+import maglev_oc.diagnosis.pipeline as pipeline_module
 import maglev_oc.diagnosis.selection as selection_module
 from maglev_oc.diagnosis.candidate import MAX_FORCE_SHARE, LibraryContext
 from maglev_oc.diagnosis.currents import ripple_candidate
 from maglev_oc.diagnosis.guides import cable_candidate, friction_candidates
-from maglev_oc.diagnosis.magnetics import cogging_candidates
+from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.magnetics import cogging_candidates, end_effects_candidate
+from maglev_oc.diagnosis.pipeline import RATE_TERM_BAND
 from maglev_oc.diagnosis.probes import smooth_probes
 from maglev_oc.diagnosis.refit import CALIBRATION, with_model_form_spread
 from maglev_oc.diagnosis.selection import (
@@ -69,6 +84,7 @@ from maglev_oc.diagnosis.selection import (
     _separability,
     _verdict,
     evidence,
+    fitted_constants,
     holdout_significance,
     judge,
 )
@@ -592,3 +608,153 @@ def test_the_long_run_covariance_is_the_sandwich_of_the_compensated_scores(model
     h = design.gram[:, idx][:, :, idx].sum(axis=0) - noise.sum(axis=0)
     hinv = np.linalg.inv(h)
     np.testing.assert_allclose(fit.covariance, hinv @ meat @ hinv, rtol=1e-7, atol=0)
+
+
+# --- the selection's outcome and the reported effects ------------------------------------------------
+def test_an_effect_a_later_choice_explains_is_dropped_even_when_two_were_chosen(two_effects, monkeypatch):
+    # select()'s contract: no effect of the final selection fails its judgement given the others
+    # (an effect chosen early may be explained by later ones). Both planted effects pass at their
+    # steps (friction first: 52 % against 28 % of the held-out mean square); here the judgement of
+    # friction beside the cogging is made to find it explained (as a constant force is by a
+    # commutation offset that also makes one). With exactly two effects chosen the friction must
+    # go, the final fit being that of the cogging alone (recomputed: the same fit, rel 1e-12)
+    design, lib = two_effects
+    friction, cogging = lib["guide_friction_horizontal"], lib["cogging_horizontal_19mm"]
+    real = selection_module.judge
+
+    def explained_later(d, cand, current, *args, **kw):
+        j = real(d, cand, current, *args, **kw)
+        if cand.name == friction.name and cogging.name in current:
+            return dataclasses.replace(j, verdict="not significant", reason="explained by the cogging")
+        return j
+
+    monkeypatch.setattr(selection_module, "judge", explained_later)
+    sel = selection_module.select(design, [friction, cogging], SelectionSettings(bootstrap=5))
+    assert sel.selected == [cogging.name]
+    assert sel.last[friction.name].reason.startswith("dropped after the later choices")
+    alone = fit_subset(design, ["base", cogging.name])
+    np.testing.assert_array_equal(sel.final.index, alone.index)
+    np.testing.assert_allclose(sel.final.coef, alone.coef, rtol=1e-12)
+
+
+def test_a_reported_effects_contribution_is_its_rms_acceleration_over_the_held_out_samples(
+    model, two_effects
+):
+    # what a user reads as an effect's contribution (and, times the mass, its RMS force) is the RMS
+    # of its own columns times its coefficients in the final fit over the held-out quarter, not
+    # over the training data (on this sweep the cogging's RMS differs by 4 % between the two).
+    # Recomputed from the design's columns: rel 1e-9. Independently, the planted cogging (0.02 m/s^2
+    # at the slot pitch, evaluated at the held-out positions) has the same RMS to 2 % (0.5 % measured:
+    # the fit's error; the training samples' RMS is 3.6 % off it)
+    design, lib = two_effects
+    cands = [lib["guide_friction_horizontal"], lib["cogging_horizontal_19mm"]]
+    sel = selection_module.select(design, cands, SelectionSettings(bootstrap=5))
+    assert sel.selected == [c.name for c in cands]
+    session = SimpleNamespace(
+        data=design.prepared,
+        model=model,
+        train=design.fit,
+        hold=design.holdout,
+        weights=design.weights,
+        settings=SelectionSettings(),
+    )
+    effects = {e.name: e for e in pipeline_module._effects(session, model, cands, design, sel)}
+    coef = np.zeros(design.n_parameters)
+    coef[sel.final.index] = sel.final.coef
+    mass = model.params.mass_horizontal
+    for cand in cands:
+        cols = design.groups[cand.name]
+        accel = np.einsum("p,pan->an", coef[cols], design.columns[cols])
+        held, train = (math.sqrt(np.mean(accel[1, m] ** 2)) for m in (design.holdout, design.fit))
+        effect = effects[cand.reported_name]
+        assert effect.contribution_rms[1] == pytest.approx(held, rel=1e-9)
+        assert effect.force_rms[1] == pytest.approx(held * mass, rel=1e-9)
+        if cand is cands[1]:
+            assert abs(train / held - 1.0) > 0.02  # the two sets of samples do differ
+            x3 = design.prepared.x[2, design.holdout]
+            planted = 0.02 * np.sin(2 * math.pi * x3 / model.params.slot_pitch + 0.5)
+            assert held == pytest.approx(math.sqrt(np.mean(planted**2)), rel=0.02)
+
+
+def test_a_lag_is_reported_from_the_narrower_band_with_half_the_bands_difference_in_its_error(
+    model, twin_log
+):
+    # an effect in the currents' rates is sized on RATE_TERM_BAND x the fit's band: the value
+    # reported is the narrower band's (refitted here from the log: prepared at 5 Hz, the same
+    # holdout and weights), its standard error the wider band's with half the difference of the
+    # two values added in quadrature. The same fits: rel 1e-9
+    data = prepare([twin_log], bandwidth=10.0)
+    train, hold = data.masks(0.25)
+    lag = next(c for c in candidate_library(model, data) if c.name == "current_amplifier_lag")
+    d = build_design(data, model, terms=[lag.term], fit=train, holdout=hold)
+    fit = fit_subset(d, list(d.groups))
+    wide = lag.term.physical_parameters(*fit.group(d, lag.name), fitted_constants(fit))
+    session = SimpleNamespace(data=data, logs=(twin_log,), holdout_fraction=0.25, weights=d.weights)
+    out = pipeline_module._on_a_narrower_band(wide, session, model, [lag], lag)
+    narrow_data = prepare([twin_log], bandwidth=10.0 * RATE_TERM_BAND)
+    n_train, n_hold = narrow_data.masks(0.25)
+    nd = build_design(narrow_data, model, terms=[lag.term], fit=n_train, holdout=n_hold, weights=d.weights)
+    nfit = fit_subset(nd, list(nd.groups))
+    narrow = lag.term.physical_parameters(*nfit.group(nd, lag.name), fitted_constants(nfit))
+    w, n = wide["time_constant"], narrow["time_constant"]
+    spread = 0.5 * abs(w.value - n.value)
+    assert spread > 0.2 * w.stderr  # 0.22 measured: the spread raises the error by 2 %, far beyond 1e-9
+    assert out["time_constant"].value == pytest.approx(n.value, rel=1e-9)
+    assert out["time_constant"].stderr == pytest.approx(math.hypot(w.stderr, spread), rel=1e-9)
+
+
+def test_a_diagnosis_fails_only_where_the_logged_currents_errors_could_not_be_removed(
+    model, twin_log, cogged
+):
+    # success means the constants are not biased low by the logged currents' errors: it fails only
+    # when the currents carry errors (current_noise > 0) and the base fit could not remove them
+    # whole. The twin's currents carry amplifier noise that its base fit removes (compensation 1):
+    # a success. A fit that could remove only part (an errors-in-variables part 4x beyond the
+    # signal, as above) fails on noisy currents; on currents without errors it has none to remove
+    data = prepare([twin_log], bandwidth=10.0)
+    train, hold = data.masks(0.25)
+    whole = fit_subset(build_design(data, model, fit=train, holdout=hold), ["base"])
+    assert whole.compensation == 1.0 and np.all(data.current_noise > 0)
+    design, _ = cogged
+    rng = np.random.default_rng(5)
+    mix = np.eye(design.n_parameters) + 0.3 * rng.normal(size=(design.n_parameters,) * 2)
+    noise = np.stack([mix @ np.diag(np.diag(g)) @ mix.T for g in design.gram])
+    part = fit_subset(dataclasses.replace(design, noise=noise), ["base"])
+    assert part.compensation < 1.0
+    clean = SimpleNamespace(current_noise=np.zeros(2))
+
+    def outcome(fit, d):
+        return pipeline_module._outcome([], [], [], SimpleNamespace(base=fit), d)
+
+    assert outcome(whole, data)[1] is True
+    _, success, message = outcome(part, data)
+    assert success is False and "compensation failed" in message
+    assert outcome(part, clean)[1] is True
+    assert outcome(whole, clean)[1] is True
+
+
+def test_end_effects_are_refused_only_when_the_forces_together_grow_towards_the_ends(model, sweep_ctx):
+    # over the ends the mover overhangs the stator and its forces fall; what is refused is forces
+    # that grow there. The thrust's loss, estimated beside a large fall of the attraction, may come
+    # out slightly negative: an attraction falling by 10 % with the thrust growing by 1 % is a fall.
+    # The thrust's change is checked here on the term's own acceleration (its horizontal part over
+    # the model's thrust at the logged ends and the centre, the references' constants; the same
+    # algebra two ways: rel 1e-12). The losses here: thrust -0.9 %, attraction +9.3 %
+    cand = end_effects_candidate(sweep_ctx)
+    lo, hi = sweep_ctx.position_range
+    gap, u = sweep_ctx.gap_median, np.array([1.5, 0.0])
+
+    def thrust_loss(q, x3):
+        x = np.array([gap, 0.0, x3, 0.0])
+        term = float(np.asarray(cand.term.function(x, u, np.zeros(2), q)).ravel()[1])
+        return -term / float(np.asarray(model.f(x, u)).ravel()[3])
+
+    consts = {n: getattr(model.constants, n) for n in ("C1", "C2", "C3", "C4")}
+    for winding, magnet, refused in ((-0.012, 0.12, False), (-0.012, -0.02, True), (0.05, -0.02, False)):
+        q = np.array([winding, winding, magnet, magnet])
+        e = cand.term.physical_parameters(q, 1e-8 * np.eye(4), consts)
+        mid = 0.5 * (lo + hi)
+        at_ends = 0.5 * (thrust_loss(q, lo) + thrust_loss(q, hi)) - thrust_loss(q, mid)
+        assert e["thrust_loss_at_ends"].value == pytest.approx(at_ends, rel=1e-12)
+        verdict = cand.plausible(e)
+        assert (verdict is not None) is refused, (winding, magnet, verdict)
