@@ -1138,7 +1138,8 @@ def _region_notes(study: MicrostepperStudy) -> list[str]:
         "R >= 0, both pairs within 9 A, x and y within ±60 mm and the gap between 8 and 35 mm. Certified: "
         "every "
         "box of a cover of {V <= c}'s image in (gap error, three accelerations) proved feasible by interval "
-        "arithmetic. 'Fails at': a state of that V where the binding constraint fails; c* lies between. "
+        "arithmetic (the natural extension, then its mean-value form on the boxes it leaves open). "
+        "'Fails at': a state of that V where the binding constraint fails; c* lies between. "
         "Half-width: the largest error of one axis inside {V <= c}.",
         f"Pair B binds: it drives y, whose mass is {m[1] / m[0]:.2f} times x's, with the same gains. "
         "Mirrored "
