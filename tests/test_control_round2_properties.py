@@ -27,7 +27,10 @@ independent computation:
 - the amplifiers' saturation scales each pair's (i_q, i_d) to Euclidean magnitude ``peak``
   with the direction kept, and leaves pairs under the limit alone (1e-12);
 - the NMPC's settings refuse a disturbance bandwidth above 0.5 / eps, and R = diag(i_q, i_d)
-  in the order of u.
+  in the order of u;
+- the PID integrates each axis's error against it (the k-th command under a held error is
+  u0 - kp e - ki Ts k e, i_q on the horizontal error, i_d on the vertical);
+- the microstepper's "margin" diagnostic is the room left in v_gap before R = 0.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.control.lqr import lqr_regulator
 from maglev_oc.control.microstepper import MicrostepperRegulator, saturated_currents
 from maglev_oc.control.nmpc import NMPCSettings, NMPCWeights
+from maglev_oc.control.pid import paper_pid
 from maglev_oc.errors import InputError
 from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
 from maglev_oc.model.platform import microstepper
@@ -236,3 +240,42 @@ def test_lqr_weighs_the_current_by_its_squared_maximum(model):
         q, r = _bryson(weights[axis])
         p = solve_continuous_lyapunov((a + b @ k[None, :]).T, -(q + k[:, None] @ r @ k[None, :]))
         assert_allclose(k, -np.linalg.solve(r, b.T @ p).ravel(), rtol=1e-5, err_msg=axis)
+
+
+def test_the_pid_integrates_each_axis_error_against_it(model):
+    """du = -(kp e + kd e' + ki int e) on both axes (PidGains' docstring): held at constant errors
+    (e1, e2) with the observers at rest on the reading (so e' = 0), the k-th command is
+    u0 - kp e - ki Ts k e on each axis, i_q on the horizontal error and i_d on the vertical.
+    1e-9 relative: the same sums in another order."""
+    pid = paper_pid(model)
+    r = np.array([0.02, 0.0, 0.0, 0.004, 0.0, 0.0])
+    e = np.array([0.3e-3, -0.5e-3])  # (gap, horizontal) errors [m]
+    y = np.array([r[0] + e[0], r[3] + e[1]])
+    u0 = np.array([0.4, -1.1])  # (i_q, i_d) already flowing [A]
+    c = pid.initial_state(y, r, u0)
+    ts = pid.sample_time
+    for k in range(25):
+        u, c, _ = (np.asarray(v).ravel() for v in pid.step(c, y, r))
+        expect_q = u0[0] - pid.horizontal.kp * e[1] - pid.horizontal.ki * ts * k * e[1]
+        expect_d = u0[1] - pid.vertical.kp * e[0] - pid.vertical.ki * ts * k * e[0]
+        assert_allclose(u, [expect_q, expect_d], rtol=1e-9, atol=1e-12)
+
+
+def test_the_microsteppers_margin_is_the_room_left_in_v_gap():
+    """The "margin" diagnostic is how much further v_gap could rise before R = 0 (R is affine in
+    v_gap): with it added, R is zero (to 1e-9 of R's scale at v: rounding of an affine function),
+    and it is positive exactly where R is (the allocation is defined), on sampled (gap, v)."""
+    ctrl = MicrostepperRegulator(microstepper())
+    margin = ctrl._margin_function()
+    transform = ctrl.transformation.function
+    rng = np.random.default_rng(26)
+    signs = []
+    for _ in range(40):
+        gap = rng.uniform(0.015, 0.03)
+        v = rng.uniform(-20.0, 20.0, 3)
+        m = float(margin(gap, v))
+        R = float(transform(gap, v)[1])
+        R_at = float(transform(gap, v + np.array([0.0, 0.0, m]))[1])
+        assert abs(R_at) <= 1e-9 * max(abs(R), 1.0)
+        signs.append(np.sign(m) == np.sign(R))
+    assert all(signs)
