@@ -30,7 +30,9 @@ independent computation:
   in the order of u;
 - the PID integrates each axis's error against it (the k-th command under a held error is
   u0 - kp e - ki Ts k e, i_q on the horizontal error, i_d on the vertical);
-- the microstepper's "margin" diagnostic is the room left in v_gap before R = 0.
+- the microstepper's "margin" diagnostic is the room left in v_gap before R = 0;
+- the linear regulators' vertical observer is fed a21 e1 + b22 du2: off the reference gap it
+  matches the model's acceleration to second order.
 """
 
 from __future__ import annotations
@@ -50,8 +52,9 @@ from maglev_oc.control.microstepper import MicrostepperRegulator, saturated_curr
 from maglev_oc.control.nmpc import NMPCSettings, NMPCWeights
 from maglev_oc.control.pid import paper_pid
 from maglev_oc.errors import InputError
-from maglev_oc.estimation.high_gain import DEFAULT_EPSILON
+from maglev_oc.estimation.high_gain import DEFAULT_EPSILON, HighGainObserver
 from maglev_oc.model.platform import microstepper
+from tests.test_control_injected_properties import _reference
 
 GAP = 0.020  # [m] an operating gap of the papers' runs
 PLATFORM = microstepper()
@@ -279,3 +282,22 @@ def test_the_microsteppers_margin_is_the_room_left_in_v_gap():
         assert abs(R_at) <= 1e-9 * max(abs(R), 1.0)
         signs.append(np.sign(m) == np.sign(R))
     assert all(signs)
+
+
+@pytest.mark.parametrize("kind", ["linear", "lqr"])
+def test_the_linear_observers_are_fed_the_gap_errors_stiffness_too(model, kind):
+    """The regulators on the Jacobian linearization feed their vertical observer
+    e1'' = a21 e1 + b22 du2 (module docstring of linear_regulator): 50 um off the reference gap
+    the a21 e1 part is tens of mm/s^2, and the fed acceleration (read off the observer's update,
+    which is affine in it) equals the model's at the measured gap and the output current to
+    second order. Measured 2e-4 (linear) and 4e-4 m/s^2 (LQR) at 50 um; 2e-3 m/s^2 allows 5x."""
+    ctrl = paper_linear_regulator(model) if kind == "linear" else lqr_regulator(model)
+    r = _reference()
+    y = np.array([GAP + 50e-6, 1e-6])
+    c = ctrl.initial_state(y, r)
+    u, c_next, _ = _step(ctrl, c, y, r)
+    obs = HighGainObserver(ctrl.sample_time, ctrl.observer_epsilon)
+    base, unit = obs.step(c[0:2], y[0], 0.0), obs.step(c[0:2], y[0], 1.0)
+    fed = float((c_next[0:2] - base) @ (unit - base) / ((unit - base) @ (unit - base)))
+    acc = model.dynamics(np.array([y[0], c[1], y[1], c[3]]), u).ravel()
+    assert abs(fed - acc[1]) <= 2e-3
