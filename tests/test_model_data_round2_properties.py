@@ -22,6 +22,7 @@ computation (numpy on the model's L1..L4, the platform's own state equation, a h
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from maglev_oc.data.logs import inputs_to_phase_currents, read_log, write_log_arrays
+from maglev_oc.errors import InputError
 from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.equilibrium import (
     NoEquilibriumError,
@@ -81,6 +83,15 @@ def test_equilibrium_current_limit_is_on_the_magnitude(model):
         op = equilibrium(model, gap, current_limit=1.1 * abs(current))
         assert op.u[1] == current and op.u[0] == 0.0
     assert float(equilibrium_currents(model, [40e-3]).current[0]) < 0
+
+
+@pytest.mark.parametrize("gap", [math.inf, -0.02, 0.0, math.nan])
+def test_an_impossible_gap_is_refused_naming_it(model, gap):
+    """A gap that is not positive and finite is refused, and the message shows that gap (an
+    infinite one too, which a filter on gap > 0 alone would leave out: "got []")."""
+    with pytest.raises(InputError, match="positive and finite") as err:
+        equilibrium_currents(model, np.array([0.02, gap]))
+    assert str(err.value).endswith(f"got {gap:g}")
 
 
 def test_gap_for_current_refuses_just_outside_its_bracket(model):

@@ -80,8 +80,10 @@ def equilibrium_currents(model: StageModel, gaps) -> EquilibriumCurve:
         Current, discriminant, existence and the amplifier checks, each of the shape of ``gaps``
         (NaN current where no equilibrium exists)."""
     gaps = np.atleast_1d(np.asarray(gaps, dtype=float))
-    if np.any(~np.isfinite(gaps)) or np.any(gaps <= 0):
-        raise InputError(f"gaps must be positive and finite [m], got {gaps[~(gaps > 0)][:3]}")
+    bad = ~(np.isfinite(gaps) & (gaps > 0))
+    if np.any(bad):
+        shown = ", ".join(f"{g:g}" for g in gaps[bad][:3])
+        raise InputError(f"gaps must be positive and finite [m], got {shown}")
     _, L2, L3, L4 = model.coefficients(gaps)
     disc = L3**2 - 4 * L4 * (L2 - model.params.gravity)
     exists = disc >= 0
