@@ -17,7 +17,7 @@ import pytest
 from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import microstepper
-from maglev_oc.region.microstepper import PHYSICAL_GAP, MicrostepperRegion
+from maglev_oc.region.microstepper import CENTRED_AFTER, PHYSICAL_GAP, MicrostepperRegion
 
 PLATFORM = microstepper()
 TRANSFORM = MicrostepperTransformation(PLATFORM).function
@@ -192,3 +192,21 @@ def test_the_sampled_loop_stays_feasible_inside_and_is_flagged_outside(sampled_l
         assert run.events["saturated"] == 0 and run.events["clipped"] == 0 and run.events["stopper_hit"] == 0
     outside = _run_from(sampled_loop, setpoint, np.sqrt(1.3) * res.witness)
     assert outside.events["saturated"] > 0 or outside.events["clipped"] > 0
+
+
+@pytest.mark.parametrize("setpoint", [(0.04, -0.04, 0.021), (0.0, 0.0, 0.025)])
+def test_no_level_above_a_failing_point_is_certified_by_either_enclosure(setpoint):
+    """A state where a pair's current exceeds the limit (IPOPT's least violation, checked here with
+    the controller's Function) lies inside {V <= 1.01 V_there}: that level must never come out
+    certified. With 100 000 boxes the search goes deep enough that the centred form decides boxes
+    too (it joins after half the budget; the refutation comes at 66 000-82 000 boxes, measured),
+    so an enclosure that accepts a box where one constraint fails, in either form, shows here."""
+    region = MicrostepperRegion(PLATFORM)
+    found, _, ell = region.refute(setpoint)
+    z = region.state_of(ell)
+    assert z @ region.P @ z == pytest.approx(found, rel=1e-9)
+    bad = _violations(region, setpoint, 1.0001 * z[:, None])
+    assert bad["headroom_A"] + bad["headroom_B"] == 1
+    status, boxes, _, _ = region.certify(setpoint, 1.01 * found, max_boxes=100_000)
+    assert status != "certified"
+    assert boxes > CENTRED_AFTER * 100_000

@@ -338,14 +338,21 @@ class CenteredForm:
         object.__setattr__(self, "jacobian", IntervalFunction(ca.Function(f"d_{f.name()}", args, [jac])))
 
     def __call__(self, lo, hi) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        lo, hi, n = self.natural._boxes(lo, hi)
         (nat_lo,), (nat_hi,) = self.natural(lo, hi)
+        mv_lo, mv_hi = self.mean_value(lo, hi)
+        # fmax/fmin: a NaN of the mean-value form (inf - inf) bounds nothing
+        return [np.fmax(nat_lo, mv_lo)], [np.fmin(nat_hi, mv_hi)]
+
+    def mean_value(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """The mean-value form alone, (lo, hi) each (size_out, n_boxes), for a caller that holds
+        the natural enclosure already (intersect the two: each is an enclosure)."""
+        lo, hi, n = self.natural._boxes(lo, hi)
         mid = [0.5 * (a + b) if k < self.boxed else a for k, (a, b) in enumerate(zip(lo, hi, strict=True))]
         mid_hi = [m if k < self.boxed else b for k, (m, b) in enumerate(zip(mid, hi, strict=True))]
         (at_lo,), (at_hi,) = self.natural(mid, mid_hi)  # F(m), rounding enclosed
         (j_lo,), (j_hi,) = self.jacobian(lo, hi)
         radius = np.vstack([0.5 * (b - a) for a, b in zip(lo[: self.boxed], hi[: self.boxed], strict=True)])
-        m_out = nat_lo.shape[0]
+        m_out = at_lo.shape[0]
         # the densified Jacobian (m_out, d) arrives column-major: row k m_out + i is dh_i / dx_k
         slope = np.maximum(np.abs(j_lo), np.abs(j_hi)).reshape(radius.shape[0], m_out, n)
         with np.errstate(invalid="ignore"):
@@ -355,6 +362,4 @@ class CenteredForm:
         # the sum's own rounding: a few units in the last place of everything added
         slack = (4 + 2 * radius.shape[0]) * _EPS * (np.abs(at_lo) + np.abs(at_hi) + spread) + _TINY
         with np.errstate(invalid="ignore"):
-            mv_lo, mv_hi = at_lo - spread - slack, at_hi + spread + slack
-        # inf - inf: no bound from this form
-        return [np.fmax(nat_lo, mv_lo)], [np.fmin(nat_hi, mv_hi)]
+            return at_lo - spread - slack, at_hi + spread + slack

@@ -237,12 +237,12 @@ class MicrostepperRegion:
             if not lo.shape[1]:
                 break
             boxes += lo.shape[1]
-            hlo, _ = self._ifn([lo, par_l, gap0], [hi, par_l, gap0])  # the parameters broadcast over boxes
-            ok = np.all(np.vstack(hlo) >= 0, axis=0)  # every constraint's lower bound, per box
-            lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
+            (hlo,), _ = self._ifn([lo, par_l, gap0], [hi, par_l, gap0])  # parameters broadcast over boxes
+            ok = np.all(hlo >= 0, axis=0)  # every constraint's lower bound, per box
+            lo, hi, near, hlo = lo[:, ~ok], hi[:, ~ok], near[:, ~ok], hlo[:, ~ok]
             if boxes > CENTRED_AFTER * max_boxes and lo.shape[1]:
-                (clo,), _ = self._centred([lo, par_l, gap0], [hi, par_l, gap0])
-                ok = np.all(clo >= 0, axis=0)
+                mv_lo, _ = self._centred.mean_value([lo, par_l, gap0], [hi, par_l, gap0])
+                ok = np.all(np.fmax(hlo, mv_lo) >= 0, axis=0)
                 lo, hi, near = lo[:, ~ok], hi[:, ~ok], near[:, ~ok]
             if not lo.shape[1]:
                 break
@@ -295,14 +295,12 @@ class MicrostepperRegion:
                 setpoint, 0.0, 0.0, binding, linear, {}, total, None, {"total": time.perf_counter() - t0},
             )  # fmt: skip
         found, why, ell = self.refute(setpoint)
-        axis = min(linear, key=linear.get) if linear else ""
-        if linear and linear[axis] <= found:
+        axis = min(linear, key=linear.get)  # the gap's floor at least: always a finite bound
+        if linear[axis] <= found:
             hi, binding = linear[axis], axis
             witness = self._linear_witness(setpoint, axis, hi)
-        elif math.isfinite(found):
-            hi, binding, witness = found, why, self.state_of(ell)
         else:
-            raise InputError("no constraint fails anywhere: nothing bounds the region")
+            hi, binding, witness = found, why, self.state_of(ell)
         # bisection between lo (certified) and top (not proved: refuted, or the box budget spent)
         lo, top, note = 0.0, hi, ""
         status, boxes, why, _ = self.certify(setpoint, hi * (1 - 1e-9), max_boxes=max_boxes)
