@@ -764,7 +764,11 @@ def _separability(
         full = np.full(g.shape, np.nan)
         full[np.ix_(live, live)] = np.linalg.inv(g[np.ix_(live, live)])
         sd = np.sqrt(np.abs(np.diag(full)))
-        corr = full / np.outer(sd, sd)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr = full / np.outer(sd, sd)
+        # a variance of 0 in the inverse: the Gram is singular to rounding (a candidate nested in
+        # columns already in the fit), so those parameters are confounded with everything they meet
+        corr[~np.isfinite(corr) & ~np.isnan(full)] = 1.0
     except np.linalg.LinAlgError:
         return np.inf, ("the base constants",)
     partners = [

@@ -405,7 +405,10 @@ def _blocks(fit: np.ndarray, segment: np.ndarray, size: int) -> list[np.ndarray]
     for run in np.split(idx, breaks):
         pieces = [run[k : k + size] for k in range(0, run.size, size)]
         if len(pieces) > 1 and pieces[-1].size < size // 2:
-            pieces[-2] = np.concatenate([pieces[-2], pieces.pop()])
+            # pop first: ``pieces[-2] = concatenate([pieces[-2], pieces.pop()])`` indexes the target
+            # after the pop, i.e. the piece before, dropping its samples and counting the next twice
+            tail = pieces.pop()
+            pieces[-1] = np.concatenate([pieces[-1], tail])
         out.extend(pieces)
     return out
 
