@@ -175,7 +175,7 @@ def test_papers_damping_follows_from_the_slopes(study, model):
     assert 3.0 < study.papers_damping < 12.0
 
 
-def test_result_convention_and_explanation(study):
+def test_result_convention_and_explanation(study, model):
     check_result(study)
     d = study.to_dict()
     json.dumps(d)
@@ -187,6 +187,11 @@ def test_result_convention_and_explanation(study):
     for trend in (study.papers_table3, study.default_table3, study.friction_table3):
         assert f"C1 {100 * trend.change['C1']:+.1f} %" in text
     assert f"{study.papers_damping:.1f} N s/m" in text
+    # the friction's equivalent damping M_h x (C1 slope with friction - without), and the ratio the
+    # papers' damping is of it: both recomputed here from the study's fields
+    equivalent = study.damping_rate * model.params.mass_horizontal
+    assert equivalent > 0
+    assert f"{study.papers_damping / equivalent:.1f} times the {equivalent:.1f} N s/m" in text
     assert "the papers' direction for all of them" in text
     report = study.report()
     assert "friction" in report and "papers" in report and study.status in report
