@@ -143,7 +143,9 @@ class PolygonBuilder:
         shrink : float
             Fraction of the sampled radius at which a vertex is first tried.
         max_cells : int
-            Interval evaluations per vertex before it counts as not proved.
+            Interval evaluations per vertex, pooled over the vertices proved together: a batch of k
+            vertices stops after ``max_cells * k`` cells, and its vertices not yet proved count as not
+            proved (so one hard vertex may use the others' share).
 
         Returns
         -------
