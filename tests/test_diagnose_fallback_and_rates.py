@@ -3,11 +3,14 @@ control loop at another rate than the rig's 5 kHz (``control_rate_hz`` in the lo
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from maglev_oc.data.logs import Log
 from maglev_oc.diagnosis.candidate import LibraryContext
+from maglev_oc.diagnosis.currents import lag_candidate
 from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.regression.data import prepare
 from tests.test_statistics_properties import _log
@@ -57,3 +60,22 @@ def test_the_lag_candidates_hold_delay_is_half_the_logs_control_period(model, ra
 def test_logs_of_two_control_rates_take_the_slower_one(model):
     data = prepare([_moving_log(2000.0), _moving_log(5000.0)], bandwidth=10.0)
     assert data.settings["control_rate_hz"] == 2000.0  # the larger hold, the lag's lower bound
+
+
+@pytest.mark.parametrize("rate_hz", [0.0, 2000.0])
+def test_a_lag_found_against_an_assumed_loop_rate_says_so(model, rate_hz):
+    """A log that does not declare its loop's rate is read at the rig's 5 kHz. The lag's finding
+    then says that it was assumed, and at which rate the loop's own hold (half its period) would be
+    the whole delay: 0.5 / total delay (0.27 ms total -> 1.85 kHz, the 2 kHz loop of the
+    independent generator's ctrl2k rig, whose clean log gave such a lag). A declared rate carries no
+    such caveat; nor do measured currents (no loop holds them)."""
+    data = prepare([_moving_log(rate_hz)], bandwidth=10.0)
+    assert data.settings["control_rate_assumed"] == (rate_hz == 0.0)
+    cand = lag_candidate(LibraryContext(model, data))
+    hold = 0.5 / (rate_hz or 5000.0)
+    text = cand.describe(cand.term.physical([hold + 1.7e-4], np.array([[4e-10]]), None))
+    assert ("kHz is assumed" in text) == (rate_hz == 0.0)
+    if rate_hz == 0.0:
+        assert "a loop at 1.9 kHz would hold" in text  # 0.5 / 0.27 ms = 1.85 kHz, 2 digits
+    measured = prepare([dataclasses.replace(_moving_log(0.0), currents_measured=True)], bandwidth=10.0)
+    assert measured.settings["control_rate_assumed"] is False

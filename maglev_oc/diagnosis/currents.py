@@ -142,8 +142,23 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
         all_of(_beyond_hold(hold), within("time_constant", 5e-3, "lag")),
         lambda e: (
             f"The currents lag their commands by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
-            f"{hold * 1e3:.2g} ms of the loop's zero-order hold."
+            f"{hold * 1e3:.2g} ms of the loop's zero-order hold." + _assumed_rate(ctx, e)
         ),
+    )
+
+
+def _assumed_rate(ctx: LibraryContext, e: dict[str, Estimate]) -> str:
+    """The caveat of a lag found against an assumed loop rate: a loop slower than assumed holds each
+    command longer (half its period on average), and one at 0.5 / total delay would account for the
+    whole lag by itself."""
+    total = e["total_delay"].value
+    if not ctx.data.settings.get("control_rate_assumed") or not total > 0:
+        return ""
+    rate = ctx.data.settings["control_rate_hz"]
+    return (
+        f" The log does not give its control loop's rate (# control_rate_hz): {rate / 1e3:g} kHz is "
+        f"assumed, and a loop at {0.5 / total / 1e3:.2g} kHz would hold its commands long enough to "
+        "account for this lag alone."
     )
 
 

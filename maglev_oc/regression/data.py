@@ -397,6 +397,9 @@ def prepare(
             "logging_error_share": [float(s) for s in shares],
             # the loop's rate (the lag candidate's hold delay); logs of several rates: the slowest
             "control_rate_hz": min(control_rate_of(log, control_rate) for log in logs),
+            # the rate above is the rig's 5 kHz, assumed: no log of commanded currents declares its own
+            "control_rate_assumed": control_rate is None
+            and any(not log.currents_measured and "control_rate_hz" not in log.metadata for log in logs),
             "max_rate_hz": max_rate,
         },
     )

@@ -18,13 +18,18 @@ import numpy as np
 
 from .simulate import Run
 
-DESCRIPTION = "2-DOF PMLSM maglev stage, closed-loop log (FL output regulator at 5 kHz, logged at 1 kHz)"
+DESCRIPTION = (
+    "2-DOF PMLSM maglev stage, closed-loop log (FL output regulator at {loop:g} kHz, logged at {log:g} kHz)"
+)
+"""The description line, with the rig's loop and logging rates (nothing else: the rates are stated in
+words only, as a user's logger would; ``control_rate_hz`` is not a metadata key here)."""
 
 
 def csv_text(run: Run) -> str:
     """The CSV file's text for ``run``."""
     head = [
-        f"# description: {DESCRIPTION}",
+        "# description: "
+        + DESCRIPTION.format(loop=run.scenario.rig.control_rate / 1e3, log=run.scenario.rig.log_rate / 1e3),
         f"# sample_rate_hz: {run.scenario.rig.log_rate:g}",
         "# units: SI",
         "# currents: commanded",
