@@ -609,15 +609,21 @@ def _merged_guide_geometry(effects: list[Effect]) -> list[Effect]:
         params["waviness_amplitude"] = w.parameters["amplitude"]
         params["waviness_period"] = w.parameters["period"]
         findings.append(w.finding)
+    # the two parts' RMS added in quadrature (exact when uncorrelated over the held-out samples), in
+    # m/s^2 and in N alike, so that the merged force stays its acceleration times the axis' mass
+    contribution = [
+        float(np.hypot(a, *(w.contribution_rms[i] for w in wavy)))
+        for i, a in enumerate(slope.contribution_rms)
+    ]
+    force = [float(np.hypot(f, *(w.force_rms[i] for w in wavy))) for i, f in enumerate(slope.force_rms)]
+    for a, axis in enumerate(AXES):
+        if f"rms_force_{axis}" in params:
+            params[f"rms_force_{axis}"] = Estimate(force[a], float("nan"), "N")
     merged = dataclasses.replace(
         slope,
         parameters=params,
         finding=" ".join(findings),
-        contribution_rms=PerAxis.of(
-            [
-                np.hypot(a, *(w.contribution_rms[i] for w in wavy))
-                for i, a in enumerate(slope.contribution_rms)
-            ]
-        ),
+        contribution_rms=PerAxis.of(contribution),
+        force_rms=PerAxis.of(force),
     )
     return [merged if e is slope else e for e in effects if e not in wavy]
