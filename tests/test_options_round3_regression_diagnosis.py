@@ -675,3 +675,14 @@ def test_the_parameter_penalty_prefers_the_nested_candidate_beyond_the_gain_per_
         assert verdicts == ["accepted", "passes"]  # both passed: the penalty decided
         if factor == 3.0:
             assert sel.steps[0].confidence == 1.0
+
+
+def test_the_waviness_scan_fits_both_axes_with_the_candidates_own_columns(model, waviness_residual):
+    """Weighted on both axes, the scan's columns must be the waviness candidate's own (the gap's
+    change through the gap sensitivity on both axes and, on the horizontal, the slope pushing the
+    platform, in the candidate's relative sign): the candidate's exact residual at P is then fitted
+    to rounding at P, the best of the grid (P on it: the guess P / 1.2, 41 points over +-25 %). On
+    the horizontal axis alone a wrong relative sign hides in the coefficients' signs."""
+    data, residual, _, fit, period = waviness_residual
+    got = refine_waviness_period(model, data, residual, np.ones(2), fit, period / 1.2)
+    assert got == pytest.approx(period, rel=1e-9)
