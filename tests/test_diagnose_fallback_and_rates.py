@@ -79,3 +79,15 @@ def test_a_lag_found_against_an_assumed_loop_rate_says_so(model, rate_hz):
         assert "a loop at 1.9 kHz would hold" in text  # 0.5 / 0.27 ms = 1.85 kHz, 2 digits
     measured = prepare([dataclasses.replace(_moving_log(0.0), currents_measured=True)], bandwidth=10.0)
     assert measured.settings["control_rate_assumed"] is False
+
+
+@pytest.mark.parametrize(("declared_hz", "assumed"), [(2000.0, False), (10_000.0, True)])
+def test_the_rate_is_assumed_only_when_the_slowest_comes_from_a_log_that_does_not_declare_it(
+    model, declared_hz, assumed
+):
+    """A log declaring 2 kHz beside one that declares nothing (5 kHz assumed): the slower, declared
+    2 kHz sets the hold, nothing is assumed. Beside a declared 10 kHz, the undeclared log's assumed
+    5 kHz is the slowest: the lag's finding must say it was assumed."""
+    data = prepare([_moving_log(declared_hz), _moving_log(0.0)], bandwidth=10.0)
+    assert data.settings["control_rate_hz"] == min(declared_hz, 5000.0)
+    assert data.settings["control_rate_assumed"] is assumed

@@ -66,22 +66,16 @@ from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
 from maglev_oc.results import Estimate, PerAxis
+from tests.test_diagnosis_trace import sweep_signals
 from tests.test_statistics_properties import RATE_FRICTION, _friction_candidate, _log, _rows
 
 TS = 1e-3  # [s] the logs' 1 kHz
 
 
 # --- the residual's trace ----------------------------------------------------------------------------
-def _sweep(n: int = 6000, seed: int = 0):
-    """(x (4, n), du (2, n)): a stage sweeping +-30 mm slowly with a 2 mm wobble, random current rates."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * TS
-    x = np.zeros((4, n))
-    x[0] = 0.020 + 0.004 * np.sin(2 * math.pi * 0.21 * t)
-    x[1] = np.gradient(x[0], TS)
-    x[2] = 0.03 * np.sin(2 * math.pi * 0.17 * t) + 0.002 * np.sin(2 * math.pi * 0.7 * t)
-    x[3] = np.gradient(x[2], TS)
-    return x, rng.standard_normal((2, n))
+def _sweep():
+    """(x (4, n), du (2, n)): 6 s of a stage sweeping +-30 mm at 0.17 Hz with a 2 mm wobble."""
+    return sweep_signals(6000, position_hz=0.17)
 
 
 def test_the_spectrums_share_is_the_r2_gain_of_a_sinusoid_over_a_constant_whatever_the_mean():

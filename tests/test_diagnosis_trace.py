@@ -18,18 +18,23 @@ TS = 1e-3  # [s] the logs' 1 kHz
 N = 20_000
 
 
+def sweep_signals(n: int = N, seed: int = 0, position_hz: float = 0.05):
+    """(x (4, n), du (2, n)): a stage sweeping +-30 mm at ``position_hz`` with a 2 mm wobble at 0.7 Hz,
+    the gap 20 +- 4 mm at 0.21 Hz, and random current rates."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * TS
+    x = np.zeros((4, n))
+    x[0] = 0.020 + 0.004 * np.sin(2 * math.pi * 0.21 * t)
+    x[1] = np.gradient(x[0], TS)
+    x[2] = 0.03 * np.sin(2 * math.pi * position_hz * t) + 0.002 * np.sin(2 * math.pi * 0.7 * t)
+    x[3] = np.gradient(x[2], TS)
+    return x, rng.standard_normal((2, n))
+
+
 @pytest.fixture(scope="module")
 def signals():
     """States of a stage sweeping 60 mm slowly and random current rates."""
-    rng = np.random.default_rng(0)
-    t = np.arange(N) * TS
-    x = np.zeros((4, N))
-    x[0] = 0.020 + 0.004 * np.sin(2 * math.pi * 0.21 * t)
-    x[1] = np.gradient(x[0], TS)
-    x[2] = 0.03 * np.sin(2 * math.pi * 0.05 * t) + 0.002 * np.sin(2 * math.pi * 0.7 * t)
-    x[3] = np.gradient(x[2], TS)
-    du = rng.standard_normal((2, N))
-    return x, du
+    return sweep_signals()
 
 
 def test_a_sinusoid_in_the_position_is_found_at_its_period_with_its_share(signals):

@@ -375,6 +375,10 @@ def prepare(
     cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
     notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
+    rates = [control_rate_of(log, control_rate) for log in logs]
+    declared = [
+        control_rate is not None or log.currents_measured or "control_rate_hz" in log.metadata for log in logs
+    ]
     return PreparedLogs(
         t=cat[0],
         segment=cat[1],
@@ -396,10 +400,11 @@ def prepare(
             "edge_samples": edge,
             "logging_error_share": [float(s) for s in shares],
             # the loop's rate (the lag candidate's hold delay); logs of several rates: the slowest
-            "control_rate_hz": min(control_rate_of(log, control_rate) for log in logs),
-            # the rate above is the rig's 5 kHz, assumed: no log of commanded currents declares its own
-            "control_rate_assumed": control_rate is None
-            and any(not log.currents_measured and "control_rate_hz" not in log.metadata for log in logs),
+            "control_rate_hz": min(rates),
+            # that rate is the rig's 5 kHz, assumed: a log of commanded currents does not declare its own
+            "control_rate_assumed": any(
+                r == min(rates) and not d for r, d in zip(rates, declared, strict=True)
+            ),
             "max_rate_hz": max_rate,
         },
     )
