@@ -329,7 +329,11 @@ def test_fit_output_error_passes_the_window_on(model, two_logs, oe_fits):
 def test_the_plain_output_error_covariance_is_s2_times_the_inverse_kkt_block(model, two_logs):
     # the constrained least-squares covariance (theta block of the inverse KKT matrix) times the
     # residual variance s^2 = r'r / (residuals - (variables - constraints)), recomputed with dense
-    # numpy at the fit's starting point; 1e-8 relative: a dense against a sparse LU of the same matrix
+    # numpy at the fit's starting point; 1e-6 relative: a dense against a sparse LU of the same
+    # matrix, which is badly scaled (2-norm condition 4e16, the node states beside the scaled
+    # constants): they agree to 1e-9-2e-8 depending on the machine's BLAS. A covariance not scaled
+    # by s^2 (0.62 here), or with the degrees of freedom off by the 60 constraints (3 % of 1976),
+    # is off by far more
     ms = MultipleShooting(two_logs[0], model)
     theta, nodes, _ = ms._start(TRUTH)
     w = ms._pack(theta, nodes)
@@ -342,4 +346,4 @@ def test_the_plain_output_error_covariance_is_s2_times_the_inverse_kkt_block(mod
     kkt = np.block([[Jr.T @ Jr, Jc.T], [Jc, np.zeros((nc, nc))]])
     s2 = float(r @ r) / (r.size - (nv - nc))
     expected = s2 * np.linalg.inv(kkt)[:q, :q] * np.outer(scale, scale)
-    np.testing.assert_allclose(naive, expected, rtol=1e-8)
+    np.testing.assert_allclose(naive, expected, rtol=1e-6)

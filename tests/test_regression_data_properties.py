@@ -34,8 +34,10 @@ def test_the_matching_filter_turns_the_true_acceleration_into_the_sg_estimate():
     acc = -np.sum((w**2)[:, None] * np.sin(np.outer(w, t) + phase), axis=0) * 1e-3
     kernel = matching_kernel(sg)
     assert kernel.sum() == pytest.approx(1.0, rel=1e-12)
-    # symmetric up to the polynomial division's round-off (1e-13 of the largest tap)
-    assert_allclose(kernel, kernel[::-1], rtol=0, atol=1e-11 * np.max(np.abs(kernel)))
+    # symmetric up to the polynomial division's round-off, which grows along its recurrence over
+    # the 53 taps (measured 1e-13 of the largest tap on one machine, 2e-11 on an AMD EPYC whose
+    # libraries round otherwise); a tap out of place would be off by a share of the largest tap
+    assert_allclose(kernel, kernel[::-1], rtol=0, atol=1e-9 * np.max(np.abs(kernel)))
     est = np.ravel(sg(y).acceleration)
     filtered = np.convolve(acc, kernel, mode="same")
     edge = max(sg.acceleration_window, kernel.size)
