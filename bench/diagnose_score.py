@@ -1,11 +1,13 @@
 """Score ``diagnose`` on sets of logs from the independent generator (no code shared with our sim).
 
-    python bench/diagnose_score.py [--sets eleven single pairs clean] [--out bench/out/diagnose_score]
+    python bench/diagnose_score.py [--sets eleven single pairs clean] [--seed-offset N] [--out DIR]
 
 Each set is generated once into ``OUT/logs/<set>`` (``python -m tests.independent.generate``; skipped
 when present), every log diagnosed with the defaults, and scored by ``tests/independent/scoring``:
 true effect first, no false claim, size within 30 %. Prints one line per log that misses a mark and
-the totals per set; writes ``OUT/summary.json``.
+the totals per set; writes ``OUT/summary.json``. ``--seed-offset N`` adds N to every seed: the same
+scenarios on fresh constants, references and noise, which no rule of the diagnosis was tuned on
+(written to ``OUT/logs/<set>+N``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sets", nargs="+", default=["eleven", "single", "pairs", "clean"])
+    parser.add_argument("--seed-offset", type=int, default=0, help="added to every seed (fresh draws)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_score")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
@@ -32,9 +35,10 @@ def main() -> None:
 
     summary: dict[str, dict] = {}
     for name in args.sets:
-        folder = args.out / "logs" / name
+        folder = args.out / "logs" / (name + (f"+{args.seed_offset}" if args.seed_offset else ""))
         if not any(folder.glob("*.csv")):
             cmd = [sys.executable, "-m", "tests.independent.generate", "--set", name, "--out", str(folder)]
+            cmd += ["--seed-offset", str(args.seed_offset)]
             subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
         marks = [0, 0, 0]
         for csv in sorted(folder.glob("*.csv")):

@@ -494,6 +494,21 @@ def test_named_sets_have_the_promised_contents():
     assert all(stem.split("_")[0] in SET_NAMES and stem.split("_")[1].isdigit() for stem in stems)
 
 
+@pytest.mark.parametrize("name", SET_NAMES)
+def test_a_seed_offset_gives_the_same_scenarios_on_fresh_draws(name):
+    own, fresh = named_set(name), named_set(name, seed_offset=1000)
+    assert [stem for stem, _ in fresh] == [stem for stem, _ in own]
+    for (_, a), (_, b) in zip(own, fresh, strict=True):
+        assert b.seed == a.seed + 1000
+        assert (b.name, b.effects, b.reference, b.rig, b.duration) == (
+            a.name,
+            a.effects,
+            a.reference,
+            a.rig,
+            a.duration,
+        )
+
+
 def test_command_line_writes_logs_and_truth(tmp_path):
     from maglev_oc.data.logs import read_log
 
@@ -506,6 +521,10 @@ def test_command_line_writes_logs_and_truth(tmp_path):
     truth = json.loads((tmp_path / "pairs_01.truth.json").read_text())
     assert {e["kind"] for e in truth["effects"]} == {"guide_friction", "cable_carrier"}
     assert truth["rig"]["control_rate_hz"] == 5000 and truth["rig"]["log_rate_hz"] == 1000
+    args = ["--set", "pairs", "--out", str(tmp_path / "fresh"), "--duration", "2", "--only", "pairs_01"]
+    assert generate_main([*args, "--seed-offset", "1000"]) == 0
+    fresh = json.loads((tmp_path / "fresh" / "pairs_01.truth.json").read_text())
+    assert fresh["seed"] == truth["seed"] + 1000
 
 
 @pytest.mark.slow

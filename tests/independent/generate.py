@@ -32,6 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", choices=SET_NAMES, help="which set to write")
     ap.add_argument("--out", type=Path, help="output directory (created if needed)")
     ap.add_argument("--duration", type=float, default=60.0, help="length of each log [s] (default 60)")
+    ap.add_argument(
+        "--seed-offset", type=int, default=0, help="added to every seed: the set on fresh draws (default 0)"
+    )
     ap.add_argument("--only", nargs="*", default=None, help="write only these stems (e.g. eleven_03)")
     ap.add_argument("--list", action="store_true", help="list the sets and their scenarios, write nothing")
     args = ap.parse_args(argv)
@@ -48,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration <= 0:
         ap.error("--duration must be positive [s]")
 
-    scenarios = named_set(args.set, args.duration)
+    scenarios = named_set(args.set, args.duration, args.seed_offset)
     if args.only:
         unknown = set(args.only) - {stem for stem, _ in scenarios}
         if unknown:

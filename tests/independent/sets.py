@@ -24,6 +24,7 @@ experiments
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 from .controller import K_H, K_V, scaled_gains
@@ -154,9 +155,17 @@ SET_NAMES = ("clean", "eleven", "single", "pairs", "experiments")
 """The named sets."""
 
 
-def named_set(name: str, duration: float = 60.0) -> list[tuple[str, Scenario]]:
-    """The scenarios of set ``name`` as ``(file stem, Scenario)``; ``duration`` [s] per log."""
+def named_set(name: str, duration: float = 60.0, seed_offset: int = 0) -> list[tuple[str, Scenario]]:
+    """The scenarios of set ``name`` as ``(file stem, Scenario)``; ``duration`` [s] per log.
+
+    ``seed_offset`` is added to every seed: the same scenarios on fresh constants, references and
+    noise (a set the tools were never tuned on; the sets' own seeds are those with offset 0)."""
     out: list[tuple[str, Scenario]] = []
+    if seed_offset:
+        return [
+            (stem, dataclasses.replace(sc, seed=sc.seed + seed_offset))
+            for stem, sc in named_set(name, duration)
+        ]
     if name == "clean":
         for i in range(20):
             out.append(
