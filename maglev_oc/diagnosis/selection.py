@@ -646,7 +646,11 @@ def _verdict(
         )
     strong = z >= settings.min_z_strong and wald >= settings.strong_wald * threshold
     if not (gain >= settings.min_gain and quarter > 0 and (z >= settings.min_z or strong)):
-        pooled = "" if j.pooled_gain_axes is None else f", {quarter:.1%} over the held-out quarter"
+        pooled = (
+            ""
+            if j.pooled_gain_axes is None
+            else f" over the quarter and the training data held out in turn ({quarter:.1%} over the quarter)"
+        )
         return "not significant", (
             f"held-out error on its axes falls by {gain:.1%}{pooled} (z = {z:.1f}; needs "
             f"{settings.min_gain:.1%}, a drop over the quarter and z >= {settings.min_z:g})"
