@@ -2,6 +2,7 @@
 
     python bench/diagnose_rigs.py [--rigs log500 enc20um ...] [--out bench/out/diagnose_rigs]
     python bench/diagnose_rigs.py --experiments [steps short ...] [--out ...]
+    python bench/diagnose_rigs.py --variants [end_effect_narrow ...] [--out ...]
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
 10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
@@ -16,6 +17,12 @@ claim, size within 30 %. Prints one line per log and the totals per rig; writes
 on the default rig: a user's experiments unlike the other sets' (set-point steps, a small
 excursion, faster sines, a short log, an off-centre travel, softer and stiffer gains, constants
 further from the papers'), each with a clean log and six large effects alone.
+
+``--variants [NAME ...]``: each effect in shapes the sets never use (:func:`variants`: end effects
+narrower, wider, on the thrust alone or at one end; cogging with a strong second harmonic; friction
+with a large Stribeck drop; a misalignment tilted the other way with a 40 mm waviness; ...), alone
+on the default rig: a user's rig has the same effects in its own proportions, and a rule tuned to
+the sets' small and large sizes may not hold there.
 """
 
 from __future__ import annotations
@@ -43,11 +50,53 @@ EFFECTS = (None, "guide_friction_horizontal", "normal_cogging", "cable_carrier",
 """What each rig records: a clean log and these effects alone, at their large size."""
 
 
+def variants() -> dict:
+    """Effects in shapes and proportions the sets' ``small()`` and ``large()`` never use, by name."""
+    from tests.independent import effects as E
+
+    return {
+        "end_effect_narrow": E.EndEffect(thrust_loss=0.10, attraction_loss=0.06, width=0.008),
+        "end_effect_wide": E.EndEffect(thrust_loss=0.06, attraction_loss=0.04, width=0.035),
+        "end_effect_thrust_only": E.EndEffect(thrust_loss=0.10, attraction_loss=0.0, width=0.02),
+        "end_effect_one_end": E.EndEffect(thrust_loss=0.12, attraction_loss=0.08, end_position_minus=-0.3),
+        "detent_strong_harmonic": E.DetentForce(peak_force=1.5, harmonic2_ratio=0.9, harmonic2_phase=0.2),
+        "normal_cogging_strong_harmonic": E.NormalCogging(peak_force=2.0, harmonic2_ratio=0.8),
+        "friction_h_stribeck": E.GuideFriction(
+            axis_="horizontal",
+            coulomb_force=0.6,
+            static_force=1.2,
+            stribeck_velocity=0.01,
+            viscous_coefficient=1.0,
+        ),
+        "friction_v_stribeck": E.GuideFriction(
+            axis_="vertical",
+            coulomb_force=1.0,
+            static_force=2.0,
+            stribeck_velocity=0.005,
+            viscous_coefficient=5.0,
+            bristle_stiffness=3e5,
+            bristle_damping=690.0,
+        ),
+        "misalignment_negative_wavy": E.GuideMisalignment(
+            slope=-3e-3, waviness_amplitude=6e-6, waviness_wavelength=0.04, waviness_phase=2.0
+        ),
+        "cable_carrier_offset": E.CableCarrier(stiffness=6.0, neutral_position=0.0, constant_force=-0.2),
+        "thrust_ripple_phase": E.ThrustRipple(ratio=0.04, phase=2.0, ratio2=0.0),
+        "commutation_negative": E.CommutationOffset(angle=-0.04),
+        "amplifier_delay": E.AmplifierDynamics(bandwidth=2000.0, delay=6e-4),
+        "amplifier_slow": E.AmplifierDynamics(bandwidth=100.0, delay=0.0),
+        "tilted_base_negative": E.TiltedBase(angle=-8e-3),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rigs", nargs="+", default=list(RIGS), choices=list(RIGS))
     parser.add_argument(
         "--experiments", nargs="*", default=None, help="score the experiments set instead (all, or these)"
+    )
+    parser.add_argument(
+        "--variants", nargs="*", default=None, help="score the effects' variants instead (all, or these)"
     )
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
@@ -61,7 +110,13 @@ def main() -> None:
     from tests.independent.simulate import Rig, Scenario, simulate
 
     groups: dict[str, list] = {}
-    if args.experiments is not None:
+    if args.variants is not None:
+        chosen = variants()
+        for k, (name, effect) in enumerate(chosen.items()):
+            if not args.variants or name in args.variants:
+                scenario = Scenario(name=name, seed=args.seed + 100 + k, effects=(effect,))
+                groups.setdefault("variants", []).append((name, scenario))
+    elif args.experiments is not None:
         wanted = args.experiments or list(EXPERIMENTS)
         for stem, scenario in named_set("experiments"):
             experiment = next(e for e in EXPERIMENTS if scenario.name.startswith(e + "_"))
