@@ -76,6 +76,25 @@ def test_a_sinusoid_at_a_motor_period_is_not_unexplained(signals):
     assert [axis for axis, _ in unexplained_periods(tr, tolerance=0.0)] == ["horizontal"]
 
 
+def test_a_motor_period_is_set_aside_only_on_the_axes_a_force_there_can_explain(signals):
+    """The same residual at twice the slot pitch on the horizontal axis, where the library has no
+    force at that period (its horizontal cogging is at the slot and pole pitches): set aside as a
+    motor period when every motor period counts on both axes, reported when the periods are given
+    per axis; set aside again when the horizontal axis has a force at that period."""
+    x, du = signals
+    rng = np.random.default_rng(1)
+    params = StageParameters()
+    lam = motor_periods(params)["twice_slot_pitch"]
+    r = np.vstack([np.zeros(N), 0.05 * np.sin(2 * math.pi * x[2] / lam) + 0.01 * rng.standard_normal(N)])
+    tr = trace(x, du, r, params, TS)
+    t1, tau = params.slot_pitch, params.pole_pitch
+    assert unexplained_periods(tr) == []
+    library = {"vertical": [t1, 2 * t1], "horizontal": [t1, tau]}
+    assert [axis for axis, _ in unexplained_periods(tr, on_axis=library)] == ["horizontal"]
+    library["horizontal"].append(2 * t1)
+    assert unexplained_periods(tr, on_axis=library) == []
+
+
 def test_motor_periods_are_the_slot_and_pole_pitches_and_their_doubles():
     p = StageParameters()
     assert motor_periods(p) == {

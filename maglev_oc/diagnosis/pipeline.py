@@ -199,7 +199,7 @@ def _diagnose(
     )
     base0, fitted, res0 = clock("base_fit", _base_fit, session, design0)
     library, design, sel, fitted = clock("selection", _select, session, fitted, tuple(exclude))
-    tr, periods = clock("waviness", _waviness_periods, session, fitted, design, sel, res0)
+    tr, periods = clock("waviness", _waviness_periods, session, fitted, library, design, sel, res0)
     if periods:
         del design, sel  # the design with the waviness replaces this one: never hold both
         library, design, sel = clock("waviness", _with_waviness, session, fitted, library, periods)
@@ -355,11 +355,17 @@ def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, f
 
 
 def _waviness_periods(
-    session: _Session, fitted: StageModel, design: Design, sel: Selection, res0: np.ndarray
+    session: _Session,
+    fitted: StageModel,
+    library: Sequence[Candidate],
+    design: Design,
+    sel: Selection,
+    res0: np.ndarray,
 ) -> tuple[Trace, list[float]]:
     """Step 5b: the trace of the base fit's residual ``res0`` (step 3), and the periodicities of the
-    selection's residual that no motor period explains, at refined periods. The two residuals'
-    traces are computed together: their spatial spectra share the sines of the position."""
+    selection's residual that no force of the library at a motor period explains on that axis
+    (:func:`_periods_on_axis`), at refined periods. The two residuals' traces are computed
+    together: their spatial spectra share the sines of the position."""
     data, train = session.data, session.train
     res = residuals(design, sel.final)
     tr, tr_after = traces(
@@ -369,13 +375,28 @@ def _waviness_periods(
         session.model.params,
         data.sample_time,
     )
+    on_axis = _periods_on_axis(library, sel)
     periods = sorted(
         {
             round(refine_waviness_period(fitted, data, res, session.weights, train, lam), 4)
-            for _, lam in unexplained_periods(tr_after, tolerance=0.03)
+            for _, lam in unexplained_periods(tr_after, tolerance=0.03, on_axis=on_axis)
         }
     )
     return tr, periods
+
+
+def _periods_on_axis(library: Sequence[Candidate], sel: Selection) -> dict[str, list[float]]:
+    """axis -> the spatial periods [m] of the library's forces of the position at a motor period
+    on that axis (cogging, detent, thrust ripple; as the selection sized them)."""
+    out: dict[str, list[float]] = {axis: [] for axis in AXES}
+    for cand in library:
+        j = sel.last.get(cand.name)
+        period = None if j is None else j.physical.get("period")
+        if period is None or cand.variable != "position" or cand.family == "geometry":
+            continue
+        for axis in AXES if cand.axis == "both" else (cand.axis,):
+            out[axis].append(period.value)
+    return out
 
 
 def _with_waviness(session: _Session, fitted: StageModel, library, periods: list[float]):

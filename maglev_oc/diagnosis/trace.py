@@ -18,7 +18,7 @@ The periodogram's peaks that match no motor period become data-driven candidates
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,14 +187,26 @@ def _trace(x, du, residual, params, sample_time, periods, spec, min_share) -> Tr
 
 
 def unexplained_periods(
-    tr: Trace, *, tolerance: float = 0.015, max_per_axis: int = 1
+    tr: Trace,
+    *,
+    tolerance: float = 0.015,
+    max_per_axis: int = 1,
+    on_axis: Mapping[str, Sequence[float]] | None = None,
 ) -> list[tuple[str, float]]:
     """Periodogram peaks (axis, period) that match no motor period or its harmonics within
-    ``tolerance``: candidates for guide waviness."""
+    ``tolerance``: candidates for guide waviness.
+
+    ``on_axis``: axis -> the periods [m] a force on that axis can explain (the library's
+    periodic candidates there); a peak is then set aside only for those of its own axis. Without
+    it every motor period counts on both axes, though the library has no force at twice the slot
+    pitch on the horizontal axis, nor at the pole pitch on the vertical one: a 40 mm guide
+    waviness's horizontal peak (39 mm) was set aside as twice the slot pitch, and its vertical
+    part went to a 38 mm normal cogging."""
     motor = list(tr.motor_periods.values())
     out: dict[str, list[tuple[float, float]]] = {}
     for axis, lam, share in sorted(tr.peaks, key=lambda p: -p[2]):
-        if any(abs(lam / m - 1) < tolerance for m in motor):
+        near = motor if on_axis is None else on_axis.get(axis, ())
+        if any(abs(lam / m - 1) < tolerance for m in near):
             continue
         out.setdefault(axis, [])
         if len(out[axis]) < max_per_axis:
