@@ -288,7 +288,11 @@ class SampledPlantTwin(RigTwin):
         """Twin state for ``x0`` and ``u0`` (:meth:`RigTwin.initial_state`), the effects' scales
         (3,) (default 1) and the plant's constants (4,) (default: the model's)."""
         c = self.model.constants.as_array() if constants is None else _constants_array(constants)
-        k = np.ones(_N_SCALES) if scales is None else np.asarray(scales, dtype=float).reshape(_N_SCALES)
+        k = np.ones(_N_SCALES) if scales is None else np.asarray(scales, dtype=float).reshape(-1)
+        if k.shape != (_N_SCALES,):
+            raise InputError(
+                f"scales must be {_N_SCALES} values, one per effect of {EFFECT_SCALES}, got {scales!r}"
+            )
         return np.concatenate([super().initial_state(x0, u0), k, c])
 
 
@@ -321,7 +325,9 @@ class PlantBatchSimulator(BatchSimulator):
         """
         constants = np.asarray(constants, dtype=float)
         x0 = np.asarray(x0, dtype=float)
-        n = x0.shape[1] if x0.ndim == 2 else -1
+        if x0.ndim != 2:
+            raise InputError(f"x0 must have shape (4, n), one column per run, got {x0.shape}")
+        n = x0.shape[1]
         if constants.shape != (4, n):
             raise InputError(f"constants must have shape (4, n) like x0, got {constants.shape}")
         scales = np.ones((_N_SCALES, n)) if scales is None else np.asarray(scales, dtype=float)
