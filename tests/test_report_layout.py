@@ -7,7 +7,18 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from maglev_oc.reporting.pdf import PAGE_SIZE, LayoutError, PdfReport, Plot, Table, Text, check_tables
+from maglev_oc.reporting.pdf import (
+    PAGE_SIZE,
+    LayoutError,
+    PdfReport,
+    Plot,
+    Table,
+    Text,
+    block_height,
+    check_tables,
+    page_room,
+    split_table,
+)
 from maglev_oc.reporting.style import CONTROLLER_COLOURS, controller_colour, thin
 
 
@@ -46,6 +57,28 @@ def test_a_long_table_continues_on_further_pages_with_its_notes_last(tmp_path):
     assert c.section("long").pages == len(c.pages) >= 3
     assert [p.heading for p in c.pages[1:]] == ["long (continued)"] * (len(c.pages) - 1)
     assert len(c.section("long").rows) == 150
+
+
+def test_a_table_too_tall_for_a_page_is_split_into_tables_that_each_fit_one(tmp_path):
+    # a diagnosis report's verdict table (one row per candidate, reasons wrapped over lines) ran
+    # 6.6 % of a page too long and the report failed: split, each part fits a page under its
+    # heading with the header repeated, the rows in order, the heading on the first, the notes on
+    # the last; a table that fits stays one
+    rows = [[f"candidate {k}", "not significant", "reason\nwrapped\nover lines"] for k in range(60)]
+    table = Table("verdicts", ("candidate", "verdict", "reason"), rows, notes=["the note"], font_size=7.5)
+    assert block_height(table) > page_room()  # whole, it cannot be placed
+    parts = split_table(table)
+    assert len(parts) >= 2
+    assert all(block_height(t) <= page_room() for t in parts)
+    assert [r for t in parts for r in t.rows] == rows
+    assert [t.heading for t in parts] == ["verdicts"] + [""] * (len(parts) - 1)
+    assert [tuple(t.notes) for t in parts] == [()] * (len(parts) - 1) + [("the note",)]
+    with PdfReport(tmp_path / "r.pdf", "t") as pdf:
+        for k, t in enumerate(parts):
+            pdf.add_page("verdicts" + (" (continued)" if k else ""), [t])
+    assert len(pdf.contents.pages) == len(parts)
+    short = Table("short", ("a", "b"), [["1", "2"]])
+    assert split_table(short) == [short]
 
 
 def test_content_that_runs_off_the_page_is_refused_and_nothing_is_written(tmp_path):

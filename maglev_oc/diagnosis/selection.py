@@ -646,14 +646,10 @@ def _verdict(
         )
     strong = z >= settings.min_z_strong and wald >= settings.strong_wald * threshold
     if not (gain >= settings.min_gain and quarter > 0 and (z >= settings.min_z or strong)):
-        pooled = (
-            ""
-            if j.pooled_gain_axes is None
-            else f" over the quarter and the training data held out in turn ({quarter:.1%} over the quarter)"
-        )
+        # the gain is the pooled one (all four quarters); the last quarter's is given beside it
         return "not significant", (
-            f"held-out error on its axes falls by {gain:.1%}{pooled} (z = {z:.1f}; needs "
-            f"{settings.min_gain:.1%}, a drop over the quarter and z >= {settings.min_z:g})"
+            f"held-out error on its axes falls by {gain:.1%} (last quarter {quarter:.1%}; z = {z:.1f}; "
+            f"needs {settings.min_gain:.1%}, a drop on the quarter, z >= {settings.min_z:g})"
         )
     if wald < threshold:
         return "not significant", f"Wald {wald:.3g} below {threshold:.3g} (alpha {settings.alpha:g})"

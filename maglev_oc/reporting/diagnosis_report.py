@@ -32,6 +32,7 @@ from maglev_oc.reporting.pdf import (
     Text,
     block_height,
     page_room,
+    split_table,
 )
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
@@ -395,7 +396,8 @@ def write_diagnosis_report(
             "Held-out data" + (", and the closed loop before and after" if study else ""),
             held_out,
         )
-        verdict_part: Part = ("Every candidate and its verdict", [verdicts])
+        # a long library (waviness candidates, long reasons) runs over a page: in parts the plan places
+        verdict_part: Part = ("Every candidate and its verdict", split_table(verdicts))
         parts = [found_part, residual_part, held_part, verdict_part]
         checks = _validation_part(diag)
         if checks is not None:

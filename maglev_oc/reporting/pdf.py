@@ -52,6 +52,7 @@ __all__ = [
     "grid",
     "new_figure",
     "page_room",
+    "split_table",
 ]
 
 PAGE_SIZE = (8.27, 11.69)  # A4 portrait [in]
@@ -389,6 +390,25 @@ class PdfReport:
 def page_room(first_page: bool = False) -> float:
     """The page fraction :meth:`PdfReport.add_page` has for blocks under its heading."""
     return _TOP - 0.032 - (0.065 if first_page else 0.0) - (_BOTTOM - 0.015)
+
+
+def split_table(table: Table) -> list[Table]:
+    """``table`` as consecutive tables that each fit a page under its heading (the header repeated,
+    the heading on the first, the notes under the last), for blocks of :meth:`PdfReport.add_page`:
+    a table taller than a page cannot be placed whole. One table when it fits."""
+    cells = [[_fmt(v) for v in r] for r in table.rows]
+    chunks = _paginate(cells, table.columns, table.font_size, bool(table.notes))
+    last = len(chunks) - 1
+    return [
+        Table(
+            table.heading if k == 0 else "",
+            table.columns,
+            chunk,
+            table.notes if k == last else (),
+            table.font_size,
+        )
+        for k, chunk in enumerate(chunks)
+    ]
 
 
 def block_height(block: Text | Table | Plot) -> float:
