@@ -86,6 +86,11 @@ class Candidate:
     bound this one holds (None: it does not, and the fallback is not judged). An implausible parent
     for another reason is no case for holding that parameter (a pure viscous friction refused for
     "no Coulomb" is not a Coulomb friction with its viscous part held at zero)."""
+    form_of: str | None = None
+    """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
+    guide friction with its Stribeck rise): judged beside it and reported under its name; chosen
+    over it only when its held-out gain beats the simpler form's by more than the parsimony
+    penalty of its extra parameter."""
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
@@ -99,8 +104,8 @@ class Candidate:
 
     @property
     def reported_name(self) -> str:
-        """The effect's name in results: a fallback's is its parent's."""
-        return self.fallback_for or self.term.name
+        """The effect's name in results: a fallback's or a richer form's is its parent's."""
+        return self.form_of or self.fallback_for or self.term.name
 
     @property
     def axis(self) -> str:

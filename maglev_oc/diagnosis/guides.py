@@ -35,6 +35,7 @@ from maglev_oc.regression.terms import (
 from maglev_oc.results import Estimate
 
 __all__ = [
+    "STRIBECK_SPEED",
     "cable_candidate",
     "friction_candidates",
     "gap_offset_candidate",
@@ -44,25 +45,37 @@ __all__ = [
     "waviness_candidate",
 ]
 
+STRIBECK_SPEED = 5e-3
+"""[m/s] The Stribeck speed of the friction's richer form (variants at half and twice): ball and
+roller guides show 0.1-10 mm/s; below the 2 mm/s over which the friction's sign is smoothed a rise
+is held by the sticking column, so the form resolves the rises that reach beyond it."""
+
 
 def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
-    """Coulomb + viscous friction of each axis's guides, with the share held while sticking; and
-    for each axis the same friction with no viscous part, judged only when the full fit's viscous
-    coefficient comes out negative (its bound-constrained fit: at slow speeds, where a gap axis
-    spends most of its time, the viscous force is small beside the Coulomb force and its
-    coefficient takes up the friction model's misfit, so a fit can turn it negative while the
-    Coulomb force is clear)."""
+    """For each axis's guides: Coulomb + viscous friction with the share held while sticking; the
+    same friction with no viscous part, judged only when the full fit's viscous coefficient comes
+    out negative (its bound-constrained fit: at slow speeds, where a gap axis spends most of its
+    time, the viscous force is small beside the Coulomb force and its coefficient takes up the
+    friction model's misfit, so a fit can turn it negative while the Coulomb force is clear); and
+    the full friction with its Stribeck rise at low speed (:data:`STRIBECK_SPEED`), a richer form
+    chosen only when the data pay for its parameter. Without that form a large Stribeck rise (a
+    breakaway force twice the Coulomb force) is taken up by the Coulomb force: 1.37 N for 1 N on an
+    independent log."""
     out = []
     negative_viscous = not_below("viscous", "viscous friction")
     for axis in ("vertical", "horizontal"):
-        for viscous in (True, False):
-            name = f"guide_friction_{axis}"
+        name = f"guide_friction_{axis}"
+        stribeck_name = f"{name}_with_stribeck"
+        for form in ("full", "without_viscous", "stribeck", "stribeck_without_viscous"):
+            viscous = not form.endswith("without_viscous")
+            stribeck = form.startswith("stribeck")
             term = guide_friction(
                 ctx.params,
                 axis,
                 holding=ctx.modelled(axis),
                 viscous=viscous,
-                name=name if viscous else f"{name}_without_viscous",
+                stribeck_speed=STRIBECK_SPEED if stribeck else None,
+                name=name if form == "full" else f"{name}_{'with_' if stribeck else ''}{form}",
             )
             plausible = [
                 detected("coulomb", "Coulomb friction (sticking without friction is not physical)"),
@@ -71,6 +84,11 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
             ]
             if viscous:
                 plausible.insert(1, negative_viscous)
+            if stribeck:
+                plausible += [
+                    detected("stribeck_rise", "Stribeck rise (a breakaway force above the Coulomb force)"),
+                    within("breakaway", MAX_FORCE_SHARE * ctx.weight(axis), "breakaway force"),
+                ]
             out.append(
                 Candidate(
                     with_physical(term, _friction_physical(ctx, term, axis)),
@@ -79,21 +97,33 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                     "slow constant-speed sweeps in both directions (speed reversals at several speeds) "
                     "separate Coulomb from viscous friction and from the thrust constant",
                     all_of(*plausible),
-                    _friction_words(axis, viscous),
+                    _friction_words(axis, form),
                     nuisance=("holding",),
-                    fallback_for=None if viscous else name,
+                    fallback_for=None if viscous else (stribeck_name if stribeck else name),
                     fallback_when=None if viscous else negative_viscous,
+                    form_of=name if stribeck else None,
                 )
             )
     return out
 
 
-def _friction_words(axis: str, viscous: bool):
+def _friction_words(axis: str, form: str):
     def describe(e):
-        if viscous:
+        if form == "full":
             return (
                 f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
                 f"and {fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+            )
+        if form.startswith("stribeck"):
+            return (
+                f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction, "
+                f"rising to a breakaway force of {fmt(e['breakaway'])} at low speed (Stribeck), and "
+                + (
+                    f"{fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+                    if form == "stribeck"
+                    else "hold the axis while it sticks; their viscous friction is not resolved on this "
+                    "log (fitted freely it came out negative, so it is held at zero)."
+                )
             )
         return (
             f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction (and "
@@ -110,6 +140,10 @@ def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
     def convert(q, cov, c):
         out = base(q, cov, c)
         out.setdefault("viscous", Estimate(0.0, 0.0, "N s/m"))  # held at its bound
+        if "stribeck_rise" in out:  # the breakaway force F_c + F_x, with their covariance
+            i, j = term.parameter_names.index("coulomb"), term.parameter_names.index("stribeck_rise")
+            var = cov[i, i] + cov[j, j] + 2 * cov[i, j]
+            out["breakaway"] = Estimate(float(q[i] + q[j]), math.sqrt(max(float(var), 0.0)), "N")
         if axis == "horizontal":  # the holding column carries the reference C1
             k = ctx.reference_ratio("C1", c)
             h = out["holding"]

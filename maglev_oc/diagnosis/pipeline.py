@@ -472,7 +472,10 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
             if cand.axis in (axis, "both") and session.data.moving[a]:
                 params[f"rms_force_{axis}"] = Estimate(force[a], float("nan"), "N")
         step = steps[name]
-        others = sorted((j for j in step.judgements.values() if j.name != name), key=lambda j: -j.gain)
+        others = sorted(  # other effects (not another form of this one)
+            (j for j in step.judgements.values() if by_name[j.name].reported_name != cand.reported_name),
+            key=lambda j: -j.gain,
+        )
         effects.append(
             Effect(
                 name=cand.reported_name,

@@ -381,6 +381,7 @@ def guide_friction(
     holding: Callable | None = None,
     stick_speed: float | None = None,
     viscous: bool = True,
+    stribeck_speed: float | None = None,
     name: str | None = None,
     explanation: str | None = None,
 ) -> AccelerationTerm:
@@ -402,6 +403,11 @@ def guide_friction(
 
     ``viscous=False`` leaves the viscous part out (c = 0: the friction with its viscous coefficient
     held at its physical bound).
+
+    ``stribeck_speed`` v_st [m/s] adds the Stribeck rise of the friction at low speed, a parameter
+    F_x = F_s - F_c [N] (breakaway force F_s above the Coulomb force): acc += -F_x tanh(v / v_r)
+    exp(-(v / v_st)^2) / M, the steady-sliding friction of the LuGre model (Canudas de Wit et al.
+    1995) with its shape exponent 2, the Stribeck speed fixed (scaled with the variants).
     """
     if axis not in ("vertical", "horizontal"):
         raise InputError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
@@ -410,25 +416,38 @@ def guide_friction(
         raise InputError(
             f"reversal_speed and stick_speed must be positive [m/s], got {reversal_speed!r}, {stick_speed!r}"
         )
+    if stribeck_speed is not None and not stribeck_speed > 0:
+        raise InputError(f"stribeck_speed must be positive [m/s], got {stribeck_speed!r}")
     vi = 1 if axis == "vertical" else 3
     m = _mass(params, axis)
-    units = {"coulomb": "N", "viscous": "N s/m", "holding": "1"}
+    units = {"coulomb": "N", "viscous": "N s/m", "stribeck_rise": "N", "holding": "1"}
     names = tuple(
-        n for n, on in (("coulomb", True), ("viscous", viscous), ("holding", holding is not None)) if on
+        n
+        for n, on in (
+            ("coulomb", True),
+            ("viscous", viscous),
+            ("stribeck_rise", stribeck_speed is not None),
+            ("holding", holding is not None),
+        )
+        if on
     )
     k = len(names)
 
     def fn(width):
-        stick = stick_speed * width / reversal_speed  # the variants scale both speeds
+        stick = stick_speed * width / reversal_speed  # the variants scale every speed
 
         def build(x, u, du, p):
             q = dict(zip(names, (p[i] for i in range(k)), strict=True))
             acc = -(q["coulomb"] * ca.tanh(x[vi] / width) + q.get("viscous", 0) * x[vi]) / m
+            if stribeck_speed is not None:
+                rise = ca.exp(-((x[vi] / (stribeck_speed * width / reversal_speed)) ** 2))
+                acc = acc - q["stribeck_rise"] * ca.tanh(x[vi] / width) * rise / m
             if holding is not None:
                 acc = acc - q["holding"] * holding(x, u) * ca.exp(-((x[vi] / stick) ** 2))
             return _put(axis, acc)
 
-        return term_function(f"friction_{axis}" + ("" if viscous else "_coulomb"), build, k)
+        form = ("" if viscous else "_coulomb") + ("_stribeck" if stribeck_speed is not None else "")
+        return term_function(f"friction_{axis}{form}", build, k)
 
     physical = [(n, units[n], 1.0) for n in names]
     return AccelerationTerm(
@@ -438,6 +457,7 @@ def guide_friction(
             f"The {axis} linear guides resist motion with a force of constant size opposing the velocity "
             "(Coulomb)"
             + (" plus a part growing with speed (viscous)" if viscous else "")
+            + (", larger below a few mm/s (Stribeck)" if stribeck_speed is not None else "")
             + (", and hold the axis while it sticks." if holding is not None else ".")
         ),
         axis=axis,
@@ -447,7 +467,12 @@ def guide_friction(
         physical=linear_physical(physical),
         signature="residual steps with the sign of the velocity",
         variants=(fn(reversal_speed / 2), fn(reversal_speed * 2)),
-        variant_note=f"reversal speed {reversal_speed / 2 * 1e3:g}-{reversal_speed * 2 * 1e3:g} mm/s",
+        variant_note=f"reversal speed {reversal_speed / 2 * 1e3:g}-{reversal_speed * 2 * 1e3:g} mm/s"
+        + (
+            f" (Stribeck speed {stribeck_speed / 2 * 1e3:g}-{stribeck_speed * 2 * 1e3:g} mm/s)"
+            if stribeck_speed is not None
+            else ""
+        ),
     )
 
 
