@@ -64,3 +64,40 @@ def test_a_search_that_meets_no_boundary_says_so(search):
     check_result(res)
     assert not res.success and res.status == "not_found" and "no start" in res.message
     assert res.level == math.inf and res.state is None and res.converged == 0
+
+
+def test_a_ray_that_meets_no_boundary_is_skipped_not_the_end_of_the_search(search, monkeypatch):
+    # the first ray that reaches the boundary made to leave the gap domain before its constraint
+    # fails instead, as rays do (test_each_ray_starts_...): the rays after it still search, from the
+    # same phases (drawn for every ray), so they find the same levels as before, less at most the
+    # one of the ray made to miss
+    minimizer, P = search
+    real = minimizer._ray_start
+    reached = []
+
+    def record(img, F, d, phi0, j):
+        start = real(img, F, d, phi0, j)
+        reached.append(start is not None)
+        return start
+
+    monkeypatch.setattr(minimizer, "_ray_start", record)
+    full = minimizer.minimize(REF, P, "headroom", starts=6)
+    first = reached.index(True)
+    assert first < 5 and full.converged >= 2  # a ray after it that converges
+    calls = []
+
+    def misses_once(img, F, d, phi0, j):
+        calls.append(d)
+        return None if len(calls) == first + 1 else real(img, F, d, phi0, j)
+
+    monkeypatch.setattr(minimizer, "_ray_start", misses_once)
+    res = minimizer.minimize(REF, P, "headroom", starts=6)
+    check_result(res)
+    assert len(calls) == 6  # every ray was tried
+    assert res.success and res.starts == 6 and res.converged >= full.converged - 1
+    left = list(full.levels)
+    for level in res.levels:  # each level found again is one of the full search's (IPOPT: 1e-9)
+        k = int(np.argmin(np.abs(np.array(left) - level)))
+        assert left[k] == pytest.approx(level, rel=1e-9)
+        left.pop(k)
+    assert res.level == pytest.approx(res.levels.min(), rel=0) and res.level >= full.level * (1 - 1e-9)
