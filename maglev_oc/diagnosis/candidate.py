@@ -256,9 +256,15 @@ class LibraryContext:
         return self.model.constants
 
     def mass(self, axis: str) -> float:
-        return self.params.mass_vertical if axis == "vertical" else self.params.mass_horizontal
+        """[kg] the mass the forces on ``axis`` ("vertical" or "horizontal") move: M_v or M_h."""
+        if axis == "vertical":
+            return self.params.mass_vertical
+        if axis == "horizontal":
+            return self.params.mass_horizontal
+        raise InputError(f"LibraryContext: axis must be 'vertical' or 'horizontal', got {axis!r}")
 
     def weight(self, axis: str) -> float:
+        """[N] M g of the mass on ``axis`` (:meth:`mass`)."""
         return self.mass(axis) * self.params.gravity
 
     def shapes(self, x):
