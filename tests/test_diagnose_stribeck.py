@@ -155,3 +155,53 @@ def test_the_stribeck_speed_is_within_ball_guides_range():
     # 0.1-10 mm/s for ball and roller guides (Olsson et al. 1998, friction models survey); above the
     # reversal speed, below which the sticking column holds the axis
     assert REVERSAL_SPEED < STRIBECK_SPEED <= 10e-3
+
+
+# --- which form of an effect is chosen ----------------------------------------------------------
+def _judged(name: str, gain: float):
+    from maglev_oc.diagnosis.selection import Judgement
+
+    nan2 = np.full(2, np.nan)
+    return Judgement(name, "passes", "", gain, nan2, 5.0, 5.0, 1.0, 1.0, 1.0, (), nan2, nan2, {}, fit=name)
+
+
+@pytest.mark.parametrize(
+    ("z", "gain", "richer_chosen"),
+    [(3.5, 0.003, True), (2.9, 0.003, False), (8.0, -0.001, False), (3.0, 1e-6, True)],
+)
+def test_a_richer_form_is_chosen_only_when_it_improves_on_the_simpler_one_significantly(
+    monkeypatch, z, gain, richer_chosen
+):
+    """selection._form_of_effect: the simplest passing form, unless a richer one improves on it
+    over the held-out samples with a positive gain at z >= min_z (3, the test every candidate
+    passes against the model without it); which form the parsimony ranking put first does not
+    matter; another effect passing beside them is not a form of this one. The held-out test is
+    stubbed: it returns (gain, z) for the richer form's residual against the simpler one's."""
+    from maglev_oc.diagnosis import selection as S
+
+    model = StageModel()
+    n = 200
+    x = np.vstack([np.linspace(0.012, 0.018, n), np.zeros(n), np.linspace(-0.05, 0.05, n), np.zeros(n)])
+    ctx = LibraryContext(model, SimpleNamespace(x=x, valid=np.ones(n, dtype=bool), settings={}))
+    by_name = {c.name: c for c in friction_candidates(ctx)}
+    simple, rich = "guide_friction_horizontal", "guide_friction_horizontal_with_stribeck"
+    other = "guide_friction_vertical"  # another effect, passing with the best gain
+    passing = [_judged(simple, 0.40), _judged(rich, 0.401), _judged(other, 0.45)]
+    seen = []
+
+    def significance(design, r0, r1, axes):
+        seen.append((r0, r1, tuple(axes)))
+        return gain, z
+
+    monkeypatch.setattr(S, "holdout_significance", significance)
+    held_out = SimpleNamespace(around=lambda fit, counted: SimpleNamespace(residual=fit))
+    design = SimpleNamespace(moving=np.array([True, True]))
+    settings = S.SelectionSettings()
+    for best in passing[:2]:  # whichever form the ranking put first
+        seen.clear()
+        chosen = S._form_of_effect(design, best, passing, by_name, held_out, None, settings)
+        assert chosen.name == (rich if richer_chosen else simple)
+        assert seen == [(simple, rich, (1,))]  # richer against simpler, on the horizontal axis
+    alone = S._form_of_effect(design, passing[1], passing[1:2], by_name, held_out, None, settings)
+    assert alone.name == rich  # a richer form passing alone is the effect's form
+    assert S._form_of_effect(design, passing[2], passing, by_name, held_out, None, settings).name == other
