@@ -25,7 +25,7 @@ from maglev_oc.region.feasibility import NONLINEAR, FeasibleSet, compensated_con
 from maglev_oc.region.interval import IntervalFunction
 from maglev_oc.results import Result
 
-__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest", "initial_boxes", "meets_unit_ball"]
+__all__ = ["BoxSearch", "LevelCertifier", "bisect_widest", "cube_grid", "initial_boxes", "meets_unit_ball"]
 
 
 @dataclass(frozen=True)
@@ -182,10 +182,7 @@ class LevelCertifier:
 def initial_boxes(periodic: bool, phase_cells: int, dims: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (dims + 1, k): a 4^dims grid over the cube [-1, 1]^dims of zeta, times
     ``phase_cells`` cells over [0, 2 pi) for a sinusoid (the phase pinned at 0 for a set-point)."""
-    n0 = 4
-    edges = np.linspace(-1, 1, n0 + 1)
-    g = np.array(np.meshgrid(*[range(n0)] * dims, indexing="ij")).reshape(dims, -1)
-    lo, hi = edges[g], edges[g + 1]
+    lo, hi = cube_grid(4, dims)
     if periodic:
         pe = np.linspace(0, 2 * math.pi, phase_cells + 1)
         k = np.arange(phase_cells)
@@ -195,6 +192,18 @@ def initial_boxes(periodic: bool, phase_cells: int, dims: int = 3) -> tuple[np.n
         lo = np.vstack([lo, np.zeros(lo.shape[1])])
         hi = np.vstack([hi, np.zeros(hi.shape[1])])
     return lo, hi
+
+
+def cube_grid(cells: int, dims: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (dims, cells^dims): the cube [-1, 1]^dims cut into cells^dims equal boxes, which
+    tile it (every point of the cube in one box, up to their shared faces). Every branch and bound
+    starts from such a grid; a grid that left part of the cube out would leave that part of
+    {V <= c} unexamined and its certificate unsound."""
+    if cells < 1 or dims < 1:
+        raise InputError(f"cube_grid: cells and dims must be >= 1, got {cells!r}, {dims!r}")
+    edges = np.linspace(-1.0, 1.0, cells + 1)
+    g = np.array(np.meshgrid(*[range(cells)] * dims, indexing="ij")).reshape(dims, -1)
+    return edges[g], edges[g + 1]
 
 
 def _bisect_boxes(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, periodic: bool):

@@ -46,7 +46,7 @@ from maglev_oc.model.allocation import MicrostepperTransformation
 from maglev_oc.model.hardware import MICROSTEPPER_STOPPER_GAP, PEAK_CURRENT_LIMIT, STOPPER_POSITION
 from maglev_oc.model.platform import Platform, microstepper
 from maglev_oc.numerics import ColumnMap
-from maglev_oc.region.branch_and_bound import bisect_widest, meets_unit_ball
+from maglev_oc.region.branch_and_bound import bisect_widest, cube_grid, meets_unit_ball
 from maglev_oc.region.interval import CenteredForm, IntervalFunction
 from maglev_oc.results import Result
 
@@ -227,9 +227,7 @@ class MicrostepperRegion:
         interval extension, and after :data:`CENTRED_AFTER` of the budget also by the centred form."""
         par_l = (math.sqrt(level) * self.chol).ravel(order="F")[:, None]
         gap0 = np.array([[float(setpoint[2])]])
-        edges = np.linspace(-1, 1, 5)
-        grid = np.array(np.meshgrid(*(range(4),) * 4, indexing="ij")).reshape(4, -1)
-        lo, hi = edges[grid], edges[grid + 1]
+        lo, hi = cube_grid(4, 4)
         boxes = 0
         while lo.shape[1]:
             keep, near = meets_unit_ball(lo, hi)

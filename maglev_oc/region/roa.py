@@ -51,7 +51,7 @@ from maglev_oc.control.linear_regulator import ScheduledLinearRegulator, axis_li
 from maglev_oc.errors import InputError
 from maglev_oc.model.equilibrium import equilibrium
 from maglev_oc.model.stage import StageModel
-from maglev_oc.region.branch_and_bound import meets_unit_ball
+from maglev_oc.region.branch_and_bound import cube_grid, meets_unit_ball
 from maglev_oc.region.closed_loop import DE1, DE2, E1, E2, N_ERROR, Reference
 from maglev_oc.region.ellipsoid import InitialConditionSet, initial_condition_set
 from maglev_oc.region.feasibility import FeasibleSet
@@ -211,9 +211,7 @@ class RoaCertifier:
         self._ijac = IntervalFunction(
             ca.Function("jac_zeta", [zeta, ca.vec(lmat)], [ca.vec(ca.densify(jac))])
         )
-        edges = np.linspace(-1, 1, self.cover + 1)
-        g = np.array(np.meshgrid(*(range(self.cover),) * 3, indexing="ij")).reshape(3, -1)
-        lo, hi = edges[g], edges[g + 1]
+        lo, hi = cube_grid(self.cover, 3)
         keep, _ = meets_unit_ball(lo, hi)
         self._lo, self._hi = lo[:, keep], hi[:, keep]
 
