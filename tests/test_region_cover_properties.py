@@ -79,3 +79,20 @@ def test_the_roa_certifiers_cover_holds_every_point_of_the_unit_ball(model):
     lo, hi = cube_grid(cert.cover, 3)
     keep, _ = meets_unit_ball(lo, hi)
     assert cert._lo.shape[1] == int(keep.sum()) < lo.shape[1]
+
+
+def test_without_a_current_limit_the_headroom_is_one_everywhere():
+    """constraints_from_coefficients (the SDP's numpy twin of the constraints): with no current
+    limit the headroom is documented as 1, an array of the margin's shape and of floats (the SDP's
+    bisection compares it elementwise with 0 beside the margin)."""
+    from maglev_oc.model.stage import StageModel
+    from maglev_oc.region.feasibility import constraints_from_coefficients
+
+    model = StageModel()
+    coef = model.coefficients(np.linspace(0.012, 0.026, 5))[:, None, :]  # (4, 1, 5)
+    v1, v2 = np.zeros((3, 5)), np.linspace(-5.0, 5.0, 15).reshape(3, 5)
+    margin, headroom = constraints_from_coefficients(coef, v1, v2, 9.81, None)
+    assert margin.shape == headroom.shape == (3, 5)
+    assert headroom.dtype == np.float64 and np.all(headroom == 1.0)
+    _, limited = constraints_from_coefficients(coef, v1, v2, 9.81, 9.0)
+    assert limited.shape == (3, 5) and np.all(limited <= 81.0)  # 9 A^2 less what the currents use

@@ -141,3 +141,21 @@ def test_a_study_with_the_large_step_names_its_steps_in_its_timings(model):
     # the steps the names stand for ran: three linear regulators, one start x target map each
     assert len(study.large_step.linear) == 3
     assert all(m["outcome"].shape == (1, 1) for m in study.large_step.maps.values())
+    # four different controllers, as the papers compare them: the FL regulator, the linear regulator
+    # with and without its feedforward, and the LQR (a map per controller, each under its own name)
+    assert len(study.large_step.maps) == 4 and "FL regulator" in study.large_step.maps
+    assert sum("no feedforward" in name for name in study.large_step.maps) == 1
+
+
+def test_each_critical_radius_is_labelled_with_the_reference_it_probes(model):
+    """The seed-41 file's small study with a robust part of 4 runs per probe (about 1 s): each
+    bisection for the radius where runs first leave F carries the name of the certificate it grows
+    (the report's bracket table finds its row by that name), there is one per certificate, and
+    the bracket is ordered (safe below broken)."""
+    config = dataclasses.replace(CONFIG, robust_runs=4, robust_probe_runs=4, certify_boxes=0)
+    study = operating_region_study(model, config)
+    check_result(study)
+    rb = study.robust
+    assert rb is not None and rb.certificates
+    assert sorted(c.reference for c in rb.radii) == sorted(rb.certificates)
+    assert all(0 <= c.safe_radius < c.broken_radius for c in rb.radii)
