@@ -159,3 +159,20 @@ def test_each_critical_radius_is_labelled_with_the_reference_it_probes(model):
     assert rb is not None and rb.certificates
     assert sorted(c.reference for c in rb.radii) == sorted(rb.certificates)
     assert all(0 <= c.safe_radius < c.broken_radius for c in rb.radii)
+
+
+def test_a_certified_robust_row_certifies_the_p_its_sdp_chose(model):
+    """The seed-41 file's small study with a certified robust part (2000 boxes per level, no
+    Monte Carlo; about 1.2 s): a set-point whose robust SDP found a P (its message says so) has
+    its nominal certificate made for that P, not for the Lyapunov equation's P of the nominal
+    loop, which the SDP replaced because the confidence set's plants mismatch it."""
+    config = dataclasses.replace(
+        CONFIG, robust_runs=4, robust_probe_runs=0, certify_boxes=2000, certify_runs=0
+    )
+    study = operating_region_study(model, config)
+    check_result(study)
+    rows = study.robust.certified.rows
+    assert rows
+    for row in rows:
+        assert row.nominal is not None and "P from the robust SDP" in row.sdp_message, row.sdp_message
+        assert not np.allclose(row.nominal.P, RegulatorLoop().lyapunov_matrix(), rtol=1e-6)
