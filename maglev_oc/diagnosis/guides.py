@@ -107,6 +107,12 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     return out
 
 
+_VISCOUS_HELD = (
+    "their viscous friction is not resolved on this log (fitted freely it came out negative, so it is "
+    "held at zero)."
+)
+
+
 def _friction_words(axis: str, form: str):
     def describe(e):
         if form == "full":
@@ -121,14 +127,12 @@ def _friction_words(axis: str, form: str):
                 + (
                     f"{fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
                     if form == "stribeck"
-                    else "hold the axis while it sticks; their viscous friction is not resolved on this "
-                    "log (fitted freely it came out negative, so it is held at zero)."
+                    else f"hold the axis while it sticks; {_VISCOUS_HELD}"
                 )
             )
         return (
             f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction (and "
-            "hold the axis while it sticks); their viscous friction is not resolved on this log (fitted "
-            "freely it came out negative, so it is held at zero)."
+            f"hold the axis while it sticks); {_VISCOUS_HELD}"
         )
 
     return describe

@@ -435,13 +435,14 @@ def guide_friction(
 
     def fn(width):
         stick = stick_speed * width / reversal_speed  # the variants scale every speed
+        slide = None if stribeck_speed is None else stribeck_speed * width / reversal_speed
 
         def build(x, u, du, p):
             q = dict(zip(names, (p[i] for i in range(k)), strict=True))
-            acc = -(q["coulomb"] * ca.tanh(x[vi] / width) + q.get("viscous", 0) * x[vi]) / m
-            if stribeck_speed is not None:
-                rise = ca.exp(-((x[vi] / (stribeck_speed * width / reversal_speed)) ** 2))
-                acc = acc - q["stribeck_rise"] * ca.tanh(x[vi] / width) * rise / m
+            sign = ca.tanh(x[vi] / width)
+            acc = -(q["coulomb"] * sign + q.get("viscous", 0) * x[vi]) / m
+            if slide is not None:
+                acc = acc - q["stribeck_rise"] * sign * ca.exp(-((x[vi] / slide) ** 2)) / m
             if holding is not None:
                 acc = acc - q["holding"] * holding(x, u) * ca.exp(-((x[vi] / stick) ** 2))
             return _put(axis, acc)
