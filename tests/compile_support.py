@@ -114,8 +114,8 @@ def object_cache(tmp_path_factory) -> ObjectCache:
 
 @pytest.fixture(scope="session", autouse=True)
 def shared_compile_cache(tmp_path_factory):
-    """``$MAGLEV_OC_CACHE`` (:func:`maglev_oc.sim.compiled_nmpc.user_cache`, where the reports
-    keep the NMPC's compiled library) in the run's shared directory: the workers build each
+    """``$MAGLEV_OC_CACHE`` (:func:`maglev_oc.sim.library_cache.user_cache`, where the reports
+    keep the compiled NMPC and closed loops) in the run's shared directory: the workers build each
     library once, and the user's own cache is neither read nor written by the tests."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("MAGLEV_OC_CACHE", str(session_shared_dir(tmp_path_factory, "maglev_oc_cache")))

@@ -29,7 +29,6 @@ import ctypes
 import dataclasses
 import hashlib
 import os
-import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -42,22 +41,15 @@ from maglev_oc.control.codegen import CODEGEN_SOLVERS, FUNCTION_NAME, compile_sh
 from maglev_oc.control.nmpc import NonlinearMPC
 from maglev_oc.errors import InputError
 from maglev_oc.numerics import c_compiler
+from maglev_oc.sim.library_cache import cache_key, keep, user_cache
 
-__all__ = ["COMPILE_FLAGS", "CompiledNMPC", "user_cache"]
+__all__ = ["COMPILE_FLAGS", "CompiledNMPC", "user_cache"]  # user_cache: maglev_oc.sim.library_cache's
 
 COMPILE_FLAGS = ("-O1",)
 """gcc flags of the RTI step's library. The generated source is about 1.3 MB: -O1 compiles in
 about a third of -O2's time and runs within 25 % of it, which over the comparison's 6e5 samples
 is the faster total (measured on the 2-core test machine: 11 s + 5.0 s against 27 s + 4.1 s for
 one 25 s run)."""
-
-
-def user_cache() -> Path:
-    """``$MAGLEV_OC_CACHE``, else ``$XDG_CACHE_HOME/maglev_oc``, else ``~/.cache/maglev_oc``."""
-    if os.environ.get("MAGLEV_OC_CACHE"):
-        return Path(os.environ["MAGLEV_OC_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "maglev_oc"
 
 
 class CompiledNMPC:
@@ -141,17 +133,13 @@ class CompiledNMPC:
         # every symbol of the library starts with the function's name (its _work, _incref, ...)
         code.source.write_text(text.replace(FUNCTION_NAME, name))
         code = dataclasses.replace(code, function=name)
-        key = hashlib.sha1("\0".join([text, *cflags, str(c_compiler()), ca.__version__]).encode()).hexdigest()
-        kept = Path(cache) / f"nmpc_rti_{key[:24]}.so" if cache is not None else None
+        kept = Path(cache) / f"nmpc_rti_{cache_key(text, cflags)[:24]}.so" if cache is not None else None
         if kept is not None and kept.is_file():
             library, self.cached = kept, True
         else:
             library = compile_shared(code, cflags=tuple(cflags))
             if kept is not None:
-                kept.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-                partial = kept.with_suffix(f".{os.getpid()}.part")
-                shutil.copyfile(library, partial)
-                os.replace(partial, kept)  # whole or not at all, also with reports running at once
+                keep(library, kept)  # whole or not at all, also with reports running at once
         self._library = library
         ctypes.CDLL(str(library), mode=ctypes.RTLD_GLOBAL)
         return ca.external(name, str(library))

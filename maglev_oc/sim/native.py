@@ -4,7 +4,8 @@ CasADi's ``mapaccum`` costs about half a microsecond per iteration of bookkeepin
 a trivial function, which caps a simulation at ~2e6 steps/s before any work is done. Here the
 step Function is generated as C, a ten-line driver loops over the samples in C, and the shared
 library is called once per run through ctypes with numpy buffers. Build once (about a second of
-gcc), then every run costs only the arithmetic.
+gcc, or a library of the same source found in the cache: :mod:`maglev_oc.sim.library_cache`), then
+every run costs only the arithmetic.
 
 :class:`NativeLoop` records every sample of one run; :class:`NativeBatch` runs many initial
 states through the same step and keeps only each one's final state (Monte Carlo), on threads
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 import subprocess
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -25,6 +27,7 @@ import numpy as np
 
 from maglev_oc.errors import InputError, SolverError
 from maglev_oc.numerics import c_compiler
+from maglev_oc.sim.library_cache import cache_key, keep, user_cache
 
 __all__ = ["NativeBatch", "NativeLoop"]
 
@@ -67,6 +70,15 @@ class NativeLoop:
         (z, r, w) -> (z_next, out), dense columns (the fused closed-loop step of the engine).
     flags : tuple of str
         Compiler flags (default ``-O3``).
+    cache : path-like or bool
+        Where the compiled library is kept and looked for (:mod:`maglev_oc.sim.library_cache`):
+        True (default) the user's cache (:func:`~maglev_oc.sim.library_cache.user_cache`), a
+        directory, or False to compile every time.
+
+    Attributes
+    ----------
+    cached : bool
+        The library came from the cache (it was not compiled).
 
     Raises
     ------
@@ -74,7 +86,9 @@ class NativeLoop:
         No C compiler, or compiling the generated code failed.
     """
 
-    def __init__(self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",)) -> None:
+    def __init__(
+        self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",), cache: str | os.PathLike | bool = True
+    ) -> None:
         if step.n_in() != 3 or step.n_out() != 2:
             raise InputError("step must map (z, r, w) -> (z_next, out)")
         for k in range(3):
@@ -84,7 +98,7 @@ class NativeLoop:
         self.nout = step.size1_out(1)
         name = "cl_step"
         driver = _DRIVER.format(name=name, nz=self.nz, nr=self.nr, nw=self.nw, nout=self.nout)
-        self._dir, self._lib = _compile(step, name, driver, flags)
+        self._dir, self._lib, self.cached = _compile(step, name, driver, flags, _cache_dir(cache))
         run = getattr(self._lib, f"{name}_run")
         dbl = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
         run.argtypes = [dbl, dbl, dbl, dbl, dbl, ctypes.c_long]
@@ -104,9 +118,19 @@ class NativeLoop:
         return out.T, zf
 
 
-def _compile(step: ca.Function, name: str, driver: str, flags: tuple[str, ...]):
-    """(temporary directory, loaded library) of ``step`` generated as C under ``name`` with
-    ``driver`` appended, compiled by the system C compiler."""
+def _cache_dir(cache: str | os.PathLike | bool) -> Path | None:
+    if cache is True:
+        return user_cache()
+    if cache is False or cache is None:
+        return None
+    return Path(cache)
+
+
+def _compile(step: ca.Function, name: str, driver: str, flags: tuple[str, ...], cache: Path | None):
+    """(temporary directory, loaded library, whether it came from the cache) of ``step``
+    generated as C under ``name`` with ``driver`` appended, compiled by the system C compiler, or
+    loaded from ``cache`` where the same source was compiled with the same flags before
+    (:mod:`maglev_oc.sim.library_cache`)."""
     cc = c_compiler()
     if cc is None:
         raise SolverError("no C compiler ($CC, gcc, cc, clang) on PATH: use the CasADi virtual machine")
@@ -117,7 +141,14 @@ def _compile(step: ca.Function, name: str, driver: str, flags: tuple[str, ...]):
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     cg.add(fn)
     cg.generate(str(Path(tmp.name)) + "/")
-    src.write_text(src.read_text() + driver)
+    text = src.read_text() + driver
+    kept = Path(cache) / "native" / f"{name}_{cache_key(text, flags)[:24]}.so" if cache is not None else None
+    if kept is not None and kept.is_file():
+        try:
+            return tmp, ctypes.CDLL(str(kept)), True
+        except OSError:  # not a library this machine loads: compiled again below, and replaced
+            pass
+    src.write_text(text)
     lib = Path(tmp.name) / f"{name}.so"
     done = subprocess.run(
         [cc, *flags, "-shared", "-fPIC", str(src), "-o", str(lib), "-lm"],
@@ -127,7 +158,9 @@ def _compile(step: ca.Function, name: str, driver: str, flags: tuple[str, ...]):
     )
     if done.returncode != 0:
         raise SolverError(f"compiling the closed loop failed: {done.stderr[-2000:]}")
-    return tmp, ctypes.CDLL(str(lib))
+    if kept is not None:
+        keep(lib, kept)
+    return tmp, ctypes.CDLL(str(lib)), False
 
 
 _BATCH_DRIVER = r"""
@@ -175,6 +208,15 @@ class NativeBatch:
         (z, r, w) -> z_next, dense columns.
     flags : tuple of str
         Compiler flags (default ``-O3``).
+    cache : path-like or bool
+        Where the compiled library is kept and looked for (:mod:`maglev_oc.sim.library_cache`):
+        True (default) the user's cache (:func:`~maglev_oc.sim.library_cache.user_cache`), a
+        directory, or False to compile every time.
+
+    Attributes
+    ----------
+    cached : bool
+        The library came from the cache (it was not compiled).
 
     Raises
     ------
@@ -182,7 +224,9 @@ class NativeBatch:
         No C compiler, or compiling the generated code failed.
     """
 
-    def __init__(self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",)) -> None:
+    def __init__(
+        self, step: ca.Function, *, flags: tuple[str, ...] = ("-O3",), cache: str | os.PathLike | bool = True
+    ) -> None:
         if step.n_in() != 3 or step.n_out() != 1:
             raise InputError("step must map (z, r, w) -> z_next")
         for k in range(3):
@@ -193,7 +237,7 @@ class NativeBatch:
         self.nz, self.nr, self.nw = (step.size1_in(k) for k in range(3))
         name = "batch_step"
         driver = _BATCH_DRIVER.format(name=name, nz=self.nz, nr=self.nr, nw=self.nw)
-        self._dir, self._lib = _compile(step, name, driver, flags)
+        self._dir, self._lib, self.cached = _compile(step, name, driver, flags, _cache_dir(cache))
         run = getattr(self._lib, f"{name}_batch")
         dbl = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
         run.argtypes = [dbl, dbl, dbl, dbl, ctypes.c_long, ctypes.c_long, ctypes.c_long]
