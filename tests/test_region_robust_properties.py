@@ -97,3 +97,21 @@ def test_the_robust_certificate_reports_its_share_of_the_nominal_level(model):
     check_result(out)
     assert not out.success and out.status == "not_certified" and out.level == 0.0
     assert out.nominal is failed and "the nominal certificate failed: none" in out.message
+
+
+def test_with_no_mismatch_the_robust_sdp_keeps_the_nominal_p(model):
+    """The nominal plant alone: every sampled worst-case mismatch is zero, so there is nothing to
+    design for and the nominal certificate's P is returned as it is, said so (a P from an SDP
+    solved with mu = 0 would be another matrix, normalised otherwise); a nominal certificate with
+    no level gives no P."""
+    loop = RegulatorLoop()
+    feasible = FeasibleSet(model)
+    nominal = Procedure2(feasible, loop).run(Reference.setpoint(0.02))
+    certifier = RobustCertifier(feasible, loop, max_boxes=1000, ladder=(1.0,))
+    P, msg = robust_lyapunov_matrix(certifier, nominal, PlantSet.point(model.constants), samples=200)
+    assert msg == "no mismatch: the nominal P is kept"
+    np.testing.assert_array_equal(P, nominal.P)
+    none, why = robust_lyapunov_matrix(
+        certifier, dataclasses.replace(nominal, level=0.0), PlantSet.point(model.constants)
+    )
+    assert none is None and why == "the nominal certificate has no level"
