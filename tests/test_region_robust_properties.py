@@ -6,6 +6,7 @@ robust SDP's choice of P does not depend on how the nominal certificate's V is n
 from __future__ import annotations
 
 import dataclasses
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -115,3 +116,40 @@ def test_with_no_mismatch_the_robust_sdp_keeps_the_nominal_p(model):
         certifier, dataclasses.replace(nominal, level=0.0), PlantSet.point(model.constants)
     )
     assert none is None and why == "the nominal certificate has no level"
+
+
+def test_the_refuting_points_lie_on_the_level_set_also_from_a_box_at_the_centre(model, monkeypatch):
+    """RobustCertifier._refute lifts each undecided box's midpoint to states z~ on V = z~' P z~ =
+    level, where the exact rate is evaluated: the image part from the midpoint (V = level |zeta|^2,
+    the least-V preimage) plus the rest of the level along a null-space direction P-orthogonal to
+    it. A box centred at the origin has no image part and no lifted direction (its P-norm is zero):
+    the points are then level times the spare null-space direction, still on the level set (to
+    1e-9 relative: the Cholesky factor and the lift's rounding)."""
+    from maglev_oc.region.robust_certificate import N_IMAGE, _geometry
+
+    loop = RegulatorLoop()
+    feasible = FeasibleSet(model)
+    nominal = Procedure2(feasible, loop).run(Reference.setpoint(0.02))
+    certifier = RobustCertifier(feasible, loop, max_boxes=1000, ladder=(1.0,))
+    P, level = nominal.P, float(nominal.level)
+    geo = _geometry(loop, P)
+    rng = np.random.default_rng(3)
+    centres = np.column_stack([np.zeros(N_IMAGE), rng.uniform(-0.4, 0.4, (N_IMAGE, 5))])
+    lo = np.vstack([centres - 0.01, np.zeros((1, 6))])  # the last row: the reference's phase
+    hi = np.vstack([centres + 0.01, np.full((1, 6), 0.5)])
+    seen = {}
+
+    def rate(P_, reference, plants, pts, phases):
+        seen["pts"] = pts
+        return np.full(pts.shape[1], -1.0), np.zeros((4, pts.shape[1]))
+
+    monkeypatch.setattr(certifier, "rate", rate)
+    plants = PlantSet.point(model.constants)
+    which = np.zeros(6, dtype=int)
+    assert certifier._refute(nominal.reference, P, level, plants, geo, lo, hi, which) is None
+    pts = seen["pts"]
+    assert pts.shape == (10, 12) and np.all(np.isfinite(pts))
+    np.testing.assert_allclose(np.einsum("in,ij,jn->n", pts, P, pts), level, rtol=1e-9)
+    # the centred box's two points are +- sqrt(level) times the spare direction
+    np.testing.assert_allclose(pts[:, 0], math.sqrt(level) * geo.spare, rtol=1e-12)
+    np.testing.assert_allclose(pts[:, 6], -math.sqrt(level) * geo.spare, rtol=1e-12)
