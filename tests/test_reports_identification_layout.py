@@ -188,6 +188,18 @@ def test_identification_scorecard_has_no_internal_names(small_identification):
     assert not re.search(r"\w_\w|mapaccum|table3_eps|\(\)", text), text
 
 
+def test_the_timing_table_names_every_step_of_the_study(small_identification):
+    """The report's timing table: one row per step of the study's clock, each named in words (a
+    step timed under no name printed as "None"), its seconds as the clock measured them."""
+    from maglev_oc.analyses.identification import timing_rows
+
+    st, trend = small_identification
+    assert st.timings and all(isinstance(k, str) and k.strip() and k != "None" for k in st.timings)
+    rows = {r[0]: r[1] for r in timing_rows(st, trend)}
+    for k, v in st.timings.items():
+        assert rows[k] == f"{v:.2f}"
+
+
 # --- closing the loop ---------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def short_diagnosis(model):

@@ -1,0 +1,61 @@
+"""Properties of ``maglev_oc.identification`` from the survivors of the seed-44 mutation run:
+
+* a twin check over several seeds summarises the fits it ran: the achieved standard error is the
+  mean of the fits' standard errors, the spread the *sample* standard deviation of the estimates
+  over the seeds (ddof = 1: with two seeds the population figure is 1/sqrt(2) of it, and a
+  spread read against a predicted standard error must be the unbiased one), the error the mean
+  |estimate - truth|. The fits are recorded as they are made and the figures recomputed from
+  them (1e-12 relative: the same arithmetic in another order);
+* every step of the identification study's clock is named (the report's timing table prints the
+  names).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import maglev_oc.identification.design as design
+from maglev_oc.identification.design import Prediction, check_on_twin, papers_reference
+from maglev_oc.identification.experiments import TWIN_TRUTH
+from maglev_oc.regression.base import CONSTANT_NAMES
+from maglev_oc.results import check_result
+
+
+def test_a_twin_check_over_seeds_is_the_mean_and_sample_deviation_of_its_fits(model, monkeypatch):
+    fits = []
+
+    class Recording(design.EquationError):
+        def fit(self, *args, **kwargs):
+            fits.append(super().fit(*args, **kwargs))
+            return fits[-1]
+
+    monkeypatch.setattr(design, "EquationError", Recording)
+    nominal = np.array(model.constants.as_array())
+    prediction = Prediction(
+        CONSTANT_NAMES,
+        nominal,
+        np.diag((0.1 * nominal) ** 2),
+        1.0,
+        np.array([1.0, 2.0]),
+        1.5,
+        np.array([15e-3, 25e-3]),
+        np.array([-40e-3, 40e-3]),
+        (),
+    )
+    check = check_on_twin(papers_reference(8.0), prediction, model=model, seeds=(1, 2))
+    check_result(check)
+    assert check.success and check.seeds == (1, 2) and len(fits) == 2
+    truth = dict(zip(CONSTANT_NAMES, model.with_constants(TWIN_TRUTH).constants.as_array(), strict=True))
+    for n in CONSTANT_NAMES:
+        est = np.array([f.values[n] for f in fits])
+        se = np.array([f.stderr[n] for f in fits])
+        assert est[0] != est[1]  # two seeds, two estimates: the spread is not trivially zero
+        assert check.spread[n] == pytest.approx(abs(est[0] - est[1]) / np.sqrt(2), rel=1e-12)
+        assert check.achieved[n] == pytest.approx(se.mean(), rel=1e-12)
+        assert check.error[n] == pytest.approx(np.mean(np.abs(est - truth[n])), rel=1e-12)
+        assert check.predicted[n] == prediction.stderr[n]
+    # one seed: no spread to speak of
+    single = check_on_twin(papers_reference(8.0), prediction, model=model, seeds=(1,))
+    assert all(np.isnan(single.spread[n]) for n in CONSTANT_NAMES)
+    assert single.error["C1"] == pytest.approx(abs(fits[2].values["C1"] - truth["C1"]), rel=1e-12)
