@@ -6,8 +6,10 @@
   spread read against a predicted standard error must be the unbiased one), the error the mean
   |estimate - truth|. The fits are recorded as they are made and the figures recomputed from
   them (1e-12 relative: the same arithmetic in another order);
-* every step of the identification study's clock is named (the report's timing table prints the
-  names).
+* an NPFSI run's estimate is its state after the last sample;
+* a multisine's harmonics are distinct positive integers, or the call is refused;
+* (in tests/test_reports_identification_layout.py) every step of the identification study's
+  clock is named (the report's timing table prints the names).
 """
 
 from __future__ import annotations
@@ -59,3 +61,34 @@ def test_a_twin_check_over_seeds_is_the_mean_and_sample_deviation_of_its_fits(mo
     single = check_on_twin(papers_reference(8.0), prediction, model=model, seeds=(1,))
     assert all(np.isnan(single.spread[n]) for n in CONSTANT_NAMES)
     assert single.error["C1"] == pytest.approx(abs(fits[2].values["C1"] - truth["C1"]), rel=1e-12)
+
+
+def test_an_npfsi_run_reports_the_estimate_at_the_end_of_the_log():
+    """NpfsiResult.values are the estimator's state after the last sample (the trajectory's last
+    column), exactly, on a two-parameter run still moving at its end (its last two samples
+    differ), started at a tenth of the truth."""
+    from maglev_oc.identification.npfsi import NpfsiEstimator
+
+    h, n = 1e-3, 400
+    t = np.arange(n) * h
+    A = np.column_stack([np.sin(2 * np.pi * 3 * t), np.cos(2 * np.pi * 5 * t)])[:, None, :]
+    theta = np.array([2.0, -1.5])
+    y = np.concatenate([[0.0], np.cumsum(A[:-1, 0, :] @ theta) * h])[:, None]
+    res = NpfsiEstimator(0.01).run(A, np.zeros((n, 1)), y, h, 0.1 * theta, names=("a", "b"))
+    for k, name in enumerate(("a", "b")):
+        assert res.values[name] == res.trajectory[k, -1]
+        assert res.trajectory[k, -1] != res.trajectory[k, -2]
+
+
+@pytest.mark.parametrize("harmonics", [[0, 2], [-1, 3], [1, 1]])
+def test_a_multisine_refuses_harmonics_that_are_not_distinct_positive_integers(harmonics):
+    """A harmonic 0 is a constant, not a sine of the period; a negative one is a positive one with
+    its phase moved; a repeated one would add two amplitudes at one frequency: each refused by
+    name, never a design built on it."""
+    from maglev_oc.errors import InputError
+    from maglev_oc.identification.design import multisine
+
+    with pytest.raises(InputError, match="distinct positive integers"):
+        multisine(harmonics, [1.0, 1.0])
+    phases, crest = multisine([1, 2], [1.0, 1.0])  # the same call with valid harmonics
+    assert phases.shape == (2,) and crest > 0
