@@ -192,3 +192,19 @@ def test_a_setpoint_on_a_stopper_certifies_nothing(model, linear):
     assert res.level_travel == 0.0 and res.level == 0.0
     assert not res.success and res.status == "not_certified"
     assert res.value(np.zeros(10)) == math.inf  # no start is inside an empty certificate
+
+
+def test_a_given_p_is_the_certificates_own_symmetrised(model, linear, roa):
+    """{z' (k P) z <= k c} is {z' P z <= c}: handed 3 P0 (P0 the default, the Lyapunov equation's)
+    plus a skew-symmetric part, which adds nothing to a quadratic form, the certificate keeps the
+    symmetric part of the matrix it was given and its exact levels (the stoppers', the current
+    limit's) are 3 times the default's (1e-9 relative: two Cholesky solves of the same set), and so
+    is the bisected stability level (its trial levels scale with P; measured 3 to 1e-15, asserted
+    to 1e-6)."""
+    P0 = roa.P
+    skew = 1e-3 * np.abs(P0).max() * np.triu(np.ones_like(P0), 1)
+    res = certify_roa(model, linear, TARGET, P=3.0 * P0 + skew - skew.T)
+    np.testing.assert_allclose(res.P, 3.0 * P0, rtol=0, atol=1e-12 * np.abs(P0).max())
+    assert res.level_travel == pytest.approx(3.0 * roa.level_travel, rel=1e-9)
+    assert res.level_current == pytest.approx(3.0 * roa.level_current, rel=1e-9)
+    assert res.level_stability == pytest.approx(3.0 * roa.level_stability, rel=1e-6)
