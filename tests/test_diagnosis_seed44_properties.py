@@ -1,0 +1,32 @@
+"""Properties of ``maglev_oc.diagnosis`` from the survivor of the seed-44 mutation run: a
+candidate's own gain (the relative drop of the held-out error on the axes it acts on, the figure
+``min_gain`` is held to) is the mean of its finite per-axis gains, and none at all where no axis
+has one (an axis it does not act on, or a locked one, is NaN): a candidate that acts on no axis
+of the log is never credited with a drop it cannot have made."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_oc.diagnosis.selection import SelectionSettings, _own_gain
+
+NAN = np.nan
+
+
+@pytest.mark.parametrize(
+    ("gains", "own"),
+    [
+        ([NAN, NAN], 0.0),
+        ([0.02, NAN], 0.02),
+        ([NAN, 0.3], 0.3),
+        ([0.02, 0.04], 0.03),
+        ([-0.01, NAN], -0.01),
+    ],
+)
+def test_a_candidates_own_gain_is_the_mean_over_the_axes_it_acts_on(gains, own):
+    assert _own_gain(np.array(gains)) == pytest.approx(own, abs=1e-15)
+
+
+def test_a_candidate_with_no_gain_on_any_axis_does_not_pass_the_gain_threshold():
+    assert _own_gain(np.full(2, NAN)) < SelectionSettings().min_gain
