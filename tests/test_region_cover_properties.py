@@ -18,7 +18,7 @@ import pytest
 
 from maglev_oc.control.linear_regulator import paper_linear_regulator
 from maglev_oc.errors import InputError
-from maglev_oc.region.branch_and_bound import cube_grid, initial_boxes, meets_unit_ball
+from maglev_oc.region.branch_and_bound import bisect_widest, cube_grid, initial_boxes, meets_unit_ball
 from maglev_oc.region.closed_loop import Reference
 from maglev_oc.region.roa import LinearizedLoop, RoaCertifier
 
@@ -96,3 +96,36 @@ def test_without_a_current_limit_the_headroom_is_one_everywhere():
     assert headroom.dtype == np.float64 and np.all(headroom == 1.0)
     _, limited = constraints_from_coefficients(coef, v1, v2, 9.81, 9.0)
     assert limited.shape == (3, 5) and np.all(limited <= 81.0)  # 9 A^2 less what the currents use
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bisection_halves_each_box_along_its_widest_scaled_side_and_the_halves_tile_it(seed):
+    """Every box of a branch and bound is replaced by its two halves: together they hold every
+    point of it exactly once (a shared face has probability zero) and have its volume; the cut is
+    at the midpoint of the side that is widest after scaling, and a side of zero scale is never
+    cut. A half that went missing would leave part of the set unexamined (an unsound
+    certificate). The boxes handed in are left as they were."""
+    rng = np.random.default_rng(seed)
+    d, k = 4, 7
+    lo = rng.uniform(-1, 0, (d, k))
+    hi = lo + rng.uniform(0.05, 1.0, (d, k))
+    scale = np.array([1.0, 3.0, 0.0, 0.5]) if seed % 2 else None
+    before = lo.copy(), hi.copy()
+    lo2, hi2 = bisect_widest(lo, hi, scale)
+    np.testing.assert_array_equal(lo, before[0])
+    np.testing.assert_array_equal(hi, before[1])
+    assert lo2.shape == hi2.shape == (d, 2 * k) and np.all(lo2 < hi2)
+    weights = np.ones(d) if scale is None else scale
+    for j in range(k):
+        halves = [j, j + k]
+        volume = np.prod(hi2[:, halves] - lo2[:, halves], axis=0)
+        assert volume.sum() == pytest.approx(np.prod(hi[:, j] - lo[:, j]), rel=1e-12)
+        axis = int(np.argmax((hi[:, j] - lo[:, j]) * weights))
+        assert weights[axis] > 0
+        cut = np.flatnonzero(
+            np.any(lo2[:, halves] != lo[:, [j, j]], axis=1) | np.any(hi2[:, halves] != hi[:, [j, j]], axis=1)
+        )
+        assert cut.tolist() == [axis]
+        assert hi2[axis, j] == lo2[axis, j + k] == pytest.approx(0.5 * (lo[axis, j] + hi[axis, j]), rel=1e-15)
+        points = lo[:, [j]] + (hi[:, [j]] - lo[:, [j]]) * rng.uniform(size=(d, 500))
+        np.testing.assert_array_equal(_holders(lo2[:, halves], hi2[:, halves], points), 1)

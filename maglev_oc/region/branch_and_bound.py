@@ -225,12 +225,13 @@ def meets_unit_ball(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def bisect_widest(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None):
     """Boxes (lo, hi) (d, k), every one halved along its widest side (widths times ``scale``, a
-    zero scale never splits that side): (lo, hi) (d, 2k)."""
+    zero scale never splits that side): (lo, hi) (d, 2k), the lower halves first. The inputs are
+    left as they were."""
     width = hi - lo if scale is None else (hi - lo) * scale[:, None]
     dim = np.argmax(width, axis=0)
     cols = np.arange(lo.shape[1])
     mid = 0.5 * (lo[dim, cols] + hi[dim, cols])
-    lo2, hi2 = lo.copy(), hi.copy()
-    hi[dim, cols] = mid
+    hi1, lo2 = hi.copy(), lo.copy()
+    hi1[dim, cols] = mid
     lo2[dim, cols] = mid
-    return np.hstack([lo, lo2]), np.hstack([hi, hi2])
+    return np.hstack([lo, lo2]), np.hstack([hi1, hi])
