@@ -30,3 +30,23 @@ def test_a_candidates_own_gain_is_the_mean_over_the_axes_it_acts_on(gains, own):
 
 def test_a_candidate_with_no_gain_on_any_axis_does_not_pass_the_gain_threshold():
     assert _own_gain(np.full(2, NAN)) < SelectionSettings().min_gain
+
+
+@pytest.mark.parametrize("form", ["full", "stribeck"])
+def test_a_viscous_part_within_two_standard_errors_of_zero_is_reported_as_not_resolved(form):
+    """The friction's finding names its viscous part as found only when it is 2 standard errors
+    from zero (the independent generator's vertical friction: 48 ± 81 N s/m for a true 10; a slow
+    gap axis does not resolve it), else as not resolved, with the estimate beside it."""
+    from maglev_oc.diagnosis.guides import _friction_words
+    from maglev_oc.results import Estimate
+
+    est = {
+        "coulomb": Estimate(1.78, 0.65, "N"),
+        "breakaway": Estimate(2.4, 0.7, "N"),
+        "viscous": Estimate(47.6, 81.0, "N s/m"),
+    }
+    words = _friction_words("vertical", form)(est)
+    assert "a viscous friction this log does not resolve (48 ± 80 N s/m)" in words
+    est["viscous"] = Estimate(4.91, 0.12, "N s/m")
+    words = _friction_words("horizontal", form)(est)
+    assert "4.9 ± 0.1 N s/m of viscous friction" in words and "does not resolve" not in words

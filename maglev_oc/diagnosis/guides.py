@@ -113,19 +113,28 @@ _VISCOUS_HELD = (
 )
 
 
+def _viscous_words(viscous: Estimate) -> str:
+    """The viscous part as a finding, or as not resolved when it is not 2 standard errors from zero
+    (a gap axis moves slowly: on the independent generator's logs the vertical coefficient came
+    out 48 ± 81 N s/m for a true 10, and a bare "48 N s/m" reads as a finding)."""
+    if viscous.value > 2.0 * viscous.stderr:
+        return f"{fmt(viscous)} of viscous friction"
+    return f"a viscous friction this log does not resolve ({fmt(viscous)})"
+
+
 def _friction_words(axis: str, form: str):
     def describe(e):
         if form == "full":
             return (
                 f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
-                f"and {fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+                f"and {_viscous_words(e['viscous'])} (and hold the axis while it sticks)."
             )
         if form.startswith("stribeck"):
             return (
                 f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction, "
                 f"rising to a breakaway force of {fmt(e['breakaway'])} at low speed (Stribeck), and "
                 + (
-                    f"{fmt(e['viscous'])} of viscous friction (and hold the axis while it sticks)."
+                    f"{_viscous_words(e['viscous'])} (and hold the axis while it sticks)."
                     if form == "stribeck"
                     else f"hold the axis while it sticks; {_VISCOUS_HELD}"
                 )
