@@ -113,36 +113,33 @@ _VISCOUS_HELD = (
 )
 
 
-def _viscous_words(viscous: Estimate) -> str:
-    """The viscous part as a finding, or as not resolved when it is not 2 standard errors from zero
-    (a gap axis moves slowly: on the independent generator's logs the vertical coefficient came
-    out 48 ± 81 N s/m for a true 10, and a bare "48 N s/m" reads as a finding)."""
+def _viscous_words(viscous: Estimate, before: str, joiner: str) -> str:
+    """The end of a friction's finding from its viscous part: found, when it is 2 standard errors
+    from zero, else not resolved, the estimate beside it (a gap axis moves slowly: on the
+    independent generator's logs the vertical coefficient came out 48 ± 81 N s/m for a true 10,
+    and a bare "48 N s/m" reads as a finding). ``before``: the finding up to its last clause,
+    ``joiner`` what joins the viscous part to it."""
     if viscous.value > 2.0 * viscous.stderr:
-        return f"{fmt(viscous)} of viscous friction"
-    return f"a viscous friction this log does not resolve ({fmt(viscous)})"
+        return f"{before}{joiner} {fmt(viscous)} of viscous friction (and hold the axis while it sticks)."
+    return (
+        f"{before} (and hold the axis while it sticks); their viscous friction is not resolved on this "
+        f"log ({fmt(viscous)})."
+    )
 
 
 def _friction_words(axis: str, form: str):
     def describe(e):
+        coulomb = f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction"
         if form == "full":
-            return (
-                f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction "
-                f"and {_viscous_words(e['viscous'])} (and hold the axis while it sticks)."
-            )
+            return _viscous_words(e["viscous"], coulomb, " and")
         if form.startswith("stribeck"):
-            return (
-                f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction, "
-                f"rising to a breakaway force of {fmt(e['breakaway'])} at low speed (Stribeck), and "
-                + (
-                    f"{_viscous_words(e['viscous'])} (and hold the axis while it sticks)."
-                    if form == "stribeck"
-                    else f"hold the axis while it sticks; {_VISCOUS_HELD}"
-                )
+            rising = (
+                f"{coulomb}, rising to a breakaway force of {fmt(e['breakaway'])} at low speed (Stribeck)"
             )
-        return (
-            f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction (and "
-            f"hold the axis while it sticks); {_VISCOUS_HELD}"
-        )
+            if form == "stribeck":
+                return _viscous_words(e["viscous"], rising, ", and")
+            return f"{rising}, and hold the axis while it sticks; {_VISCOUS_HELD}"
+        return f"{coulomb} (and hold the axis while it sticks); {_VISCOUS_HELD}"
 
     return describe
 
