@@ -92,3 +92,29 @@ def test_a_multisine_refuses_harmonics_that_are_not_distinct_positive_integers(h
         multisine(harmonics, [1.0, 1.0])
     phases, crest = multisine([1, 2], [1.0, 1.0])  # the same call with valid harmonics
     assert phases.shape == (2,) and crest > 0
+
+
+def test_the_equilibrium_runs_place_their_pids_on_the_controller_model(model, monkeypatch):
+    """``controller_model``: the model the vertical PIDs are placed on (the nominal one the rig
+    engineer has), the truth being the plant; by default the truth itself. Every PID of the runs,
+    one per gap, is placed on that model at that gap (seed-45 survivor: the option ignored). The
+    measured currents are the plant's either way, to the PID's integral action: within 1 % of each
+    other at 15 mm."""
+    from maglev_oc.identification import experiments
+
+    placed = []
+    real = experiments.paper_pid
+
+    def recording(m, **kw):
+        placed.append((m, kw["design_gap"]))
+        return real(m, **kw)
+
+    monkeypatch.setattr(experiments, "paper_pid", recording)
+    truth = model.with_constants(TWIN_TRUTH)
+    gaps = (0.015, 0.02)
+    nominal = experiments.equilibrium_current_runs(truth, gaps, controller_model=model, hold=0.6, window=0.2)
+    assert [(m is model, g) for m, g in placed] == [(True, 0.015), (True, 0.02)]
+    placed.clear()
+    own = experiments.equilibrium_current_runs(truth, gaps, hold=0.6, window=0.2)
+    assert [(m is truth, g) for m, g in placed] == [(True, 0.015), (True, 0.02)]
+    assert nominal.current[0] == pytest.approx(own.current[0], rel=0.01)
