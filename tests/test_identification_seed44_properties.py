@@ -1,4 +1,5 @@
-"""Properties of ``maglev_oc.identification`` from the survivors of the seed-44 mutation run:
+"""Properties of ``maglev_oc.identification`` from the survivors of the seed-44 and seed-45 mutation
+runs:
 
 * a twin check over several seeds summarises the fits it ran: the achieved standard error is the
   mean of the fits' standard errors, the spread the *sample* standard deviation of the estimates
@@ -8,6 +9,7 @@
   them (1e-12 relative: the same arithmetic in another order);
 * an NPFSI run's estimate is its state after the last sample;
 * a multisine's harmonics are distinct positive integers, or the call is refused;
+* the equilibrium runs place their PIDs on the controller model they are given;
 * (in tests/test_reports_identification_layout.py) every step of the identification study's
   clock is named (the report's timing table prints the names).
 """
