@@ -60,3 +60,26 @@ def test_a_viscous_part_within_two_standard_errors_of_zero_is_reported_as_not_re
             "The horizontal linear guides resist motion with 1.8 ± 0.7 N of Coulomb friction and "
             "4.9 ± 0.1 N s/m of viscous friction (and hold the axis while it sticks)."
         )
+
+
+def test_the_effects_accelerations_add_up(model):
+    """The stage file's and the controllers' effects Function is the sum of every found effect's
+    acceleration (seed-45 survivor: each effect replaced the one before, so only the last was
+    compensated): two guide frictions, one per axis, give each alone on its axis and their sum
+    (1e-12: the same arithmetic), for the compensation (state only) and the twin (with currents)."""
+    from maglev_oc.diagnosis.feedback import _effects_acceleration
+    from maglev_oc.diagnosis.guides import friction_candidates
+    from tests.test_diagnosis_round3_properties import _ctx, _effect
+
+    cands = {c.name: c for c in friction_candidates(_ctx(model))}
+    h = _effect(cands["guide_friction_horizontal"], [2.0, 5.0, 0.6])
+    v = _effect(cands["guide_friction_vertical"], [1.0, 3.0, 0.5])
+    x, u = np.array([0.02, 4e-3, 0.01, 6e-3]), np.array([0.3, 1.2])
+    for args, with_inputs in (((x,), False), ((x, u), True)):
+        each = [
+            np.asarray(_effects_acceleration([e], with_inputs=with_inputs)(*args)).ravel() for e in (h, v)
+        ]
+        both = np.asarray(_effects_acceleration([h, v], with_inputs=with_inputs)(*args)).ravel()
+        assert np.all(each[0] != 0) or each[0][1] != 0  # each acts (on its axis at least)
+        assert each[1][0] != 0
+        np.testing.assert_allclose(both, each[0] + each[1], rtol=1e-12, atol=1e-15)
