@@ -82,3 +82,15 @@ def test_the_effects_accelerations_add_up(model):
         both = np.asarray(_effects_acceleration([h, v], with_inputs=with_inputs)(*args)).ravel()
         assert each[0][1] != 0 and each[1][0] != 0  # each acts on its own axis
         np.testing.assert_allclose(both, each[0] + each[1], rtol=1e-12, atol=1e-15)
+
+
+def test_a_negative_parameter_is_refused_with_how_many_standard_errors_below_zero_it_is():
+    """not_below's reason gives value / standard error (seed-45 survivor: value times it)."""
+    from maglev_oc.diagnosis.candidate import not_below
+    from maglev_oc.results import Estimate
+
+    check = not_below("viscous", "viscous friction")
+    assert check({"viscous": Estimate(-6.0, 2.0, "N s/m")}) == (
+        "viscous friction of -6 N s/m is negative (-3.0 standard errors)"
+    )
+    assert check({"viscous": Estimate(-3.0, 2.0, "N s/m")}) is None  # 1.5 standard errors: not refused
