@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 import maglev_oc.identification.design as design
-from maglev_oc.identification.design import Prediction, check_on_twin, papers_reference
+from maglev_oc.identification.design import check_on_twin, papers_reference
 from maglev_oc.identification.experiments import TWIN_TRUTH
 from maglev_oc.regression.base import CONSTANT_NAMES
 from maglev_oc.results import check_result
+from tests.test_identification_seed39_properties import _prediction
 
 
 def test_a_twin_check_over_seeds_is_the_mean_and_sample_deviation_of_its_fits(model, monkeypatch):
@@ -35,18 +36,7 @@ def test_a_twin_check_over_seeds_is_the_mean_and_sample_deviation_of_its_fits(mo
             return fits[-1]
 
     monkeypatch.setattr(design, "EquationError", Recording)
-    nominal = np.array(model.constants.as_array())
-    prediction = Prediction(
-        CONSTANT_NAMES,
-        nominal,
-        np.diag((0.1 * nominal) ** 2),
-        1.0,
-        np.array([1.0, 2.0]),
-        1.5,
-        np.array([15e-3, 25e-3]),
-        np.array([-40e-3, 40e-3]),
-        (),
-    )
+    prediction = _prediction(model)  # C1..C4 with 10 % standard errors
     check = check_on_twin(papers_reference(8.0), prediction, model=model, seeds=(1, 2))
     check_result(check)
     assert check.success and check.seeds == (1, 2) and len(fits) == 2

@@ -206,17 +206,9 @@ class NativeBatch:
     ----------
     step : casadi.Function
         (z, r, w) -> z_next, dense columns.
-    flags : tuple of str
-        Compiler flags (default ``-O3``).
-    cache : path-like or bool
-        Where the compiled library is kept and looked for (:mod:`maglev_oc.sim.library_cache`):
-        True (default) the user's cache (:func:`~maglev_oc.sim.library_cache.user_cache`), a
-        directory, or False to compile every time.
-
-    Attributes
-    ----------
-    cached : bool
-        The library came from the cache (it was not compiled).
+    flags, cache
+        As :class:`NativeLoop`'s (and ``cached`` likewise says whether the library came from the
+        cache).
 
     Raises
     ------
