@@ -133,11 +133,12 @@ def test_reduce_rate_uses_the_fewest_samples_per_mean_that_reach_max_rate(max_ra
     assert reduced.n == n // q
 
 
-def test_prepare_reduces_to_max_rate_and_scales_the_logging_error_by_the_samples_per_mean():
+def test_prepare_reduces_to_max_rate_and_keeps_the_logging_error_share():
     """prepare(max_rate=): a 1 kHz log of commands from a 5 kHz loop (logging-error share 1 - 1/5)
     prepared at max_rate 250 Hz is reduced by 4-sample means (sample time 4 ms, a quarter of the
-    samples, the setting reported), and a 4-sample mean carries a quarter of that share; at
-    max_rate 1000 Hz nothing is reduced."""
+    samples, the setting reported); the share is the logging's, the same after the means (they
+    divide the error's variance and the floor it is a share of alike: the floor is measured on the
+    reduced log, tests/test_regression_reduced_noise.py); at max_rate 1000 Hz nothing is reduced."""
     log = _both_axes_log(seconds=8.0, seed=2)
     kept = prepare([log], bandwidth=5.0, max_rate=1000.0)
     reduced = prepare([log], bandwidth=5.0, max_rate=250.0)
@@ -146,7 +147,7 @@ def test_prepare_reduces_to_max_rate_and_scales_the_logging_error_by_the_samples
     assert reduced.n == log.n // 4 and kept.n == log.n
     assert reduced.settings["max_rate_hz"] == 250.0
     assert kept.settings["logging_error_share"] == [pytest.approx(0.8, rel=1e-12)]
-    assert reduced.settings["logging_error_share"] == [pytest.approx(0.8 / 4, rel=1e-12)]
+    assert reduced.settings["logging_error_share"] == [pytest.approx(0.8, rel=1e-12)]
 
 
 def test_filter_overwrites_its_argument_only_in_place_and_is_the_per_log_convolution():
