@@ -86,3 +86,22 @@ def test_the_built_polygon_is_feasible_on_a_dense_grid_of_the_whole_period(setup
     reach = np.min(poly.offsets / np.maximum(poly.normals @ down, 1e-300))
     dense = _dense_radius(model, F, down, np.linspace(0, 2 * math.pi, 721)[:-1])
     assert reach >= 0.96 * dense  # 0.995 x the sampled radius, one 3 % shrink allowed
+
+
+def test_a_vertex_infeasible_only_between_the_grid_phases_is_not_proved(model):
+    """The prover's phase cells are intervals, not their edge phases: with the worst phase half a
+    cell (pi / 24) past one of the 24 edges, a vertex between the whole-period radius and the
+    radius on the 24 edge phases alone is refused (a prover that checked the edges only would
+    prove it). The premise is measured: the edges-only radius exceeds the whole-period one by more
+    than 0.1 %, many times the bisection's resolution (500 / 2^50 of the radius)."""
+    shifted = Reference(0.02, 0.0, 3e-3, 0.0, math.pi - math.pi / 24, 0.0)  # worst phase 3 pi / 2 + pi / 24
+    loop = RegulatorLoop()
+    builder = PolygonBuilder(FeasibleSet(model), loop)
+    F = loop.offset_coefficients(shifted)
+    d = np.array([0.0, -1.0])
+    whole = _dense_radius(model, F, d, np.linspace(0, 2 * math.pi, 2881)[:-1])
+    edges = _dense_radius(model, F, d, np.linspace(0, 2 * math.pi, 25)[:-1])
+    assert edges > 1.001 * whole, (edges, whole)
+    verts = np.column_stack([0.9 * whole * d, 0.5 * (whole + edges) * d])
+    proved, _ = builder._prove_vertices(verts, HALFWIDTH, True, F.ravel(order="F")[:, None], 20_000)
+    assert proved.tolist() == [True, False]
