@@ -430,7 +430,14 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
     by_name = {c.name: c for c in library}
     not_sep = sorted(
         (
-            NotSeparable(j.name, j.confounded_with, by_name[j.name].separate_by, j.gain, j.reason, j.physical)
+            NotSeparable(
+                j.name,
+                j.confounded_with,
+                _separating(j, by_name[j.name], session),
+                j.gain,
+                j.reason,
+                j.physical,
+            )
             for j in sel.last.values()
             if j.verdict == "not separable"
         ),
@@ -463,6 +470,20 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
             steps=[st for st in sel.steps if st.chosen in kept],
             final=fit_subset(design, ["base", *kept]),
         )
+
+
+def _separating(j: Judgement, cand: Candidate, session: _Session) -> str:
+    """The experiment that would separate a candidate judged not separable: a longer travel when
+    the travel was too short for its period (the candidate's own experiment separates it from the
+    base constants, which is not what failed), else the candidate's."""
+    period = j.physical.get("period")
+    if SMOOTH_POSITION in j.confounded_with and period is not None and period.value > 0:
+        travel = session.settings.min_periods * period.value
+        return (
+            f"a run over {travel * 1e3:.0f} mm of travel or more ({session.settings.min_periods:g} periods "
+            f"of {period.value * 1e3:.1f} mm) separates it from a smooth dependence on the position"
+        )
+    return cand.separate_by
 
 
 def _effects(session: _Session, fitted: StageModel, library, design: Design, sel: Selection) -> list[Effect]:
