@@ -21,30 +21,14 @@ import pytest
 
 from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _verdict
 from tests.diagnosis_support import diagnose_path
+from tests.test_diagnosis_injected_properties import _judgement as injected_judgement
 
 
 def _judgement(quarter, pooled) -> Judgement:
     """A candidate that passes tests 1-5 (z 5, Wald 10x its threshold, 0.01 m/s^2 on both axes),
     with the given per-axis held-out gains over the quarter and pooled over the four quarters."""
-    quarter = np.asarray(quarter, dtype=float)
-    return Judgement(
-        "guide_waviness_15mm",
-        "passes",
-        "",
-        float(np.nanmean(quarter)),
-        quarter,
-        5.0,
-        5.0,
-        100.0,
-        10.0,
-        1.0,
-        (),
-        np.array([0.01, 0.01]),
-        np.array([0.01, 0.01]),
-        {},
-        SimpleNamespace(compensation=1.0),
-        np.asarray(pooled, dtype=float),
-    )
+    j = injected_judgement(z=5.0, wald=100.0, gain_axes=quarter)
+    return dataclasses.replace(j, pooled_gain_axes=np.asarray(pooled, dtype=float))
 
 
 def _verdict_of(j, axes=(0, 1), settings=None):

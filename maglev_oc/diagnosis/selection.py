@@ -700,11 +700,10 @@ def _verdict(
         return "implausible", why
     lost = _axis_lost(j, axes, settings)
     if lost is not None:
-        worse, better = lost
-        pooled = j.gain_axes if j.pooled_gain_axes is None else j.pooled_gain_axes
+        (worse, loss), (better, gain) = lost
         return "not specific", (
-            f"it makes the held-out {AXES[worse]} error {-pooled[worse]:.1%} worse while it explains "
-            f"{pooled[better]:.1%} of the {AXES[better]} one: the data show a {AXES[better]} dependence, not "
+            f"it makes the held-out {AXES[worse]} error {loss:.1%} worse while it explains "
+            f"{gain:.1%} of the {AXES[better]} one: the data show a {AXES[better]} dependence, not "
             f"what this effect does on both axes"
         )
     if rivals and (cand.axis, _reported(cand)) in rivals:
@@ -725,16 +724,16 @@ def axis_loss_breaks(j: Judgement, settings: SelectionSettings) -> bool:
     return _axis_lost(j, np.flatnonzero(np.isfinite(j.gain_axes)), settings) is not None
 
 
-def _axis_lost(j: Judgement, axes: np.ndarray, settings: SelectionSettings) -> tuple[int, int] | None:
-    """(the axis it worsens, the other) when a candidate acting on both axes makes the pooled
-    held-out error of one worse by more than ``max_axis_loss``; None otherwise."""
+def _axis_lost(j: Judgement, axes: np.ndarray, settings: SelectionSettings):
+    """((the axis it worsens, by how much), (the other, its gain)) when a candidate acting on both
+    axes makes the pooled held-out error of one worse by more than ``max_axis_loss``; else None."""
     if axes.size < 2:
         return None
     pooled = j.gain_axes if j.pooled_gain_axes is None else j.pooled_gain_axes
-    worse = int(axes[np.argmin(pooled[axes])])
+    worse, better = int(axes[np.argmin(pooled[axes])]), int(axes[np.argmax(pooled[axes])])
     if not pooled[worse] < -settings.max_axis_loss:
         return None
-    return worse, int(axes[np.argmax(pooled[axes])])
+    return (worse, float(-pooled[worse])), (better, float(pooled[better]))
 
 
 def _stands_in(cand: Candidate, implausible: dict[str, Judgement]) -> bool:
