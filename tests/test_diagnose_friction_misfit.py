@@ -96,7 +96,7 @@ def test_the_misfit_lives_at_the_slow_samples_and_is_not_claimed(logs):
     ("name", "other", "kind"),
     [
         ("with_cable", CableCarrier.small(), "cable_carrier"),
-        ("with_tilt", TiltedBase.small(), "tilted_base"),
+        pytest.param("with_tilt", TiltedBase.small(), "tilted_base", marks=pytest.mark.extended),
     ],
 )
 def test_a_real_spring_or_constant_force_beside_the_friction_is_still_found(logs, name, other, kind):

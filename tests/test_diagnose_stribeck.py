@@ -108,7 +108,7 @@ def _friction_log(tmp_path, seed: int, **friction):
     [
         # bench/diagnose_rigs.py --variants: friction_v_stribeck (seed 807), friction_h_stribeck (806)
         ("vertical", 807, 1.0, 2.0, 5e-3, 5.0),
-        ("horizontal", 806, 0.6, 1.2, 1e-2, 1.0),
+        pytest.param("horizontal", 806, 0.6, 1.2, 1e-2, 1.0, marks=pytest.mark.extended),
     ],
 )
 def test_a_large_stribeck_rise_is_sized_as_coulomb_and_breakaway(

@@ -337,7 +337,12 @@ def _python_split_commands(nmpc, y, r, c0):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("qp_solver", "budget"), [("dual", 25), ("dual", 1), ("qrqp", 20), ("qrqp", 1)])
+@pytest.mark.parametrize(
+    ("qp_solver", "budget"),
+    # qrqp's failed QP (budget 1) is in the extended tier: the dual solver's (the default) is
+    # checked on every run, and qrqp's 1.4 MB source is compiled again for each budget
+    [("dual", 25), ("dual", 1), ("qrqp", 20), pytest.param("qrqp", 1, marks=pytest.mark.extended)],
+)
 def test_exported_nmpc_gives_the_python_commands_on_constrained_samples(
     model, tmp_path, object_cache, qp_solver, budget
 ):

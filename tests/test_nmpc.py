@@ -534,7 +534,10 @@ def test_horizon_40_and_the_large_step(model):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("qp_solver", ["hpipm", "qrqp"])
+@pytest.mark.parametrize(
+    "qp_solver",
+    ["hpipm", pytest.param("qrqp", marks=pytest.mark.extended)],  # hpipm: the default
+)
 def test_generated_c_matches_python(model, tmp_path, qp_solver):
     # The C export of the RTI step gives the Python Function's outputs on instances recorded in
     # closed loop (the large step: unconstrained and constrained samples). Same operations in the
