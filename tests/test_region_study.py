@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
-from maglev_oc.region.study import StudyConfig, operating_region_study
+from maglev_oc.region.study import StudyConfig, certificate_rows, operating_region_study
 from maglev_oc.results import check_result
 
 TINY = StudyConfig(
@@ -90,3 +91,27 @@ def test_sinusoid_checks_sample_the_whole_period_and_every_run():
             counts = [c for _, c in groups]
             assert max(counts) - min(counts) <= 1
     assert _phases(Reference.setpoint(0.02), 7) == [(0.0, 7)]
+
+
+@pytest.fixture(scope="module")
+def tiny_with_sdp(model):
+    """TINY with the SDP enlargement (about 4 s)."""
+    return operating_region_study(model, dataclasses.replace(TINY, sdp=True))
+
+
+def test_the_sdp_certificate_reaches_the_study_its_checks_and_its_table(tiny_with_sdp):
+    # The SDP's certified set is what the study keeps for the set-point: the best certificate
+    # (larger than the Lyapunov equation's: the enlargement's area > 1), sampled inside and from
+    # its boundary like the Lyapunov one (no run leaves F), in the JSON and in the report's table
+    # at its own level.
+    (rs,) = tiny_with_sdp.references
+    assert rs.sdp is not None and rs.sdp.certified is not None and rs.sdp.certified.success
+    assert rs.best is rs.sdp.certified
+    assert rs.enlargement is not None and rs.enlargement.area > 1.0
+    assert {"SDP P, full", "SDP P, at rest"} <= set(rs.checks) and "SDP P" in rs.worst_start
+    assert all(c.violations == 0 and c.n > 0 for c in rs.checks.values())
+    assert rs.checks["SDP P, full"].level == pytest.approx(rs.sdp.certified.level)
+    out = json.loads(json.dumps(tiny_with_sdp.to_dict()))["references"][0]
+    assert out["sdp"]["best"] is not None and out["sdp"]["success"]
+    rows = [r for r in certificate_rows(tiny_with_sdp) if r[1] == "SDP"]
+    assert len(rows) == 1 and rows[0][2] == pytest.approx(rs.sdp.certified.level)
