@@ -58,6 +58,7 @@ from tests.diagnosis_support import diagnosed, generated  # noqa: E402, F401
 
 # studies and reports checked by several test files
 from tests.report_support import (  # noqa: E402, F401
+    shared_controllers_report,
     shared_eps_trend,
     shared_model_report,
     shared_region_report,
@@ -72,6 +73,7 @@ SHARED_BY_FILES = {
     "shared_region_report": ("tests/test_region_study.py", "tests/test_reports_model_region_layout.py"),
     "shared_model_report": ("tests/test_reports.py", "tests/test_reports_model_region_layout.py"),
     "diagnosed": ("tests/test_diagnose.py", "tests/test_diagnose_clean_seeds.py"),
+    "shared_controllers_report": ("tests/test_calibration.py", "tests/test_controllers_report.py"),
 }
 """The files that use each session fixture shared between files: they run on one worker, so the
 fixture is computed once per run (the other session fixtures are cheap, or cached per key and

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-__all__ = ["shared_eps_trend", "shared_model_report", "shared_region_report"]
+__all__ = ["shared_controllers_report", "shared_eps_trend", "shared_model_report", "shared_region_report"]
 
 
 @pytest.fixture(scope="session")
@@ -40,3 +40,20 @@ def shared_eps_trend(model):
     from maglev_oc.identification.eps_trend import eps_trend_study
 
     return eps_trend_study(model)
+
+
+@pytest.fixture(scope="session")
+def shared_controllers_report(tmp_path_factory, model):
+    """reports/controllers.pdf as ``maglev-oc report`` writes it: the comparison with the NMPC and the
+    twin calibrated to 002's step experiments (about a minute): (calibration, study, contents).
+    tests/test_calibration.py checks the calibration and the report's calibrated-twin rows,
+    tests/test_controllers_report.py the scorecard and tables (the report a user gets, not a
+    quicker variant of it)."""
+    from maglev_oc.analyses import controllers as analysis
+
+    from maglev_oc.sim.calibration import calibrate_to_paper
+
+    calibration = calibrate_to_paper(model)
+    study = analysis.compare_controllers(model, calibration=calibration)
+    path = tmp_path_factory.mktemp("controllers") / "controllers.pdf"
+    return calibration, study, analysis.write_report(path, study)

@@ -241,9 +241,10 @@ def test_coupling_route_reproduces_both_claims_too(model, candidates):
 
 # --- the whole calibration -------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def calibration(model):
-    """The calibration, run once for its own checks and for the whole controller report."""
-    return calibrate_to_paper(model)
+def calibration(shared_controllers_report):
+    """The calibration, run once per session for its own checks and for the whole controller
+    report (tests/report_support.py)."""
+    return shared_controllers_report[0]
 
 
 @pytest.mark.slow
@@ -276,12 +277,9 @@ def test_calibration_end_to_end(calibration):
 
 # --- the whole controller report, on this calibration --------------------------------------------------
 @pytest.mark.slow
-def test_the_whole_report_with_nmpc_and_the_calibrated_twin(tmp_path, model, calibration):
-    from maglev_oc.analyses import controllers as analysis
-
-    study = analysis.compare_controllers(model, calibration=calibration)
+def test_the_whole_report_with_nmpc_and_the_calibrated_twin(calibration, shared_controllers_report):
+    _, study, contents = shared_controllers_report
     assert study.calibration is calibration
-    contents = analysis.write_report(tmp_path / "controllers.pdf", study)
     assert contents.sparse_pages() == []
     assert "NMPC" in study.comparison.controllers
     cal = study.calibration

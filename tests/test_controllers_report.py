@@ -5,9 +5,10 @@ settling, overshoot and tracking-error code, not the library's metrics, and comp
 printed strings to their printed precision. The papers' column is checked against 002 Sec. 7 and
 001 Sec. VI as SPEC 4 quotes them.
 
-The quick study leaves out the NMPC (its C library takes 5-10 s to compile) and the calibration
-(about 40 s); the whole report, with both, is built in tests/test_calibration.py, beside the
-calibration's own tests, from the one calibration they share.
+The report is the one ``maglev-oc report`` writes, with the NMPC and the calibrated twin, built once
+per session (tests/report_support.py) and shared with tests/test_calibration.py, which checks the
+calibration and the report's calibrated-twin rows. (Checking a quicker variant without them here
+cost 14 s of CPU more per run and left the user's report's own scorecard unchecked.)
 """
 
 from __future__ import annotations
@@ -28,11 +29,10 @@ PERCENT = 0.51  # overshoots are printed to 1 %
 
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory, model):
-    from maglev_oc.analyses import controllers as analysis
-
-    study = analysis.compare_controllers(model, nmpc=False, calibration=False)
-    return study, analysis.write_report(tmp_path_factory.mktemp("reports") / "controllers.pdf", study)
+def whole(shared_controllers_report):
+    """(study, contents) of the report ``maglev-oc report`` writes, with the NMPC and the calibrated
+    twin (tests/report_support.py; tests/test_calibration.py checks its calibration)."""
+    return shared_controllers_report[1:]
 
 
 # --- this file's own scoring of a run ---------------------------------------------------------------------
@@ -116,8 +116,8 @@ def _row(contents, first: str) -> tuple[str, ...]:
 
 
 # --- the layout -------------------------------------------------------------------------------------------
-def test_the_report_is_whole_with_no_near_empty_page(quick):
-    _, contents = quick
+def test_the_report_is_whole_with_no_near_empty_page(whole):
+    _, contents = whole
     assert contents.path.read_bytes()[:5] == b"%PDF-"
     pages = len(re.findall(rb"/Type\s*/Page[^s]", contents.path.read_bytes()))
     assert pages == contents.n_pages == len(contents.pages) >= 10
@@ -126,8 +126,8 @@ def test_the_report_is_whole_with_no_near_empty_page(quick):
     assert contents.pages[-1].heading.startswith("Appendix")
 
 
-def test_the_report_speaks_in_words(quick):
-    _, contents = quick
+def test_the_report_speaks_in_words(whole):
+    _, contents = whole
     text = contents.text()
     for internal in ("mapaccum", "TwinEffects", "rig()", "table3", "eps0", "setpoint_steps", "RunMetrics"):
         assert internal not in text, internal
@@ -139,8 +139,8 @@ def test_the_report_speaks_in_words(quick):
 
 
 # --- the scorecard, row by row ----------------------------------------------------------------------------
-def test_scorecard_papers_column_is_spec_4(quick):
-    _, contents = quick
+def test_scorecard_papers_column_is_spec_4(whole):
+    _, contents = whole
     expected = {
         "Vertical error below 0.1 mm": "< 1.3 s",
         "Horizontal error below 0.1 mm": "four < 1.2 s,\nthe fifth 2.38 s",
@@ -160,8 +160,8 @@ def test_scorecard_papers_column_is_spec_4(quick):
 @pytest.mark.parametrize(
     ("first", "axis", "limit"), [("Vertical error below", 0, 1.3), ("Horizontal error below", 1, 1.2)]
 )
-def test_scorecard_settling_is_every_step(quick, first, axis, limit):
-    study, contents = quick
+def test_scorecard_settling_is_every_step(whole, first, axis, limit):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, first)
     run = study.result("FL regulator", "setpoint_steps", "rig")
     times = _settling(run, axis, BAND)
@@ -178,8 +178,8 @@ def test_scorecard_settling_is_every_step(quick, first, axis, limit):
             assert _numbers(verdict.split("\n")[1]) == pytest.approx([min(design), max(design)], abs=SECONDS)
 
 
-def test_scorecard_encoder_resolution(quick):
-    study, contents = quick
+def test_scorecard_encoder_resolution(whole):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, "Error within the encoders'")
     run = study.result("FL regulator", "setpoint_steps", "rig")
     h = _settling(run, 1, ENCODER)
@@ -199,8 +199,8 @@ def test_scorecard_encoder_resolution(quick):
         assert _numbers(verdict)[-1] == pytest.approx(max(ideal), abs=SECONDS)
 
 
-def test_scorecard_overshoots(quick):
-    study, contents = quick
+def test_scorecard_overshoots(whole):
+    study, contents = whole
     run = study.result("FL regulator", "setpoint_steps", "rig")
     v, h = _overshoot(run, 0), _overshoot(run, 1)
     _, _, ours, verdict = _row(contents, "Vertical overshoot at t = 5 s")
@@ -216,8 +216,8 @@ def test_scorecard_overshoots(quick):
     assert verdict == ("reproduced" if abs(np.nanmax(h) - 43) <= 15 else verdict)
 
 
-def test_scorecard_retuned_gains(quick):
-    study, contents = quick
+def test_scorecard_retuned_gains(whole):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, "Retuned K_v")
     printed = study.result("FL regulator", "setpoint_steps", "rig")
     retuned = study.result("FL regulator, retuned K_v", "setpoint_steps", "rig")
@@ -230,8 +230,8 @@ def test_scorecard_retuned_gains(quick):
     assert verdict == ("reproduced" if abs(over - 40) <= 15 and abs(ratio - 3) <= 0.5 else "differs")
 
 
-def test_scorecard_linear_against_nonlinear(quick):
-    study, contents = quick
+def test_scorecard_linear_against_nonlinear(whole):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, "Small step")
     names = ("FL regulator", "linear regulator", "linear regulator (no feedforward)")
     runs = [study.result(n, "small_step", "rig") for n in names]
@@ -261,8 +261,8 @@ def test_scorecard_linear_against_nonlinear(quick):
         ("Ellipse: mean (peak) |error|,\nvertical", 0, 0.24),
     ],
 )
-def test_scorecard_ellipse(quick, first, axis, paper):
-    study, contents = quick
+def test_scorecard_ellipse(whole, first, axis, paper):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, first)
     mean, peak = _tracking(study.result("FL regulator", "sinusoid", "rig"), axis)
     ideal, _ = _tracking(study.result("FL regulator", "sinusoid", "ideal"), axis)
@@ -274,8 +274,8 @@ def test_scorecard_ellipse(quick, first, axis, paper):
     assert verdict.startswith("reproduced" if within else "differs")
 
 
-def test_scorecard_pid_on_the_ellipse(quick):
-    study, contents = quick
+def test_scorecard_pid_on_the_ellipse(whole):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, "PID on the ellipse")
     run = study.result("PID", "sinusoid", "rig")
     h, v = _tracking(run, 1)[0], _tracking(run, 0)[0]
@@ -285,8 +285,8 @@ def test_scorecard_pid_on_the_ellipse(quick):
     assert verdict == ("reproduced" if ok else "differs")
 
 
-def test_scorecard_flags_commands_above_the_amplifier_rating(quick):
-    study, contents = quick
+def test_scorecard_flags_commands_above_the_amplifier_rating(whole):
+    study, contents = whole
     _, _, ours, verdict = _row(contents, "Amplifiers")
     cmp = study.comparison
     peaks = {n: max(_peak(cmp.results[(n, sc, "rig")]) for sc in cmp.scenarios) for n in cmp.controllers}
@@ -301,8 +301,8 @@ def test_scorecard_flags_commands_above_the_amplifier_rating(quick):
     assert verdict.startswith(f"flagged: {len(over)} of {len(peaks)}")
 
 
-def test_step_table_is_every_step_and_controller(quick):
-    study, contents = quick
+def test_step_table_is_every_step_and_controller(whole):
+    study, contents = whole
     cmp = study.comparison
     for twin, heading in (
         ("rig", "Set-point steps, step by step: rig"),
@@ -329,8 +329,8 @@ def test_step_table_is_every_step_and_controller(quick):
                 assert float(cell) == pytest.approx(value, abs=PERCENT), row
 
 
-def test_amplifier_table_names_the_commands_over_9_a(quick):
-    study, contents = quick
+def test_amplifier_table_names_the_commands_over_9_a(whole):
+    study, contents = whole
     table = contents.section("Currents")
     name = ""
     for row in table.rows:
