@@ -134,7 +134,15 @@ def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
     judged = [st.judgements["cogging_horizontal_57mm"] for st in d.selection.steps]
     assert any(j.verdict == "not separable" and SMOOTH_POSITION in j.confounded_with for j in judged)
     assert any("fewer than 1.25" in j.reason for j in judged)
-    # with the rule off the same log names the detent (the failure the rule fixes)
+
+
+@pytest.mark.slow
+@pytest.mark.extended
+def test_without_the_periods_rule_the_same_log_names_a_detent(generated):
+    # the failure the rule above fixes: with SelectionSettings.min_periods = 0, pairs_03's end
+    # effect is named a 57 mm detent (extended tier: a second diagnosis of that log, which only
+    # shows the rule is what makes the difference)
+    path, _ = generated("pairs", "pairs_03")
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" in [e.name for e in off.effects]
 
