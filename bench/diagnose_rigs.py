@@ -3,6 +3,7 @@
     python bench/diagnose_rigs.py [--rigs log500 enc20um ...] [--out bench/out/diagnose_rigs]
     python bench/diagnose_rigs.py --experiments [steps short ...] [--out ...]
     python bench/diagnose_rigs.py --variants [end_effect_narrow ...] [--out ...]
+    python bench/diagnose_rigs.py --saturation [--out ...]
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
 10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
@@ -23,6 +24,12 @@ narrower, wider, on the thrust alone or at one end; cogging with a strong second
 with a large Stribeck drop; a misalignment tilted the other way with a 40 mm waviness; ...), alone
 on the default rig: a user's rig has the same effects in its own proportions, and a rule tuned to
 the sets' small and large sizes may not hold there.
+
+``--saturation``: the iron saturated by the stator current
+(``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
+an effect in none of the named sets, on three seeds each. On a regulated stage the levitation
+current follows the gap, so most of it looks like a smooth dependence on the gap: what matters is
+that nothing else is claimed in its place.
 """
 
 from __future__ import annotations
@@ -89,6 +96,20 @@ def variants() -> dict:
     }
 
 
+SATURATION_SEEDS = (901, 902, 903)
+"""Seeds of the ``--saturation`` logs (one log per seed and saturation current)."""
+
+
+def saturation() -> dict:
+    """The saturations ``--saturation`` runs, by name."""
+    from tests.independent import effects as E
+
+    return {
+        "current_saturation_30A": E.CurrentSaturation.small(),
+        "current_saturation_15A": E.CurrentSaturation.large(),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rigs", nargs="+", default=list(RIGS), choices=list(RIGS))
@@ -97,6 +118,9 @@ def main() -> None:
     )
     parser.add_argument(
         "--variants", nargs="*", default=None, help="score the effects' variants instead (all, or these)"
+    )
+    parser.add_argument(
+        "--saturation", action="store_true", help="score the iron saturated by the current instead"
     )
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
@@ -110,7 +134,12 @@ def main() -> None:
     from tests.independent.simulate import Rig, Scenario, simulate
 
     groups: dict[str, list] = {}
-    if args.variants is not None:
+    if args.saturation:
+        for name, effect in saturation().items():
+            for seed in SATURATION_SEEDS:
+                scenario = Scenario(name=name, seed=seed, effects=(effect,))
+                groups.setdefault("saturation", []).append((f"{name}_{seed}", scenario))
+    elif args.variants is not None:
         chosen = variants()
         for k, (name, effect) in enumerate(chosen.items()):
             if not args.variants or name in args.variants:

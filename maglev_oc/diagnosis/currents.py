@@ -1,4 +1,5 @@
-"""Candidates that act through the currents: thrust ripple, commutation offset, amplifier lag."""
+"""Candidates that act through the currents: thrust ripple, commutation offset, amplifier lag, iron
+saturated by the current."""
 
 from __future__ import annotations
 
@@ -12,13 +13,14 @@ from maglev_oc.diagnosis.candidate import (
     Plausibility,
     all_of,
     delta_method,
+    detected,
     fmt,
     within,
 )
 from maglev_oc.regression.terms import AccelerationTerm, linear_physical, term_function
 from maglev_oc.results import Estimate
 
-__all__ = ["commutation_candidate", "lag_candidate", "ripple_candidate"]
+__all__ = ["commutation_candidate", "lag_candidate", "ripple_candidate", "saturation_candidate"]
 
 
 def ripple_candidate(ctx: LibraryContext) -> Candidate:
@@ -100,6 +102,70 @@ def commutation_candidate(ctx: LibraryContext) -> Candidate:
         "from the thrust constant",
         within("angle", 0.35, "commutation angle"),
         lambda e: f"The commutation angle is off by {fmt(e['angle'], 180 / math.pi, 'degrees')}.",
+    )
+
+
+SATURATION_REFERENCE_A = 5.0
+"""[A] The current at which the saturation's loss of force per ampere is reported (about the
+levitation current at the papers' 10-15 mm gaps; the amplifiers' rating is 7 A)."""
+
+
+def saturation_candidate(ctx: LibraryContext) -> Candidate:
+    """The iron saturated by the stator current: the force per ampere falls as the current grows.
+
+    An iron-cored PMLSM's armature flux runs through the stator teeth, which saturate as the current
+    grows. To first order the armature acts with the currents scaled by ``1 - kappa |i|^2``
+    (``|i|^2 = i_d^2 + i_q^2``): the model's forces at those currents, minus its forces at the
+    logged ones, is ``-kappa |i|^2`` times the currents' directional derivative. On a regulated
+    stage the levitation current follows the gap, so this term is close to a smooth dependence on
+    the gap (the field's shape, the constants); the selection judges whether the log separates it
+    (the horizontal current's share of |i|^2 and i_d's transients at one gap are what does).
+    """
+    c_ref = ctx.references
+    i_ref = SATURATION_REFERENCE_A
+
+    def saturation(x, u, du, q):
+        l = ctx.shapes(x)
+        i2 = u[0] ** 2 + u[1] ** 2
+        # acc(u (1 - kappa i2)) - acc(u) = -kappa i2 (d acc / d u) u; horizontally -C1 l1 i_q is
+        # the thrust's derivative. The attraction's part (C3 l3 i_d + 2 C4 l4 i2) i2 kappa is left
+        # to C3, C4 as the field shape's is (field_shape_candidate): i_d follows the gap, and on
+        # the independent generator's logs of a saturated stage it inflated the constants'
+        # variance 187-fold
+        return ca.vertcat(0, c_ref.C1 * l[0] * u[0] * i2 * q[0])
+
+    def physical(q, cov, c):
+        s = ctx.reference_ratio("C1", c)
+        return {
+            "loss_at_reference_current": delta_method(lambda v: s * v[0] * i_ref**2, q, cov, "1"),
+            "loss_at_9_A": delta_method(lambda v: s * v[0] * 81.0, q, cov, "1"),
+            "reference_current": Estimate(i_ref, 0.0, "A"),
+        }
+
+    return Candidate(
+        AccelerationTerm(
+            "current_saturation",
+            "The stator's iron saturates under the current: the force per ampere (thrust and the "
+            "currents' part of the attraction) falls as the current grows.",
+            "horizontal",
+            ("kappa",),
+            function=term_function("saturation", saturation, 1),
+            physical=physical,
+            signature="residual proportional to the forces of the currents times the current squared",
+        ),
+        "current",
+        "current",
+        "set-points at one gap with different loads (the levitation current changes, the field does "
+        "not) or fast horizontal moves (large i_q) separate it from the field's gap dependence",
+        all_of(
+            detected("loss_at_reference_current", "loss of force per ampere"),
+            within("loss_at_9_A", 0.5, "loss of force per ampere at 9 A"),
+        ),
+        lambda e: (
+            f"The force per ampere falls as the current grows (iron saturation): by "
+            f"{fmt(e['loss_at_reference_current'], 100, '%')} at {i_ref:g} A and "
+            f"{fmt(e['loss_at_9_A'], 100, '%')} at 9 A."
+        ),
     )
 
 

@@ -13,7 +13,7 @@ PMLSM stages on linear guides are known for), module by module:
   with the gap as field harmonics do; end effects (thrust and attraction falling towards the
   ends of the travel); the attraction's dependence on the gap differing from the field model;
 * :mod:`~maglev_oc.diagnosis.currents` — thrust ripple along the track, commutation-angle offset,
-  current-amplifier lag.
+  current-amplifier lag, the iron saturated by the current (force per ampere falling with it).
 
 Hyper-parameters that would make a term nonlinear (spatial periods, decay lengths, the reversal
 speed of friction, the end effects' width) are fixed at physical values; where several are
@@ -29,7 +29,12 @@ import dataclasses
 from collections.abc import Mapping
 
 from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
-from maglev_oc.diagnosis.currents import commutation_candidate, lag_candidate, ripple_candidate
+from maglev_oc.diagnosis.currents import (
+    commutation_candidate,
+    lag_candidate,
+    ripple_candidate,
+    saturation_candidate,
+)
 from maglev_oc.diagnosis.guides import (
     cable_candidate,
     friction_candidates,
@@ -104,6 +109,7 @@ def _candidates(ctx: LibraryContext) -> list[Candidate]:
         ripple_candidate(ctx),
         commutation_candidate(ctx),
         lag_candidate(ctx),
+        saturation_candidate(ctx),
         misalignment_candidate(ctx),
         gap_offset_candidate(ctx),
     ]

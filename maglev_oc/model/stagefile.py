@@ -85,6 +85,7 @@ EFFECT_NAMES = (
     r"thrust_ripple",
     r"commutation_offset",
     r"current_amplifier_lag",
+    r"current_saturation",
 )
 """The names of the diagnosis library's effects (:mod:`maglev_oc.diagnosis.library`), as patterns."""
 _MAX_BYTES = 20_000_000  # [bytes] a stage file is a few kB per effect; refuse anything huge

@@ -59,6 +59,7 @@ _WORDS = {
     "commutation_offset": "commutation angle offset",
     "end_effects": "end effects",
     "current_amplifier_lag": "current amplifier lag",
+    "current_saturation": "iron saturated by the current",
 }
 """The diagnosis library's effects in the words a control engineer uses."""
 

@@ -75,7 +75,7 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     const double Ctrue[4] = {p->C1, p->C2, p->C3, p->C4};
     double L[4];
     double delta = 0.0, slope = 0.0;
-    double fB = 1.0, fBt = 1.0, etaT = 1.0, etaA = 1.0, rho = 1.0;
+    double fB = 1.0, fBt = 1.0, etaT = 1.0, etaA = 1.0, rho = 1.0, sat = 1.0;
     double Fx, Fn, Ffh = 0.0, Ffv = 0.0;
     int k;
 
@@ -112,8 +112,16 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
                 rho += p->tr_amp[k] * cos(2.0 * M_PI * x3 / p->tr_period[k] + p->tr_phase[k]);
     }
 
-    Fx = -p->Mh * L[0] * fBt * etaT * rho * iq;
-    Fn = p->Mv * (L[1] * fB * fB * etaA + L[2] * fBt * etaT * id + L[3] * etaT * (id * id + iq * iq));
+    /* iron saturated by the stator current: the armature's flux, and with it the force per
+       ampere, falls as 1 / (1 + |i|^2 / I_s^2); exactly 1 (the same arithmetic) when off */
+    if (p->sat_on) {
+        const double r = (id * id + iq * iq) / (p->sat_current * p->sat_current);
+        sat = 1.0 / (1.0 + r);
+    }
+
+    Fx = -p->Mh * L[0] * fBt * etaT * rho * (iq * sat);
+    Fn = p->Mv * (L[1] * fB * fB * etaA + L[2] * fBt * etaT * (id * sat) +
+                  L[3] * etaT * ((id * id + iq * iq) * (sat * sat)));
 
     /* normal cogging (adds to the attraction) and longitudinal cogging (detent) */
     if (p->cn_on) {

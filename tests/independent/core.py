@@ -64,6 +64,8 @@ FIELDS: list[tuple[str, object]] = [
     ("com_cos", _D), ("com_sin", _D), ("amp_tau", _D), ("amp_delay_sub", _I), ("amp_peak", _D),
     # field shape
     ("fs_on", _I), ("fs_k1", _D), ("fs_k2", _D), ("fs_gref", _D), ("fs_thrust", _I),
+    # saturation of the iron by the stator current
+    ("sat_on", _I), ("sat_current", _D),
 ]  # fmt: skip
 """The ``Params`` struct: (name, ctypes type) in declaration order."""
 

@@ -32,6 +32,7 @@ amplifier_dynamics  ``current_amplifier_lag``              first-order time cons
 field_shape         ``attraction_gap_dependence``          attraction change at the smallest gap [1]
                     or ``magnet_field_gap_dependence``
 tilted_base         ``horizontal_guides_not_level``        force along the track [N]
+current_saturation  ``current_saturation``                 loss of force per ampere at 5 A [1]
 =================== ====================================== =========================================
 """
 
@@ -104,6 +105,9 @@ def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
             return f2 - 1, c["attraction_change_at_smallest_gap"]
         if kind == "tilted_base":
             return true_effect.get("derived", {}).get("horizontal_force_N"), c["force"]
+        if kind == "current_saturation":
+            i_ref = c["reference_current"]
+            return 1 - 1 / (1 + (i_ref / t["saturation_current"]) ** 2), c["loss_at_reference_current"]
     except (KeyError, TypeError):
         return None
     return None
