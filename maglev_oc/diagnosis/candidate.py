@@ -42,7 +42,7 @@ __all__ = [
     "within",
 ]
 
-VARIABLES = ("gap", "gap_rate", "position", "position_rate", "current_rate", "current")
+VARIABLES = ("gap", "gap_rate", "position", "position_rate", "current_rate", "current", "axis_current")
 FAMILIES = ("friction", "periodic", "profile", "current", "constant", "geometry")
 MAX_FORCE_SHARE = 0.25
 """An effect whose RMS force exceeds this share of its axis's weight (M g) is not plausible as an

@@ -136,9 +136,17 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
 
     def physical(q, cov, c):
         s = ctx.reference_ratio("C1", c)
+
+        def saturating(k):  # the loss 1 - 1 / (1 + k) of the saturating law at k = kappa |i|^2
+            return k / (1.0 + max(k, -0.5))
+
         return {
+            # within the logged currents: the fitted first-order loss
             "loss_at_reference_current": delta_method(lambda v: s * v[0] * i_ref**2, q, cov, "1"),
-            "loss_at_9_A": delta_method(lambda v: s * v[0] * 81.0, q, cov, "1"),
+            # beyond them: extrapolated with the saturating law 1 / (1 + kappa |i|^2), whose
+            # first-order term is the fitted one (the first-order line overstates a loss that
+            # levels off: 33 % against the generator's true 26 % at 9 A for I_s = 15 A)
+            "loss_at_9_A": delta_method(lambda v: saturating(s * v[0] * 81.0), q, cov, "1"),
             "reference_current": Estimate(i_ref, 0.0, "A"),
         }
 
@@ -154,7 +162,7 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
             signature="residual proportional to the forces of the currents times the current squared",
         ),
         "current",
-        "current",
+        "axis_current",
         "set-points at one gap with different loads (the levitation current changes, the field does "
         "not) or fast horizontal moves (large i_q) separate it from the field's gap dependence",
         all_of(
@@ -164,7 +172,7 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
         lambda e: (
             f"The force per ampere falls as the current grows (iron saturation): by "
             f"{fmt(e['loss_at_reference_current'], 100, '%')} at {i_ref:g} A and "
-            f"{fmt(e['loss_at_9_A'], 100, '%')} at 9 A."
+            f"{fmt(e['loss_at_9_A'], 100, '%')} at 9 A (extrapolated)."
         ),
     )
 

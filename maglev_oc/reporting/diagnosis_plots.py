@@ -83,17 +83,23 @@ _VARIABLE = {
     "gap_rate": ("gap rate x2 [mm/s]", lambda d: d.x[1] * M_TO_MM),
     "position": ("horizontal position x3 [mm]", lambda d: d.x[2] * M_TO_MM),
     "position_rate": ("horizontal rate x4 [mm/s]", lambda d: d.x[3] * M_TO_MM),
-    "current_rate": ("rate of the other axis's current [A/s]", None),
+    "current_rate": ("rate of the axis's own current [A/s]", None),
     "current": ("the other axis's current [A]", None),
+    "axis_current": ("the axis's own current [A]", None),
 }
 
 
 def _variable(diag: Diagnosis, effect: Effect, axis: int) -> tuple[str, np.ndarray]:
+    """(label, values) of the variable a found effect's residual is plotted against on ``axis``
+    (0 vertical, 1 horizontal). The currents: u[0] = i_q drives the thrust (horizontal), u[1] = i_d
+    the attraction (vertical), so the axis's own current is u[1 - axis] and the other axis's u[axis]."""
     d = diag.data
     label, get = _VARIABLE[effect.candidate.variable]
-    if effect.candidate.variable == "current_rate":
+    if effect.candidate.variable == "current_rate":  # the lag: each axis's force lags its own current
         return label, d.du[1 - axis]
-    if effect.candidate.variable == "current":
+    if effect.candidate.variable == "current":  # the commutation offset: i_d makes thrust, i_q attraction
+        return label, d.u[axis]
+    if effect.candidate.variable == "axis_current":
         return label, d.u[1 - axis]
     return label, get(d)
 

@@ -67,6 +67,7 @@ def _size_parameters(effect: Effect) -> dict:
         if not k.startswith("rms_force")
         and k not in effect.candidate.nuisance
         and not (v.unit == "m" and k in _POSITION_PARAMETERS)
+        and k != "reference_current"  # [A] where a saturation's loss is read, not its size
     }
 
 
