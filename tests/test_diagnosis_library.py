@@ -523,3 +523,38 @@ def test_a_guide_tilt_larger_than_the_weight_is_a_vertical_track_not_an_error(pl
     physical = cand.term.physical_parameters(np.array([sign * 3 * weight]), np.eye(1), constants)
     assert physical["tilt"].value == pytest.approx(sign * math.pi / 2, rel=1e-12)
     assert cand.plausible(physical) is not None  # and it is not a finding
+
+
+def test_the_report_plots_each_current_effect_against_the_current_it_acts_through(plant):
+    # The key figure plots a found effect's residual against its variable. For the effects that act
+    # through a current, that must be a current the effect's term depends on, on each axis it acts
+    # on: the commutation offset's thrust comes from i_d (u[1]) and its attraction from i_q (u[0]);
+    # the saturation's thrust from i_q itself. (The plot once took u[1 - axis] for every current
+    # effect: a commutation offset's horizontal residual against i_q, on which it does not depend.)
+    import casadi as ca
+
+    from maglev_oc.reporting.diagnosis_plots import _variable
+    from maglev_oc.results import AXES
+
+    data = plant.data
+    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    k = np.flatnonzero(data.valid)[::500]
+    checked = []
+    for cand in candidate_library(StageModel(), data):
+        if cand.variable not in ("current", "axis_current"):
+            continue
+        fn = cand.term.function
+        qn = np.full(fn.size1_in(3), 1e-3)
+        for axis in [0, 1] if cand.axis == "both" else [AXES.index(cand.axis)]:
+            _, values = _variable(
+                dataclasses.make_dataclass("D", ["data"])(data),
+                dataclasses.make_dataclass("E", ["candidate"])(cand),
+                axis,
+            )
+            (row,) = [r for r in range(2) if np.array_equal(values, data.u[r])]
+            q_all = ca.SX.sym("q", fn.size1_in(3))
+            grad = ca.Function("g", [x, u, du, q_all], [ca.jacobian(fn(x, u, du, q_all)[axis], u)[row]])
+            slopes = np.array([float(grad(data.x[:, i], data.u[:, i], data.du[:, i], qn)) for i in k])
+            assert np.max(np.abs(slopes)) > 0, (cand.name, AXES[axis], f"u[{row}]")
+            checked.append((cand.name, axis))
+    assert {n for n, _ in checked} >= {"commutation_offset", "current_saturation"}
