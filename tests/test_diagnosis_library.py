@@ -415,7 +415,7 @@ def test_iron_saturation_is_a_loss_of_force_per_ampere(plant, saturation_current
     planted[0] = 0.0
     cand = _candidate(plant, "current_saturation")
     p = _fit(plant, cand, planted)
-    _close(p["loss_at_reference_current"], 25 * kappa, 0.03, "loss of force per ampere at 5 A")
+    _close(p["loss_at_5_A"], 25 * kappa, 0.03, "loss of force per ampere at 5 A")
     # at 9 A, beyond the log's currents: the saturating law's loss, 1 - 1 / (1 + 81 kappa)
     _close(p["loss_at_9_A"], 81 * kappa / (1 + 81 * kappa), 0.03, "loss of force per ampere at 9 A")
     assert (cand.plausible(p) is None) == (kappa > 0), cand.plausible(p)

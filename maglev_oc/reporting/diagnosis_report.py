@@ -67,16 +67,19 @@ def _size_parameters(effect: Effect) -> dict:
         if not k.startswith("rms_force")
         and k not in effect.candidate.nuisance
         and not (v.unit == "m" and k in _POSITION_PARAMETERS)
-        and k != "reference_current"  # [A] where a saturation's loss is read, not its size
     }
 
 
 def effect_sizes(effect: Effect) -> str:
-    """'coulomb 0.128 ± 0.0048 N, viscous ...': an effect's size parameters, value ± standard error."""
-    return ", ".join(
-        f"{k.replace('_', ' ')} {_fmt(v.value, v.stderr)}{NBSP}{v.unit}".rstrip(NBSP)
-        for k, v in _size_parameters(effect).items()
-    )
+    """'coulomb 0.128 ± 0.0048 N, viscous ...': an effect's size parameters, value ± standard error;
+    a ratio (unit "1") in per cent."""
+
+    def size(v) -> str:
+        if v.unit == "1":
+            return f"{_fmt(100 * v.value, 100 * v.stderr)}{NBSP}%"
+        return f"{_fmt(v.value, v.stderr)}{NBSP}{v.unit}".rstrip(NBSP)
+
+    return ", ".join(f"{k.replace('_', ' ')} {size(v)}" for k, v in _size_parameters(effect).items())
 
 
 def _drop(before: float, after: float) -> str:

@@ -106,8 +106,7 @@ def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
         if kind == "tilted_base":
             return true_effect.get("derived", {}).get("horizontal_force_N"), c["force"]
         if kind == "current_saturation":
-            i_ref = c["reference_current"]
-            return 1 - 1 / (1 + (i_ref / t["saturation_current"]) ** 2), c["loss_at_reference_current"]
+            return 1 - 1 / (1 + (5.0 / t["saturation_current"]) ** 2), c["loss_at_5_A"]
     except (KeyError, TypeError):
         return None
     return None
