@@ -15,6 +15,7 @@ import pytest
 from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.model.stage import StageModel
 from tests.diagnosis_support import stub_diagnosis
+from tests.test_diagnose_ripple_properties import rippled  # noqa: F401 (the module fixture)
 from tests.test_diagnose_synthetic import with_friction  # noqa: F401 (the module fixture)
 from tests.test_diagnosis_library import plant  # noqa: F401 (the module fixture)
 
@@ -74,7 +75,14 @@ def test_a_choice_no_other_candidate_contested_has_full_confidence(with_friction
     # the confidence of a choice is the share of bootstrap resamples in which it ranks first among
     # the candidates that pass at its step; with none beside it that share is 1 (not 0: no
     # resample is drawn), and it is a share whatever the contest
-    d = with_friction
+    _check_confidence(with_friction)
+
+
+def test_a_planted_ripples_confidence_is_a_share(rippled):  # noqa: F811
+    _check_confidence(rippled[-1])
+
+
+def _check_confidence(d):
     assert d.effects
     for step, effect in zip(d.selection.steps, d.effects, strict=False):
         passing = [n for n, j in step.judgements.items() if j.verdict in ("passes", "accepted")]
