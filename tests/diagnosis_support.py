@@ -23,7 +23,7 @@ from tests.independent import write_log
 from tests.independent.sets import named_set
 from tests.independent.simulate import simulate
 
-__all__ = ["diagnose_path", "diagnosed", "generated", "relative_errors", "stub_diagnosis"]
+__all__ = ["check_confidence", "diagnose_path", "diagnosed", "generated", "relative_errors", "stub_diagnosis"]
 
 
 @pytest.fixture(scope="session")
@@ -116,3 +116,16 @@ def stub_diagnosis(
         validation_before=validation_before,
         validation_after=validation_after,
     )
+
+
+def check_confidence(d) -> None:
+    """The confidence of each choice is the share of bootstrap resamples in which it ranks first among
+    the candidates that pass at its step: with none beside it 1 (not 0: no resample is drawn), and
+    a share whatever the contest."""
+    assert d.effects
+    for step, effect in zip(d.selection.steps, d.effects, strict=False):
+        passing = [n for n, j in step.judgements.items() if j.verdict in ("passes", "accepted")]
+        assert 0.0 < step.confidence <= 1.0
+        if passing == [step.chosen]:
+            assert step.confidence == 1.0 and effect.confidence == 1.0
+    assert d.to_dict()["effects"][0]["confidence"] == pytest.approx(d.effects[0].confidence)

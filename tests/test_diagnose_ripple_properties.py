@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.pipeline import diagnose
+from tests.diagnosis_support import check_confidence
 from tests.test_regression import _synthetic
 from tests.test_statistics_properties import _log
 
@@ -65,3 +66,7 @@ def test_every_reported_size_is_the_candidates_function_of_the_final_fit(rippled
         for name, est in own.items():
             assert e.parameters[name].value == pytest.approx(est.value, rel=1e-12, abs=1e-300), (e.name, name)
             assert e.parameters[name].stderr >= est.stderr
+
+
+def test_a_planted_ripples_confidence_is_a_share(rippled):
+    check_confidence(rippled[-1])

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.pipeline import diagnose
+from tests.diagnosis_support import check_confidence
 from tests.test_regression import RATE, _synthetic
 from tests.test_statistics_properties import _log
 
@@ -133,3 +134,10 @@ def test_both_models_are_validated_on_the_held_out_block(with_friction):
     assert before is not None and after is not None
     assert "base model" in before.model and "guide_friction_horizontal" in after.model
     assert after.fits[0].fit["horizontal"] > before.fits[0].fit["horizontal"]
+
+
+def test_a_choice_no_other_candidate_contested_has_full_confidence(with_friction):
+    # the confidence of a choice is the share of bootstrap resamples in which it ranks first among
+    # the candidates that pass at its step; with none beside it that share is 1 (not 0: no
+    # resample is drawn), and it is a share whatever the contest
+    check_confidence(with_friction)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -558,3 +559,39 @@ def test_the_report_plots_each_current_effect_against_the_current_it_acts_throug
             assert np.max(np.abs(slopes)) > 0, (cand.name, AXES[axis], f"u[{row}]")
             checked.append((cand.name, axis))
     assert {n for n, _ in checked} >= {"commutation_offset", "current_saturation"}
+
+
+def test_the_cogging_candidates_are_the_documented_periods_and_harmonics(plant):
+    # magnetics.py and the library's module doc: normal cogging at the slot pitch t1 (with its
+    # second harmonic) and at 2 t1 (000 eq. (9)); detent at t1 (with its second harmonic) and at
+    # the pole pitch tau (the mover's ends: its fundamental). Each harmonic is a sine and a cosine.
+    p = StageModel().params
+    t1, tau = p.slot_pitch, p.pole_pitch
+    library = {c.name: c for c in candidate_library(StageModel(), plant.data) if c.family == "periodic"}
+    expected = {
+        f"cogging_vertical_{t1 * 1e3:.0f}mm": 2,
+        f"cogging_vertical_{2 * t1 * 1e3:.0f}mm": 1,
+        f"cogging_horizontal_{t1 * 1e3:.0f}mm": 2,
+        f"cogging_horizontal_{tau * 1e3:.0f}mm": 1,
+    }
+    assert set(expected) <= set(library)
+    for name, harmonics in expected.items():
+        assert library[name].term.n_parameters == 2 * harmonics, name
+
+
+_ESTIMATE = re.compile(r"± (\S+) (\S+)")
+
+
+def test_every_candidate_gives_each_size_a_unit(plant):
+    # the sentence a user reads: every "value ± error" is followed by its unit (%, N, mm, ...),
+    # never by the bare "1" of a ratio that was not scaled to per cent, nor by the next word
+    constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    units = {"%", "N", "N/m", "N s/m", "mm", "um", "m", "rad", "degrees", "ms", "s", "A", "mrad"}
+    for cand in candidate_library(StageModel(), plant.data):
+        n = cand.term.n_parameters
+        physical = cand.term.physical_parameters(np.full(n, 2e-3), 1e-10 * np.eye(n), constants)
+        sentence = cand.describe(physical)
+        found = _ESTIMATE.findall(sentence)
+        assert found, (cand.name, sentence)
+        for _, unit in found:
+            assert unit.rstrip(",.;:)") in units, (cand.name, unit, sentence)
