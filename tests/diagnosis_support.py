@@ -123,9 +123,12 @@ def check_confidence(d) -> None:
     the candidates that pass at its step: with none beside it 1 (not 0: no resample is drawn), and
     a share whatever the contest."""
     assert d.effects
-    for step, effect in zip(d.selection.steps, d.effects, strict=False):
+    found = {e.name: e for e in d.effects}  # a choice dropped by the backward pass has no effect
+    for step in d.selection.steps:
         passing = [n for n, j in step.judgements.items() if j.verdict in ("passes", "accepted")]
         assert 0.0 < step.confidence <= 1.0
+        if step.chosen in found:
+            assert found[step.chosen].confidence == step.confidence
         if passing == [step.chosen]:
-            assert step.confidence == 1.0 and effect.confidence == 1.0
+            assert step.confidence == 1.0
     assert d.to_dict()["effects"][0]["confidence"] == pytest.approx(d.effects[0].confidence)

@@ -23,6 +23,7 @@ import dataclasses
 import json
 import math
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -547,11 +548,7 @@ def test_the_report_plots_each_current_effect_against_the_current_it_acts_throug
         fn = cand.term.function
         qn = np.full(fn.size1_in(3), 1e-3)
         for axis in [0, 1] if cand.axis == "both" else [AXES.index(cand.axis)]:
-            _, values = _variable(
-                dataclasses.make_dataclass("D", ["data"])(data),
-                dataclasses.make_dataclass("E", ["candidate"])(cand),
-                axis,
-            )
+            _, values = _variable(SimpleNamespace(data=data), SimpleNamespace(candidate=cand), axis)
             (row,) = [r for r in range(2) if np.array_equal(values, data.u[r])]
             q_all = ca.SX.sym("q", fn.size1_in(3))
             grad = ca.Function("g", [x, u, du, q_all], [ca.jacobian(fn(x, u, du, q_all)[axis], u)[row]])

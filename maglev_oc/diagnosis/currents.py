@@ -158,7 +158,7 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
             ("kappa",),
             function=term_function("saturation", saturation, 1),
             physical=physical,
-            signature="residual proportional to the forces of the currents times the current squared",
+            signature="horizontal residual proportional to the thrust times the current squared",
         ),
         "current",
         "axis_current",
