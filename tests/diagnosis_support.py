@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 from types import SimpleNamespace
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ import pytest
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.diagnosis.result import Diagnosis
+from maglev_oc.regression import design as regression_design
 from maglev_oc.results import Estimate, PerAxis
 from tests.independent import write_log
 from tests.independent.sets import named_set
@@ -51,16 +53,29 @@ def generated(tmp_path_factory):
 @pytest.fixture(scope="session")
 def diagnosed(generated):
     """The default diagnosis of a generated log by (set, stem), run once per session (the quick
-    clean tests and the twenty-seed test share theirs): (diagnosis, truth)."""
+    clean tests and the twenty-seed test share theirs): (diagnosis, truth).
+
+    ``get.weightings[(set, stem)]``: how many designs of that diagnosis chose their own axis
+    weights (``regression.design._axis_weights``) instead of being handed the base fit's."""
     cache: dict[tuple[str, str], tuple] = {}
 
     def get(set_name: str, stem: str):
         key = (set_name, stem)
         if key not in cache:
             path, truth = generated(set_name, stem)
-            cache[key] = (diagnose_path(path), truth)
+            calls = []
+            own = regression_design._axis_weights
+
+            def counted(*args, **kw):
+                calls.append(1)
+                return own(*args, **kw)
+
+            with mock.patch.object(regression_design, "_axis_weights", counted):
+                cache[key] = (diagnose_path(path), truth)
+            get.weightings[key] = len(calls)
         return cache[key]
 
+    get.weightings = {}
     return get
 
 

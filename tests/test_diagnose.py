@@ -64,6 +64,18 @@ def test_clean_logs_claim_nothing_and_recover_the_constants(diagnosed, stem):
     assert abs(err["C4"]) < 0.10, err
 
 
+def test_every_design_of_a_diagnosis_weighs_the_axes_as_its_base_fit(diagnosed):
+    # The selection's thresholds (min_gain, min_z, min_effect) and the unexplained search's are
+    # read on one weighted fit of both axes: the base design's 1 / RMS residual per axis. A design
+    # that chose its own weights (from its own unweighted fit, probes or effects included) would
+    # judge a vertical and a horizontal term on another balance of the shared constants. So the
+    # weights are chosen once per diagnosis, by the base design, on a two-axis log that reaches
+    # every step (selection, refits, unexplained search, output error, validation).
+    d, _ = diagnosed("clean", "clean_01")
+    assert d.data.moving.all()
+    assert diagnosed.weightings[("clean", "clean_01")] == 1
+
+
 # --- effects outside the library ------------------------------------------------------------------
 def test_an_effect_outside_the_library_goes_to_unexplained(generated):
     # A spring force along the track with the spring left out of the library: the diagnosis
