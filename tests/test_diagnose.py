@@ -64,13 +64,14 @@ def test_clean_logs_claim_nothing_and_recover_the_constants(diagnosed, stem):
     assert abs(err["C4"]) < 0.10, err
 
 
-def test_every_design_of_a_diagnosis_weighs_the_axes_as_its_base_fit(diagnosed):
+def test_no_design_of_a_diagnosis_chooses_its_own_axis_weights(diagnosed):
     # The selection's thresholds (min_gain, min_z, min_effect) and the unexplained search's are
-    # read on one weighted fit of both axes: the base design's 1 / RMS residual per axis. A design
-    # that chose its own weights (from its own unweighted fit, probes or effects included) would
-    # judge a vertical and a horizontal term on another balance of the shared constants. So the
-    # weights are chosen once per diagnosis, by the base design, on a two-axis log that reaches
-    # every step (selection, refits, unexplained search, output error, validation).
+    # read on one weighted fit of both axes: the base design's 1 / RMS residual per axis, or the
+    # fit's with the first selection's effects when they changed the balance (pipeline._rebalanced,
+    # tests/test_diagnosis_rebalance_properties.py). A design that chose its own weights (from its
+    # own unweighted fit, probes or effects included) would judge a vertical and a horizontal term
+    # on another balance. So only the base design chooses, on a two-axis log that reaches every
+    # step (selection, refits, unexplained search, output error, validation).
     d, _ = diagnosed("clean", "clean_01")
     assert d.data.moving.all()
     assert diagnosed.weightings[("clean", "clean_01")] == 1

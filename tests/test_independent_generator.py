@@ -512,6 +512,10 @@ def test_named_sets_have_the_promised_contents():
     assert {sc.effects[0].kind for _, sc in single} == set(E.EFFECT_KINDS) - {"current_saturation"}
     pairs = named_set("pairs")
     assert all(len(sc.effects) == 2 for _, sc in pairs)
+    assert all(len(sc.effects) in (3, 4) for _, sc in named_set("triples"))
+    # no two logs of the sets share a seed (each is its own draw of constants, references, noise)
+    seeds = [sc.seed for name in SET_NAMES if name != "experiments" for _, sc in named_set(name)]
+    assert len(seeds) == len(set(seeds))
     stems = [stem for name in SET_NAMES for stem, _ in named_set(name)]
     assert len(stems) == len(set(stems))
     # the file names say nothing about the contents

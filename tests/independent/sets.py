@@ -13,6 +13,10 @@ single
     Each effect alone at its ``small()`` and ``large()`` size (seeds 301-324).
 pairs
     Six logs with two effects together (seeds 401-406).
+triples
+    Eight logs with three or four effects together, as a rig has them: guide friction beside
+    cogging, a cable carrier, ripple, end effects, a commutation offset, a tilt, a misalignment or
+    the field's shape; cogging and ripple beside an amplifier lag (seeds 601-608).
 experiments
     A user's experiments unlike the other sets' (which all excite both axes with sines of
     0.05-2 Hz, 4-5 mm around 19.5 mm and 35-40 mm along the travel, for 60 s, with the papers'
@@ -96,6 +100,50 @@ def _pairs() -> list[tuple[str, tuple[Effect, ...]]]:
     ]
 
 
+def _triples() -> list[tuple[str, tuple[Effect, ...]]]:
+    return [
+        (
+            "friction_h_cogging_cable",
+            (GuideFriction.small("horizontal"), NormalCogging.small(), CableCarrier.small()),
+        ),
+        (
+            "friction_both_detent_ripple",
+            (
+                GuideFriction.small("horizontal"),
+                GuideFriction.small("vertical"),
+                DetentForce.small(),
+                ThrustRipple.small(),
+            ),
+        ),
+        (
+            "friction_h_end_commutation",
+            (GuideFriction.large("horizontal"), EndEffect.small(), CommutationOffset.small()),
+        ),
+        (
+            "friction_v_misalignment_cable",
+            (GuideFriction.small("vertical"), GuideMisalignment.small(), CableCarrier.large()),
+        ),
+        (
+            "cogging_ripple_amplifier",
+            (NormalCogging.large(), ThrustRipple.small(), AmplifierDynamics.large()),
+        ),
+        (
+            "friction_h_cogging_detent_cable",
+            (
+                GuideFriction.small("horizontal"),
+                NormalCogging.small(),
+                DetentForce.small(),
+                CableCarrier.small(),
+            ),
+        ),
+        (
+            "friction_h_tilt_ripple",
+            (GuideFriction.large("horizontal"), TiltedBase.small(), ThrustRipple.large()),
+        ),
+        ("end_field_friction_h", (EndEffect.large(), FieldShape.large(), GuideFriction.small("horizontal"))),
+    ]
+
+
 EXPERIMENTS: dict[str, dict] = {
     "steps": {
         "reference": {
@@ -151,7 +199,7 @@ def experiment_scenario(experiment: str, effect: str | None, seed: int, duration
     )
 
 
-SET_NAMES = ("clean", "eleven", "single", "pairs", "experiments")
+SET_NAMES = ("clean", "eleven", "single", "pairs", "triples", "experiments")
 """The named sets."""
 
 
@@ -223,6 +271,20 @@ def named_set(name: str, duration: float = 60.0, seed_offset: int = 0) -> list[t
                         duration=duration,
                         effects=effects,
                         description=f"set pairs: {label}",
+                    ),
+                )
+            )
+    elif name == "triples":
+        for i, (label, effects) in enumerate(_triples()):
+            out.append(
+                (
+                    f"triples_{i + 1:02d}",
+                    Scenario(
+                        name=label,
+                        seed=601 + i,
+                        duration=duration,
+                        effects=effects,
+                        description=f"set triples: {label}",
                     ),
                 )
             )
