@@ -592,3 +592,43 @@ def test_every_candidate_gives_each_size_a_unit(plant):
         assert found, (cand.name, sentence)
         for _, unit in found:
             assert unit.rstrip(",.;:)") in units, (cand.name, unit, sentence)
+
+
+# --- what sticking guides hold ---------------------------------------------------------------------
+NOT_HELD_BESIDE_FRICTION = {
+    "constant_vertical_force",
+    "attraction_gap_dependence",
+    "magnet_field_gap_dependence",
+    "gap_sensor_offset",
+}
+"""Smooth functions of the gap alone: nearly the constants' own columns, which the fit carries
+unheld (the friction's own holding term holds the modelled force)."""
+
+
+@pytest.mark.parametrize("axis", ["vertical", "horizontal"])
+def test_sticking_guides_hold_every_force_but_the_friction_and_the_gap_dependences(plant, axis):
+    """Static friction holds a stuck axis against every force on it. With the guides of ``axis``
+    holding a share h = 0.6 (``candidate_library(held=...)``), each candidate's acceleration on that
+    axis at standstill is (1 - h) times its free one; the friction candidates and the smooth gap
+    dependences are unchanged, and so is every candidate on the other axis and at speed (the hold
+    fades as exp(-(v / v_s)^2), v_s = 2 mm/s: nothing is left of it at 0.2 m/s)."""
+    h = 0.6
+    free = {c.name: c for c in candidate_library(StageModel(), plant.data)}
+    held = {c.name: c for c in candidate_library(StageModel(), plant.data, {axis: h})}
+    assert held.keys() == free.keys()
+    a = 0 if axis == "vertical" else 1
+    rng = np.random.default_rng(5)
+    k = int(np.flatnonzero(plant.train)[100])
+    x, u, du = plant.data.x[:, k].copy(), plant.data.u[:, k], plant.data.du[:, k]
+    for speed, factor in ((0.0, 1 - h), (0.2, 1.0)):
+        x[1] = x[3] = speed
+        for name, c in free.items():
+            q = rng.normal(size=c.term.function.size1_in(3))
+            f0 = np.asarray(c.term.function(x, u, du, q)).ravel()
+            f1 = np.asarray(held[name].term.function(x, u, du, q)).ravel()
+            unheld = c.family == "friction" or name in NOT_HELD_BESIDE_FRICTION
+            expected = f0.copy()
+            if not unheld and c.axis in (axis, "both"):
+                expected[a] *= factor
+            # the same expression times an exact factor: rounding only
+            np.testing.assert_allclose(f1, expected, rtol=1e-12, atol=1e-15, err_msg=f"{name} at {speed} m/s")
