@@ -115,6 +115,41 @@ def test_two_effects_together_are_both_found(generated, stem):
     assert s.size_right, (s.claimed, s.notes)  # both found, each within 30 %
 
 
+KNOWN_TRIPLE_FAILURES = {
+    "triples_02": pytest.mark.xfail(
+        strict=True,
+        reason="the vertical friction beside horizontal friction, detent and ripple: 0.36 +- 0.5 N against "
+        "0.6 N, within its standard error but not the 30 %",
+    ),
+    "triples_08": pytest.mark.xfail(
+        strict=True, reason="the field's shape beside large end effects and friction: not claimed"
+    ),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.extended
+@pytest.mark.parametrize(
+    "stem",
+    [
+        pytest.param(
+            stem, marks=[KNOWN_TRIPLE_FAILURES[stem]] if stem in KNOWN_TRIPLE_FAILURES else [], id=stem
+        )
+        for stem, _ in named_set("triples")
+    ],
+)
+def test_three_or_four_effects_together_are_all_found(generated, stem):
+    # bench/README "Three or four effects together": 8/8/6. triples_03 (a commutation offset
+    # beside 1 N of friction) and triples_04 (a misalignment beside vertical friction) passed
+    # only once sticking guides held every force but the friction's and the gap dependences'.
+    path, truth = generated("triples", stem)
+    d = diagnose_path(path)
+    s = score(stem, truth, d.to_dict()["effects"])
+    assert s.true_first, s.claimed
+    assert s.no_false_claim, s.claimed
+    assert s.size_right, (s.claimed, s.notes)  # all found, each within 30 %
+
+
 @pytest.mark.slow
 def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
     # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 5 % end effect at +-50 mm
