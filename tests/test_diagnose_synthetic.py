@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.validation import Validation
 from tests.diagnosis_support import check_confidence
 from tests.test_regression import RATE, _synthetic
 from tests.test_statistics_properties import _log
@@ -141,3 +142,19 @@ def test_a_choice_no_other_candidate_contested_has_full_confidence(with_friction
     # the candidates that pass at its step; with none beside it that share is 1 (not 0: no
     # resample is drawn), and it is a share whatever the contest
     check_confidence(with_friction)
+
+
+def test_a_diagnosis_with_effects_validates_the_model_with_them(with_friction):
+    """The friction found: the result carries the validation of the model with it (named in its
+    description) beside the base model's, the JSON too, and with the friction the held-out
+    horizontal prediction errs less than without it."""
+    d = with_friction
+    assert [e.name for e in d.effects] == ["guide_friction_horizontal"]
+    after, before = d.validation_after, d.validation_before
+    assert isinstance(after, Validation) and isinstance(before, Validation)
+    assert "guide_friction_horizontal" in after.model
+    j = d.to_dict()["validation"]
+    assert j["after"] is not None and j["after"]["model"] == after.model
+    assert j["after"]["residual_rms_m"] == after.to_dict()["residual_rms_m"]
+    rms = [v.to_dict()["residual_rms_m"]["horizontal"] for v in (before, after)]
+    assert rms[1] < rms[0]

@@ -520,6 +520,14 @@ def _check_covariance(cov: np.ndarray, error) -> None:
                     j,
                     f"{float(cov[i, j])!r} differs from [{j}][{i}] = {float(cov[j, i])!r}: not symmetric",
                 )
+            # |cov[i][j]| <= sqrt(cov[i][i] cov[j][j]): beside a zero variance a covariance is zero
+            # (the correlations below leave such a row out)
+            if (cov[i, i] == 0 or cov[j, j] == 0) and cov[i, j] != 0:
+                raise error(
+                    i,
+                    j,
+                    f"{float(cov[i, j])!r} beside a zero variance: not positive semidefinite",
+                )
     d = np.sqrt(np.diag(cov))
     scaled = np.where(np.outer(d, d) > 0, cov / np.where(np.outer(d, d) > 0, np.outer(d, d), 1.0), 0.0)
     lowest = float(np.linalg.eigvalsh(0.5 * (scaled + scaled.T)).min())

@@ -75,7 +75,7 @@ def term_function(name: str, build: Callable, n_parameters: int) -> ca.Function:
 def _casadi_name(name: str) -> str:
     """A valid CasADi Function name from any term name (letters, digits, single underscores)."""
     clean = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", name)).strip("_")
-    return clean if clean[:1].isalpha() else f"t_{clean}"
+    return clean if clean[:1].isalpha() else f"t_{clean}" if clean else "t"
 
 
 def _as_four_inputs(fn: ca.Function, n_p: int, name: str) -> ca.Function:
