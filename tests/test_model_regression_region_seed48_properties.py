@@ -70,15 +70,17 @@ def _beside_zero(i: int, j: int, value: float) -> np.ndarray:
     return cov
 
 
-# (i, j, value): a covariance of any size beside a zero variance; |cov_ij| <= sqrt(cov_ii cov_jj) = 0
-BESIDE_ZERO = [(0, 1, 0.1), (1, 0, -0.5), (3, 2, 1e-12), (2, 3, 1e-300)]
+# (i, j, value): a covariance beside a zero variance, above the check's rounding room
+# (_PSD_TOL = 1e-9 of sqrt(the other variance x the largest), 2e-9 beside C3's variance 1 here);
+# |cov_ij| <= sqrt(cov_ii cov_jj) = 0
+BESIDE_ZERO = [(0, 1, 0.1), (1, 0, -0.5), (3, 2, 1e-6), (2, 3, 1e-7)]
 
 
 @pytest.mark.parametrize("i, j, value", BESIDE_ZERO)
 def test_a_covariance_beside_a_zero_variance_is_refused_naming_its_entry(i, j, value, tmp_path):
     """[[0, c], [c, v]] has the eigenvalue (v - sqrt(v^2 + 4 c^2)) / 2 < 0 for every c != 0: not
-    positive semidefinite, however small c is in the constants' units. The error names the entry,
-    as the other covariance errors do, in a StageFile and in a file."""
+    positive semidefinite beyond rounding once c is above the check's room. The error names the
+    entry, as the other covariance errors do, in a StageFile and in a file."""
     cov = _beside_zero(i, j, value)
     entry = rf"\[({i}\]\[{j}|{j}\]\[{i})\]"
     with pytest.raises(InputError, match=rf"^StageFile\.covariance{entry}: .*not positive semidefinite"):
@@ -89,6 +91,16 @@ def test_a_covariance_beside_a_zero_variance_is_refused_naming_its_entry(i, j, v
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError, match=rf"constants\.covariance{entry}: .*not positive semidefinite"):
         StageFile.read(path)
+
+
+@pytest.mark.parametrize("value", [1e-12, 1e-181, 1e-300])
+def test_a_rounding_level_covariance_beside_a_zero_variance_is_accepted(value):
+    """The other side of the room: beside a zero variance and one of 1, a covariance c gives the
+    eigenvalue -c^2 (to first order), 1e-24 or less here, rounding against the matrix's scale 4 (a
+    product A A' whose small entries' squares underflow keeps 4.7e-181 beside a zero variance:
+    tests/test_stage_file.py's round trip found it)."""
+    stage = _stage(covariance=_beside_zero(3, 2, value))
+    assert stage.covariance[3, 2] == value
 
 
 def test_zero_rows_of_constants_held_fixed_are_still_accepted():
