@@ -144,6 +144,10 @@ def _triples() -> list[tuple[str, tuple[Effect, ...]]]:
     ]
 
 
+COMBINED = {"pairs": (_pairs, 401), "triples": (_triples, 601)}
+"""The sets of effects together: (their entries, the first log's seed)."""
+
+
 EXPERIMENTS: dict[str, dict] = {
     "steps": {
         "reference": {
@@ -260,31 +264,18 @@ def named_set(name: str, duration: float = 60.0, seed_offset: int = 0) -> list[t
                         ),
                     )
                 )
-    elif name == "pairs":
-        for i, (label, effects) in enumerate(_pairs()):
+    elif name in COMBINED:
+        entries, first_seed = COMBINED[name]
+        for i, (label, effects) in enumerate(entries()):
             out.append(
                 (
-                    f"pairs_{i + 1:02d}",
+                    f"{name}_{i + 1:02d}",
                     Scenario(
                         name=label,
-                        seed=401 + i,
+                        seed=first_seed + i,
                         duration=duration,
                         effects=effects,
-                        description=f"set pairs: {label}",
-                    ),
-                )
-            )
-    elif name == "triples":
-        for i, (label, effects) in enumerate(_triples()):
-            out.append(
-                (
-                    f"triples_{i + 1:02d}",
-                    Scenario(
-                        name=label,
-                        seed=601 + i,
-                        duration=duration,
-                        effects=effects,
-                        description=f"set triples: {label}",
+                        description=f"set {name}: {label}",
                     ),
                 )
             )
