@@ -35,6 +35,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -43,7 +44,15 @@ from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.loading import load_model
 from maglev_oc.units import M_TO_MM, MM_TO_M
 
-__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_NOT_CERTIFIED", "EXIT_USAGE", "build_parser", "main"]
+__all__ = [
+    "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
+    "EXIT_NOT_CERTIFIED",
+    "EXIT_USAGE",
+    "build_parser",
+    "main",
+    "run",
+]
 
 EXIT_USAGE = 2
 """Exit status for errors in the user's input or files."""
@@ -1163,5 +1172,22 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERNAL
 
 
+def run() -> NoReturn:
+    """The ``maglev-oc`` program: :func:`main` on the command line, then exit with its status.
+
+    After Ctrl-C the process ends at once with :data:`EXIT_INTERRUPTED`. CPython 3.11 marks an
+    interrupt that passed through code run by ``exec`` (dataclasses build their methods that way
+    while a module is imported) as unhandled even once :func:`main` has caught it, and then kills
+    the interpreter with SIGINT at exit, so that the shell sees a signal rather than 130. Nothing
+    is left to write by then (outputs are written whole or not at all).
+    """
+    code = main()
+    if code == EXIT_INTERRUPTED:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        os._exit(code)
+    raise SystemExit(code)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run()
