@@ -31,7 +31,9 @@ import pytest
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.guides import waviness_candidate
 from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.magnetics import END_WIDTHS
 from maglev_oc.diagnosis.pipeline import _prepare
+from maglev_oc.diagnosis.refit import best_end_width
 from maglev_oc.diagnosis.selection import fitted_constants
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
@@ -308,6 +310,31 @@ def test_end_effects_at_one_end_only_are_sized_at_that_end(plant):
     # the low end's profile minus the centre's is negative and small: the loss reported there is under
     # 30 % of the high end's (what tells a one-ended fall from a shared one)
     assert abs(p["thrust_loss_at_low_end"].value) < 0.3 * 0.10 * high_drop
+
+
+@pytest.mark.parametrize(
+    ("width", "thrust_only"),
+    # two scanned widths either side of the library's 15 mm, and one between two (20 mm: the
+    # nearest is 18.9 mm, the next 23.8 mm), with the attraction's loss or without it (the
+    # variants bench's thrust-only end effect, whose width fixed at 15 mm left a false cogging)
+    [(END_WIDTHS[1], False), (END_WIDTHS[7], False), (0.020, True)],
+)
+def test_the_end_effects_width_is_the_scanned_one_nearest_the_truth(plant, width, thrust_only):
+    # 10 % of the thrust and the currents' normal force (and 6 % of the attraction) lost where the
+    # profile exp((x3 - 50 mm) / w) + exp((-50 mm - x3) / w) is 1, as the independent generator's
+    # EndEffect: the scan fits every width beside the base constants and keeps the smallest
+    # training residual. The noise of the clean log cannot move it off the nearest width: the
+    # residual's change between neighbouring widths is the effect's misfit, not the noise.
+    x3 = plant.data.x[2]
+    end = 0.05
+    profile = np.exp((x3 - end) / width) + np.exp((-end - x3) / width)
+    thrust, attraction, normal = _parts(plant)
+    magnets = 0.0 if thrust_only else 0.06
+    planted = np.vstack([(magnets * attraction + 0.10 * normal) * profile, -0.10 * thrust * profile])
+    data = dataclasses.replace(plant.data, acc=plant.data.acc + plant.data.filter(planted))
+    found = best_end_width(plant.model, data, [], plant.train, plant.hold, None)
+    nearest = min(END_WIDTHS, key=lambda w: abs(math.log(w / width)))
+    assert found == pytest.approx(nearest, rel=1e-12), (found, nearest)
 
 
 @pytest.mark.parametrize("name", ["attraction_gap_dependence", "magnet_field_gap_dependence"])

@@ -16,17 +16,18 @@ PMLSM stages on linear guides are known for), module by module:
   current-amplifier lag, the iron saturated by the current (force per ampere falling with it).
 
 Hyper-parameters that would make a term nonlinear (spatial periods, decay lengths, the reversal
-speed of friction, the end effects' width) are fixed at physical values; where several are
-plausible they are separate candidates that compete, or variants whose spread is reported as a
-model-form uncertainty. Coefficients that multiply the magnetic shape functions use the base
-fit's constants as references; their physical values are converted with the constants of the
-fit they come from, so a joint refit stays consistent.
+speed of friction) are fixed at physical values; where several are plausible they are separate
+candidates that compete, or variants whose spread is reported as a model-form uncertainty. The
+end effects' width and a waviness's period are scanned once the selection has chosen them.
+Coefficients that multiply the magnetic shape functions use the base fit's constants as
+references; their physical values are converted with the constants of the fit they come from,
+so a joint refit stays consistent.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
 from maglev_oc.diagnosis.currents import (
@@ -45,6 +46,7 @@ from maglev_oc.diagnosis.guides import (
     waviness_candidate,
 )
 from maglev_oc.diagnosis.magnetics import (
+    END_WIDTH,
     cogging_candidates,
     end_effects_candidate,
     field_shape_candidate,
@@ -61,6 +63,7 @@ __all__ = [
     "VARIABLES",
     "Candidate",
     "candidate_library",
+    "end_effects_at_widths",
     "held_by_sticking_guides",
     "refine_waviness_period",
     "smooth_probes",
@@ -69,7 +72,11 @@ __all__ = [
 
 
 def candidate_library(
-    model: StageModel, data: PreparedLogs, held: Mapping[str, float] | None = None
+    model: StageModel,
+    data: PreparedLogs,
+    held: Mapping[str, float] | None = None,
+    *,
+    end_width: float = END_WIDTH,
 ) -> list[Candidate]:
     """Every candidate for ``data``, with magnetic references from ``model`` (the base fit).
 
@@ -78,17 +85,32 @@ def candidate_library(
     on that axis are held the same way (:func:`~maglev_oc.regression.terms.held_by_guides`), or a force found
     beside sticking guides would be sized by the samples where it moves the stage only (half its
     size beside 2 N of vertical friction on independent logs).
+    ``end_width`` [m]: the end effects' fall-off width (:func:`end_effects_at_widths` chooses it).
     """
     ctx = LibraryContext(model, data)
-    library = _candidates(ctx)
-    if not held:
-        return library
-    return [
-        dataclasses.replace(c, term=held_by_guides(c.term, held))
-        if held_by_sticking_guides(c) and c.axis in (*held, "both")
-        else c
-        for c in library
-    ]
+    return [_held(c, held) for c in _candidates(ctx, end_width)]
+
+
+def end_effects_at_widths(
+    model: StageModel,
+    data: PreparedLogs,
+    widths: Sequence[float],
+    held: Mapping[str, float] | None = None,
+) -> list[Candidate]:
+    """The end effects at each of ``widths`` [m], held as :func:`candidate_library` holds them,
+    with the terms named apart (``end_effects_w0``, ...) so that one design can carry them all."""
+    ctx = LibraryContext(model, data)
+    out = []
+    for k, w in enumerate(widths):
+        c = _held(end_effects_candidate(ctx, w), held)
+        out.append(dataclasses.replace(c, term=dataclasses.replace(c.term, name=f"{c.name}_w{k}")))
+    return out
+
+
+def _held(c: Candidate, held: Mapping[str, float] | None) -> Candidate:
+    if held and held_by_sticking_guides(c) and c.axis in (*held, "both"):
+        return dataclasses.replace(c, term=held_by_guides(c.term, held))
+    return c
 
 
 def held_by_sticking_guides(c: Candidate) -> bool:
@@ -106,13 +128,13 @@ def held_by_sticking_guides(c: Candidate) -> bool:
     return c.family != "friction" and c.variable != "gap"
 
 
-def _candidates(ctx: LibraryContext) -> list[Candidate]:
+def _candidates(ctx: LibraryContext, end_width: float) -> list[Candidate]:
     return [
         *friction_candidates(ctx),
         *level_candidates(ctx),
         cable_candidate(ctx),
         *cogging_candidates(ctx),
-        end_effects_candidate(ctx),
+        end_effects_candidate(ctx, end_width),
         gap_dependence_candidate(ctx),
         field_shape_candidate(ctx),
         ripple_candidate(ctx),

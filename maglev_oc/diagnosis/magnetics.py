@@ -25,6 +25,7 @@ from maglev_oc.results import Estimate
 
 __all__ = [
     "END_WIDTH",
+    "END_WIDTHS",
     "cogging_candidates",
     "end_effects_candidate",
     "field_shape_candidate",
@@ -34,6 +35,9 @@ __all__ = [
 END_WIDTH = 0.015
 """[m] Over how much travel the forces fall towards the ends (variants at half and twice): about a
 quarter of the pole pitch, the scale over which the magnets' end field fringes."""
+END_WIDTHS = tuple(END_WIDTH * 2.0 ** (k / 3) for k in range(-4, 6))
+"""[m] The widths scanned once the end effects are chosen (refit.best_end_width): 6 to 48 mm, each
+26 % wider than the last, around :data:`END_WIDTH`."""
 
 
 def cogging_candidates(ctx: LibraryContext) -> list[Candidate]:
@@ -179,7 +183,8 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
             f"{fmt(e['thrust_loss_at_low_end'], 100, '%')} at {lo * 1e3:.0f} mm and "
             f"{fmt(e['thrust_loss_at_high_end'], 100, '%')} at {hi * 1e3:.0f} mm, "
             f"the magnets' attraction by {fmt(e['attraction_loss_at_low_end'], 100, '%')} and "
-            f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre."
+            f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre; the "
+            f"losses fall by 1/e every {width * 1e3:.0f} mm inwards."
         ),
     )
 

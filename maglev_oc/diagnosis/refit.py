@@ -9,7 +9,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
-from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.library import candidate_library, end_effects_at_widths
+from maglev_oc.diagnosis.magnetics import END_WIDTH, END_WIDTHS
 from maglev_oc.diagnosis.selection import fitted_constants
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
@@ -17,6 +18,7 @@ from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES, UNITS
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import SubsetFit, fit_subset
+from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES, Estimate
 
 __all__ = [
@@ -76,6 +78,7 @@ def converged_references(
     max_rounds: int = 12,
     held: Mapping[str, float] | None = None,
     library: Sequence[Candidate] | None = None,
+    end_width: float = END_WIDTH,
 ) -> StageModel:
     """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
     the effects' magnetic references (which scale some of their columns) agree with them.
@@ -83,10 +86,15 @@ def converged_references(
     Terms such as the commutation offset are bilinear in a constant and their own parameter;
     their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
     repeated here (a few tenths of a second each: only the chosen effects' columns) until the
-    constants move by less than ``tolerance``. ``held``: as :func:`candidate_library` takes it;
-    ``library``: ``candidate_library(fitted, data, held)`` when the caller has it (the first round's)."""
+    constants move by less than ``tolerance``. ``held``, ``end_width``: as :func:`candidate_library`
+    takes them; ``library``: ``candidate_library(fitted, data, held, end_width=end_width)`` when the
+    caller has it (the first round's)."""
     for k in range(max_rounds):
-        current = library if k == 0 and library is not None else candidate_library(fitted, data, held)
+        current = (
+            library
+            if k == 0 and library is not None
+            else candidate_library(fitted, data, held, end_width=end_width)
+        )
         by_name = {c.name: c for c in current}
         terms = [by_name[n].term for n in chosen]
         design = build_design(data, fitted, terms=terms, fit=train, holdout=hold, weights=weights)
@@ -101,6 +109,28 @@ def converged_references(
         if done:
             break
     return fitted
+
+
+def best_end_width(
+    model: StageModel,
+    data: PreparedLogs,
+    others: Sequence[AccelerationTerm],
+    train: np.ndarray,
+    hold: np.ndarray,
+    weights: np.ndarray | None,
+    held: Mapping[str, float] | None = None,
+    widths: Sequence[float] = END_WIDTHS,
+) -> float:
+    """The end effects' fall-off width among ``widths`` [m] whose joint fit with the base constants
+    and the ``others`` terms leaves the smallest weighted training residual (one design carries
+    every width's columns; each fit is a solve of its Gram blocks)."""
+    scanned = end_effects_at_widths(model, data, widths, held)
+    design = build_design(
+        data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
+    )
+    fixed = ["base", *(t.name for t in others)]
+    cost = [fit_subset(design, [*fixed, c.name], covariance=False).chi_square for c in scanned]
+    return float(widths[int(np.argmin(cost))])
 
 
 def with_model_form_spread(
