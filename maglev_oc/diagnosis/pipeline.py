@@ -333,12 +333,13 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     force) inflates that axis's base residual, and a candidate acting on both axes (the amplifiers'
     lag) would otherwise be sized on the other axis almost alone.
 
-    When the first selection chooses the end effects, their fall-off width is scanned
-    (:func:`_end_width`); at another width than the library's the selection is repeated with it."""
+    The first selection that chooses the end effects has their fall-off width scanned
+    (:func:`_end_width`); at another width than the library's the selection is repeated with it
+    (a third time when that was the second)."""
     held: dict[str, float] = {}
-    end_width = END_WIDTH
+    end_width, scanned = END_WIDTH, False
     relaxed = dataclasses.replace(session.settings, max_axis_loss=math.inf)
-    for attempt in range(2):
+    for attempt in range(3):
         full = candidate_library(fitted, session.data, held, end_width=end_width)
         effects = list(dict.fromkeys(c.reported_name for c in full))
         unknown = sorted(set(exclude) - set(effects))
@@ -353,7 +354,8 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         if rebalanced is not None:
             session = dataclasses.replace(session, weights=rebalanced)
         shares = _holding_shares(sel, library)
-        width = _end_width(session, fitted, library, sel, held, end_width) if attempt == 0 else end_width
+        width = None if scanned else _end_width(session, fitted, library, sel, held)
+        scanned, width = scanned or width is not None, width or end_width
         converged = converged_references(
             session.model,
             fitted,
@@ -367,15 +369,18 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             library=full if shares == held and width == end_width else None,
             end_width=width,
         )
-        same = shares == held and rebalanced is None and width == end_width
+        rewidthed = width != end_width
         end_width = width
+        same = shares == held and rebalanced is None and not rewidthed
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
                 sel = session.select(design, library)
             break
         fitted, held = converged, shares
-        if attempt == 0:
+        if attempt > 0 and not rewidthed:
+            break  # once repeated, a selection is kept (but for the end effects' first width)
+        if attempt < 2:  # (the third always stops above)
             del design, sel  # the next design replaces this one: never hold both (samples x columns)
     return session, library, design, sel, fitted
 
@@ -410,19 +415,19 @@ def _end_width(
     library: Sequence[Candidate],
     sel: Selection,
     held: dict[str, float],
-    current: float,
-) -> float:
+) -> float | None:
     """The end effects' width (:func:`~maglev_oc.diagnosis.refit.best_end_width`) fitted beside the
     base constants and the effects chosen before them, when the selection chose them; else
-    ``current``. The effects chosen after them are left out: they may be the misfit of a wrong
+    None. The effects chosen after them are left out: they may be the misfit of a wrong
     width (a 0.017 N vertical cogging at 38 mm beside a thrust-only end effect falling over 20 mm,
     fitted at 15 mm, on 3 of 6 draws of the independent generator; none at the scanned width)."""
     name = next((c.name for c in library if c.reported_name == "end_effects"), None)
     if name is None or name not in sel.selected:
-        return current
+        return None
     by_name = {c.name: c for c in library}
     before = [by_name[n].term for n in sel.selected[: sel.selected.index(name)]]
-    return best_end_width(fitted, session.data, before, session.train, session.hold, session.weights, held)
+    data, train, hold, weights = session.data, session.train, session.hold, session.weights
+    return best_end_width(fitted, data, before, train, hold, weights, held, settings=session.settings)
 
 
 def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, float]:

@@ -110,6 +110,7 @@ __all__ = [
     "fitted_constants",
     "judge",
     "select",
+    "separable",
 ]
 
 
@@ -801,6 +802,13 @@ def _unresolved(
         if beats < settings.min_beats:
             out.append((other.reported_name, beats))
     return out
+
+
+def separable(design: Design, cand: Candidate, fit: SubsetFit, settings: SelectionSettings) -> bool:
+    """Whether ``cand`` is separable in the joint ``fit`` as the selection judges it: variance
+    inflation at most ``max_vif`` and no parameter confounded with one of its own."""
+    vif, partners = _separability(design, cand, fit, settings)
+    return vif <= settings.max_vif and not partners
 
 
 def _separability(
