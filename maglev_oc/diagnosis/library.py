@@ -115,17 +115,20 @@ def _held(c: Candidate, held: Mapping[str, float] | None) -> Candidate:
 
 def held_by_sticking_guides(c: Candidate) -> bool:
     """Whether sticking guides hold ``c``'s force as they hold the motor's: static friction holds a
-    stuck axis against every force on it. All but the friction itself and the smooth dependences on
-    the gap (the field's shape, the attraction's gap dependence, a gap sensor offset): their columns
-    are nearly the constants' own, which the linear fit carries unheld, and holding them would make
-    them separable from the constants by the holding factor alone.
+    stuck axis against every force on it. All but the friction itself, the smooth dependences on
+    the gap (the field's shape, the attraction's gap dependence, a gap sensor offset) and the end
+    effects: their columns are nearly the constants' own (the end effects are the constants
+    falling smoothly along the travel), which the linear fit carries unheld, and holding them would
+    make them separable from the constants by the holding factor alone. Held, the end effects took
+    up the misfit of a pre-sliding (LuGre) vertical friction: a 0.8-1.2 % "end effect" claimed
+    beside 2 N of vertical friction on 2 of the experiments bench's 56 logs, none unheld.
 
-    The forces that change the motor's own force along the travel or with the current (end effects,
-    a thrust ripple, a commutation offset, the amplifiers' lag, a misalignment) are held too: unheld
+    The forces that change the motor's own force with the current or at a motor period (a thrust
+    ripple, a commutation offset, the amplifiers' lag) and a misalignment are held too: unheld
     beside 1 N of horizontal guide friction, a commutation offset's force over the stuck samples
     left the friction at 60 % of its size and the end effects unclaimed; beside 0.6 N of vertical
     friction a misalignment came out at 62 % of its slope (independent generator, set ``triples``)."""
-    return c.family != "friction" and c.variable != "gap"
+    return c.family not in ("friction", "profile") and c.variable != "gap"
 
 
 def _candidates(ctx: LibraryContext, end_width: float) -> list[Candidate]:

@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.candidate import Candidate, LibraryContext
 from maglev_oc.diagnosis.library import candidate_library, end_effects_at_widths
 from maglev_oc.diagnosis.magnetics import END_WIDTH, END_WIDTHS
 from maglev_oc.diagnosis.selection import SelectionSettings, fitted_constants, separable
@@ -125,13 +125,24 @@ def best_end_width(
 ) -> float:
     """The end effects' fall-off width among ``widths`` [m] whose joint fit with the base constants
     and the ``others`` terms leaves the smallest weighted training residual, among the widths at
-    which they stay separable from those as ``settings`` judge it (``current`` when none is).
+    which they stay end effects and separable from those as ``settings`` judge it (``current``
+    when none is). One design carries every width's columns; each fit is a solve of its Gram
+    blocks.
 
-    One design carries every width's columns; each fit is a solve of its Gram blocks. Separable
-    only: the wider the fall, the more it looks like a change of the constants over a short
-    travel (the variants bench's end effect falling over 35 mm fitted best at 38 mm, where its
-    variance inflation, 307, made it not separable; at 15 mm it was found and sized right)."""
+    * End effects: a width up to a third of the logged travel (or ``current``), so that the fall
+      at the centre of the travel is at most exp(-1.5) = 22 % of the fall at its ends. A wider
+      fall is a smooth dependence on the position, which would take up any smooth misfit along
+      the travel whatever its cause: beside vertical guide friction on an off-centre travel of
+      40 mm (the experiments bench, no end effect planted), the scan went to its widest, 48 mm,
+      and a 0.5 % end effect was claimed; not at 15 mm.
+    * Separable: the wider the fall, the more it looks like a change of the constants over a
+      short travel (the variants bench's end effect falling over 35 mm fitted best at 38 mm, where
+      its variance inflation, 307, made it not separable; at 15 mm it was found and sized right).
+    """
     settings = settings or SelectionSettings()
+    lo, hi = LibraryContext(model, data).position_range
+    widest = max((hi - lo) / 3.0, current)
+    widths = [w for w in widths if w <= widest]
     scanned = end_effects_at_widths(model, data, widths, held)
     design = build_design(
         data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
