@@ -216,10 +216,12 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     start = model.with_constants(LumpedConstants(0.9 * c.C1, c.C2, c.C3, c.C4, source="start"))
     first = candidate_library(start, data, None)
     built_for = []
+    widths = []
 
-    def spy(fitted, data, held=None):
+    def spy(fitted, data, held=None, *, end_width):
         built_for.append(fitted.constants.C1)
-        return candidate_library(fitted, data, held)
+        widths.append(end_width)
+        return candidate_library(fitted, data, held, end_width=end_width)
 
     monkeypatch.setattr(refit, "candidate_library", spy)
     args = (model, start, data, ["guide_friction_horizontal"], train, hold, np.array([0.0, 1.0]))
@@ -232,6 +234,10 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     assert start.constants.C1 not in built_for
     # the same fits of the same columns: rounding only
     np.testing.assert_allclose(handed.constants.as_array(), built.constants.as_array(), rtol=1e-12)
+    # each rebuilt library has the end effects' width handed in (the scanned one), not the default
+    widths.clear()
+    refit.converged_references(*args, end_width=0.02)
+    assert widths and set(widths) == {0.02}
 
 
 # --- the compensation study ------------------------------------------------------------------------------
