@@ -368,3 +368,19 @@ def test_any_corruption_is_read_or_refused_in_one_line(tmp_path, good_text, edit
         assert str(path) in str(err) and "\n" not in str(err)
     else:
         assert log.n >= 10 and np.all(np.diff(log.t) > 0)
+
+
+def test_a_log_in_which_neither_axis_moves_is_refused_by_diagnose_in_one_line(tmp_path, capsys):
+    # the stage nearly still: both positions vary by 3 encoder counts (enough for the reader, which
+    # refuses a constant column) with a standard deviation under the 50 um a moving axis needs:
+    # nothing to diagnose; the line names the log and says why, nothing is touched or written
+    t, x, u = _signals(20_000, 1e-3)
+    x[0] = 0.020 + 30e-6 * np.sin(2 * np.pi * 1.3 * t)
+    x[1] = 30e-6 * 2 * np.pi * 1.3 * np.cos(2 * np.pi * 1.3 * t)
+    x[2] = 30e-6 * np.sin(2 * np.pi * 0.7 * t)
+    x[3] = 30e-6 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
+    log = write_log_arrays(tmp_path / "still.csv", t, x, u)
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["diagnose", str(log), "--json", str(out / "d.json")]
+    _run_refused(argv, [log], out, capsys, ["still.csv", "neither axis moves", "nothing to diagnose"])

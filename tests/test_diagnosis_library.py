@@ -692,3 +692,22 @@ def test_sticking_guides_hold_every_force_but_the_friction_the_gap_dependences_a
                 expected[a] *= factor
             # the same expression times an exact factor: rounding only
             np.testing.assert_allclose(f1, expected, rtol=1e-12, atol=1e-15, err_msg=f"{name} at {speed} m/s")
+
+
+def test_the_end_effects_width_is_chosen_on_the_training_samples(plant, monkeypatch):
+    # the held-out block judges the end effects at the width found: the scan's fits see the
+    # training samples only (its design is built with the fit mask, the held-out mask apart)
+    import maglev_oc.diagnosis.refit as refit
+
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs["fit"], kwargs["holdout"]))
+        return build_design(*args, **kwargs)
+
+    monkeypatch.setattr(refit, "build_design", spy)
+    data = _planted_end_effects(plant, END_WIDTHS[3])
+    best_end_width(plant.model, data, [], plant.train, plant.hold, None)
+    assert len(seen) == 1
+    fit, holdout = seen[0]
+    assert np.array_equal(fit, plant.train) and np.array_equal(holdout, plant.hold)

@@ -106,6 +106,12 @@ def test_gap_sweep_stays_feasible_on_rig_twin_under_9_A(model, designer):
         design.reference.values[0].min() >= 10e-3 - 1e-12
         and design.reference.values[0].max() <= 25e-3 + 1e-12
     )
+    # the settings written beside the reference are the sweep's own: its gaps bound the set-point
+    # and are reached to within its ripple (a user reruns or reports the design from them)
+    lo, hi = design.settings["gaps_m"]
+    ripple = design.settings["ripple_m"]
+    gap = design.reference.values[0]
+    assert lo <= gap.min() < lo + ripple and hi - ripple < gap.max() <= hi
     check = check_on_twin(design.reference, design.prediction, model=model, seeds=(0,))
     assert check.success, check.message
     assert np.all(check.peak_current < PEAK_CURRENT_LIMIT)

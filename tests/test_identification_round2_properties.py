@@ -347,3 +347,13 @@ def test_the_plain_output_error_covariance_is_s2_times_the_inverse_kkt_block(mod
     s2 = float(r @ r) / (r.size - (nv - nc))
     expected = s2 * np.linalg.inv(kkt)[:q, :q] * np.outer(scale, scale)
     np.testing.assert_allclose(naive, expected, rtol=1e-6)
+
+
+def test_the_output_error_counts_its_residuals(oe_fits):
+    # every fitted sample gives two output residuals (gap and position), and the reduced chi-square
+    # is the chi-square over the residuals less the free variables: n_residuals is what the report
+    # and the JSON print as "# residuals" and what the degrees of freedom start from
+    for fit in oe_fits:
+        assert fit.n_residuals == 2 * fit.n_samples, (fit.n_residuals, fit.n_samples)
+        dof = fit.chi_square / fit.reduced_chi_square
+        assert 0 < fit.n_residuals - dof < 0.1 * fit.n_residuals

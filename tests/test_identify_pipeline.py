@@ -198,3 +198,13 @@ def test_cli_all_methods(tmp_path, good_csv, capsys):
     assert data["output_error"]["success"]
     assert [r["eps"] for r in data["npfsi"]] == [0.001, 0.01, 0.05]
     assert data["identified_constants"]["source"].startswith("identified (output_error)")
+
+
+def test_npfsi_estimates_the_constants_asked_for(good_log, model):
+    # identify's estimate reaches NPFSI: asked for C1 and C2, each run estimates those two (the
+    # others held at the model's values), as the least-squares fits do
+    outcome = identify(
+        good_log, model, estimate=("C1", "C2"), methods=("equation_error", "npfsi"), npfsi_eps=(0.01,)
+    )
+    assert outcome.equation_error.names[:2] == ("C1", "C2") and "C3" not in outcome.equation_error.names
+    assert [run.names for run in outcome.npfsi] == [("C1", "C2")]
