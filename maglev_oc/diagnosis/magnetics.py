@@ -26,6 +26,7 @@ from maglev_oc.results import Estimate
 __all__ = [
     "END_WIDTH",
     "END_WIDTHS",
+    "END_WIDTH_STEP",
     "cogging_candidates",
     "end_effects_candidate",
     "field_shape_candidate",
@@ -33,11 +34,17 @@ __all__ = [
 ]
 
 END_WIDTH = 0.015
-"""[m] Over how much travel the forces fall towards the ends (variants at half and twice): about a
+"""[m] Over how much travel the forces fall towards the ends before the width is fitted: about a
 quarter of the pole pitch, the scale over which the magnets' end field fringes."""
-END_WIDTHS = tuple(END_WIDTH * 2.0 ** (k / 3) for k in range(-4, 6))
+END_WIDTH_STEP = 2.0 ** (1 / 3)
+"""Ratio of neighbouring scanned widths (26 %)."""
+END_WIDTHS = tuple(END_WIDTH * END_WIDTH_STEP**k for k in range(-4, 6))
 """[m] The widths scanned once the end effects are chosen (refit.best_end_width): 6 to 48 mm, each
-26 % wider than the last, around :data:`END_WIDTH`."""
+26 % wider than the last, around :data:`END_WIDTH`. The model-form spread of the end effects'
+sizes is over the two widths either side of the one found. Over half and twice the width, it
+overstated their uncertainty fivefold once the width was fitted: on 41 logs with end effects
+(fresh draws, variants, sets, experiments) the sizes' errors were 0.13 of their standard errors
+RMS, none beyond one."""
 
 
 def cogging_candidates(ctx: LibraryContext) -> list[Candidate]:
@@ -108,6 +115,7 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
     """
     lo, hi = ctx.position_range
     c_ref = ctx.references
+    narrow, wide = width / END_WIDTH_STEP, width * END_WIDTH_STEP
 
     def fn(w):
         def build(x, u, du, q):
@@ -163,8 +171,9 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
             function=fn(width),
             physical=physical,
             signature="thrust- and attraction-proportional residual growing towards the ends of the travel",
-            variants=(fn(width / 2), fn(width * 2)),
-            variant_note=f"fall-off width {width / 2 * 1e3:g}-{width * 2 * 1e3:g} mm",
+            # the scanned widths either side (the width is fitted on that grid once chosen)
+            variants=(fn(narrow), fn(wide)),
+            variant_note=f"fall-off width {narrow * 1e3:.3g}-{wide * 1e3:.3g} mm",
         ),
         "profile",
         "position",
