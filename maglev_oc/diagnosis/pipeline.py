@@ -354,8 +354,9 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         if rebalanced is not None:
             session = dataclasses.replace(session, weights=rebalanced)
         shares = _holding_shares(sel, library)
-        width = None if scanned else _end_width(session, fitted, library, sel, held)
-        scanned, width = scanned or width is not None, width or end_width
+        found = None if scanned else _end_width(session, fitted, library, sel, held)
+        scanned = scanned or found is not None
+        width = found or end_width
         converged = converged_references(
             session.model,
             fitted,
