@@ -4,6 +4,7 @@
     python bench/diagnose_rigs.py --experiments [steps short ...] [--out ...]
     python bench/diagnose_rigs.py --variants [end_effect_narrow ...] [--out ...]
     python bench/diagnose_rigs.py --saturation [--out ...]
+    python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
 10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
@@ -30,6 +31,11 @@ the sets' small and large sizes may not hold there.
 an effect in none of the named sets, on three seeds each. On a regulated stage the levitation
 current follows the gap, so most of it looks like a smooth dependence on the gap: what matters is
 that nothing else is claimed in its place.
+
+``--drawn N``: every effect kind N times, each with its parameters drawn at random within the
+ranges real stages show (``tests/independent/draws.py``: sizes log-uniform over at least the sets'
+small-to-large span, phases and signs at random), alone on the default rig. The sets and variants
+are values somebody chose; these are not, which is what a user's rig is like.
 """
 
 from __future__ import annotations
@@ -122,6 +128,10 @@ def main() -> None:
     parser.add_argument(
         "--saturation", action="store_true", help="score the iron saturated by the current instead"
     )
+    parser.add_argument(
+        "--drawn", type=int, default=0, help="score N random draws of every effect kind instead"
+    )
+    parser.add_argument("--kinds", nargs="*", default=None, help="with --drawn: only these kinds")
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
     args = parser.parse_args()
@@ -134,7 +144,22 @@ def main() -> None:
     from tests.independent.simulate import Rig, Scenario, simulate
 
     groups: dict[str, list] = {}
-    if args.saturation:
+    if args.drawn:
+        import numpy as np
+
+        from tests.independent.draws import KINDS, draw
+
+        unknown = sorted(set(args.kinds or ()) - set(KINDS))
+        if unknown:
+            parser.error(f"--kinds: unknown {unknown}; choose from {list(KINDS)}")
+        for k, kind in enumerate(args.kinds or KINDS):
+            for j in range(args.drawn):
+                seed = args.seed + 100 * k + j
+                effect = draw(kind, np.random.default_rng(seed))
+                groups.setdefault(kind, []).append(
+                    (f"{kind}_{seed}", Scenario(name=kind, seed=seed, effects=(effect,)))
+                )
+    elif args.saturation:
         for name, effect in saturation().items():
             for seed in SATURATION_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=(effect,))
@@ -170,6 +195,7 @@ def main() -> None:
             row = {
                 "scenario": scenario.name,
                 "truth": s.truth,
+                "effects": [e.description() for e in scenario.effects],
                 "claimed": s.claimed,
                 "not_separable": [n["name"] for n in result["not_separable"]],
                 "unexplained": [f"{u['axis']}: {u['depends_on']}" for u in result["unexplained"]],
