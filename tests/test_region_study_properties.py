@@ -55,7 +55,9 @@ def test_the_maps_span_the_gaps_the_stage_can_reach(model, stoppers):
     """The slices of F through the 20 mm set-point show the gap error over the stoppers' range
     widened by 2 mm each side (so the stoppers' edges are in view), and without stoppers over
     5-35 mm likewise: the e1 axis runs from that lower gap to that upper gap minus 20 mm
-    (1e-15 m: rounding of millimetre sums), increasing, through the set-point."""
+    (1e-15 m: rounding of millimetre sums), increasing, through the set-point. Every slice's
+    second axis (an error or its rate) is centred on the reference: it spans -a to a, so the
+    picture shows as much of F on either side of the set-point (exact: the ends are negatives)."""
     from maglev_oc.region.feasibility import GAP_TRAVEL, FeasibleSet
 
     feasible = FeasibleSet(model) if stoppers else FeasibleSet(model, gap_range=None)
@@ -67,3 +69,5 @@ def test_the_maps_span_the_gaps_the_stage_can_reach(model, stoppers):
         assert m.x[0] == pytest.approx(lo - 2e-3 - 0.02, abs=1e-15)
         assert m.x[-1] == pytest.approx(hi + 2e-3 - 0.02, abs=1e-15)
         assert np.all(np.diff(m.x) > 0) and m.x[0] < 0 < m.x[-1]
+    for m in st.maps:
+        assert m.y[0] == -m.y[-1] < 0, m.axes
