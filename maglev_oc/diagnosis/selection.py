@@ -42,19 +42,23 @@ effects already chosen (bias-compensated least squares on the training blocks,
 4. **Separability.** c must be separable from the base constants and the chosen effects on this
    log: the variance inflation of its coefficients (VIF, from the normal matrix) at most
    ``max_vif``, and no correlation of its estimate with another parameter's above
-   ``max_correlation``. A confounded candidate goes to ``not_separable`` with what it is
-   confounded with; it is never claimed (a constant vertical force, for example, is nearly
-   collinear with a common scale of the vertical magnetic force, which near equilibrium always
-   carries the weight). A force periodic in the position at one of the motor's periods is, in the
-   same way, not separable from a smooth dependence on the position when the logged travel covers
-   fewer than ``min_periods`` of its periods (a sine over 1.1 periods is a bowl: the end effects
-   of pairs_03 of the independent set passed for a 57 mm detent). 1.25: over that travel a sine of
-   any phase shows both a maximum and a minimum at least an eighth of a period inside its ends (an
-   interval of one period holds two of its extrema, which are half a period apart); 1.5 refused the
-   38 mm normal cogging of the closing-the-loop report's twin, logged over 1.3 periods. Nor is
-   it separable from a chosen force of the position alone on one of its axes whose period the
-   travel does not tell from its own (fewer than ``min_beats`` cycles of drift between the two
-   over the travel, :func:`_unresolved`).
+   ``max_correlation``, the correlation at which a one-parameter candidate's variance inflation
+   reaches ``max_vif`` (sqrt(1 - 1/100) = 0.995: for a single parameter, a correlation rho with any
+   other forces a variance inflation of at least 1 / (1 - rho^2), so the two rules then agree; at
+   0.99, a variance inflation of 50, a 2.4 degree commutation offset of a drawn independent log,
+   estimated to 0.15 %, was refused at a variance inflation of 76). A confounded candidate goes to
+   ``not_separable`` with what it is confounded with; it is never claimed (a constant vertical
+   force, for example, is nearly collinear with a common scale of the vertical magnetic force,
+   which near equilibrium always carries the weight). A force periodic in the position at one of
+   the motor's periods is, in the same way, not separable from a smooth dependence on the position
+   when the logged travel covers fewer than ``min_periods`` of its periods (a sine over 1.1 periods
+   is a bowl: the end effects of pairs_03 of the independent set passed for a 57 mm detent). 1.25:
+   over that travel a sine of any phase shows both a maximum and a minimum at least an eighth of a
+   period inside its ends (an interval of one period holds two of its extrema, which are half a
+   period apart); 1.5 refused the 38 mm normal cogging of the closing-the-loop report's twin,
+   logged over 1.3 periods. Nor is it separable from a chosen force of the position alone on one of
+   its axes whose period the travel does not tell from its own (fewer than ``min_beats`` cycles of
+   drift between the two over the travel, :func:`_unresolved`).
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -129,7 +133,7 @@ class SelectionSettings:
     alpha: float = 1e-4
     min_effect: float = 2.25e-3
     max_vif: float = 100.0
-    max_correlation: float = 0.99
+    max_correlation: float = 0.995
     min_periods: float = 1.25
     min_beats: float = 1.0
     parameter_penalty: float = 0.002
