@@ -6,15 +6,18 @@ option a user passes:
   that is silently replaced makes a user's warm start, e.g. from yesterday's fit, do nothing);
 * ``ExperimentDesigner.predict`` predicts C1..C4 alone unless asked for the constant vertical
   force: the default's covariance is the 4 x 4 of the constants, and it is not the constants' block
-  of the prediction with the force (estimating the force as well costs the constants precision).
+  of the prediction with the force (estimating the force as well costs the constants precision);
+* constrained Gauss-Newton calls an iterate converged only with every |c| strictly below the
+  constraint tolerance, as its documentation says: an iterate exactly at it is not converged.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
+import scipy.sparse as sp
 
 from maglev_oc.identification import output_error
+from maglev_oc.identification.constrained_gn import constrained_gauss_newton
 from maglev_oc.identification.design import EFFECT, ExperimentDesigner, multisine_reference
 from maglev_oc.identification.experiments import TWIN_TRUTH
 from maglev_oc.identification.layout import CONSTANT_NAMES
@@ -51,3 +54,30 @@ def test_a_prediction_leaves_the_vertical_force_out_unless_asked(model):
     c2 = CONSTANT_NAMES.index("C2")
     assert both.covariance[c2, c2] > 2.0 * plain.covariance[c2, c2]
     assert np.all(np.isfinite(plain.covariance))
+
+
+def _circle(w):
+    """r = w - (2, 0.5), c = |w|^2 - 1: the closest point of the unit circle to (2, 0.5)."""
+    return (
+        w - np.array([2.0, 0.5]),
+        np.array([w @ w - 1.0]),
+        sp.identity(2, format="csr"),
+        sp.csr_matrix(2 * w),
+    )
+
+
+def test_an_iterate_exactly_at_the_constraint_tolerance_is_not_converged():
+    """With a step tolerance of 1 the constraint alone decides. The third iterate's |c| (the solver
+    run with a tolerance nothing meets) taken as the tolerance itself: the third iterate is not
+    converged (|c| is not below it), the fourth is (the iterates are the same floats in both runs,
+    the solver being deterministic; |c| falls at every iterate from this start)."""
+    w0 = np.array([0.3, 0.2])
+    third = constrained_gauss_newton(
+        _circle, w0, np.ones(2), max_iterations=3, tolerance=1.0, constraint_tolerance=1e-300
+    )
+    assert third.iterations == 3 and third.c[0] != 0.0
+    at = constrained_gauss_newton(
+        _circle, w0, np.ones(2), tolerance=1.0, constraint_tolerance=abs(third.c[0])
+    )
+    assert at.status == "converged" and at.iterations == 4
+    assert abs(at.c[0]) < abs(third.c[0])
