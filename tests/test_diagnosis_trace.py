@@ -116,6 +116,7 @@ def test_binned_means_are_the_samples_means(signals):
     tr = trace(x, du, r, StageParameters(), TS)
     for name, row in (("gap", 0), ("gap_rate", 1), ("position", 2), ("position_rate", 3)):
         b = tr.binned[name]
+        assert b.unit == ("m/s" if "rate" in name else "m")  # SI, as the report labels its axes
         v = x[row]
         lo, hi = np.percentile(v, [1, 99])
         edges = (

@@ -562,6 +562,7 @@ def test_a_periodic_force_over_too_short_a_travel_or_beside_an_unresolved_period
     assert _periodic_verdict() == ("passes", "")
     verdict, reason = _periodic_verdict(periods_seen=1.2)
     assert verdict == "not separable" and "1.2 periods of 19.0 mm" in reason
+    assert "a travel of 24 mm or more separates them" in reason  # min_periods x 19 mm = 23.75 mm
     assert _periodic_verdict(periods_seen=1.3)[0] == "passes"
     verdict, reason = _periodic_verdict(unresolved=[("detent_57mm", 0.5)])
     assert verdict == "not separable" and "detent 57mm" in reason and "0.50 of a cycle" in reason

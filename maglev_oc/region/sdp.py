@@ -189,7 +189,9 @@ class PolygonBuilder:
 
     def _sampled_radii(self, F: np.ndarray, dirs: np.ndarray, halfwidth: float, periodic: bool) -> np.ndarray:
         """Radius (k,) of the intersection of F's slices along each direction, on a sample of
-        gap errors and phases (bisection on the numpy constraints)."""
+        gap errors and phases (bisection on the numpy constraints over [0, 2]: a direction asks for
+        the current limit at about 1, so the limit's ellipse, of diameter 2, bounds the radius;
+        without a current limit F is unbounded towards weaker attraction and 2 is the cap)."""
         es = np.linspace(-halfwidth, halfwidth, 41)
         ps = np.linspace(0, 2 * math.pi, 73)[:-1] if periodic else np.zeros(1)
         E, PH = (a.ravel() for a in np.meshgrid(es, ps))
