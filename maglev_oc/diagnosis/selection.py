@@ -341,10 +341,19 @@ def evidence(design: Design, chosen: Sequence[Candidate], settings: SelectionSet
     that is there acts at speed too. 5 mm/s is 2.5 times the friction term's reversal speed and
     above the Stribeck speeds of ball guides (0.1-5 mm/s).
     """
-    axes = {AXIS_INDEX[c.axis] for c in chosen if c.family == "friction" and c.axis in AXIS_INDEX}
+    axes = _friction_axes(chosen)
     if not axes:
         return None
-    velocity = design.prepared.x[[1, 3]][:, design.holdout]
+    return _fast_enough(design.prepared.x[[1, 3]][:, design.holdout], axes, settings)
+
+
+def _friction_axes(chosen: Sequence[Candidate]) -> set[int]:
+    """The axes (rows of :data:`AXIS_INDEX`) on which guide friction is chosen."""
+    return {AXIS_INDEX[c.axis] for c in chosen if c.family == "friction" and c.axis in AXIS_INDEX}
+
+
+def _fast_enough(velocity: np.ndarray, axes: set[int], settings: SelectionSettings) -> np.ndarray:
+    """(2, n) whether each sample counts: on the ``axes``, not slower than ``slow_speed``."""
     counted = np.ones(velocity.shape, dtype=bool)
     for a in axes:
         counted[a] = np.abs(velocity[a]) >= settings.slow_speed
@@ -459,17 +468,13 @@ class _CrossFit:
 
     def counted(self, chosen: Sequence[Candidate], settings: SelectionSettings) -> list[np.ndarray | None]:
         """Per part, which samples count as evidence (:func:`evidence`), or None (all)."""
-        axes = {AXIS_INDEX[c.axis] for c in chosen if c.family == "friction" and c.axis in AXIS_INDEX}
+        axes = _friction_axes(chosen)
         if not axes:
             return [None] * len(self.samples)
-        out = []
-        for samples in self.samples:
-            velocity = self.design.prepared.x[[1, 3]][:, samples]
-            counted = np.ones(velocity.shape, dtype=bool)
-            for a in axes:
-                counted[a] = np.abs(velocity[a]) >= settings.slow_speed
-            out.append(counted)
-        return out
+        return [
+            _fast_enough(self.design.prepared.x[[1, 3]][:, samples], axes, settings)
+            for samples in self.samples
+        ]
 
 
 @dataclass(frozen=True, eq=False)
