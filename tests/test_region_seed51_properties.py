@@ -22,12 +22,13 @@ import numpy as np
 import pytest
 
 from maglev_oc.control.linear_regulator import paper_linear_regulator
-from maglev_oc.region import study as study_module
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibleSet
+from maglev_oc.region.montecarlo import check_error_states
 from maglev_oc.region.roa import certify_roa
 from maglev_oc.region.robust_certificate import certificate_words
 from maglev_oc.region.sdp import PolygonBuilder
+from maglev_oc.region.study import operating_region_study
 from tests.test_region_study_properties import TINY
 
 SETPOINT = Reference.setpoint(0.02)
@@ -94,13 +95,12 @@ def test_the_worst_start_is_judged_against_the_studys_current_limit(model, monke
     """Every run of the study's Monte Carlo, the worst start included, is judged with the study's
     current limit (the default F's 9 A): recorded at each call; the worst start did run."""
     limits = []
-    real = study_module.check_error_states
 
     def recording(*args, **kwargs):
         limits.append(kwargs.get("current_limit", "default"))
-        return real(*args, **kwargs)
+        return check_error_states(*args, **kwargs)
 
-    monkeypatch.setattr(study_module, "check_error_states", recording)
-    st = study_module.operating_region_study(model, dataclasses.replace(TINY, robust_runs=0))
+    monkeypatch.setattr("maglev_oc.region.study.check_error_states", recording)
+    st = operating_region_study(model, dataclasses.replace(TINY, robust_runs=0))
     assert st.references[0].worst_start  # the run from the boundary point was made
     assert limits and set(limits) == {FeasibleSet(model).current_limit}
