@@ -263,6 +263,7 @@ def test_a_guide_waviness_near_twice_the_slot_pitch_is_named_with_the_misalignme
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_commutation_offset_as_precise_as_the_thrust_constant_is_claimed(tmp_path):
     # A commutation offset of -2.4 degrees drawn at random (tests/independent/draws.py, seed 2000 of
     # bench/diagnose_rigs.py --drawn). The levitation current is nearly constant, so i_d's thrust
@@ -271,6 +272,7 @@ def test_a_commutation_offset_as_precise_as_the_thrust_constant_is_claimed(tmp_p
     # (variance inflation 76). Estimated to 0.15 %, it was refused as confounded with C1 while the
     # correlation limit (0.99) was stricter than the variance inflation's (100); with the two in
     # agreement it is claimed, within 30 % of the truth (the issue's size tolerance; it is within 1 %).
+    # Extended tier (8 s): every run checks the two limits' agreement in test_statistics_properties.
     import numpy as np
 
     from tests.independent import write_log

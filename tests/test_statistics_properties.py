@@ -534,6 +534,16 @@ def test_a_correlation_above_max_correlation_is_confounded(with_friction, measur
     assert high.verdict == "passes" and high.confounded_with == ()
 
 
+def test_the_correlation_limit_is_where_a_one_parameter_candidates_inflation_reaches_max_vif():
+    """For a candidate with one parameter, an estimate correlated by rho with another parameter's
+    forces a variance inflation of at least 1 / (1 - rho^2); the two separability limits agree when
+    that bound at ``max_correlation`` is ``max_vif`` (1 %: 0.995 is sqrt(1 - 1/100) rounded). At 0.99
+    (a bound of 50) a drawn 2.4 degree commutation offset, estimated to 0.15 %, was refused at a
+    variance inflation of 76 (the extended test of tests/test_diagnose_effects.py keeps that log)."""
+    s = SelectionSettings()
+    assert 1.0 / (1.0 - s.max_correlation**2) == pytest.approx(s.max_vif, rel=0.01)
+
+
 def test_a_generic_rival_better_by_more_than_the_margin_takes_the_residual(with_friction, measured):
     """rival_margin: a smooth function of another variable with the same number of coefficients
     that explains more than the candidate plus the margin makes it 'not specific'; within the
