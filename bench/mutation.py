@@ -255,6 +255,16 @@ def _report(
     print(f"{'overall (weighted by mutants)':<30}{int(total_all):>8}{'':>25}{overall:>7.1%}")
 
 
+def _imports(text: str, module: str) -> bool:
+    """Whether a test's source names ``module`` (a.b.c): its dotted name anywhere (an import, a
+    monkeypatch target), or ``from a.b import ..., c, ...`` (one line or parenthesized)."""
+    if module in text:
+        return True
+    parent, leaf = module.rsplit(".", 1)
+    names = rf"(\([^)]*\b{leaf}\b[^)]*\)|[^\n(]*\b{leaf}\b)"
+    return re.search(rf"from {re.escape(parent)} import {names}", text) is not None
+
+
 def _verify(names: list[str], budget: float, since: str | None) -> set[str]:
     """Survivors killed when rerun against the committed sources and quick tests (HEAD).
 
@@ -298,7 +308,7 @@ def _verify(names: list[str], budget: float, since: str | None) -> set[str]:
             print("verify: budget spent")
             break
         # the test files that import the mutated module, else those that import its package
-        files = [str(t.relative_to(WORK)) for t in tests if module in t.read_text()]
+        files = [str(t.relative_to(WORK)) for t in tests if _imports(t.read_text(), module)]
         files = files or [str(t.relative_to(WORK)) for t in tests if package in t.read_text()]
         pytest = [
             sys.executable,
