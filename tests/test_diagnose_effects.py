@@ -202,6 +202,14 @@ def test_a_field_shapes_attraction_is_absorbed_by_the_constants_and_its_thrust_i
     assert abs(err["C4"]) > 0.2  # the attraction's part went into C4 (measured +136 %)
 
 
+def _eleven_scored(generated, name: str):
+    """(diagnosis, score) of the eleven set's log whose scenario is ``name``."""
+    stem = next(s for s, sc in named_set("eleven") if sc.name == name)
+    path, truth = generated("eleven", stem)
+    d = diagnose_path(path)
+    return d, score(stem, truth, d.to_dict()["effects"])
+
+
 @pytest.mark.slow
 def test_a_strong_field_shape_is_found_where_the_stage_pushes_at_small_gaps(generated):
     # The benchmark's large field shape (eleven_10: the field +2.8 % at 14.5 mm, -1.2 % at
@@ -209,10 +217,7 @@ def test_a_strong_field_shape_is_found_where_the_stage_pushes_at_small_gaps(gene
     # 2.25e-3 m/s^2 of one encoder count, and by about 3e-3 in the held-out half-second where it
     # is largest; its Wald statistic is 17 times its threshold (measured), so it is sized where it
     # is largest (SelectionSettings' strong path) and claimed, alone and first.
-    stem = next(s for s, sc in named_set("eleven") if sc.name == "field_shape")
-    path, truth = generated("eleven", stem)
-    d = diagnose_path(path)
-    s = score(stem, truth, d.to_dict()["effects"])
+    d, s = _eleven_scored(generated, "field_shape")
     assert s.true_first and s.no_false_claim, s.claimed
     assert s.size_right, s.notes  # the attraction's change at the smallest gap within 30 %
     j = d.selection.steps[0].judgements["magnet_field_gap_dependence"]
@@ -227,10 +232,7 @@ def test_the_end_effects_are_diagnosed_at_their_scanned_width(generated):
     # attraction lost at +-50 mm). The first selection fits it at the library's 15 mm; the scan
     # finds 18.9 mm (the scanned width nearest 20 mm) and the selection is repeated there, so the
     # result reports that width, and the size within 30 % (the issue's bound; measured 0.3 %).
-    stem = next(s for s, sc in named_set("eleven") if sc.name == "end_effect")
-    path, truth = generated("eleven", stem)
-    d = diagnose_path(path)
-    s = score(stem, truth, d.to_dict()["effects"])
+    d, s = _eleven_scored(generated, "end_effect")
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     (effect,) = d.effects
     assert effect.parameters["width"].value == pytest.approx(END_WIDTHS[5], rel=1e-12)

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.control.linear_regulator import paper_linear_regulator
+from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.feasibility import FeasibleSet
 from maglev_oc.region.montecarlo import check_error_states
@@ -41,7 +42,7 @@ def _radii(model, current_limit):
     builder = PolygonBuilder(FeasibleSet(model, **kwargs), loop)
     F = loop.offset_coefficients(SETPOINT)
     L1, _, L3, _ = model.coefficients([F[0, 0]])[:, 0]
-    lim = builder.feasible.current_limit or 9.0  # the builder's scale: the peak limit when none
+    lim = builder.feasible.current_limit or PEAK_CURRENT_LIMIT  # the builder's scale
     th = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     dirs = np.vstack([np.cos(th), np.sin(th)]) * np.array([[L1 * lim], [abs(L3) * lim]])
     return th, builder._sampled_radii(F, dirs, HALFWIDTH, False)
