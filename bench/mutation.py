@@ -50,7 +50,7 @@ os.environ.update(THREADS)
 
 ROOT = Path(__file__).resolve().parents[1]
 WORK = ROOT / "bench" / "out" / "mutation"
-PACKAGES = ("model", "control", "region", "identification", "diagnosis", "regression")
+PACKAGES = ("model", "control", "region", "identification", "diagnosis", "regression", "data", "estimation")
 DETECTED = ("killed", "timeout", "segfault")
 TIMEOUT_MULTIPLIER = 3.0
 TIMEOUT_CONSTANT = 90.0

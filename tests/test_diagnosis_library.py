@@ -31,7 +31,7 @@ import pytest
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.guides import waviness_candidate
 from maglev_oc.diagnosis.library import candidate_library
-from maglev_oc.diagnosis.magnetics import END_WIDTHS
+from maglev_oc.diagnosis.magnetics import END_WIDTH, END_WIDTHS
 from maglev_oc.diagnosis.pipeline import _prepare
 from maglev_oc.diagnosis.refit import best_end_width
 from maglev_oc.diagnosis.selection import SelectionSettings, fitted_constants
@@ -539,6 +539,31 @@ def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, 
         )
 
 
+def test_end_effects_take_a_share_of_the_models_own_forces_by_one_exponential_profile(plant):
+    """The end effects' columns are exact, not linearized: a loss q at the low end takes the share
+    q exp((x3_low - x3) / w) of each force the model itself computes (StageModel, the candidate's
+    references), the winding's share of the currents' normal force (the model's vertical
+    acceleration at the logged currents minus at none) and of the thrust, the magnets' share of
+    their attraction (at no current, minus gravity); the same profile for every force, so that
+    the log of the share is a line in x3 of slope -1 / w with w the library's width. Rounding only:
+    1e-9 relative."""
+    model = StageModel()
+    cand = _candidate(plant, "end_effects")
+    x, u, du = _states(plant)
+    n = x.shape[1]
+    fn = cand.term.function.map(n)
+    at_u = model.dynamics(x, u)[[1, 3]]
+    at_0 = model.dynamics(x, np.zeros_like(u))[[1, 3]]
+    winding = np.asarray(fn(x, u, du, np.tile([[1.0], [0.0], [0.0], [0.0]], n)))
+    magnets = np.asarray(fn(x, u, du, np.tile([[0.0], [0.0], [1.0], [0.0]], n)))
+    share = -winding[1] / at_u[1]  # the thrust's share lost
+    np.testing.assert_allclose(-winding[0], share * (at_u[0] - at_0[0]), rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(-magnets[0], share * (at_0[0] - model.params.gravity), rtol=1e-9, atol=1e-15)
+    assert np.all(magnets[1] == 0)  # the magnets' attraction is not a thrust
+    slope, _ = np.polyfit(x[2], np.log(share), 1)
+    assert slope == pytest.approx(-1.0 / END_WIDTH, rel=1e-9)
+
+
 def test_every_candidate_can_travel_in_a_stage_file(plant):
     # the stage file accepts effects by name (model.stagefile.EFFECT_NAMES, patterns): every
     # candidate the library builds must be one of them, or a found effect could not be written
@@ -548,6 +573,24 @@ def test_every_candidate_can_travel_in_a_stage_file(plant):
     names = [c.reported_name for c in candidate_library(StageModel(), plant.data)]
     assert len(names) > 10
     assert [n for n in names if not known_effect(n)] == []
+
+
+def test_cogging_is_named_by_its_axis_and_its_period_in_mm(plant):
+    """The cogging candidates are reported as ``cogging_<axis>_<period in whole mm>mm`` (what the
+    stage file and a user's scripts look for: the set's truth files name normal cogging
+    ``cogging_vertical_19mm``), at the motor's periods: the slot pitch t1 and 2 t1 normally, t1 and
+    the pole pitch tau = 3 t1 longitudinally (000 eq. (9))."""
+    params = StageModel().params
+    t1, tau = params.slot_pitch, params.pole_pitch
+    found = {}
+    for cand in candidate_library(StageModel(), plant.data):
+        if cand.family == "periodic":  # the forces periodic in the position alone
+            n = cand.term.n_parameters
+            period = cand.term.physical_parameters(np.full(n, 1e-3), np.eye(n), {})["period"].value
+            found[cand.name] = period
+            assert cand.name == f"cogging_{cand.axis}_{period * 1e3:.0f}mm"
+    assert sorted(found.values()) == pytest.approx(sorted([t1, 2 * t1, t1, tau]), rel=1e-12)
+    assert {n.rsplit("_", 1)[0] for n in found} == {"cogging_vertical", "cogging_horizontal"}
 
 
 SI_UNITS = {"m", "N", "1", "rad", "N s/m", "N/m", "s", "A"}
@@ -568,6 +611,52 @@ def test_every_candidate_says_how_to_separate_it_and_reports_in_si_units(plant):
         assert {e.unit for e in physical.values()} <= SI_UNITS, (cand.name, physical)
         sentence = cand.describe(physical)
         assert "None" not in sentence and "nan" not in sentence and any(ch.isdigit() for ch in sentence)
+
+
+PRINTED_UNITS = {
+    "N": ("N", 1.0),
+    "N s/m": ("N s/m", 1.0),
+    "N/m": ("N/m", 1.0),
+    "m": ("m", 1.0),
+    "mm": ("m", 1e-3),
+    "um": ("m", 1e-6),
+    "rad": ("rad", 1.0),
+    "mrad": ("rad", 1e-3),
+    "degrees": ("rad", math.pi / 180),
+    "s": ("s", 1.0),
+    "ms": ("s", 1e-3),
+    "%": ("1", 1e-2),
+}
+"""A unit a finding's sentence prints -> (the SI unit of the physical parameter, its factor)."""
+PRINTED = re.compile(r"(-?[\d.e+-]+) ± ([\d.e+-]+) (N s/m|N/m|N|mrad|mm|ms|um|m|rad|degrees|s|%)?(?![a-z])")
+
+
+def test_every_number_a_finding_prints_is_one_of_its_parameters_in_the_unit_printed(plant):
+    """Each "value ± error unit" of a candidate's sentence, read back in SI units, is one of its
+    physical parameters and that parameter's standard error, up to the printing's rounding (two
+    significant digits on the value: 5 %; one on the error: a factor 2). A length printed in mm
+    with "m" beside it, a loss in per cent without "%" or a sentence quoting another parameter's
+    number fails. Coefficients drawn at random, of the order the fits return (1e-3)."""
+    constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+    rng = np.random.default_rng(5)
+    for cand in candidate_library(StageModel(), plant.data):
+        n = cand.term.n_parameters
+        physical = cand.term.physical_parameters(rng.uniform(0.5e-3, 2e-3, n), 1e-10 * np.eye(n), constants)
+        sentence = cand.describe(physical)
+        printed = PRINTED.findall(sentence)
+        assert printed, (cand.name, sentence)
+        for value, error, unit in printed:
+            assert unit in PRINTED_UNITS, (cand.name, sentence)
+            si, factor = PRINTED_UNITS[unit]
+            v, e = float(value) * factor, float(error) * factor
+            matches = [
+                p
+                for p in physical.values()
+                if p.unit == si
+                and abs(p.value - v) <= 0.05 * abs(p.value)
+                and 0.5 * p.stderr <= e <= 2 * p.stderr
+            ]
+            assert matches, (cand.name, value, error, unit, sentence)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])

@@ -22,6 +22,7 @@ import dataclasses
 import json
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -160,9 +161,18 @@ def csv_path(tmp_path_factory, twin_log):
 
 
 @pytest.fixture(scope="module")
-def outcome(model, csv_path):
-    """Every method on the CSV, in process (the same numbers the command line computes)."""
-    return identify(load_logs([csv_path]), model, npfsi_eps=EPS)
+def timed_outcome(model, csv_path):
+    """Every method on the CSV, in process (the same numbers the command line computes), and the
+    wall time [s] the call took."""
+    logs = load_logs([csv_path])
+    start = time.perf_counter()
+    out = identify(logs, model, npfsi_eps=EPS)
+    return out, time.perf_counter() - start
+
+
+@pytest.fixture(scope="module")
+def outcome(timed_outcome):
+    return timed_outcome[0]
 
 
 @pytest.fixture(scope="module")
@@ -279,6 +289,17 @@ def test_identify_json_numbers_are_the_results_attributes(outcome, model):
     t = d["timings"]
     parts = ("equation_error", "output_error", "npfsi", "validation")
     assert t["total"] == pytest.approx(sum(t[k] for k in parts), rel=1e-12)
+
+
+def test_each_stage_of_identify_is_timed_within_the_calls_own_wall_time(timed_outcome):
+    """Every stage's wall time is positive, and they add up to no more than the call took (measured
+    around it): a stage timed from the wrong origin, or a clock added instead of subtracted, is
+    off by the machine's uptime."""
+    outcome, wall = timed_outcome
+    t = outcome.to_dict()["timings"]
+    parts = ("equation_error", "output_error", "npfsi", "validation")
+    assert all(0 < t[k] <= wall for k in parts), (t, wall)
+    assert t["total"] <= wall
 
 
 def _same_but_timings(a: dict, b: dict) -> bool:

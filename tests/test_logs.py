@@ -293,6 +293,25 @@ def test_gap_in_time(tmp_path: Path):
     assert "0.006 s" in str(err) and "6 x the median step 0.001 s" in str(err)
 
 
+def test_one_missing_sample_is_a_gap_in_time(tmp_path: Path):
+    """The smallest gap a log can have, one sample dropped (a step of twice the median), is named as a
+    gap at its line, not as irregular sampling: 2 x is beyond GAP_FACTOR (1.5), and a step of 1.4 x
+    with the grid kept (the next stamp on time) is jitter, not a gap."""
+
+    def drop_one(rows):
+        del rows[300]
+
+    err = _bad(tmp_path, _csv_text(edit=drop_one, meta=()))
+    assert f"line {_line(300, ())}" in str(err) and "gap in time" in str(err)
+    assert "2 x the median step 0.001 s" in str(err) and "1 such gap(s)" in str(err)
+
+    def late(rows):
+        rows[300][0] = repr(300e-3 + 0.4e-3)
+
+    err = _bad(tmp_path, _csv_text(edit=late, meta=()))
+    assert "irregular sampling" in str(err) and "gap in time" not in str(err)
+
+
 def test_sample_rate_in_metadata_disagrees(tmp_path: Path):
     err = _bad(tmp_path, _csv_text(meta=("# units: SI", "# sample_rate_hz: 5000")))
     assert "line 2 (metadata 'sample_rate_hz')" in str(err)

@@ -93,6 +93,9 @@ def test_settings_are_validated(model):
         dataclasses.replace(settings, mode="sqp")
     with pytest.raises(TypeError):
         NonlinearMPC(model, horizn=20)
+    # a model that is not one (a stage file's path, say) is named with what it is
+    with pytest.raises(TypeError, match="model must be a StageModel, got str"):
+        NonlinearMPC("stage.json")
     with pytest.raises(RuntimeError, match="reset"):
         NonlinearMPC(model).control(0, np.array([0.02, 0.0]), np.zeros((6, 10)))
 

@@ -20,6 +20,7 @@ from scipy import stats
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.selection import (
     SelectionSettings,
+    _block_z,
     _CrossFit,
     _CrossParts,
     _held_out_blocks,
@@ -297,6 +298,46 @@ def test_the_pooled_z_is_calibrated_and_about_twice_as_powerful_as_the_quarters(
     blocks_held = sum(cut.shape[0] for _, cut in _held_out_blocks(d))
     expected = np.sqrt((blocks_held + d.gram.shape[0]) / blocks_held)
     assert np.mean(pooled) / np.mean(quarter) == pytest.approx(expected, rel=0.2)
+
+
+def test_the_pooled_z_weighs_two_axes_by_their_mean_squares(with_friction):
+    """On both axes each is scaled by its mean square over every sample of r0 first, so the pooled
+    z does not change when one axis's residuals (r0 and r1 alike) are given other units (x 1e-3:
+    metres per second squared to kilometres), and it is the block z of the blocks' log-ratios of
+    those scaled sums, recomputed here from the residuals."""
+    d = with_friction
+    cross = _CrossFit(d)
+    n = int(d.holdout.sum())
+    axes = np.array([0, 1])
+    rng = np.random.default_rng(11)
+    scale = np.array([[3e-2], [2e-3]])  # the two axes' residuals differ in size, as on a log
+    held0 = scale * rng.standard_normal((2, n))
+    held1 = 0.9 * held0 + 0.3 * scale * rng.standard_normal((2, n))
+    p0 = [scale * rng.standard_normal((2, s.size)) for s in cross.samples]
+    p1 = [0.9 * p + 0.3 * scale * rng.standard_normal(p.shape) for p in p0]
+    z = pooled_significance(d, cross, (held0, held1), list(zip(p0, p1, strict=True)), axes)
+    units = np.array([[1e-3], [1.0]])
+    z_units = pooled_significance(
+        d,
+        cross,
+        (units * held0, units * held1),
+        [(units * a, units * b) for a, b in zip(p0, p1, strict=True)],
+        axes,
+    )
+    assert z_units == pytest.approx(z, rel=1e-9)
+    # recomputed: each axis over its mean square of r0 on all the samples, summed per block
+    every0 = np.concatenate([held0, *p0], axis=1)
+    mse0 = np.mean(every0**2, axis=1)
+    e = [np.sum(r**2 / mse0[:, None], axis=0) for r in (held0, held1)]
+    s0 = [e[0][cut].sum(axis=1) for cut in cross.held_cuts]
+    s1 = [e[1][cut].sum(axis=1) for cut in cross.held_cuts]
+    for (a, b), where in zip(zip(p0, p1, strict=True), cross.where, strict=True):
+        size = int(where.max()) + 1
+        s0.append(np.bincount(where, np.sum(a**2 / mse0[:, None], axis=0), size))
+        s1.append(np.bincount(where, np.sum(b**2 / mse0[:, None], axis=0), size))
+    ratios = np.log(np.concatenate(s0) / np.concatenate(s1))[cross.order]
+    assert z == pytest.approx(_block_z(ratios, cross.logs, d.block_seconds), rel=1e-9)
+    assert z > 3  # r1 is 0.9 r0 plus a little noise: a real improvement on both axes
 
 
 def test_the_selection_judges_on_the_pooled_z(with_friction):
