@@ -240,3 +240,15 @@ def test_region_compensates_stage_effects(tmp_path, capsys):
     code = main(["region", "--params", str(path), "--gaps", "20", "--sdp"])
     assert code != 0
     assert "--without-effects" in capsys.readouterr().err
+
+
+def test_the_feasible_set_is_evaluated_at_rest_at_position_zero_unless_told(model):
+    """FeasibleSet.evaluate's defaults are the stage at rest at x3 = 0: with a normal cogging force
+    compensated, leaving the velocities and the position out gives the constraints at (0, 0, 0)
+    exactly, and the position matters (a quarter pole pitch further the cogging force, and with it
+    the margin, differs)."""
+    feasible = FeasibleSet(model, compensation=_compensation(cogging=1.0, friction=0.1))
+    x1, v1, v2 = np.array([0.018, 0.022]), np.array([-2.0, 3.0]), np.array([1.0, -0.5])
+    default = feasible.evaluate(x1, v1, v2)
+    np.testing.assert_array_equal(default, feasible.evaluate(x1, v1, v2, x2=0.0, x3=0.0, x4=0.0))
+    assert not np.allclose(default, feasible.evaluate(x1, v1, v2, x3=POLE / 4), rtol=1e-6, atol=0)

@@ -238,6 +238,33 @@ def test_a_refutations_state_has_the_searched_image_and_the_least_v(model):
         assert z @ P @ z == pytest.approx(level * zeta @ zeta, rel=1e-6)
 
 
+def test_with_a_compensation_along_the_travel_the_state_has_the_image_over_its_four_rows(model):
+    """A compensated force that depends on the position (a normal cogging force) adds x3 to the
+    variables F depends on, so the certifier searches a 4-D image: ``zeta_to_state`` maps a 4-D zeta
+    to the z~ whose image over those four rows is sqrt(c) chol(S) zeta, with V = c |zeta|^2 (the
+    same tolerances as the 3-D case above)."""
+    import casadi as ca
+
+    x = ca.SX.sym("x", 4)
+    cogging = ca.Function("d", [x], [ca.vertcat(0.3 * ca.sin(2 * math.pi * x[2] / 0.05715), 0)])
+    loop = RegulatorLoop()
+    feasible = FeasibleSet(model, compensation=cogging)
+    rows = feasible.loop_variables
+    assert len(rows) == 4 and "x3" in rows
+    P = loop.lyapunov_matrix()
+    cert = LevelCertifier(feasible, loop)
+    M = loop.rows(rows)
+    S = M @ np.linalg.solve(P, M.T)
+    chol = np.linalg.cholesky(0.5 * (S + S.T))
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        zeta = rng.uniform(-0.6, 0.6, 4)
+        level = float(rng.uniform(0.5, 2.0)) * 1e-5
+        z = cert.zeta_to_state(P, level, zeta)
+        np.testing.assert_allclose(M @ z, math.sqrt(level) * chol @ zeta, rtol=1e-6, atol=0)
+        assert z @ P @ z == pytest.approx(level * zeta @ zeta, rel=1e-6)
+
+
 @pytest.mark.parametrize("level", [math.inf, math.nan, 0.0, -1e-6])
 def test_a_level_that_is_not_positive_and_finite_is_refused(model, level):
     """A certificate is for a level c in (0, inf): an infinite level is no set that can be checked
