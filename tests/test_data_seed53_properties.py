@@ -67,6 +67,7 @@ def test_a_currents_metadata_outside_its_choices_is_refused_at_its_line(tmp_path
     LogError that quotes the value, not a crash."""
     err = _refused(_write(tmp_path, _rows(), meta=("# sample_rate_hz: 1000", "# currents: averaged")))
     assert "currents 'averaged'" in str(err) and "expected 'measured' or 'commanded'" in str(err)
+    assert err.line == 2 and "line 2 (metadata 'currents')" in str(err)
 
 
 def test_a_position_in_millimetres_names_the_quantity(tmp_path):

@@ -222,16 +222,22 @@ def test_a_refutations_state_has_the_searched_image_and_the_least_v(model):
     sqrt(c) chol(S) zeta. Its image is that l, and V there is c |zeta|^2 (the least V over
     {M z~ = l} is l' S^-1 l); equalities to 1e-6 relative (solves with P, whose condition number
     is 2.3e9, lose up to 2.3e9 x 1.1e-16 ~ 2.5e-7 relative)."""
+    _check_zeta_to_state(FeasibleSet(model), ("x1", "v1", "v2"), draws=5, seed=3)
+
+
+def _check_zeta_to_state(feasible: FeasibleSet, rows: tuple[str, ...], *, draws: int, seed: int) -> None:
+    """zeta_to_state's state has the image sqrt(c) chol(S) zeta over ``rows`` and V = c |zeta|^2, for
+    random zeta in the unit cube and levels of the order of the certified ones (tolerances: the
+    test above)."""
     loop = RegulatorLoop()
-    feasible = FeasibleSet(model)
     P = loop.lyapunov_matrix()
     cert = LevelCertifier(feasible, loop)
-    M = loop.rows(("x1", "v1", "v2"))
+    M = loop.rows(rows)
     S = M @ np.linalg.solve(P, M.T)
     chol = np.linalg.cholesky(0.5 * (S + S.T))
-    rng = np.random.default_rng(3)
-    for _ in range(5):
-        zeta = rng.uniform(-0.6, 0.6, 3)
+    rng = np.random.default_rng(seed)
+    for _ in range(draws):
+        zeta = rng.uniform(-0.6, 0.6, len(rows))
         level = float(rng.uniform(0.5, 2.0)) * 1e-5
         z = cert.zeta_to_state(P, level, zeta)
         np.testing.assert_allclose(M @ z, math.sqrt(level) * chol @ zeta, rtol=1e-6, atol=0)
@@ -246,23 +252,12 @@ def test_with_a_compensation_along_the_travel_the_state_has_the_image_over_its_f
     import casadi as ca
 
     x = ca.SX.sym("x", 4)
-    cogging = ca.Function("d", [x], [ca.vertcat(0.3 * ca.sin(2 * math.pi * x[2] / 0.05715), 0)])
-    loop = RegulatorLoop()
+    tau = model.params.pole_pitch
+    cogging = ca.Function("d", [x], [ca.vertcat(0.3 * ca.sin(2 * math.pi * x[2] / tau), 0)])
     feasible = FeasibleSet(model, compensation=cogging)
-    rows = feasible.loop_variables
+    rows = tuple(feasible.loop_variables)
     assert len(rows) == 4 and "x3" in rows
-    P = loop.lyapunov_matrix()
-    cert = LevelCertifier(feasible, loop)
-    M = loop.rows(rows)
-    S = M @ np.linalg.solve(P, M.T)
-    chol = np.linalg.cholesky(0.5 * (S + S.T))
-    rng = np.random.default_rng(4)
-    for _ in range(3):
-        zeta = rng.uniform(-0.6, 0.6, 4)
-        level = float(rng.uniform(0.5, 2.0)) * 1e-5
-        z = cert.zeta_to_state(P, level, zeta)
-        np.testing.assert_allclose(M @ z, math.sqrt(level) * chol @ zeta, rtol=1e-6, atol=0)
-        assert z @ P @ z == pytest.approx(level * zeta @ zeta, rel=1e-6)
+    _check_zeta_to_state(feasible, rows, draws=3, seed=4)
 
 
 @pytest.mark.parametrize("level", [math.inf, math.nan, 0.0, -1e-6])
