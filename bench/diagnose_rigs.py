@@ -99,6 +99,24 @@ def variants() -> dict:
         "amplifier_delay": E.AmplifierDynamics(bandwidth=2000.0, delay=6e-4),
         "amplifier_slow": E.AmplifierDynamics(bandwidth=100.0, delay=0.0),
         "tilted_base_negative": E.TiltedBase(angle=-8e-3),
+        # the fringing in other shapes than the library's exponential (EndEffect.profile): flat at
+        # the ends and then falling faster (Gaussian), or none further in than 3 w (cosine); last,
+        # so that the variants above keep their seeds
+        "end_effect_gaussian": E.EndEffect(
+            thrust_loss=0.10, attraction_loss=0.06, width=0.02, profile="gaussian"
+        ),
+        "end_effect_gaussian_narrow": E.EndEffect(
+            thrust_loss=0.12, attraction_loss=0.08, width=0.012, profile="gaussian"
+        ),
+        "end_effect_cosine": E.EndEffect(
+            thrust_loss=0.10, attraction_loss=0.06, width=0.01, profile="cosine"
+        ),
+        "end_effect_cosine_wide": E.EndEffect(
+            thrust_loss=0.08, attraction_loss=0.05, width=0.015, profile="cosine"
+        ),
+        "end_effect_cosine_one_end": E.EndEffect(
+            thrust_loss=0.12, attraction_loss=0.08, width=0.01, end_position_minus=-0.3, profile="cosine"
+        ),
     }
 
 

@@ -4,6 +4,7 @@ sized within 30 %, nothing else claimed (the diagnosis issue's acceptance tests;
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
@@ -236,6 +237,32 @@ def test_the_end_effects_are_diagnosed_at_their_scanned_width(generated):
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     (effect,) = d.effects
     assert effect.parameters["width"].value == pytest.approx(END_WIDTHS[5], rel=1e-12)
+
+
+@pytest.mark.slow
+def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(tmp_path):
+    # The fringing as a raised cosine (the generator's EndEffect.profile = "cosine"): 10 % of the
+    # thrust and 6 % of the attraction lost at +-50 mm, none further in than 20 mm from the
+    # centre, 7.5 % of the thrust at the logged ends (bench/diagnose_rigs.py --variants,
+    # end_effect_cosine). The library's exponential at 15 mm does not fit it: its first judgement
+    # failed (on another seed of the same variant, "not specific": a smooth function of the gap
+    # explained more) and nothing was claimed. Its held-out gain shows the data have it, so its
+    # width is scanned although it was not chosen, and at the scanned width it is found, alone,
+    # and sized within 30 % (the bound).
+    from tests.independent import effects as E
+    from tests.independent import write_log
+    from tests.independent.simulate import Scenario, simulate
+
+    effect = E.EndEffect(thrust_loss=0.10, attraction_loss=0.06, width=0.01, profile="cosine")
+    path, truth_path = write_log(
+        simulate(Scenario(name="end_effect_cosine", seed=817, effects=(effect,))), tmp_path, stem="variant"
+    )
+    d = diagnose_path(path)
+    s = score("variant", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert [e.name for e in d.effects] == ["end_effects"]
+    # a width other than the library's (the scan's narrowest widths fit a fall confined to the ends)
+    assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
 @pytest.mark.slow

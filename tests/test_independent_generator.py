@@ -349,6 +349,39 @@ def test_end_effect_force_law():
     assert 1 - d1[3] / d0[3] == pytest.approx(eff.thrust_loss, rel=0.002)
 
 
+@pytest.mark.parametrize("profile", ["gaussian", "cosine"])
+def test_end_effect_profiles_other_than_the_exponential(profile):
+    # the core's force law against the docstring's formulas, written out here: at a distance u
+    # inside an end, exp(-(u/w)^2) or (1 + cos(pi u / 3w)) / 2 (zero beyond 3w), 1 at the end
+    eff = E.EndEffect(thrust_loss=0.1, attraction_loss=0.06, width=0.01, profile=profile)
+    p0, p1 = _params(), _params(eff)
+
+    def one_end(u: float) -> float:
+        if u <= 0:
+            return 1.0
+        if profile == "gaussian":
+            return math.exp(-((u / 0.01) ** 2))
+        return 0.0 if u >= 0.03 else 0.5 * (1 + math.cos(math.pi * u / 0.03))
+
+    for x in (0.0, 0.015, 0.025, 0.035, 0.045, 0.05, 0.06, -0.041):
+        loss = one_end(0.05 - x) + one_end(x + 0.05)
+        assert eff.loss(x) == pytest.approx(loss, rel=1e-12, abs=1e-15)
+        s = np.array([0.0195, 0, x, 0, 0, 0])
+        d0, _ = core.eval_rhs(p0, s, 1.0, 0.0)
+        d1, _ = core.eval_rhs(p1, s, 1.0, 0.0)
+        assert d1[3] / d0[3] == pytest.approx(1 - eff.thrust_loss * loss, rel=1e-12)
+        d0, _ = core.eval_rhs(p0, s, 0.0, 0.0)
+        d1, _ = core.eval_rhs(p1, s, 0.0, 0.0)
+        assert (G - d1[1]) / (G - d0[1]) == pytest.approx(1 - eff.attraction_loss * loss, rel=1e-12)
+    # the stated loss at the end itself, and nothing at the centre (the cosine exactly nothing)
+    assert eff.loss(0.05) == pytest.approx(1.0, abs=1e-12)
+    assert eff.loss(0.0) < (1e-10 if profile == "gaussian" else 1e-300)
+    # the truth file rebuilds the same effect (scoring.py sizes it from that)
+    assert E.effect_from_truth(eff.truth({})) == eff
+    with pytest.raises(ValueError, match="profile"):
+        E.EndEffect(profile="linear")
+
+
 def test_end_effect_shows_in_the_log(clean_run):
     # less thrust per ampere near the ends: |i_q| is larger there than in the clean run for the
     # same motion; the regression of the relative change on the loss profile is positive

@@ -51,6 +51,17 @@ static void model_L(const Params *p, const double *C, double y, double *L)
     L[3] = C[3] * lam * coth * coth / (kc * kc);
 }
 
+/* The end effects' loss at distance u [m] inside an end, 1 at the end and beyond, for the
+   profiles other than the exponential: 1 = Gaussian exp(-(u/w)^2), 2 = raised cosine over 3 w
+   (none further in than 3 w). */
+static double end_profile(int profile, double u, double w)
+{
+    if (u <= 0.0) return 1.0;
+    if (profile == 1) return exp(-(u / w) * (u / w));
+    if (u >= 3.0 * w) return 0.0;
+    return 0.5 * (1.0 + cos(M_PI * u / (3.0 * w)));
+}
+
 /* LuGre friction force [N] and bristle rate dz [m/s] at velocity v [m/s], deflection z [m]. */
 static double lugre(double Fc, double Fs, double vs, double s0, double s1, double s2, double v, double z,
                     double *dz)
@@ -100,7 +111,9 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     }
     /* end effects: smooth loss of thrust and attraction near the stator ends */
     if (p->ee_on) {
-        double loss = exp((x3 - p->ee_xp) / p->ee_w) + exp((p->ee_xm - x3) / p->ee_w);
+        double loss = p->ee_profile == 0 ? exp((x3 - p->ee_xp) / p->ee_w) + exp((p->ee_xm - x3) / p->ee_w)
+                                         : end_profile(p->ee_profile, p->ee_xp - x3, p->ee_w) +
+                                               end_profile(p->ee_profile, x3 - p->ee_xm, p->ee_w);
         if (loss > 2.0) loss = 2.0;
         etaT = 1.0 - p->ee_fT * loss;
         etaA = 1.0 - p->ee_fA * loss;

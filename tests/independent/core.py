@@ -54,6 +54,7 @@ FIELDS: list[tuple[str, object]] = [
     ("cl_gref", _D),
     # end effects
     ("ee_on", _I), ("ee_fT", _D), ("ee_fA", _D), ("ee_xp", _D), ("ee_xm", _D), ("ee_w", _D),
+    ("ee_profile", _I),
     # guide misalignment
     ("mis_on", _I), ("mis_slope", _D), ("mis_amp", _D), ("mis_len", _D), ("mis_phase", _D),
     # cable carrier, tilted base

@@ -63,14 +63,18 @@ def _cogging(rng: np.random.Generator, cls: type, lo: float, hi: float) -> E.Eff
 def _end_effect(rng: np.random.Generator) -> E.EndEffect:
     # Thrust 5-12 % lost at the logged ends, attraction up to the same fraction (it needs no
     # winding under the mover, so it may fall less), fall-off 8-35 mm; one end may be far away
-    # (a mover whose travel is off the stator's centre).
+    # (a mover whose travel is off the stator's centre). The fringing's profile is any of the
+    # generator's three (exponential, Gaussian, raised cosine), drawn last so that the other
+    # parameters are those the same seed drew before the profiles existed.
     thrust = _log(rng, 0.05, 0.12)
     far = rng.random() < 0.25
+    attraction, width = thrust * rng.uniform(0.0, 1.0), _log(rng, 0.008, 0.035)
     return E.EndEffect(
         thrust_loss=thrust,
-        attraction_loss=thrust * rng.uniform(0.0, 1.0),
-        width=_log(rng, 0.008, 0.035),
+        attraction_loss=attraction,
+        width=width,
         end_position_minus=-0.3 if far else -0.05,
+        profile=E.EndEffect.PROFILES[int(rng.integers(len(E.EndEffect.PROFILES)))],
     )
 
 

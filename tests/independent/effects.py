@@ -364,7 +364,15 @@ class EndEffect(Effect):
     ``L3 i_d``, ``L4 (i_d^2 + i_q^2)``, which need winding under the mover), ``eta_A`` the
     magnets' attraction to the stator iron ``L2``. At ``x3 = x+`` (or ``x-``) the loss is
     ``f_T`` (``f_A``); it falls by 1/e every ``w`` inwards.
+
+    ``profile`` gives the loss other shapes towards each end, for rigs whose fringing is not an
+    exponential: ``"gaussian"``, :math:`e^{-(u/w)^2}` at a distance u inside an end (flat at the
+    end, then falling faster), and ``"cosine"``, a raised cosine :math:`(1 + \\cos(\\pi u / 3w))/2`
+    that is exactly zero further in than 3 w. Both are 1 at the end and beyond (so at most 2 with
+    both ends counted, as the exponential is clipped).
     """
+
+    PROFILES: ClassVar[tuple[str, ...]] = ("exponential", "gaussian", "cosine")
 
     thrust_loss: float = _p(
         0.05, "-", "fraction of thrust (and current-produced normal force) lost at the end positions"
@@ -373,6 +381,7 @@ class EndEffect(Effect):
     end_position_plus: float = _p(0.05, "m", "x3 at which the losses are stated, positive end")
     end_position_minus: float = _p(-0.05, "m", "x3 at which the losses are stated, negative end")
     width: float = _p(0.015, "m", "length over which the loss falls by 1/e inwards")
+    profile: str = "exponential"
 
     kind: ClassVar[str] = "end_effect"
     axis: ClassVar[str] = "both"
@@ -387,36 +396,73 @@ class EndEffect(Effect):
         """12 % thrust, 8 % attraction lost at +-50 mm, width 20 mm."""
         return cls(thrust_loss=0.12, attraction_loss=0.08, width=0.020)
 
+    def __post_init__(self) -> None:
+        if self.profile not in self.PROFILES:
+            raise ValueError(f"EndEffect.profile: {self.profile!r} is not one of {self.PROFILES}")
+
+    def parameters(self) -> dict[str, Any]:
+        """The physical parameters, with ``profile`` only when it is not the exponential (the
+        truth files of the sets' logs stay as they were)."""
+        out: dict[str, Any] = super().parameters()
+        if self.profile != "exponential":
+            out["profile"] = self.profile
+        return out
+
+    def loss(self, x3: float) -> float:
+        """The loss profile l(x3) at position x3 [m], both ends counted, as the core computes it."""
+        if self.profile == "exponential":
+            out = math.exp((x3 - self.end_position_plus) / self.width) + math.exp(
+                (self.end_position_minus - x3) / self.width
+            )
+        else:
+            out = _end_profile(self.profile, self.end_position_plus - x3, self.width) + _end_profile(
+                self.profile, x3 - self.end_position_minus, self.width
+            )
+        return min(out, 2.0)
+
     def apply(self, p: Any, ctx: dict[str, float]) -> None:
         p.ee_on = 1
         p.ee_fT, p.ee_fA = self.thrust_loss, self.attraction_loss
         p.ee_xp, p.ee_xm, p.ee_w = self.end_position_plus, self.end_position_minus, self.width
+        p.ee_profile = self.PROFILES.index(self.profile)
 
     def description(self) -> str:
         return (
             f"End effects: thrust falls by {self.thrust_loss:.0%} and the magnets' attraction by "
             f"{self.attraction_loss:.0%} at x3 = {self.end_position_minus * 1e3:g} / "
-            f"+{self.end_position_plus * 1e3:g} mm, decaying inwards over {self.width * 1e3:g} mm."
+            f"+{self.end_position_plus * 1e3:g} mm, decaying inwards over {self.width * 1e3:g} mm"
+            + ("." if self.profile == "exponential" else f" ({self.profile} profile).")
         )
 
     def equation(self) -> str:
+        ends = {
+            "exponential": "l(x3) = exp((x3 - x+)/w) + exp((x- - x3)/w)",
+            "gaussian": "l(x3) = p(x+ - x3) + p(x3 - x-), p(u) = exp(-(u/w)^2) for u > 0, else 1",
+            "cosine": "l(x3) = p(x+ - x3) + p(x3 - x-), p(u) = (1 + cos(pi u / 3w))/2 for 0 < u < 3w, "
+            "1 for u <= 0, 0 beyond 3w",
+        }[self.profile]
         return (
-            "l(x3) = exp((x3 - x+)/w) + exp((x- - x3)/w); thrust, L3 and L4 terms times (1 - f_T l); "
-            "L2 attraction times (1 - f_A l)"
+            f"{ends}, at most 2; thrust, L3 and L4 terms times (1 - f_T l); L2 attraction times (1 - f_A l)"
         )
 
     def derived(self, ctx: dict[str, float]) -> dict[str, float]:
-        def loss(x: float) -> float:
-            return math.exp((x - self.end_position_plus) / self.width) + math.exp(
-                (self.end_position_minus - x) / self.width
-            )
-
+        loss = self.loss
         return {
             "thrust_loss_at_+40_mm": self.thrust_loss * loss(0.04),
             "thrust_loss_at_-40_mm": self.thrust_loss * loss(-0.04),
             "attraction_loss_at_+40_mm": self.attraction_loss * loss(0.04),
             "thrust_loss_at_0_mm": self.thrust_loss * loss(0.0),
         }
+
+
+def _end_profile(profile: str, u: float, w: float) -> float:
+    """One end's loss at distance u [m] inside it for the non-exponential profiles (core.c's
+    ``end_profile``)."""
+    if u <= 0.0:
+        return 1.0
+    if profile == "gaussian":
+        return math.exp(-((u / w) ** 2))
+    return 0.0 if u >= 3.0 * w else 0.5 * (1.0 + math.cos(math.pi * u / (3.0 * w)))
 
 
 # --------------------------------------------------------------------------------------------

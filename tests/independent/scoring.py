@@ -41,6 +41,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from tests.independent.effects import EndEffect
+
 SIZE_TOLERANCE = 0.30
 """Relative size error allowed (the diagnosis issue: 'size within 30 % of the truth')."""
 
@@ -64,8 +66,8 @@ def _name_for(effect: dict) -> tuple[str, ...]:
 
 
 def _profile(x: float, p: dict) -> float:
-    w = p["width"]
-    return math.exp((x - p["end_position_plus"]) / w) + math.exp((p["end_position_minus"] - x) / w)
+    """The true end effects' loss profile at x [m] (the generator's ``EndEffect.loss``)."""
+    return EndEffect(**p).loss(x)
 
 
 def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
