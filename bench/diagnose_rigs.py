@@ -5,6 +5,7 @@
     python bench/diagnose_rigs.py --variants [end_effect_narrow ...] [--out ...]
     python bench/diagnose_rigs.py --saturation [--out ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
+    python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
 10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
@@ -31,6 +32,10 @@ the sets' small and large sizes may not hold there.
 an effect in none of the named sets, on three seeds each. On a regulated stage the levitation
 current follows the gap, so most of it looks like a smooth dependence on the gap: what matters is
 that nothing else is claimed in its place.
+
+``--drawn-pairs N [--seed S]``: N logs, each with two effects of different kinds drawn at random
+(the kinds from seed S + j, each effect's parameters as ``--drawn`` draws them), on the default
+rig: a rig has more than one effect, in combinations no set chose.
 
 ``--drawn N``: every effect kind N times, each with its parameters drawn at random within the
 ranges real stages show (``tests/independent/draws.py``: sizes log-uniform over at least the sets'
@@ -149,6 +154,9 @@ def main() -> None:
     parser.add_argument(
         "--drawn", type=int, default=0, help="score N random draws of every effect kind instead"
     )
+    parser.add_argument(
+        "--drawn-pairs", type=int, default=0, help="score N random pairs of drawn effects instead"
+    )
     parser.add_argument("--kinds", nargs="*", default=None, help="with --drawn: only these kinds")
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
@@ -177,6 +185,19 @@ def main() -> None:
                 groups.setdefault(kind, []).append(
                     (f"{kind}_{seed}", Scenario(name=kind, seed=seed, effects=(effect,)))
                 )
+    elif args.drawn_pairs:
+        import numpy as np
+
+        from tests.independent.draws import KINDS, draw
+
+        for j in range(args.drawn_pairs):
+            seed = args.seed + j
+            kinds = sorted(np.random.default_rng(seed).choice(len(KINDS), size=2, replace=False))
+            effects = tuple(draw(KINDS[k], np.random.default_rng([seed, int(k)])) for k in kinds)
+            name = "+".join(KINDS[k] for k in kinds)
+            groups.setdefault("drawn_pairs", []).append(
+                (f"pair_{seed}", Scenario(name=name, seed=seed, effects=effects))
+            )
     elif args.saturation:
         for name, effect in saturation().items():
             for seed in SATURATION_SEEDS:

@@ -373,13 +373,15 @@ def _bounded(model, name):
 def test_a_geometry_or_commutation_error_beyond_its_physical_bound_is_refused_on_either_side(
     model, name, parameter, bound
 ):
-    """Each candidate's one parameter, fitted 5 % inside its bound (either sign), is plausible, and
-    5 % beyond it is refused with a reason naming the bound (the library's stated bounds)."""
+    """Each candidate's parameter (the commutation offset's two axes' angles alike), fitted 5 %
+    inside its bound (either sign), is plausible, and 5 % beyond it is refused with a reason naming
+    the bound (the library's stated bounds)."""
     cand = _bounded(model, name)
+    n = len(cand.term.parameter_names)
     for sign in (1.0, -1.0):
         for factor, ok in ((0.95, True), (1.05, False)):
-            q = np.array([sign * factor * bound])
-            p = cand.term.physical_parameters(q, np.array([[1e-14]]), {})
+            q = np.full(n, sign * factor * bound)
+            p = cand.term.physical_parameters(q, 1e-14 * np.eye(n), {})
             assert p[parameter].value == pytest.approx(q[0], rel=1e-12)
             reason = cand.plausible(p)
             assert (reason is None) == ok, (name, sign, factor, reason)
