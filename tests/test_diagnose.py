@@ -80,15 +80,26 @@ def test_no_design_of_a_diagnosis_chooses_its_own_axis_weights(diagnosed):
 # --- effects outside the library ------------------------------------------------------------------
 def test_an_effect_outside_the_library_goes_to_unexplained(generated):
     # A spring force along the track with the spring left out of the library: the diagnosis
-    # must not name the nearest candidate (a constant force, a commutation offset: both explain
-    # part of it) but report a residual that depends on the position.
+    # must not name the nearest candidate that only shares part of its shape (a commutation
+    # offset, whose thrust current also varies along the travel; a periodic force) but report a
+    # residual that depends on the position. The spring's neutral point is at -30 mm, so over the
+    # centred travel it pushes -0.26 N on average: a constant force along the track, which on one
+    # log is what a tilt of the guides makes (the library's constant horizontal force, whose text
+    # says so). It may be claimed, at the spring's mean force (within 30 %, the size
+    # bound), with the rest of the spring unexplained.
     stem = next(s for s, sc in named_set("single") if sc.name == "cable_carrier_large")
-    path, _ = generated("single", stem)
+    path, truth = generated("single", stem)
     d = diagnose_path(path, exclude=["cable_carrier_force"])
-    assert d.effects == []
+    assert {e.name for e in d.effects} <= {"horizontal_guides_not_level"}
     assert [(u.axis, u.depends_on) for u in d.unexplained] == [("horizontal", "position")]
+    spring = truth["effects"][0]["parameters"]
+    x3 = d.data.x[2][d.data.valid]
+    force = -spring["stiffness"] * (x3 - spring["neutral_position"]) + spring["constant_force"]
+    for e in d.effects:
+        assert e.parameters["force"].value == pytest.approx(float(np.mean(force)), rel=0.3)
+        assert "a cable's preload" in e.finding
     u = d.unexplained[0]
-    # 12 N/m over the logged +-35 mm and a 0.26 N offset: about 0.27 N RMS of force
+    # 12 N/m over the logged +-35 mm about its mean: about 0.25 N RMS of force left to explain
     assert 0.15 < u.force_rms < 0.4
     with pytest.raises(ValueError, match="unknown candidate"):
         diagnose_path(path, exclude=["spring"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import casadi as ca
+import numpy as np
 
 from maglev_oc.diagnosis.candidate import (
     Candidate,
@@ -101,11 +102,15 @@ def commutation_candidate(ctx: LibraryContext) -> Candidate:
         return ca.vertcat(c_ref.C3 * l[2] * u[0] * q[1], -c_ref.C1 * l[0] * u[1] * q[0])
 
     def physical(q, cov, c):
-        axes = {}
-        for k, (axis, ref) in enumerate((("horizontal", "C1"), ("vertical", "C3"))):
-            s = ctx.reference_ratio(ref, c)
-            axes[axis] = Estimate(float(q[k] * s), float(math.sqrt(max(cov[k, k], 0.0))) * abs(s), "rad")
-        return {"angle": _pooled(*axes.values()), **{f"angle_{a}": e for a, e in axes.items()}}
+        # each axis's angle: its coefficient times its constant's reference over the fitted value
+        scale = np.array([ctx.reference_ratio("C1", c), ctx.reference_ratio("C3", c)])
+        angles = np.asarray(q[:2], dtype=float) * scale
+        cov_a = np.asarray(cov, dtype=float)[:2, :2] * np.outer(scale, scale)
+        axes = {
+            f"angle_{axis}": Estimate(float(angles[k]), float(math.sqrt(max(cov_a[k, k], 0.0))), "rad")
+            for k, axis in enumerate(("horizontal", "vertical"))
+        }
+        return {"angle": _pooled(angles, cov_a), **axes}
 
     return Candidate(
         AccelerationTerm(
@@ -127,14 +132,19 @@ def commutation_candidate(ctx: LibraryContext) -> Candidate:
     )
 
 
-def _pooled(a: Estimate, b: Estimate) -> Estimate:
-    """The inverse-variance mean of two estimates of one quantity (the more precise alone when
-    either has no variance to weigh)."""
-    va, vb = a.stderr**2, b.stderr**2
-    if not (va > 0 and vb > 0):
-        return a if va <= vb else b
-    w = vb / (va + vb)
-    return Estimate(w * a.value + (1 - w) * b.value, math.sqrt(va * vb / (va + vb)), a.unit)
+def _pooled(values: np.ndarray, cov: np.ndarray) -> Estimate:
+    """The minimum-variance combination of two estimates of one quantity with covariance ``cov``
+    (generalized least squares: weights w and 1 - w, w = (v_b - c_ab) / (v_a + v_b - 2 c_ab)), and
+    its standard error sqrt(g' C g) with g = (w, 1 - w); the more precise one alone when the
+    two cannot be weighed (a zero variance, or a singular difference)."""
+    va, vb, cab = float(cov[0, 0]), float(cov[1, 1]), float(cov[0, 1])
+    den = va + vb - 2.0 * cab
+    if not (va > 0 and vb > 0 and den > 0):
+        k = 0 if va <= vb else 1
+        return Estimate(float(values[k]), float(math.sqrt(max(cov[k, k], 0.0))), "rad")
+    w = float(np.clip((vb - cab) / den, 0.0, 1.0))
+    g = np.array([w, 1.0 - w])
+    return Estimate(float(g @ values), float(math.sqrt(max(g @ cov @ g, 0.0))), "rad")
 
 
 def _commutation_text(e) -> str:

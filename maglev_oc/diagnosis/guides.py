@@ -197,7 +197,8 @@ def level_candidates(ctx: LibraryContext) -> list[Candidate]:
             within("force", MAX_FORCE_SHARE * weight_h, "horizontal force"),
             lambda e: (
                 f"The horizontal guides are tilted by {fmt(e['tilt'], 1e3, 'mrad')}: a constant force "
-                f"of {fmt(e['force'])} along the track."
+                f"of {fmt(e['force'])} along the track (any constant force there looks the same on "
+                "one log: a cable's preload, a spring whose neutral point is beyond the travel)."
             ),
         ),
         Candidate(
