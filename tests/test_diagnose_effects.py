@@ -295,6 +295,33 @@ def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thru
 
 
 @pytest.mark.slow
+def test_end_effects_beside_a_misalignment_are_not_also_a_ripple_over_the_pole_pitch(tmp_path):
+    # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9105): end effects falling as a
+    # Gaussian over 19 mm (7 % of the thrust and of the attraction at +-50 mm) and a 4.9 mrad guide
+    # slope. Beside the two, the exponential end effects' misfit was claimed as a third effect, a
+    # 4.2 % thrust ripple over the 57 mm pole pitch with 0.25 % over the slot pitch, over a travel
+    # of 1.4 pole pitches. Such a ripple is not told from a smooth change of the thrust along the
+    # travel (currents.POLE_RIPPLE_PERIODS): the two true effects, sized within 30 % (the issue's
+    # bound), and nothing else.
+    import numpy as np
+
+    from tests.independent import write_log
+    from tests.independent.draws import KINDS, draw
+    from tests.independent.simulate import Scenario, simulate
+
+    kinds = ("end_effect", "guide_misalignment")
+    effects = tuple(draw(k, np.random.default_rng([9105, KINDS.index(k)])) for k in kinds)
+    assert effects[0].profile == "gaussian" and effects[1].slope == pytest.approx(0.0049, abs=1e-4)
+    path, truth_path = write_log(
+        simulate(Scenario(name="+".join(kinds), seed=9105, effects=effects)), tmp_path, stem="pair"
+    )
+    d = diagnose_path(path)
+    s = score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["end_effects", "guide_misalignment"]
+
+
+@pytest.mark.slow
 def test_a_guide_waviness_near_twice_the_slot_pitch_is_named_with_the_misalignment(tmp_path):
     # A guide tilted the other way (-3 mrad) with 6 um of waviness at 40 mm, a shape the sets never
     # use (bench/diagnose_rigs.py --variants). 40 mm is within 5 % of twice the slot pitch, where

@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis.candidate import LibraryContext
 from maglev_oc.diagnosis.guides import waviness_candidate
 from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.diagnosis.magnetics import END_WIDTH, END_WIDTHS
@@ -430,6 +431,38 @@ def test_thrust_ripple_is_a_fraction_of_the_thrust(plant, phase):
     _close(p["amplitude"], 0.03, 0.03, "slot-pitch ripple")
     _close(p["amplitude_pole_pitch"], 0.01, 0.10, "pole-pitch ripple")
     _phase_close(p["phase"].value, phase, 0.05)
+
+
+def test_a_ripple_mostly_over_the_pole_pitch_is_refused_over_less_than_two_pole_pitches(plant):
+    # Over little more than one pole pitch of travel a thrust varying as a sine of the position is
+    # a smooth change of the thrust along it (the end effects' misfit was claimed so on two random
+    # pairs of the independent generator): a ripple whose pole-pitch part is the larger is refused
+    # there, with the travel that would separate it; one mostly over the slot pitch (slotting,
+    # the generator's 3-5 % against 1 %) is not. Over two pole pitches either is plausible.
+    from maglev_oc.diagnosis.currents import POLE_RIPPLE_PERIODS, _ripple_on_the_slots
+
+    cand = _candidate(plant, "thrust_ripple")
+    lo, hi = LibraryContext(StageModel(), plant.data).position_range
+    tau = StageModel().params.pole_pitch
+    assert hi - lo < POLE_RIPPLE_PERIODS * tau  # the clean log's travel: about 1.3 pole pitches
+
+    def ripple(slot: float, pole: float) -> dict:
+        return {
+            "amplitude": Estimate(slot, 0.001, "1"),
+            "amplitude_pole_pitch": Estimate(pole, 0.003, "1"),
+        }
+
+    reason = cand.plausible(ripple(0.0028, 0.023))
+    assert (
+        reason is not None
+        and "pole pitch" in reason
+        and f"{POLE_RIPPLE_PERIODS * tau * 1e3:.0f} mm" in reason
+    )
+    assert cand.plausible(ripple(0.03, 0.01)) is None
+    assert cand.plausible(ripple(0.02, 0.02)) is None  # equal parts: not mostly over the pole pitch
+    long_travel = _ripple_on_the_slots(POLE_RIPPLE_PERIODS * tau, tau)
+    assert long_travel(ripple(0.0028, 0.023)) is None
+    assert _ripple_on_the_slots(0.99 * POLE_RIPPLE_PERIODS * tau, tau)(ripple(0.0028, 0.023)) is not None
 
 
 @pytest.mark.parametrize("angle", [0.04, -0.04])
