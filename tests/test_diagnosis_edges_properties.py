@@ -28,6 +28,25 @@ def test_with_no_window_in_the_held_out_block_the_output_error_is_undefined_on_b
     assert math.isnan(some["vertical"]) and math.isfinite(some["horizontal"])
 
 
+def test_one_window_in_the_held_out_block_is_enough_for_an_output_error(model):
+    """A held-out block holding exactly one 50 ms window: its error is the RMS over that window of
+    the simulated position against the logged one, recomputed here from ``simulate_windows`` (the
+    moving axis finite, the held one NaN); one window is data, not nothing."""
+    from maglev_oc.validation import simulate_windows
+
+    data = prepare([_synthetic(model, seconds=12.0, position_noise=2e-6)], bandwidth=10.0)
+    h = round(0.05 / data.sample_time)
+    _, hold = data.masks(0.25)
+    first = int(np.flatnonzero(hold)[0])
+    one = np.zeros(data.n, dtype=bool)
+    one[first : first + h + 1] = True  # room for one window and no second start
+    err = output_error(data, one, model)
+    traj, meas = simulate_windows(data, np.array([first]), h, model)
+    rms = np.sqrt(np.mean((traj[[0, 2]] - meas[[0, 2]]).reshape(2, -1) ** 2, axis=1))
+    assert math.isnan(err["vertical"]) and err["horizontal"] == rms[1]
+    assert math.isfinite(err["horizontal"])
+
+
 def test_a_diagnosis_with_only_confounded_candidates_says_none_was_separable():
     """Nothing claimed and nothing unexplained, but candidates that explain part of the residual
     and cannot be told from the constants: the outcome says no effect could be separated (not

@@ -719,6 +719,26 @@ def test_every_number_a_finding_prints_is_one_of_its_parameters_in_the_unit_prin
             assert matches, (cand.name, value, error, unit, sentence)
 
 
+def test_every_length_an_explanation_prints_is_a_motor_period_in_mm(plant):
+    """The periodic candidates' explanations quote their periods in mm: each printed length,
+    read back in metres, is the slot pitch, the pole pitch or twice the slot pitch of the model
+    (to the printing's last digit). A length divided where it should be multiplied, or printed in
+    m beside "mm", fails; at least the ripple's two and the coggings' four are checked."""
+    params = StageModel().params
+    periods = (params.slot_pitch, params.pole_pitch, 2 * params.slot_pitch)
+    checked = 0
+    for cand in candidate_library(StageModel(), plant.data):
+        for value in re.findall(r"(\d+(?:\.\d+)?) mm", cand.term.explanation):
+            digits = len(value.split(".")[1]) if "." in value else 0
+            assert any(abs(float(value) * 1e-3 - p) <= 0.51 * 10.0**-digits * 1e-3 for p in periods), (
+                cand.name,
+                value,
+                cand.term.explanation,
+            )
+            checked += 1
+    assert checked >= 6
+
+
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_a_guide_tilt_larger_than_the_weight_is_a_vertical_track_not_an_error(plant, sign):
     """A fitted constant horizontal force beyond the platform's weight (a wild fit, which the

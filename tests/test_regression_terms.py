@@ -163,3 +163,15 @@ def test_friction_force_and_periodic_terms_in_newtons(model):
         kw = {"period": 0.019, **bad}
         with pytest.raises(InputError):
             periodic_force(params, "vertical", kw.pop("period"), **kw)
+
+
+def test_guide_friction_on_an_axis_it_does_not_have_is_refused_naming_it():
+    """The friction term exists on the two axes only: another name is refused with an error that
+    names the axes it may be and the one given (a message-less error tells a user nothing)."""
+    from maglev_oc.model.parameters import StageParameters
+    from maglev_oc.regression.terms import guide_friction
+
+    with pytest.raises(InputError, match=r"axis must be 'vertical' or 'horizontal', got 'diagonal'"):
+        guide_friction(StageParameters(), "diagonal")
+    for axis in ("vertical", "horizontal"):
+        assert guide_friction(StageParameters(), axis).axis == axis
