@@ -504,6 +504,30 @@ def test_a_commutation_offset_is_found_whatever_thrust_constant_the_fit_starts_f
     assert p["angle"].stderr <= min(h.stderr, v.stderr)
 
 
+def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
+    # The commutation offset's two coefficients (one per axis) move together with one angle, so
+    # its separability is judged along that direction (Candidate.size_direction): that variance
+    # inflation is at most the group's over both coefficients (a canonical correlation of a
+    # line in a plane is at most the plane's largest), and along one coefficient alone it is the
+    # variance inflation of that coefficient judged alone (the other made a nuisance): two paths
+    # through the same Gram matrix, which must agree to rounding.
+    from maglev_oc.diagnosis.selection import _separability
+
+    (cand,) = [c for c in candidate_library(StageModel(), plant.data) if c.name == "commutation_offset"]
+    design = build_design(plant.data, plant.model, terms=[cand.term], fit=plant.train, holdout=plant.hold)
+    fit = fit_subset(design, ["base", cand.name])
+    settings = SelectionSettings()
+    shared, _ = _separability(design, cand, fit, settings)
+    group, _ = _separability(design, dataclasses.replace(cand, size_direction=None), fit, settings)
+    assert 1.0 <= shared <= group * (1 + 1e-9)
+    for k, other in enumerate(cand.term.parameter_names[::-1]):
+        along = dataclasses.replace(cand, size_direction=lambda c, k=k: np.eye(2)[k])
+        alone = dataclasses.replace(cand, size_direction=None, nuisance=(other,))
+        assert _separability(design, along, fit, settings)[0] == pytest.approx(
+            _separability(design, alone, fit, settings)[0], rel=1e-9
+        )
+
+
 def test_an_amplifier_lag_delays_the_forces(plant):
     # the motor sees the currents 0.6 ms late (interpolated). The candidate's time constant is the
     # delay beyond the loop's own zero-order hold (half the generator's 0.2 ms control period), so

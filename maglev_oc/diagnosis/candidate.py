@@ -86,6 +86,13 @@ class Candidate:
     bound this one holds (None: it does not, and the fallback is not judged). An implausible parent
     for another reason is no case for holding that parameter (a pure viscous friction refused for
     "no Coulomb" is not a Coulomb friction with its viscous part held at zero)."""
+    size_direction: Callable[[Mapping[str, float]], np.ndarray] | None = field(default=None, repr=False)
+    """For an effect whose size is one number shared by several coefficients (the commutation
+    angle, one coefficient per axis): the fitted constants -> the direction in the space of its
+    reported coefficients along which that number moves them together. Separability is then
+    judged for that one combination (the effect as a whole), not for each coefficient alone,
+    which a constant may be collinear with while the shared size is well determined. None: every
+    direction (the effect's coefficients are its sizes)."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen

@@ -160,6 +160,14 @@ def commutation_candidate(ctx: LibraryContext) -> Candidate:
         "from the thrust constant",
         within("angle", 0.35, "commutation angle"),
         _commutation_text,
+        # one angle moves both axes' coefficients, each by 1 / its reference ratio: the thrust's
+        # coefficient alone can be collinear with C1 (the loop cancels i_d's steady thrust with a
+        # steady i_q, so the two currents' steady parts move together), while the angle the two
+        # axes share is separable (a random pair of the independent generator: the thrust's
+        # coefficient at a variance inflation of 110, the shared angle at far less)
+        size_direction=lambda c: np.array(
+            [1.0 / ctx.reference_ratio("C1", c), 1.0 / ctx.reference_ratio("C3", c)]
+        ),
     )
 
 

@@ -91,6 +91,7 @@ held-out gain at that step (given the earlier choices).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -841,8 +842,16 @@ def _separability(
     own_cols = design.groups[cand.name][[cand.term.parameter_names.index(q) for q in reported]]
     own = np.isin(idx, own_cols)
     others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0)
+    # the candidate's reported coefficients in the order of the fit's columns, and the directions
+    # judged: each coefficient, or the one combination that is the effect's size
+    order = [int(np.flatnonzero(own_cols == c)[0]) for c in idx[own]]
+    size_direction = getattr(cand, "size_direction", None)  # (a stand-in may have none)
+    direction = np.eye(int(own.sum()))
+    if size_direction is not None:
+        direction = np.asarray(size_direction(fitted_constants(fit)), dtype=float)[order][:, None]
     try:
-        g_cc, g_oo, g_co = g[np.ix_(own, own)], g[np.ix_(others, others)], g[np.ix_(own, others)]
+        g_cc = direction.T @ g[np.ix_(own, own)] @ direction
+        g_oo, g_co = g[np.ix_(others, others)], direction.T @ g[np.ix_(own, others)]
         m = np.linalg.solve(g_cc, g_co @ np.linalg.solve(g_oo, g_co.T))
         rho2 = float(np.clip(np.max(np.real(np.linalg.eigvals(m))), 0.0, 1.0)) if others.any() else 0.0
         vif = 1.0 / max(1.0 - rho2, 1e-300)
@@ -857,6 +866,16 @@ def _separability(
         corr[~np.isfinite(corr) & ~np.isnan(full)] = 1.0
     except np.linalg.LinAlgError:
         return np.inf, ("the base constants",)
+    if size_direction is not None:
+        # the correlation of the combination d'q with each other parameter, from the same inverse
+        live_own = own & live
+        d = direction[live[own], 0]
+        cov_cc = full[np.ix_(live_own, live_own)]
+        sd_d = math.sqrt(max(float(d @ cov_cc @ d), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr_d = (d @ full[live_own]) / (sd_d * sd)
+        corr = np.full(corr.shape, np.nan)
+        corr[np.flatnonzero(own)[0]] = corr_d
     partners = [
         _owner(design, idx[j])
         for j in np.flatnonzero(others)
