@@ -528,6 +528,20 @@ def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
         )
 
 
+def test_the_commutation_size_direction_is_one_angle_on_both_axes(plant):
+    # Candidate.size_direction is the direction in which one angle moves the two coefficients:
+    # coefficients along it, whatever the fitted constants (here C1 twice and C3 half their
+    # references), convert to the same angle on both axes, and to that angle pooled.
+    (cand,) = [c for c in candidate_library(StageModel(), plant.data) if c.name == "commutation_offset"]
+    ref = StageModel().constants
+    for constants in ({"C1": 2 * ref.C1, "C3": 0.5 * ref.C3}, {"C1": ref.C1 / 9, "C3": 1.3 * ref.C3}, {}):
+        d = cand.size_direction(constants)
+        q = 0.03 * d / d[0] * (constants.get("C1", ref.C1) / ref.C1)  # the thrust's angle: 0.03 rad
+        p = cand.term.physical_parameters(q, 1e-12 * np.eye(2), constants)
+        for name in ("angle_horizontal", "angle_vertical", "angle"):
+            assert p[name].value == pytest.approx(0.03, rel=1e-12), (constants, name)
+
+
 def test_an_amplifier_lag_delays_the_forces(plant):
     # the motor sees the currents 0.6 ms late (interpolated). The candidate's time constant is the
     # delay beyond the loop's own zero-order hold (half the generator's 0.2 ms control period), so
