@@ -528,6 +528,26 @@ def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
         )
 
 
+def test_a_spring_along_the_track_needs_a_stiffness_the_log_resolves(plant):
+    # The cable carrier is a constant force plus a spring. Without a resolved stiffness (positive
+    # by 2 standard errors) it is the constant force alone, the tilt's candidate: a tilt beside a
+    # detent of the independent generator was claimed as a "cable carrier" of -0.016 +- 0.01 N/m
+    # neutral at 14 m. A stiffness resolved and in range is plausible; negative, unresolved, or
+    # pushing beyond a quarter of the platform's weight over the travel, it is not.
+    (cand,) = [c for c in candidate_library(StageModel(), plant.data) if c.name == "cable_carrier_force"]
+    constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
+
+    def judged(k: float, sd: float):
+        p = cand.term.physical_parameters(np.array([k, 0.1]), np.diag([sd**2, 1e-6]), constants)
+        return cand.plausible(p)
+
+    assert judged(5.0, 0.06) is None
+    for k, sd in ((-0.016, 0.01), (0.015, 0.01), (-5.0, 0.06)):
+        reason = judged(k, sd)
+        assert reason is not None and "spring along the track" in reason, (k, sd, reason)
+    assert "quarter of the platform's weight" in judged(1e4, 1.0)
+
+
 def test_the_commutation_size_direction_is_one_angle_on_both_axes(plant):
     # Candidate.size_direction is the direction in which one angle moves the two coefficients:
     # coefficients along it, whatever the fitted constants (here C1 twice and C3 half their
