@@ -265,6 +265,24 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
+def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str]):
+    """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these two kinds
+    (each effect drawn from its own generator, seeded by the log's seed and the kind's index),
+    diagnosed with the defaults and scored: (effects, diagnosis, score)."""
+    import numpy as np
+
+    from tests.independent import write_log
+    from tests.independent.draws import KINDS, draw
+    from tests.independent.simulate import Scenario, simulate
+
+    effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
+    path, truth_path = write_log(
+        simulate(Scenario(name="+".join(kinds), seed=seed, effects=effects)), tmp_path, stem="pair"
+    )
+    d = diagnose_path(path)
+    return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+
+
 @pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
@@ -275,20 +293,8 @@ def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thru
     # horizontal held-out error). Each axis's angle as its own product with its constant is linear
     # whatever the references: both effects found, the angle within 30 % (the issue's bound;
     # measured 0.2 %), nothing unexplained.
-    import numpy as np
-
-    from tests.independent import write_log
-    from tests.independent.draws import KINDS, draw
-    from tests.independent.simulate import Scenario, simulate
-
-    kinds = ("normal_cogging", "commutation_offset")
-    effects = tuple(draw(k, np.random.default_rng([9018, KINDS.index(k)])) for k in kinds)
+    effects, d, s = _drawn_pair(tmp_path, 9018, ("normal_cogging", "commutation_offset"))
     assert effects[1].angle == pytest.approx(-0.04383, abs=1e-5)  # the bench's log
-    path, truth_path = write_log(
-        simulate(Scenario(name="+".join(kinds), seed=9018, effects=effects)), tmp_path, stem="pair"
-    )
-    d = diagnose_path(path)
-    s = score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cogging_vertical_19mm", "commutation_offset"]
     assert not d.unexplained, [u.description for u in d.unexplained]
@@ -303,20 +309,8 @@ def test_end_effects_beside_a_misalignment_are_not_also_a_ripple_over_the_pole_p
     # of 1.4 pole pitches. Such a ripple is not told from a smooth change of the thrust along the
     # travel (currents.POLE_RIPPLE_PERIODS): the two true effects, sized within 30 % (the issue's
     # bound), and nothing else.
-    import numpy as np
-
-    from tests.independent import write_log
-    from tests.independent.draws import KINDS, draw
-    from tests.independent.simulate import Scenario, simulate
-
-    kinds = ("end_effect", "guide_misalignment")
-    effects = tuple(draw(k, np.random.default_rng([9105, KINDS.index(k)])) for k in kinds)
+    effects, d, s = _drawn_pair(tmp_path, 9105, ("end_effect", "guide_misalignment"))
     assert effects[0].profile == "gaussian" and effects[1].slope == pytest.approx(0.0049, abs=1e-4)
-    path, truth_path = write_log(
-        simulate(Scenario(name="+".join(kinds), seed=9105, effects=effects)), tmp_path, stem="pair"
-    )
-    d = diagnose_path(path)
-    s = score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["end_effects", "guide_misalignment"]
 
@@ -329,20 +323,8 @@ def test_a_commutation_offset_is_judged_separable_by_the_angle_both_axes_share(t
     # coefficient by coefficient the offset was "not separable", and a guide misalignment took its
     # steady horizontal force (a false claim). Judged along the angle both axes share it is
     # claimed, within 30 % of the truth (the issue's bound; measured 0.1 %), and nothing false.
-    import numpy as np
-
-    from tests.independent import write_log
-    from tests.independent.draws import KINDS, draw
-    from tests.independent.simulate import Scenario, simulate
-
-    kinds = ("end_effect", "commutation_offset")
-    effects = tuple(draw(k, np.random.default_rng([9128, KINDS.index(k)])) for k in kinds)
+    effects, d, s = _drawn_pair(tmp_path, 9128, ("end_effect", "commutation_offset"))
     assert effects[1].angle == pytest.approx(0.0546, abs=1e-4)  # the bench's log
-    path, truth_path = write_log(
-        simulate(Scenario(name="+".join(kinds), seed=9128, effects=effects)), tmp_path, stem="pair"
-    )
-    d = diagnose_path(path)
-    s = score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
     assert s.no_false_claim, s.claimed
     assert "commutation_offset" in [e.name for e in d.effects]
     angle = next(e for e in d.effects if e.name == "commutation_offset").parameters["angle"]

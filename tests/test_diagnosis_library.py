@@ -495,7 +495,7 @@ def test_a_commutation_offset_is_found_whatever_thrust_constant_the_fit_starts_f
     p = _fit(plant, cand, planted)
     for name in ("angle", "angle_horizontal", "angle_vertical"):
         _close(p[name], angle, 0.05, f"{name} [rad]")
-    # the reported angle is the two axes' inverse-variance mean: within both and nearer the more
+    # the reported angle is the two axes' minimum-variance mean: within both and nearer the more
     # precise one
     h, v = p["angle_horizontal"], p["angle_vertical"]
     assert min(h.value, v.value) <= p["angle"].value <= max(h.value, v.value)
@@ -510,12 +510,18 @@ def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
     # inflation is at most the group's over both coefficients (a canonical correlation of a
     # line in a plane is at most the plane's largest), and along one coefficient alone it is the
     # variance inflation of that coefficient judged alone (the other made a nuisance): two paths
-    # through the same Gram matrix, which must agree to rounding.
+    # through the same Gram matrix, which must agree to rounding. Fitted beside a constant
+    # horizontal force, which the thrust's coefficient (i_d, nearly steady) is correlated with and
+    # the attraction's is not, so that which parameters count as partners depends on the direction.
     from maglev_oc.diagnosis.selection import _separability
 
-    (cand,) = [c for c in candidate_library(StageModel(), plant.data) if c.name == "commutation_offset"]
-    design = build_design(plant.data, plant.model, terms=[cand.term], fit=plant.train, holdout=plant.hold)
-    fit = fit_subset(design, ["base", cand.name])
+    library = candidate_library(StageModel(), plant.data)
+    (cand,) = [c for c in library if c.name == "commutation_offset"]
+    (tilt,) = [c for c in library if c.name == "horizontal_guides_not_level"]
+    design = build_design(
+        plant.data, plant.model, terms=[cand.term, tilt.term], fit=plant.train, holdout=plant.hold
+    )
+    fit = fit_subset(design, ["base", cand.name, tilt.name])
     settings = SelectionSettings()
     shared, _ = _separability(design, cand, fit, settings)
     group, _ = _separability(design, dataclasses.replace(cand, size_direction=None), fit, settings)
@@ -526,6 +532,16 @@ def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
         assert _separability(design, along, fit, settings)[0] == pytest.approx(
             _separability(design, alone, fit, settings)[0], rel=1e-9
         )
+        # and the same partners (parameters correlated beyond the limit) at every limit: the
+        # direction's correlations are that coefficient's, not the other one's too
+        partners = []
+        for limit in np.linspace(0.05, 0.95, 19):
+            at = dataclasses.replace(settings, max_correlation=float(limit))
+            partners.append(_separability(design, along, fit, at)[1])
+            assert partners[-1] == _separability(design, alone, fit, at)[1], (k, limit)
+        # the thrust's coefficient has the tilt as a partner at some limit, and loses it at a higher one
+        if k == 0:
+            assert ("horizontal_guides_not_level",) in partners and () in partners, partners
 
 
 def test_a_spring_along_the_track_needs_a_stiffness_the_log_resolves(plant):

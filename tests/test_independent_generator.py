@@ -328,6 +328,18 @@ def test_cogging_shows_in_the_log(clean_run):
         assert np.corrcoef(du, shape)[0, 1] > 0.5, eff.kind
 
 
+def _check_end_effect_forces(eff, p0, p1, x: float, loss: float) -> None:
+    """At x3 = x the core's thrust per ampere (i_q = 1 A) is the clean plant's times 1 - f_T loss
+    and its magnets' attraction (no current) the clean plant's times 1 - f_A loss, to rounding."""
+    s = np.array([0.0195, 0, x, 0, 0, 0])
+    d0, _ = core.eval_rhs(p0, s, 1.0, 0.0)
+    d1, _ = core.eval_rhs(p1, s, 1.0, 0.0)
+    assert d1[3] / d0[3] == pytest.approx(1 - eff.thrust_loss * loss, rel=1e-12)
+    d0, _ = core.eval_rhs(p0, s, 0.0, 0.0)
+    d1, _ = core.eval_rhs(p1, s, 0.0, 0.0)
+    assert (G - d1[1]) / (G - d0[1]) == pytest.approx(1 - eff.attraction_loss * loss, rel=1e-12)
+
+
 def test_end_effect_force_law():
     eff = E.EndEffect.small()
     p0, p1 = _params(), _params(eff)
@@ -335,13 +347,7 @@ def test_end_effect_force_law():
         loss = math.exp((x - eff.end_position_plus) / eff.width) + math.exp(
             (eff.end_position_minus - x) / eff.width
         )
-        s = np.array([0.0195, 0, x, 0, 0, 0])
-        d0, _ = core.eval_rhs(p0, s, 1.0, 0.0)
-        d1, _ = core.eval_rhs(p1, s, 1.0, 0.0)
-        assert d1[3] / d0[3] == pytest.approx(1 - eff.thrust_loss * loss, rel=1e-12)
-        d0, _ = core.eval_rhs(p0, s, 0.0, 0.0)
-        d1, _ = core.eval_rhs(p1, s, 0.0, 0.0)
-        assert (G - d1[1]) / (G - d0[1]) == pytest.approx(1 - eff.attraction_loss * loss, rel=1e-12)
+        _check_end_effect_forces(eff, p0, p1, x, loss)
     # at the stated end position the loss is the stated fraction (plus the other end's
     # exp(-100 mm / 15 mm) = 0.13 %)
     d0, _ = core.eval_rhs(p0, np.array([0.0195, 0, 0.05, 0, 0, 0]), 1.0, 0.0)
@@ -366,13 +372,7 @@ def test_end_effect_profiles_other_than_the_exponential(profile):
     for x in (0.0, 0.015, 0.025, 0.035, 0.045, 0.05, 0.06, -0.041):
         loss = one_end(0.05 - x) + one_end(x + 0.05)
         assert eff.loss(x) == pytest.approx(loss, rel=1e-12, abs=1e-15)
-        s = np.array([0.0195, 0, x, 0, 0, 0])
-        d0, _ = core.eval_rhs(p0, s, 1.0, 0.0)
-        d1, _ = core.eval_rhs(p1, s, 1.0, 0.0)
-        assert d1[3] / d0[3] == pytest.approx(1 - eff.thrust_loss * loss, rel=1e-12)
-        d0, _ = core.eval_rhs(p0, s, 0.0, 0.0)
-        d1, _ = core.eval_rhs(p1, s, 0.0, 0.0)
-        assert (G - d1[1]) / (G - d0[1]) == pytest.approx(1 - eff.attraction_loss * loss, rel=1e-12)
+        _check_end_effect_forces(eff, p0, p1, x, loss)
     # the stated loss at the end itself, and nothing at the centre (the cosine exactly nothing)
     assert eff.loss(0.05) == pytest.approx(1.0, abs=1e-12)
     assert eff.loss(0.0) < (1e-10 if profile == "gaussian" else 1e-300)

@@ -121,9 +121,10 @@ def commutation_candidate(ctx: LibraryContext) -> Candidate:
     fit's C1 came out at 1.6 against the true 14.5 on a drawn log of the independent generator,
     and one angle for both axes, fitted around it, was 2.3 times the truth while a smooth function
     of the gap took the horizontal residual (bench/README, *Random pairs*). The angle reported is
-    the two axes' inverse-variance mean, in practice the thrust's: i_d is large and steady, i_q
-    small, and the vertical axis carries its other effects' misfit (beside sticking vertical
-    guides the attraction gave -1.1 +- 0.3 degrees where the thrust gave the true 2.0 +- 0.002).
+    the two axes' minimum-variance (generalized least-squares) mean, in practice the thrust's:
+    i_d is large and steady, i_q small, and the vertical axis carries its other effects' misfit
+    (beside sticking vertical guides the attraction gave -1.1 +- 0.3 degrees where the thrust
+    gave the true 2.0 +- 0.002).
     Both are reported, and the text says when they differ by more than 3 standard errors."""
     c_ref = ctx.references
 

@@ -842,12 +842,12 @@ def _separability(
     own_cols = design.groups[cand.name][[cand.term.parameter_names.index(q) for q in reported]]
     own = np.isin(idx, own_cols)
     others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0)
-    # the candidate's reported coefficients in the order of the fit's columns, and the directions
-    # judged: each coefficient, or the one combination that is the effect's size
-    order = [int(np.flatnonzero(own_cols == c)[0]) for c in idx[own]]
+    # the directions judged: each reported coefficient, or the one combination that is the
+    # effect's size (in the order of the fit's columns)
     size_direction = getattr(cand, "size_direction", None)  # (a stand-in may have none)
     direction = np.eye(int(own.sum()))
     if size_direction is not None:
+        order = [int(np.flatnonzero(own_cols == c)[0]) for c in idx[own]]
         direction = np.asarray(size_direction(fitted_constants(fit)), dtype=float)[order][:, None]
     try:
         g_cc = direction.T @ g[np.ix_(own, own)] @ direction
@@ -866,20 +866,18 @@ def _separability(
         corr[~np.isfinite(corr) & ~np.isnan(full)] = 1.0
     except np.linalg.LinAlgError:
         return np.inf, ("the base constants",)
+    own_corr = corr[own]  # each judged direction's correlation with every parameter
     if size_direction is not None:
-        # the correlation of the combination d'q with each other parameter, from the same inverse
+        # the combination d'q's, from the same inverse
         live_own = own & live
         d = direction[live[own], 0]
-        cov_cc = full[np.ix_(live_own, live_own)]
-        sd_d = math.sqrt(max(float(d @ cov_cc @ d), 0.0))
+        sd_d = math.sqrt(max(float(d @ full[np.ix_(live_own, live_own)] @ d), 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
-            corr_d = (d @ full[live_own]) / (sd_d * sd)
-        corr = np.full(corr.shape, np.nan)
-        corr[np.flatnonzero(own)[0]] = corr_d
+            own_corr = ((d @ full[live_own]) / (sd_d * sd))[None, :]
     partners = [
         _owner(design, idx[j])
         for j in np.flatnonzero(others)
-        if np.nanmax(np.abs(corr[own, j]), initial=0.0) > settings.max_correlation
+        if np.nanmax(np.abs(own_corr[:, j]), initial=0.0) > settings.max_correlation
     ]
     return vif, tuple(dict.fromkeys(partners))
 
