@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from maglev_oc.errors import InputError
 from maglev_oc.identification.eps_trend import (
     FLAT_BAND,
     RIG_FRICTION,
+    EpsTrend,
     eps_trend_study,
     stationary_point,
 )
@@ -254,3 +256,15 @@ def test_the_papers_damping_gives_the_papers_c1_change(model, study):
     )
     st = eps_trend_study(model, friction=(stronger, fv))
     assert st.friction_table3.change["C1"] == pytest.approx(study.papers_table3.change["C1"], rel=0.25)
+
+
+def test_a_trend_needs_two_eps_and_two_are_enough():
+    """A trend is a change between eps values: two are the fewest that give one (the papers'
+    tables have three, a user's run may have two), one is refused. With two, the relative change
+    is the second estimate over the first less one, and the slope that over the eps step (1e-12:
+    one division each)."""
+    two = EpsTrend("run", ("C1",), (0.01, 0.03), np.array([[14.0, 15.0]]))
+    assert two.change["C1"] == pytest.approx(1.0 / 14.0, rel=1e-12)
+    assert two.slope["C1"] == pytest.approx(1.0 / 14.0 / 0.02, rel=1e-12)
+    with pytest.raises(InputError, match="2\\+ eps"):
+        EpsTrend("run", ("C1",), (0.01,), np.array([[14.0]]))

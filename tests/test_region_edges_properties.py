@@ -170,3 +170,15 @@ def test_the_robust_ladder_refines_between_the_certified_rung_and_the_one_above(
     assert [a.level / c_nom for a in res.attempts] == pytest.approx([1.0, 0.6, 0.8, 0.7, 0.75])
     assert res.status == "certified" and res.level == pytest.approx(0.75 * c_nom)
     assert res.level_upper == pytest.approx(0.8 * c_nom)
+
+
+def test_the_linearized_loop_cannot_be_changed_after_it_is_built(model, linear):
+    """The loop's matrices are shared by every certificate built on it (the Jacobian boxes, the
+    Lyapunov matrix, the stoppers' levels): each is read-only, so a caller that writes into one
+    gets an error instead of silently changing the loop under a certificate already issued."""
+    loop = LinearizedLoop(model, linear, Reference.setpoint(0.02))
+    for name in ("A", "output", "z_eq", "u_eq", "K_h", "K_v"):
+        value = getattr(loop, name)
+        assert not value.flags.writeable, name
+        with pytest.raises(ValueError, match="read-only"):
+            value.flat[0] = 1.0

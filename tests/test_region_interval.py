@@ -209,6 +209,9 @@ def test_division_by_an_interval_holding_zero_is_unbounded(expr):
         (lambda x, y: ca.constpow(y, 0.5), ((0.0, 1.0), (-1.0, 4.0)), (0.0, 2.0)),
         (lambda x, y: ca.constpow(y, -0.5), ((0.0, 1.0), (0.0, 4.0)), (0.5, np.inf)),
         (lambda x, y: ca.constpow(y, 1.5), ((0.0, 1.0), (-1.0, 4.0)), (0.0, 8.0)),
+        # a box that reaches the domain at its one point 0 only: the value there, 0
+        (lambda x, y: ca.constpow(y, 0.5), ((0.0, 1.0), (-1.0, 0.0)), (0.0, 0.0)),
+        (lambda x, y: ca.constpow(y, 1.5), ((0.0, 1.0), (-1.0, 0.0)), (0.0, 0.0)),
         # nothing defined on the box: the enclosure is the function's whole range (never a
         # finite wrong answer)
         (lambda x, y: ca.constpow(y, 0.5), ((0.0, 1.0), (-2.0, -1.0)), (0.0, np.inf)),
@@ -221,6 +224,8 @@ def test_division_by_an_interval_holding_zero_is_unbounded(expr):
         "sqrt-cut",
         "rsqrt-at-zero",
         "pow-1.5-cut",
+        "sqrt-at-zero-only",
+        "pow-1.5-at-zero-only",
         "sqrt-undefined",
         "log-undefined",
     ],
