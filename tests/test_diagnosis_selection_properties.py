@@ -9,6 +9,7 @@ Numpy and one design, about a second."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -42,11 +43,11 @@ def cogged_design(model):
     return design, lib
 
 
-def _judge(design, cand, settings, beside=()):
+def _judge(design, cand, settings, beside=(), friction_axes=frozenset()):
     base = fit_subset(design, ["base"])
     r0 = residuals(design, base)[:, design.holdout]
     mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-    return judge(design, cand, ["base"], base, r0, mse0, settings, beside=beside)
+    return judge(design, cand, ["base"], base, r0, mse0, settings, beside=beside, friction_axes=friction_axes)
 
 
 def test_a_period_the_travel_cannot_tell_from_a_chosen_ones_is_confounded_with_it(cogged, model):
@@ -80,3 +81,68 @@ def test_a_candidate_the_held_out_test_rejects_has_no_wald_statistic(cogged):
         j = _judge(design, lib["guide_friction_horizontal"], SelectionSettings(alpha=alpha))
         assert j.verdict == "not significant"
         assert j.wald == 0.0 and j.wald < j.wald_threshold
+
+
+def test_evidence_on_an_axis_with_claimed_friction_does_not_count_for_a_candidate_it_hides(cogged):
+    """A candidate not judged beside friction (the amplifiers' lag: there the regulator makes its
+    column the friction's viscous part) is judged on the axes without claimed friction. The
+    planted cogging, so marked, passes beside friction on the vertical axis (which it does not act
+    on) and is not separable, confounded with the horizontal friction, beside friction on its own
+    axis; unmarked, it passes beside either (what the friction axes are must not matter then).
+    A marked candidate the data do not show (friction on the frictionless log) stays not
+    significant beside friction on its axis: only one that passes is confounded with it."""
+    design, lib = cogged
+    settings = SelectionSettings()
+    vertical, horizontal = frozenset({0}), frozenset({1})  # rows of regression.base.AXES
+    cog = lib["cogging_horizontal_19mm"]
+    hidden = dataclasses.replace(cog, beside_friction=False)
+    assert _judge(design, hidden, settings, friction_axes=vertical).verdict == "passes"
+    j = _judge(design, hidden, settings, friction_axes=horizontal)
+    assert j.verdict == "not separable", j.reason
+    assert j.confounded_with == ("guide_friction_horizontal",)
+    assert "viscous" in j.reason and "horizontal" in j.reason
+    for axes in (vertical, horizontal):
+        assert _judge(design, cog, settings, friction_axes=axes).verdict == "passes"
+    # one the data do not show keeps its verdict: only what passes is confounded with the friction
+    viscous = dataclasses.replace(lib["guide_friction_horizontal"], beside_friction=False)
+    j = _judge(design, viscous, settings, friction_axes=horizontal)
+    assert j.verdict == "not significant" and j.confounded_with == (), j.reason
+
+
+def _spring_selection(model, force):
+    """select() over the cable carrier alone (a line in the position, ``rival_span``) on the
+    horizontal sweep with ``force`` [m/s^2] of the true position planted, the position's generic
+    probe in the design as its rival."""
+    from maglev_oc.diagnosis.library import candidate_library
+    from maglev_oc.diagnosis.probes import smooth_probes
+    from maglev_oc.diagnosis.selection import select
+
+    data = prepare([_log(model, friction=0.0, force=force)], bandwidth=10.0)
+    cable = next(c for c in candidate_library(model, data) if c.name == "cable_carrier_force")
+    probe = smooth_probes(data)[("horizontal", "position")]
+    fit, hold = data.masks(0.25)
+    design = build_design(data, model, estimate=("C1",), terms=(cable.term, probe), fit=fit, holdout=hold)
+    return select(design, [cable], SelectionSettings(), {("horizontal", "position"): probe.name})
+
+
+def test_a_line_in_the_position_is_a_spring_only_when_nothing_further_depends_on_the_position(model):
+    """A spring along the track spans the first two terms of the position's generic rival, so the
+    equal-size comparison cannot refuse it: what is left must. A planted spring force (a line,
+    0.02 m/s^2 at the ends of the sweep) is claimed; the same line plus a bow of the position
+    (a Legendre P2 of the same size) is not: refused as not specific, on the position, though the
+    line alone would pass the forward step."""
+    travel = 0.5 * float(np.ptp(_log(model, friction=0.0).x[2]))
+    centre = float(np.mean(_log(model, friction=0.0).x[2][[0, -1]]))
+
+    def line(x3):
+        return -0.02 * (x3 - centre) / travel
+
+    def bowed(x3):
+        s = (x3 - centre) / travel
+        return line(x3) + 0.02 * (1.5 * s**2 - 0.5)
+
+    assert _spring_selection(model, line).selected == ["cable_carrier_force"]
+    sel = _spring_selection(model, bowed)
+    assert sel.selected == []
+    j = sel.last["cable_carrier_force"]
+    assert j.verdict == "not specific" and "position" in j.reason, j.reason

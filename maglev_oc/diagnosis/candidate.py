@@ -93,6 +93,19 @@ class Candidate:
     judged for that one combination (the effect as a whole), not for each coefficient alone,
     which a constant may be collinear with while the shared size is well determined. None: every
     direction (the effect's coefficients are its sizes)."""
+    beside_friction: bool = True
+    """Whether its evidence on an axis with claimed guide friction counts. False for an effect of
+    the currents' rates (the amplifiers' lag): the regulator makes an axis's current rate follow
+    its velocity and acceleration, so there the term's column is a viscous force and a change of
+    mass, which the friction's viscous part (free, or held at zero after a negative fit) trades
+    with. It is then judged on the other axes alone; with none left, not separable from the
+    friction if it passes on its own axes."""
+    rival_span: tuple[str, str, int] | None = None
+    """(axis, variable, k) when its columns span the same functions as the first k of that generic
+    rival's (:mod:`~maglev_oc.diagnosis.probes`; a spring along the track is a line in the
+    position): the equal-complexity comparison is then a tie by construction, so its shape is
+    judged by what is left: the rival's further orders must not explain significantly more of the
+    held-out data beside it."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen
