@@ -283,6 +283,15 @@ def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str]):
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
 
 
+def _drawn_pair_finds(tmp_path, seed: int, kinds: tuple[str, str], names: list[str], sized: bool = True):
+    """:func:`_drawn_pair`, asserting the true effect first, no false claim, every size within 30 %
+    (the issue's bound) when ``sized``, and exactly the effects ``names``: (effects, diagnosis)."""
+    effects, d, s = _drawn_pair(tmp_path, seed, kinds)
+    assert s.true_first and s.no_false_claim and (s.size_right or not sized), (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == sorted(names)
+    return effects, d
+
+
 @pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
@@ -393,10 +402,12 @@ def test_no_amplifier_lag_is_claimed_from_the_vertical_axis_of_sticking_guides(t
     # currents' rate follow the velocity: its column there is the friction's viscous part, and
     # with it the Coulomb force came out 1.10 N (32 % off). Judged on the horizontal axis alone it
     # is not significant: the two true effects, each within 30 % (the issue's bound), and no lag.
-    effects, d, s = _drawn_pair(tmp_path, 9122, ("guide_friction_vertical", "cable_carrier"))
+    kinds, names = (
+        ("guide_friction_vertical", "cable_carrier"),
+        ["cable_carrier_force", "guide_friction_vertical"],
+    )
+    effects, d = _drawn_pair_finds(tmp_path, 9122, kinds, names)
     assert effects[0].coulomb_force == pytest.approx(0.8313, abs=1e-4)  # the bench's log
-    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_friction_vertical"]
     lag = d.selection.last["current_amplifier_lag"]
     assert "judged on the horizontal axis alone" in lag.reason, lag.reason
 
@@ -410,10 +421,9 @@ def test_the_force_of_a_guide_waviness_is_not_claimed_as_a_cable_carrier(tmp_pat
     # rival of its size. Beside it the next orders of a smooth function of the position explained
     # about half as much again (z 2.4), so the spring is refused and the residual is reported as
     # unexplained, depending on the position; the two true effects are found.
-    effects, d, s = _drawn_pair(tmp_path, 9201, ("guide_friction_vertical", "guide_misalignment"))
+    kinds = ("guide_friction_vertical", "guide_misalignment")
+    effects, d = _drawn_pair_finds(tmp_path, 9201, kinds, list(kinds), sized=False)
     assert effects[1].waviness_amplitude == pytest.approx(3.69e-6, abs=1e-8)  # the bench's log
-    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["guide_friction_vertical", "guide_misalignment"]
     cable = d.selection.last["cable_carrier_force"]
     assert cable.verdict == "not specific" and "position" in cable.reason, cable.reason
     assert any("horizontal position" in u.description for u in d.unexplained), d.unexplained
@@ -426,7 +436,39 @@ def test_a_spring_beside_end_effects_is_judged_once_they_are_chosen(tmp_path):
     # first, when the end effects are still in the residual: judged by the position's further
     # orders there it was refused, and a constant force (a tilt) took its place. Judged once the
     # end effects are chosen beside it, both true effects are claimed and nothing else.
-    effects, d, s = _drawn_pair(tmp_path, 9020, ("end_effect", "cable_carrier"))
+    names = ["cable_carrier_force", "end_effects"]
+    effects, _ = _drawn_pair_finds(tmp_path, 9020, ("end_effect", "cable_carrier"), names, sized=False)
     assert effects[0].profile == "cosine" and effects[1].stiffness == pytest.approx(5.242, abs=1e-3)
-    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "end_effects"]
+
+
+@pytest.mark.slow
+def test_friction_whose_viscous_part_turns_negative_beside_a_later_effect_keeps_it_at_zero(tmp_path):
+    # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9304): vertical guide friction
+    # (1.43 N Coulomb, 2.81 N breakaway) and a guide misalignment. The friction was chosen with its
+    # viscous part free; once the misalignment was chosen beside it, the free viscous coefficient
+    # came out at -17 N s/m, and the backward pass dropped the friction as implausible, leaving a
+    # 1.6 N vertical residual "unexplained". As in the forward steps, its form with the viscous
+    # part held at zero now stands in: both effects found, each within 30 % (the issue's bound).
+    kinds = ("guide_friction_vertical", "guide_misalignment")
+    effects, d = _drawn_pair_finds(tmp_path, 9304, kinds, list(kinds))
+    assert effects[0].coulomb_force == pytest.approx(1.4284, abs=1e-4)  # the bench's log
+    assert (
+        d.effects[[e.name for e in d.effects].index("guide_friction_vertical")].parameters["viscous"].value
+        == 0
+    )
+
+
+@pytest.mark.slow
+def test_a_spring_beside_a_wavy_guide_is_judged_after_the_waviness_is_searched_for(tmp_path):
+    # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9332): a guide misalignment with
+    # waviness and a cable carrier. Judged by the position's further orders in the first
+    # selection, the spring was refused (the waviness, not yet found, was 9.8 % of the remainder
+    # at z 5.0); the residual then hid the waviness from its search and a false 38 mm vertical
+    # cogging was claimed. Judged in the kept selection, beside the waviness found meanwhile, all
+    # three are found (the waviness with the misalignment) and nothing else.
+    names = ["cable_carrier_force", "guide_misalignment"]
+    effects, _ = _drawn_pair_finds(
+        tmp_path, 9332, ("guide_misalignment", "cable_carrier"), names, sized=False
+    )
+    assert effects[1].stiffness == pytest.approx(10.521, abs=1e-3)  # the bench's log
+    assert effects[0].waviness_amplitude == pytest.approx(5.99e-6, abs=1e-8)

@@ -211,6 +211,8 @@ def _diagnose(
     if periods:
         del design, sel  # the design with the waviness replaces this one: never hold both
         library, design, sel = clock("waviness", _with_waviness, session, fitted, library, periods)
+    elif _has_lines(library, sel):
+        sel = clock("selection", session.select, design, library)  # the line-like shapes judged last
     sel, not_sep, rejected, unexplained = clock(
         "unexplained", _separate_unexplained, session, fitted, library, design, sel, tr
     )
@@ -338,7 +340,10 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     (a third time when that was the second)."""
     held: dict[str, float] = {}
     end_width, scanned = END_WIDTH, False
-    relaxed = dataclasses.replace(session.settings, max_axis_loss=math.inf)
+    # a line-like shape is judged by what is left beside it only in the kept selection, once the
+    # residual has been searched for guide waviness (SelectionSettings.judge_lines)
+    early = dataclasses.replace(session.settings, judge_lines=False)
+    relaxed = dataclasses.replace(early, max_axis_loss=math.inf)
     for attempt in range(3):
         full = candidate_library(fitted, session.data, held, end_width=end_width)
         effects = list(dict.fromkeys(c.reported_name for c in full))
@@ -347,7 +352,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             raise InputError(f"exclude: unknown candidate(s) {unknown}; the library has {effects}")
         library = [c for c in full if c.reported_name not in exclude]  # an effect with its fallback
         design = session.library_design(fitted, library)
-        sel = session.select(design, library, relaxed if attempt == 0 else None)
+        sel = session.select(design, library, relaxed if attempt == 0 else early)
         if not sel.selected:
             found = None if scanned or attempt == 2 else _end_width(session, fitted, library, sel, held)
             scanned = scanned or found is not None
@@ -382,7 +387,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
-                sel = session.select(design, library)
+                sel = session.select(design, library, early)
             break
         fitted, held = converged, shares
         if attempt > 0 and not rewidthed:
@@ -493,6 +498,13 @@ def _waviness_periods(
         }
     )
     return tr, periods
+
+
+def _has_lines(library: Sequence[Candidate], sel: Selection) -> bool:
+    """Whether ``sel`` chose a shape that a generic rival's first terms span (``rival_span``: a
+    spring along the track), which the kept selection judges by the rival's further orders."""
+    by_name = {c.name: c for c in library}
+    return any(by_name[n].rival_span is not None for n in sel.selected)
 
 
 def _periods_on_axis(library: Sequence[Candidate], sel: Selection) -> dict[str, list[float]]:

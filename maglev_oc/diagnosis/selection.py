@@ -93,7 +93,9 @@ A candidate whose columns span the first terms of a generic rival (``Candidate.r
 spring along the track is a line in the position) ties with the equal-size rival by construction;
 once everything else is chosen, the rival's further orders beside it must not explain
 significantly more (:func:`_beyond_its_span`), or it is the first terms of some other smooth
-dependence on that variable and goes to ``unexplained`` with the rest.
+dependence on that variable and goes to ``unexplained`` with the rest. ``judge_lines`` False
+leaves that test out: the diagnosis's first selections, whose residual is searched for guide
+waviness afterwards (a waviness still to be found is part of the remainder), run without it.
 
 Among the candidates that pass all six the one with the largest gain is added; the selection
 stops when none passes or after ``max_effects``. The confidence of each choice is the share of
@@ -158,6 +160,7 @@ class SelectionSettings:
     bootstrap: int = 30
     seed: int = 0
     cross_parts: int = 3
+    judge_lines: bool = True
 
 
 @dataclass(frozen=True)
@@ -1098,7 +1101,7 @@ def select(
     # and judge the shapes that a generic rival's first terms span by that rival's further orders,
     # given every other effect chosen (:func:`_beyond_its_span`), even when it is the only one
     def lines() -> bool:
-        return any(getattr(by_name[n], "rival_span", None) for n in current[1:])
+        return settings.judge_lines and any(getattr(by_name[n], "rival_span", None) for n in current[1:])
 
     dropped = True
     while dropped and len(current) > (1 if lines() else 2):
@@ -1116,28 +1119,53 @@ def select(
             chosen = [by_name[n] for n in others[1:]]
             cross = _CrossParts.of(fold, others, chosen, settings) if fold else None
             friction = frozenset(_friction_axes(chosen))
-            j = judge(
-                design,
-                by_name[name],
-                others,
-                fit_o,
-                r0,
-                mse0,
-                settings,
-                rivals,
-                counted,
-                beside,
-                cross,
-                friction_axes=friction,
+
+            context = (others, fit_o, r0, mse0, settings, rivals, counted, beside, cross)
+            j = _judged_again(design, by_name[name], context, friction, probes)
+            if j.verdict == "passes":
+                continue
+            # the same effect with a parameter at its bound, where the free fit now lies beyond it
+            # (as in the forward steps): swapped in when it passes
+            stand_in = next(
+                (
+                    jf
+                    for c in by_name.values()
+                    if c.fallback_for == name and _stands_in(c, {name: j})
+                    for jf in (_judged_again(design, c, context, friction, probes),)
+                    if jf.verdict == "passes"
+                ),
+                None,
             )
-            j = _beyond_its_span(design, j, by_name[name], others, counted, probes, settings)
-            if j.verdict != "passes":
+            last[name] = dataclasses.replace(j, reason=f"dropped after the later choices: {j.reason}")
+            if stand_in is None:
                 current = others
                 steps = [st for st in steps if st.chosen != name]
-                last[name] = dataclasses.replace(j, reason=f"dropped after the later choices: {j.reason}")
-                dropped = True
-                break
+            else:
+                current = [stand_in.name if c == name else c for c in current]
+                last[stand_in.name] = _accepted(stand_in)
+                steps = [
+                    dataclasses.replace(
+                        st,
+                        chosen=stand_in.name,
+                        judgements={**st.judgements, stand_in.name: last[stand_in.name]},
+                    )
+                    if st.chosen == name
+                    else st
+                    for st in steps
+                ]
+            dropped = True
+            break
     return Selection(steps, base, fit_subset(design, current), last)
+
+
+def _judged_again(
+    design: Design, cand: Candidate, context: tuple, friction: frozenset[int], probes
+) -> Judgement:
+    """The backward pass's judgement of ``cand`` beside the others (``context``: judge's arguments
+    from ``current`` to ``cross``), its further orders included (:func:`_beyond_its_span`)."""
+    others, counted, settings = context[0], context[6], context[4]
+    j = judge(design, cand, *context, friction_axes=friction)
+    return _beyond_its_span(design, j, cand, others, counted, probes, settings)
 
 
 def _form_of_effect(
@@ -1214,6 +1242,8 @@ def _beyond_its_span(
     not ``min_z``: it refuses a claim rather than making one (the random pair that showed it:
     0.9-1.3 % more at z 1.9-2.4 beside a spring of 2-3 % gain, both of a guide waviness's force)."""
     if j.verdict != "passes" or getattr(cand, "rival_span", None) is None or not probes:
+        return j
+    if not settings.judge_lines:
         return j
     axis, var, k = cand.rival_span
     further = tuple(_rival_columns(design, probes, axis, var)[k:])
