@@ -17,7 +17,11 @@ Steps:
    magnetic references are the base fit's constants; when the selected effects move the
    constants by more than 2 %, or change the balance of the two axes' residuals (the weights of
    the joint fit) by more than half, the library is rebuilt on the refitted ones and the selection
-   repeated once;
+   repeated once; periodicities of its residual that no motor-period force explains become guide
+   waviness candidates and the selection is repeated with them. A shape that a generic rival's
+   first terms span (a spring along the track) is judged by the rival's further orders only in
+   this kept selection (``SelectionSettings.judge_lines``; repeated for it when no waviness was
+   found);
 6. :mod:`~maglev_oc.diagnosis.unexplained` — structure left in the residual that no candidate
    explains, reported with its signature;
 7. the refit of base constants and effects together; held-out error per axis before and after,
