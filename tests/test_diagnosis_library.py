@@ -954,3 +954,38 @@ def test_the_end_effects_width_is_chosen_on_the_training_samples(plant, monkeypa
     assert len(seen) == 1
     fit, holdout = seen[0]
     assert np.array_equal(fit, plant.train) and np.array_equal(holdout, plant.hold)
+
+
+@pytest.mark.parametrize(
+    ("values", "cov"),
+    [
+        ((0.04, 0.05), ((1e-6, 0.0), (0.0, 4e-6))),  # independent: inverse-variance weights 4/5, 1/5
+        ((0.04, 0.02), ((1e-6, 1.5e-6), (1.5e-6, 9e-6))),  # correlated: GLS weights 1.2, -0.2 -> clipped
+        ((-0.01, 0.03), ((2e-6, 5e-7), (5e-7, 2e-6))),  # equal variances: the plain mean
+    ],
+)
+def test_the_commutation_angle_is_the_minimum_variance_mean_of_the_two_axes(values, cov):
+    """The angle both axes report is their generalized least-squares mean: weights (w, 1 - w) with
+    w = (v_b - c_ab) / (v_a + v_b - 2 c_ab), clipped to [0, 1] (a mean outside the two estimates
+    is not reported), and its standard error sqrt(g' C g); recomputed here by numpy's solve of the
+    GLS normal equation 1' C^-1 1 m = 1' C^-1 x (1e-12: round-off)."""
+    from maglev_oc.diagnosis.currents import _pooled
+
+    x, c = np.array(values), np.array(cov)
+    one = np.ones(2)
+    w = float((one @ np.linalg.solve(c, one * [1, 0])) / (one @ np.linalg.solve(c, one)))
+    w = min(max(w, 0.0), 1.0)
+    g = np.array([w, 1 - w])
+    got = _pooled(x, c)
+    assert got.value == pytest.approx(float(g @ x), rel=1e-12, abs=1e-15)
+    assert got.stderr == pytest.approx(math.sqrt(float(g @ c @ g)), rel=1e-12)
+    assert min(x) - 1e-15 <= got.value <= max(x) + 1e-15
+
+
+def test_only_the_effects_of_the_currents_rates_are_judged_off_the_axes_with_friction(plant):
+    """``Candidate.beside_friction``: the amplifiers' lag (its column on an axis with friction is
+    that friction's viscous part, test_diagnosis_selection_properties) and nothing else; every other
+    candidate's evidence counts on every axis it acts on."""
+    lib = candidate_library(plant.model, plant.data)
+    hidden = {c.name for c in lib if not c.beside_friction}
+    assert hidden == {c.name for c in lib if c.variable == "current_rate"} == {"current_amplifier_lag"}

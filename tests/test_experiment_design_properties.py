@@ -77,3 +77,14 @@ def test_a_failed_run_is_named_and_its_states_not_judged():
     assert flags == ["run failed: diverged"]
     both = FS.violations(_reference(gap=0.05), _run(success=False))
     assert len(both) == 2 and both[0].startswith("gap set-point") and both[1].startswith("run failed")
+
+
+@pytest.mark.parametrize(("compiler", "backend"), [(None, "vm"), ("/usr/bin/cc", "c")])
+def test_the_design_twin_runs_on_a_backend_the_closed_loop_accepts(monkeypatch, compiler, backend):
+    """Generated C where a compiler is found, else CasADi's virtual machine: either way a name
+    ``ClosedLoop`` accepts (a machine without gcc must still design experiments)."""
+    import maglev_oc.identification.design as design
+    from maglev_oc.sim.engine import ClosedLoop
+
+    monkeypatch.setattr(design, "c_compiler", lambda: compiler)
+    assert design._twin_backend() == backend and backend in ClosedLoop.BACKENDS

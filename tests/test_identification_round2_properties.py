@@ -357,3 +357,18 @@ def test_the_output_error_counts_its_residuals(oe_fits):
         assert fit.n_residuals == 2 * fit.n_samples, (fit.n_residuals, fit.n_samples)
         dof = fit.chi_square / fit.reduced_chi_square
         assert 0 < fit.n_residuals - dof < 0.1 * fit.n_residuals
+
+
+def test_the_starting_nodes_reproduce_the_logged_gap_through_the_offset(model, two_logs):
+    """The output map is y = (x1 - gap_offset, x3): the node states a fit starts from carry the
+    logged gap plus the starting offset, so that at every node the model's output is the reading
+    (1e-15 m: one addition and one subtraction of the same number). With a 0.2 mm offset a node
+    state on the wrong side of the reading would be 0.4 mm off."""
+    ms = MultipleShooting(two_logs[0], model, estimate=(*CONSTANT_NAMES, "gap_offset"))
+    start = {k: getattr(TWIN_TRUTH, k) for k in CONSTANT_NAMES} | {"gap_offset": 2e-4}
+    theta, nodes, _ = ms._start(start)
+    offset = theta[ms.layout.names.index("gap_offset")]
+    assert offset == pytest.approx(2e-4, rel=1e-12)
+    for sg, S in zip(ms.segments, nodes, strict=True):
+        assert np.max(np.abs((S[0] - offset) - sg.nodes0[0])) < 1e-15
+        assert np.array_equal(S[1:], sg.nodes0[1:])

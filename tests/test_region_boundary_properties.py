@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from maglev_oc.errors import InputError
 from maglev_oc.region.boundary import BoundaryMinimizer
 from maglev_oc.region.closed_loop import Reference, RegulatorLoop
 from maglev_oc.region.ellipsoid import ellipsoid_image
@@ -101,3 +102,16 @@ def test_a_ray_that_meets_no_boundary_is_skipped_not_the_end_of_the_search(searc
         assert left[k] == pytest.approx(level, rel=1e-9)
         left.pop(k)
     assert res.level == pytest.approx(res.levels.min(), rel=0) and res.level >= full.level * (1 - 1e-9)
+
+
+def test_without_a_current_limit_only_the_margin_has_a_boundary_to_search(model, search):
+    """With the current limit switched off the headroom is no constraint (h = 1 everywhere), so
+    the minimizer searches the margin R >= 0 alone and refuses the headroom, naming the constraints
+    it has; with the limit on it has both."""
+    _, P = search
+    loop = RegulatorLoop()
+    free = BoundaryMinimizer(FeasibleSet(model, current_limit=None), loop)
+    with pytest.raises(InputError, match=r"constraint must be one of \['margin'\], got 'headroom'"):
+        free.minimize(REF, P, "headroom", starts=1)
+    limited, _ = search
+    assert set(limited._solvers) == set(NONLINEAR)

@@ -58,3 +58,22 @@ def test_the_reported_box_count_is_the_work_of_every_pass():
     assert len(seen) >= 3, seen  # the set-point, the refuted level, at least one bisection step
     assert all(b > 0 for b in seen)
     assert res.boxes == sum(seen), (res.boxes, seen)
+
+
+def test_the_constraint_functions_are_the_margin_and_each_pairs_current_headroom():
+    """The branch and bound's constraints h(l) (``_h_of_l``: the margin R and limit^2 - |i|^2 of
+    each motor pair) against the controller's own transformation evaluated here: at random
+    points of l = (gap error, v) around three gaps, each entry equals its definition (1e-9
+    relative: the same arithmetic in another order), so a wrong sign or a swapped pair in one
+    headroom is seen wherever that pair carries current."""
+    from tests.test_microstepper_region import TRANSFORM
+
+    region = MicrostepperRegion(PLATFORM)
+    limit2 = region.current_limit**2
+    rng = np.random.default_rng(5)
+    for gap0 in (0.015, 0.021, 0.03):
+        for ell in rng.normal(0.0, [1e-3, 2.0, 2.0, 2.0], (20, 4)):
+            h = np.asarray(region._h_of_l(ell, gap0)).ravel()
+            u, R = (np.asarray(a).ravel() for a in TRANSFORM(gap0 + ell[0], ell[1:4]))
+            want = [float(R[0]), limit2 - u[0] ** 2 - u[1] ** 2, limit2 - u[2] ** 2 - u[3] ** 2]
+            assert h == pytest.approx(want, rel=1e-9, abs=1e-9), (gap0, ell)

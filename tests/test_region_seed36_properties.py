@@ -51,6 +51,10 @@ def test_the_microstepper_level_reports_its_total_wall_time(limit, setpoint, sta
     assert 0 < res.timings["total"] <= wall
     assert "timings [s]: total " in res.report()
     check_result(res)  # success a Python bool (it was numpy's np.True_ when certified), the rest
+    if status == "infeasible_setpoint":
+        # the set-point itself (V = 0) breaks a constraint: nothing is certified, and the least
+        # refuted level is 0, a number a table can print (not a missing value)
+        assert res.level == 0.0 and res.refuted_level == 0.0 and res.binding
 
 
 def test_a_lyapunov_matrix_is_refused_with_what_is_wrong_with_it():
