@@ -1020,21 +1020,9 @@ def select(
         chosen = [by_name[n] for n in current[1:]]
         cross = _CrossParts.of(fold, current, chosen, settings) if fold else None
         friction = frozenset(_friction_axes(chosen))
+        context = (current, cur_fit, r0, mse0, settings, rivals, counted, beside, cross)
         judged = {
-            n: judge(
-                design,
-                by_name[n],
-                current,
-                cur_fit,
-                r0,
-                mse0,
-                settings,
-                rivals,
-                counted,
-                beside,
-                cross,
-                friction_axes=friction,
-            )
+            n: judge(design, by_name[n], *context, friction_axes=friction)
             for n in pool
             if by_name[n].fallback_for is None
         }
@@ -1043,20 +1031,7 @@ def select(
         implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
         judged.update(
             {
-                n: judge(
-                    design,
-                    by_name[n],
-                    current,
-                    cur_fit,
-                    r0,
-                    mse0,
-                    settings,
-                    rivals,
-                    counted,
-                    beside,
-                    cross,
-                    friction_axes=friction,
-                )
+                n: judge(design, by_name[n], *context, friction_axes=friction)
                 for n in pool
                 if _stands_in(by_name[n], implausible)
             }
@@ -1163,7 +1138,7 @@ def _judged_again(
 ) -> Judgement:
     """The backward pass's judgement of ``cand`` beside the others (``context``: judge's arguments
     from ``current`` to ``cross``), its further orders included (:func:`_beyond_its_span`)."""
-    others, counted, settings = context[0], context[6], context[4]
+    others, _, _, _, settings, _, counted, _, _ = context
     j = judge(design, cand, *context, friction_axes=friction)
     return _beyond_its_span(design, j, cand, others, counted, probes, settings)
 
@@ -1241,9 +1216,11 @@ def _beyond_its_span(
     beside it was refused, and a constant force took its place). The bar is the strong path's z,
     not ``min_z``: it refuses a claim rather than making one (the random pair that showed it:
     0.9-1.3 % more at z 1.9-2.4 beside a spring of 2-3 % gain, both of a guide waviness's force)."""
-    if j.verdict != "passes" or getattr(cand, "rival_span", None) is None or not probes:
-        return j
-    if not settings.judge_lines:
+    if (
+        j.verdict != "passes"
+        or getattr(cand, "rival_span", None) is None
+        or not (probes and settings.judge_lines)
+    ):
         return j
     axis, var, k = cand.rival_span
     further = tuple(_rival_columns(design, probes, axis, var)[k:])
