@@ -221,3 +221,34 @@ def test_eps_trend_study_records_and_reports_its_total_wall_time(model, monkeypa
     assert len(steps) == 4 and total >= sum(steps)
     assert f"total {total:.2f}" in study.report()
     assert study.to_dict()["timings"]["total"] == total
+
+
+def test_eps_trend_study_status_is_one_of_its_documented_three(model, monkeypatch):
+    """``EpsTrendStudy.status`` (its docstring): ``"reproduced"`` when with friction every constant
+    moves the papers' way, ``"partly_reproduced"`` naming the rest otherwise, ``"failed"`` when a run
+    did not complete; reports and the workflow compare it to these exact strings. The friction runs
+    are replaced by the papers' own trends (every direction matches), then by the same with C4 of
+    Table III reversed, then by a run that did not complete."""
+    p3 = eps_trend._papers("table3", CONSTANT_NAMES)
+    p2 = eps_trend._papers("table2", eps_trend.TABLE2_NAMES)
+    d3 = _trend(CONSTANT_NAMES, (-0.04, 0.002, -0.02, -0.3))
+    log = SimpleNamespace(sample_time=1e-3)
+    reversed_c4 = p3.values.copy()
+    reversed_c4[CONSTANT_NAMES.index("C4")] = reversed_c4[CONSTANT_NAMES.index("C4")][::-1]
+    cases = {
+        "reproduced": ((p3, p2, log, True), None),
+        "partly_reproduced": ((eps_trend.EpsTrend("t", CONSTANT_NAMES, p3.eps, reversed_c4), p2, log, True), "C4"),
+        "failed": ((p3, p2, log, False), None),
+    }
+    monkeypatch.setattr(eps_trend, "_npfsi_trend", lambda *a, **k: (d3, True))
+    monkeypatch.setattr(eps_trend, "_limit", lambda *a: d3)
+    for status, (friction_run, named) in cases.items():
+
+        def runs(model, friction, run=friction_run, **kw):
+            return (d3, p2, log, True) if friction == (None, None) else run
+
+        monkeypatch.setattr(eps_trend, "_twin_trend", runs)
+        study = eps_trend.eps_trend_study(model)
+        assert study.status == status
+        assert study.success == (status != "failed")
+        assert named is None or f"Table III {named}" in study.message

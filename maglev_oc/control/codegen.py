@@ -157,7 +157,7 @@ def generate_c(controller: NonlinearMPC, directory: str | os.PathLike) -> Genera
 
 
 def _patch_hpipm(source: Path) -> None:
-    text = source.read_text()
+    text = source.read_text(encoding="utf-8")
     for needle in (_HPIPM_ARG_COPY, _HPIPM_EARLY_RETURN):
         if text.count(needle) != 1:
             raise RuntimeError(
@@ -166,7 +166,7 @@ def _patch_hpipm(source: Path) -> None:
                 "maglev_oc.control.codegen must be revisited"
             )
     text = text.replace(_HPIPM_ARG_COPY, _HPIPM_ARG_DEFAULT).replace(_HPIPM_EARLY_RETURN, "")
-    source.write_text(text)
+    source.write_text(text, encoding="utf-8")
 
 
 def _compiler() -> str:

@@ -257,22 +257,24 @@ def export_controller(
             cg.add(f)
         cg.generate(str(work) + os.sep)
         source = _qp_failures_checked_after_the_call(
-            (work / f"{prefix}_generated.c").read_text(), controller.name
+            (work / f"{prefix}_generated.c").read_text(encoding="utf-8"), controller.name
         )
-        (work / f"{prefix}_generated.c").write_text(source)
+        (work / f"{prefix}_generated.c").write_text(source, encoding="utf-8")
         _check_self_contained(source, controller.name)
         fields = _fields(prefix, controller, nc, nd, sizes, n_prepared, sources)
         split = nmpc is not None
         if dual:
             fields.update(_dual_fields(prefix, nmpc, budget))
             for name, text in dual_qp_sources(prefix, nmpc.grid.horizon).items():
-                (work / name).write_text(text)
-        (work / f"{prefix}.h").write_text(_header(fields, split, dual))
-        (work / f"{prefix}.c").write_text(_source(fields, split, dual))
-        (work / f"sfun_{prefix}.c").write_text(_SFUNCTION.format(**fields, **_sfunction_parts(fields, split)))
-        (work / "build_sfunction.m").write_text(_BUILD_SFUNCTION.format(**fields))
+                (work / name).write_text(text, encoding="utf-8")
+        (work / f"{prefix}.h").write_text(_header(fields, split, dual), encoding="utf-8")
+        (work / f"{prefix}.c").write_text(_source(fields, split, dual), encoding="utf-8")
+        (work / f"sfun_{prefix}.c").write_text(
+            _SFUNCTION.format(**fields, **_sfunction_parts(fields, split)), encoding="utf-8"
+        )
+        (work / "build_sfunction.m").write_text(_BUILD_SFUNCTION.format(**fields), encoding="utf-8")
         (work / "README.md").write_text(
-            _readme(prefix, controller, nc, sizes, split, solver, budget, sources)
+            _readme(prefix, controller, nc, sizes, split, solver, budget, sources), encoding="utf-8"
         )
         manifest = {
             "format": "maglev_oc.export",
@@ -290,7 +292,7 @@ def export_controller(
             "qp_solver": solver,
             "qp_iterations": budget,
         }
-        (work / "export.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        (work / "export.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
         replace_directory(work, out)
     memory = 8 * (2 * nc + nd + sizes["w"] + sizes["iw"] + sizes["arg"] + sizes["res"])
     if split:  # prepared, r_prepared, r_next, is_prepared, late_preparations

@@ -128,10 +128,10 @@ class CompiledNMPC:
         the closed loop's generated C finds it by name."""
         self._directory = tempfile.TemporaryDirectory(prefix="maglev_oc_nmpc_")
         code = generate_c(controller, self._directory.name)
-        text = code.source.read_text()
+        text = code.source.read_text(encoding="utf-8")
         name = f"{FUNCTION_NAME}_{hashlib.sha1(text.encode()).hexdigest()[:12]}"
         # every symbol of the library starts with the function's name (its _work, _incref, ...)
-        code.source.write_text(text.replace(FUNCTION_NAME, name))
+        code.source.write_text(text.replace(FUNCTION_NAME, name), encoding="utf-8")
         code = dataclasses.replace(code, function=name)
         kept = Path(cache) / f"nmpc_rti_{cache_key(text, cflags)[:24]}.so" if cache is not None else None
         if kept is not None and kept.is_file():

@@ -141,14 +141,14 @@ def _compile(step: ca.Function, name: str, driver: str, flags: tuple[str, ...], 
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     cg.add(fn)
     cg.generate(str(Path(tmp.name)) + "/")
-    text = src.read_text() + driver
+    text = src.read_text(encoding="utf-8") + driver
     kept = Path(cache) / "native" / f"{name}_{cache_key(text, flags)[:24]}.so" if cache is not None else None
     if kept is not None and kept.is_file():
         try:
             return tmp, ctypes.CDLL(str(kept)), True
         except OSError:  # not a library this machine loads: compiled again below, and replaced
             pass
-    src.write_text(text)
+    src.write_text(text, encoding="utf-8")
     lib = Path(tmp.name) / f"{name}.so"
     done = subprocess.run(
         [cc, *flags, "-shared", "-fPIC", str(src), "-o", str(lib), "-lm"],
