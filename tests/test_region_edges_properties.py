@@ -182,3 +182,87 @@ def test_the_linearized_loop_cannot_be_changed_after_it_is_built(model, linear):
         assert not value.flags.writeable, name
         with pytest.raises(ValueError, match="read-only"):
             value.flat[0] = 1.0
+
+
+def test_the_certified_study_checks_its_largest_set_with_the_configs_seed(model, monkeypatch):
+    """The certified robust study (``region.study._certified``): per set-point the robust levels are
+    certified confidence level by confidence level and stop at the first not certified; the
+    Monte Carlo check then runs ``config.certify_runs`` runs, drawn with the study's seed (a study
+    is reproducible from its config), inside the largest set certified at the first confidence
+    level, with that certificate's plants, P and level; its counts are the study's. The costly
+    parts (the robust SDP, Procedure 2, the branch and bound) and the sweep are stand-ins whose
+    answers are scripted, so what is checked is the study's own bookkeeping."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from maglev_oc.region import study as study_module
+    from maglev_oc.region import sweep as sweep_module
+    from maglev_oc.region.study import CONFIDENCE_LEVELS, _certified
+    from tests.test_region_study import TINY
+
+    # certified levels per set-point, one per confidence level in order (None: not certified)
+    script = {0.018: (2.0, None, 1.0, 0.5), 0.02: (3.0, 2.5, 2.0, 1.5), 0.022: (1.0, 0.5, 0.2, None)}
+    assert len(CONFIDENCE_LEVELS) == 4
+    calls: list[tuple[float, object]] = []
+
+    class Nominal:
+        def __init__(self, feasible, loop):
+            pass
+
+        def run(self, reference, P):
+            return SimpleNamespace(success=True, reference=reference)
+
+    class Certifier:
+        def __init__(self, feasible, loop, max_boxes, ladder):
+            pass
+
+        def run(self, nominal, plants):
+            gap = nominal.reference.gap
+            k = sum(1 for g, _ in calls if g == gap)
+            calls.append((gap, plants))
+            level = script[gap][k]
+            ok = level is not None
+            return SimpleNamespace(success=ok, level=level if ok else 0.0, P=np.eye(10) * (1 + k))
+
+    @dataclasses.dataclass(frozen=True)
+    class Spec:
+        plants: object = None
+        P: tuple = ()
+        level: float = 0.0
+
+    sweeps = []
+
+    def run_sweep(spec, n, *, seed=0, progress=True):
+        sweeps.append((spec, n, seed))
+        return SimpleNamespace(violations=3, n=n)
+
+    monkeypatch.setattr(study_module, "Procedure2", Nominal)
+    monkeypatch.setattr(study_module, "RobustCertifier", Certifier)
+    monkeypatch.setattr(study_module, "robust_lyapunov_matrix", lambda c, lyap, plants: (np.eye(10), "ok"))
+    monkeypatch.setattr(sweep_module, "run_sweep", run_sweep)
+    config = dataclasses.replace(TINY, seed=41, certify_runs=17, certify_boxes=10)
+    refs = [SimpleNamespace(reference=Reference.setpoint(g), lyapunov=None) for g in script]
+    specs = {f"{g * 1e3:g} mm": Spec() for g in script}
+    covariance = np.diag([0.05, 0.01, 0.01, 1e-3]) ** 2
+
+    def certified(config):
+        calls.clear()
+        sweeps.clear()
+        run = SimpleNamespace(config=config, model=model, feasible=None, loop=None)
+        return _certified(run, refs, covariance, specs)
+
+    out = certified(config)
+    # certificates per set-point: up to and including the first not certified
+    assert [len(r.certificates) for r in out.rows] == [2, 4, 4]
+    assert [r.certificates[-1].success for r in out.rows] == [False, True, False]
+    # one check, in the largest set certified at the first level (20 mm: 3.0), with the study's seed
+    assert len(sweeps) == 1
+    spec, n, seed = sweeps[0]
+    assert (n, seed) == (17, 41)
+    assert out.checked == ("20 mm", CONFIDENCE_LEVELS[0])
+    assert spec.level == 3.0 and np.array_equal(np.array(spec.P), np.eye(10))
+    assert spec.plants is next(p for g, p in calls if g == 0.02)  # the first level's plant set
+    assert (out.runs, out.violations) == (17, 3)
+    # no runs asked for: no check
+    out = certified(dataclasses.replace(config, certify_runs=0))
+    assert sweeps == [] and out.checked is None and (out.runs, out.violations) == (0, 0)
