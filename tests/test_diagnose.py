@@ -15,6 +15,7 @@ files of their own so that pytest-xdist spreads them over the cores: the twenty 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -103,6 +104,44 @@ def test_an_effect_outside_the_library_goes_to_unexplained(generated):
     assert 0.15 < u.force_rms < 0.4
     with pytest.raises(ValueError, match="unknown candidate"):
         diagnose_path(path, exclude=["spring"])
+
+
+def test_effects_dropped_as_not_specific_leave_the_fit_without_them(generated, monkeypatch):
+    """Step 6 drops a chosen effect that a generic dependence on another variable explains as well
+    (``_explained_by_unexplained``) and refits the rest. Here every chosen effect is declared so by a
+    stand-in (the real check rarely drops one on a set log), once: each is then gone from the
+    effects, listed as rejected ("not specific"), and with none left the model is the base fit
+    again, so the held-out error after equals the error before and the residuals are the base
+    fit's (the same design refitted: equal to round-off)."""
+    from maglev_oc.diagnosis import pipeline
+
+    stem = next(s for s, sc in named_set("single") if sc.name == "guide_friction_horizontal_large")
+    path, _ = generated("single", stem)
+    kept = diagnose_path(path)
+    assert kept.effects, "the stand-in needs a log with a claimed effect"
+    seen = {}
+    separate = pipeline._separate_unexplained
+
+    def capturing(session, fitted, library, design, sel, tr):
+        seen.setdefault("sel", sel)
+        return separate(session, fitted, library, design, sel, tr)
+
+    def all_stale(session, model, chosen, unexplained):
+        if seen.get("dropped"):
+            return []
+        seen["dropped"] = True
+        steps = seen["sel"].steps
+        return [dataclasses.replace(st.judgements[st.chosen], verdict="not specific") for st in steps]
+
+    monkeypatch.setattr(pipeline, "_separate_unexplained", capturing)
+    monkeypatch.setattr(pipeline, "_explained_by_unexplained", all_stale)
+    d = diagnose_path(path)
+    chosen = [st.chosen for st in seen["sel"].steps]
+    assert chosen and d.effects == []
+    assert {j.name for j in d.rejected if j.verdict == "not specific"} == set(chosen)
+    for axis, before in d.error_before.items():
+        assert d.error_after[axis] == pytest.approx(before, rel=1e-9, abs=1e-12)
+    np.testing.assert_allclose(d.residual_after, d.residual_before, rtol=1e-9, atol=1e-12)
 
 
 # --- the command line, the contract, bad input ----------------------------------------------------
