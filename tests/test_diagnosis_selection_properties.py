@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -149,3 +150,31 @@ def test_a_line_in_the_position_is_a_spring_only_when_nothing_further_depends_on
     assert j.verdict == "not specific" and "position" in j.reason, j.reason
     early = _spring_selection(model, bowed, SelectionSettings(judge_lines=False))
     assert early.selected == ["cable_carrier_force"]
+
+
+def test_a_periodic_force_on_one_half_of_the_travel_is_no_cogging(model):
+    """Cogging repeats with the stator's slots, so it is the same all along the travel
+    (``selection._drift_along_travel``). The planted slot-pitch force at 0.4 of its size below the
+    middle of the sweep and full size above is refused as not specific, the reason giving each
+    half's share of the whole-log fit in the planted ratio 1 : 0.4 (within 10 %: the filtered
+    columns straddle the split for a filter length); at one size all along it passes (the first
+    test); with the change allowed up to 10x its size, the same force passes."""
+    from maglev_oc.diagnosis.library import candidate_library
+
+    period = model.params.slot_pitch
+    x3 = _log(model, friction=0.0).x[2]
+    middle = float(np.median(x3))
+
+    def one_sided(x):
+        return 0.03 * np.sin(2 * math.pi * x / period + 0.5) * np.where(x > middle, 1.0, 0.4)
+
+    data = prepare([_log(model, friction=0.0, force=one_sided)], bandwidth=10.0)
+    lib = {c.name: c for c in candidate_library(model, data)}
+    fit, hold = data.masks(0.25)
+    cog = lib["cogging_horizontal_19mm"]
+    design = build_design(data, model, estimate=("C1",), terms=(cog.term,), fit=fit, holdout=hold)
+    j = _judge(design, cog, SelectionSettings())
+    assert j.verdict == "not specific", j.reason
+    low, high = (int(s) for s in re.findall(r"(\d+)% and (\d+)% of its whole-log size", j.reason)[0])
+    assert high / low == pytest.approx(1.0 / 0.4, rel=0.1), j.reason
+    assert _judge(design, cog, SelectionSettings(max_half_change=10.0)).verdict == "passes"

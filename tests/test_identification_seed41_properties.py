@@ -235,9 +235,10 @@ def test_eps_trend_study_status_is_one_of_its_documented_three(model, monkeypatc
     log = SimpleNamespace(sample_time=1e-3)
     reversed_c4 = p3.values.copy()
     reversed_c4[CONSTANT_NAMES.index("C4")] = reversed_c4[CONSTANT_NAMES.index("C4")][::-1]
+    partly = eps_trend.EpsTrend("t", CONSTANT_NAMES, p3.eps, reversed_c4)
     cases = {
         "reproduced": ((p3, p2, log, True), None),
-        "partly_reproduced": ((eps_trend.EpsTrend("t", CONSTANT_NAMES, p3.eps, reversed_c4), p2, log, True), "C4"),
+        "partly_reproduced": ((partly, p2, log, True), "C4"),
         "failed": ((p3, p2, log, False), None),
     }
     monkeypatch.setattr(eps_trend, "_npfsi_trend", lambda *a, **k: (d3, True))
