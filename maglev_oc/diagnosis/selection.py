@@ -107,8 +107,8 @@ size, it stands in for a dependence on the position of another shape and is "not
 residual goes to ``unexplained``). A drawn pair of the independent generator (seed 9321: thrust
 and attraction falling over the last 46 mm before a stator end, a cosine profile the library's
 exponential end effects fit only in part) claimed a 38 mm normal cogging whose halves differed by
-1.23 of its size (Wald 70 against 18); true cogging on 18 logs of the sets, experiments and
-random pairs differed by at most 0.07 of its size (Wald at most 9). Guide waviness is not held
+1.23 of its size (Wald 70 against 18); true cogging (15 fits on 13 logs of the sets, experiments and
+random pairs) differed by at most 0.07 of its size (Wald at most 9). Guide waviness is not held
 to it: its period is estimated from the residual, and a period slightly off drifts in phase
 along the travel (the true waviness of experiments_06 of the independent set, found at 73 mm,
 kept its size on both halves, 97 % and 107 %, but changed by 0.61 with a Wald of 96), and a real
