@@ -54,7 +54,9 @@ def _kkt(H: sp.spmatrix, Jc: sp.spmatrix) -> sp.csc_matrix:
 
 
 def _factor(H: sp.spmatrix, Jc: sp.spmatrix):
-    """LU of the KKT matrix; damped (Levenberg-Marquardt) if the reduced Hessian is singular.
+    """LU of the KKT matrix; damped (Levenberg-Marquardt) if the reduced Hessian is singular: H +
+    1e-6 max(max diag H, 1) I, so a direction the data do not determine takes a step of at most
+    1e6 times its gradient over that scale, and the determined ones move by a relative 1e-6.
     Raises RuntimeError if even the damped one is."""
     try:
         return splu(_kkt(H, Jc))
