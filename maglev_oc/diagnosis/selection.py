@@ -615,6 +615,7 @@ def judge(
     beside: Sequence[tuple[Candidate, float]] = (),
     cross: _CrossParts | None = None,
     friction_axes: frozenset[int] = frozenset(),
+    periodic: Sequence[tuple[Candidate, float]] = (),
 ) -> Judgement:
     """``r0``, ``mse0``: the held-out residual of ``current`` and its mean square, zero and left out
     where ``counted`` is False (:func:`evidence`); ``beside``: the effects already chosen with their
@@ -622,7 +623,9 @@ def judge(
     ``cross``: the cross-fitted parts of the training data with ``current``'s residuals there
     (the significance is then :func:`pooled_significance`'s); ``friction_axes``: the axes with
     guide friction among ``current`` (a candidate not judged ``beside_friction`` is judged on the
-    others)."""
+    others); ``periodic``: the design's forces periodic in the position alone with their periods
+    (:func:`_pool_periods`), those the travel does not tell from ``cand``'s fitted beside it when
+    its halves are compared (:func:`_drift_along_travel`)."""
     acts = _axes(cand, design.moving)
     hidden = () if getattr(cand, "beside_friction", True) else tuple(a for a in acts if a in friction_axes)
     left = np.array([a for a in acts if a not in hidden], dtype=int)
@@ -685,7 +688,7 @@ def judge(
     unresolved = _unresolved(cand, measured.physical, beside, design, settings)
     verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen, unresolved)
     if verdict == "passes":
-        drift = _drift_along_travel(design, cand, current, settings, measured.physical)
+        drift = _drift_along_travel(design, cand, current, settings, measured.physical, periodic)
         if drift is not None:
             verdict, reason = "not specific", drift
     if hidden:
@@ -709,17 +712,32 @@ def _drift_along_travel(
     current: Sequence[str],
     settings: SelectionSettings,
     physical: dict[str, Estimate],
+    periodic: Sequence[tuple[Candidate, float]] = (),
 ) -> str | None:
     """Why a force periodic in the position is not the same on both halves of the logged travel
-    (module doc), or None when it is (or when it is no such force).
+    (module doc), or None when it is (or when it is no such force). The forces of ``periodic``
+    whose period the travel does not tell from its own (fewer than ``min_beats`` cycles of drift)
+    are fitted beside it: two such forces beat, and the sum of the two changes along the travel.
 
     The candidate's columns are split at the training samples' median position and fitted, both
     halves beside ``current``, by weighted least squares over the fitted samples, with a block
     sandwich covariance (the fitted 0.5 s blocks). A force at one of the motor's pitches must keep
     its coefficients (a Wald test of their difference); any must keep its size (the halves' norms,
     the delta method's z of their difference), which a period estimated slightly off keeps."""
-    if _spatial_period(cand, physical) is None:
+    period = _spatial_period(cand, physical)
+    if period is None:
         return None
+    travel = _travel(design)
+    beating = [
+        other.name
+        for other, p in periodic
+        if other.reported_name != cand.reported_name
+        and other.name not in current
+        and other.name in design.groups
+        and ("both" in (cand.axis, other.axis) or cand.axis == other.axis)
+        and travel * abs(1.0 / period - 1.0 / p) < settings.min_beats
+    ]
+    current = [*current, *beating]
     halves = _fitted_halves(design, cand, current)
     if halves is None:
         return None
@@ -1117,6 +1135,7 @@ def select(
     held_out = _HeldOutGrams(design)
     fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
     pool = [c.name for c in candidates if _axes(c, design.moving).size]
+    periodic = _pool_periods(design, candidates)
     current = ["base"]
     base = fit_subset(design, current)
     cur_fit = base
@@ -1135,7 +1154,7 @@ def select(
         friction = frozenset(_friction_axes(chosen))
         context = (current, cur_fit, r0, mse0, settings, rivals, counted, beside, cross)
         judged = {
-            n: judge(design, by_name[n], *context, friction_axes=friction)
+            n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic)
             for n in pool
             if by_name[n].fallback_for is None
         }
@@ -1144,7 +1163,7 @@ def select(
         implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
         judged.update(
             {
-                n: judge(design, by_name[n], *context, friction_axes=friction)
+                n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic)
                 for n in pool
                 if _stands_in(by_name[n], implausible)
             }
@@ -1209,7 +1228,7 @@ def select(
             friction = frozenset(_friction_axes(chosen))
 
             context = (others, fit_o, r0, mse0, settings, rivals, counted, beside, cross)
-            j = _judged_again(design, by_name[name], context, friction, probes)
+            j = _judged_again(design, by_name[name], context, friction, probes, periodic)
             if j.verdict == "passes":
                 continue
             # the same effect with a parameter at its bound, where the free fit now lies beyond it
@@ -1219,7 +1238,7 @@ def select(
                     jf
                     for c in by_name.values()
                     if c.fallback_for == name and _stands_in(c, {name: j})
-                    for jf in (_judged_again(design, c, context, friction, probes),)
+                    for jf in (_judged_again(design, c, context, friction, probes, periodic),)
                     if jf.verdict == "passes"
                 ),
                 None,
@@ -1247,12 +1266,17 @@ def select(
 
 
 def _judged_again(
-    design: Design, cand: Candidate, context: tuple, friction: frozenset[int], probes
+    design: Design,
+    cand: Candidate,
+    context: tuple,
+    friction: frozenset[int],
+    probes,
+    periodic: Sequence[tuple[Candidate, float]] = (),
 ) -> Judgement:
     """The backward pass's judgement of ``cand`` beside the others (``context``: judge's arguments
     from ``current`` to ``cross``), its further orders included (:func:`_beyond_its_span`)."""
     others, _, _, _, settings, _, counted, _, _ = context
-    j = judge(design, cand, *context, friction_axes=friction)
+    j = judge(design, cand, *context, friction_axes=friction, periodic=periodic)
     return _beyond_its_span(design, j, cand, others, counted, probes, settings)
 
 
@@ -1290,6 +1314,24 @@ def _form_of_effect(
         if gain > 0 and z >= settings.min_z:
             chosen = richer
     return chosen
+
+
+def _pool_periods(design: Design, candidates: Sequence[Candidate]) -> list[tuple[Candidate, float]]:
+    """The candidates that are forces periodic in the position alone (:func:`_spatial_period`),
+    with their periods, read from their physical parameters at zero size (the period is the
+    term's, not fitted)."""
+    constants = fitted_constants(fit_subset(design, ["base"], covariance=False))
+    out = []
+    for cand in candidates:
+        if cand.name not in design.groups:
+            continue
+        k = design.groups[cand.name].size
+        with np.errstate(all="ignore"):
+            physical = cand.term.physical_parameters(np.zeros(k), np.zeros((k, k)), constants)
+        period = _spatial_period(cand, physical)
+        if period is not None:
+            out.append((cand, period))
+    return out
 
 
 def _periodic_beside(

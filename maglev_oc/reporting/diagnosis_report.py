@@ -424,6 +424,7 @@ def write_diagnosis_report(
                         (_SETTING_WORDS.get(k, k.replace("_", " ")), _wrap(str(v), 70))
                         for k, v in _flat(diag.settings).items()
                     ],
+                    font_size=7.5,  # every selection threshold: about 40 rows
                 ),
             ],
         )
