@@ -8,6 +8,7 @@ package's own sources are parsed (``ast``) and every ``open``, ``Path.open``, ``
 from __future__ import annotations
 
 import ast
+import os
 from pathlib import Path
 
 import pytest
@@ -31,12 +32,31 @@ def _mode(call: ast.Call, name: str) -> str | None:
     return "r"
 
 
-def _unnamed_encodings(source: str) -> list[int]:
-    """Lines of text-mode calls without ``encoding=``."""
-    lines = []
-    for node in ast.walk(ast.parse(source)):
-        if not isinstance(node, ast.Call):
+def _inactive_mutant(name: str) -> bool:
+    """Whether a function is one of mutmut's copies that is not running (``bench/mutation.py``
+    copies every mutant of a function into its module beside the original and switches one on
+    through ``MUTANT_UNDER_TEST``): only the code that runs is checked."""
+    if "__mutmut_" not in name or name.endswith("__mutmut_orig"):
+        return False
+    return os.environ.get("MUTANT_UNDER_TEST", "").rpartition(".")[2] != name
+
+
+def _calls(tree: ast.AST):
+    """The calls of ``tree`` outside mutmut's inactive copies."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and _inactive_mutant(node.name):
             continue
+        if isinstance(node, ast.Call):
+            yield node
+        stack.extend(ast.iter_child_nodes(node))
+
+
+def _unnamed_encodings(source: str) -> list[int]:
+    """Lines of text-mode calls without ``encoding=``, in order."""
+    lines = []
+    for node in _calls(ast.parse(source)):
         func = node.func
         name = (
             func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else None
@@ -48,7 +68,7 @@ def _unnamed_encodings(source: str) -> list[int]:
             continue
         if not any(kw.arg == "encoding" for kw in node.keywords):
             lines.append(node.lineno)
-    return lines
+    return sorted(lines)
 
 
 def test_the_check_sees_a_call_without_an_encoding():

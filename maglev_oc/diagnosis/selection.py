@@ -706,6 +706,13 @@ def judge(
     return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
 
 
+MIN_BEATING = 0.25
+"""[cycles over the travel] Below this drift two periodic forces are one function over the travel:
+fitted beside a candidate's two halves, the other would take what the halves share and leave the
+halves undetermined (pair 9321's 38 mm waviness beside the 38 mm cogging, 0 cycles, then passed).
+Seed37's slot-pitch and 25 mm forces, 0.79 cycles apart over the travel, beat."""
+
+
 def _drift_along_travel(
     design: Design,
     cand: Candidate,
@@ -715,9 +722,11 @@ def _drift_along_travel(
     periodic: Sequence[tuple[Candidate, float]] = (),
 ) -> str | None:
     """Why a force periodic in the position is not the same on both halves of the logged travel
-    (module doc), or None when it is (or when it is no such force). The forces of ``periodic``
-    whose period the travel does not tell from its own (fewer than ``min_beats`` cycles of drift)
-    are fitted beside it: two such forces beat, and the sum of the two changes along the travel.
+    (module doc), or None when it is (or when it is no such force). For a force at one of the
+    motor's pitches, the others of ``periodic`` on its axis whose period the travel does not tell
+    from its own (fewer than ``min_beats`` cycles of drift, but at least :data:`MIN_BEATING`) are
+    fitted beside it: two such forces beat, and the sum of the two changes along the travel.
+    Waviness, whose period is estimated, is compared alone.
 
     The candidate's columns are split at the training samples' median position and fitted, both
     halves beside ``current``, by weighted least squares over the fitted samples, with a block
@@ -734,8 +743,9 @@ def _drift_along_travel(
         if other.reported_name != cand.reported_name
         and other.name not in current
         and other.name in design.groups
-        and ("both" in (cand.axis, other.axis) or cand.axis == other.axis)
-        and travel * abs(1.0 / period - 1.0 / p) < settings.min_beats
+        and cand.family == other.family == "periodic"
+        and cand.axis == other.axis
+        and MIN_BEATING <= travel * abs(1.0 / period - 1.0 / p) < settings.min_beats
     ]
     current = [*current, *beating]
     halves = _fitted_halves(design, cand, current)
