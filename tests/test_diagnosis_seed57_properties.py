@@ -92,3 +92,12 @@ def test_effects_that_move_the_constants_have_the_selection_repeated_around_them
     ((start, kept),) = returned
     assert len(converged) >= 2 and kept is not start
     assert any(kept is c for c in converged)
+
+
+def test_a_diagnosis_that_found_its_effect_says_so_as_a_boolean(generated):
+    """Seed 58: the result's ``success`` (a bool in the JSON contract, SPEC section 3) with its
+    status: a log with one large effect is "effects_found" and successful."""
+    path, _ = generated("single", _stem("thrust_ripple_large"))
+    d = diagnose_path(path)
+    assert d.status == "effects_found" and d.success is True
+    assert d.to_dict()["success"] is True

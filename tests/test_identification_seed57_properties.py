@@ -111,3 +111,14 @@ def test_a_singular_hessian_is_damped_by_a_millionth_of_its_scale(scale):
     damp = 1e-6 * max(scale, 1.0)
     step = _factor(H, Jc).solve(np.array([1.0, 1.0]))
     np.testing.assert_allclose(step, [1.0 / (scale + damp), 1.0 / damp], rtol=1e-12)
+
+
+def test_the_designer_keeps_the_feasible_set_it_is_given(model):
+    """Seed 58: ``ExperimentDesigner(feasible=...)`` designs inside the set it is given (a user's
+    stoppers or current limit), not the default one."""
+    from maglev_oc.identification.design import ExperimentDesigner
+    from maglev_oc.region.feasibility import FeasibleSet
+
+    limited = FeasibleSet(model, current_limit=4.0)
+    assert ExperimentDesigner(model, feasible=limited).feasible is limited
+    assert ExperimentDesigner(model).feasible is not limited
