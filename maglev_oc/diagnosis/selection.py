@@ -788,7 +788,13 @@ def _drift_along_travel(
 def _fitted_halves(design: Design, cand: Candidate, current: Sequence[str]):
     """(the split position [m], the candidate's coefficients on the lower and on the upper half,
     their (2k, 2k) block sandwich covariance), fitted beside ``current``; None when a half is
-    empty or the fit is singular."""
+    empty or the fit is singular.
+
+    The scores are summed over the fitted 0.5 s blocks, which overstates the variance of filtered
+    equation errors (``regression.solve._long_run_meat``'s doc: 2.3x on a synthetic log), so the
+    Wald and z of the halves' difference err low: a stand-in may pass, a true force is not refused
+    for it. The shared per-sample periodogram (``_long_run_meat``) is the consistent choice; it
+    was not swapped in at the end of session (v) because every bench log would need rerunning."""
     fitted = design.fit & (design.block_of >= 0)
     x3 = design.prepared.x[2]
     middle = float(np.median(x3[fitted]))
