@@ -430,11 +430,13 @@ class _PlantedSim:
 
     def __init__(self, name):
         self.controller = type("Ctrl", (), {"name": name, "n_state": 10})()
+        self.references = []
 
     def with_duration(self, duration):
         return self
 
     def run(self, x0, c0, reference):
+        self.references.append(np.array(reference, dtype=float))
         n = x0.shape[1]
         final = np.zeros((4, n))
         final[0], final[2] = reference[0], reference[3]  # every run settles on its target
@@ -462,7 +464,14 @@ def test_the_fl_map_succeeds_only_within_f_and_the_linear_ones_when_converged(mo
     run.simulator = lambda twin, ctrl, duration: _PlantedSim(ctrl.name)
     starts, targets = np.array([0.01, 0.012, 0.014, 0.016]), np.array([0.018, 0.02])
     linear = type("Lin", (), {"name": "linear regulator"})()
-    maps = study_module._start_target_maps(run, _PlantedSim("FL"), [linear], starts, targets)
+    fl_sim = _PlantedSim("FL")
+    maps = study_module._start_target_maps(run, fl_sim, [linear], starts, targets)
+    # every run is the set-point (target gap, 20 mm), as Reference.setpoint lays it out (values,
+    # velocities and accelerations of gap and position): at rest there
+    assert len(fl_sim.references) == targets.size
+    for g, ref in zip(targets, fl_sim.references, strict=True):
+        setpoint = Reference.setpoint(g, study_module.LARGE_STEP_TARGET[1]).signals(0.0)[:, 0]
+        np.testing.assert_array_equal(ref, setpoint)
     np.testing.assert_array_equal(maps["FL"]["outcome"], [[0, 1, 2, 0]] * 2)
     np.testing.assert_array_equal(maps["FL"]["success"], [[True, False, False, True]] * 2)
     np.testing.assert_array_equal(maps["linear regulator"]["success"], [[True, True, True, True]] * 2)
