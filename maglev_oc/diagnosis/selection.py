@@ -98,26 +98,26 @@ leaves that test out: the diagnosis's first selections, whose residual is search
 waviness afterwards (a waviness still to be found is part of the remainder), run without it.
 
 A force periodic in the position at one of the motor's pitches (cogging, a detent: ``family``
-"periodic") is the same all along the stator, whose slots and magnets repeat: fitted on each half
-of the logged travel (split at the training samples' median position) beside the rest of the
-model, its two sets of coefficients must agree (:func:`_drift_along_travel`). When they differ
-both significantly (a Wald test of the difference with a block sandwich covariance over the
-fitted 0.5 s blocks, level ``alpha``) and by more than ``max_half_change`` of the whole-log fit's
-size, it stands in for a dependence on the position of another shape and is "not specific" (the
-residual goes to ``unexplained``). A drawn pair of the independent generator (seed 9321: thrust
-and attraction falling over the last 46 mm before a stator end, a cosine profile the library's
-exponential end effects fit only in part) claimed a 38 mm normal cogging whose halves differed by
-1.23 of its size (Wald 70 against 18); true cogging (15 fits on 13 logs of the sets, experiments and
-random pairs) differed by at most 0.07 of its size (Wald at most 9). Guide waviness is not held
-to it: its period is estimated from the residual, and a period slightly off drifts in phase
-along the travel (the true waviness of experiments_06 of the independent set, found at 73 mm,
+"periodic") is the same all along the stator, whose slots and magnets repeat: fitted on each half of
+the logged travel (split at the training samples' median position) beside the rest of the model, its
+two sets of coefficients must agree (:func:`_drift_along_travel`). When they differ both
+significantly (a Wald test of the difference, level ``alpha``, with the regression layer's long-run
+covariance of the per-sample scores, as every fit's) and by more than ``max_half_change`` of the
+whole-log fit's size, it stands in for a dependence on the position of another shape and is "not
+specific" (the residual goes to ``unexplained``). A drawn pair of the independent generator (seed
+9321: thrust and attraction falling over the last 46 mm before a stator end, a cosine profile the
+library's exponential end effects fit only in part) claimed a 38 mm normal cogging whose halves
+differed by 1.23 of its size (Wald 70 against 18); true cogging (15 fits on 13 logs of the sets,
+experiments and random pairs) differed by at most 0.07 of its size (Wald at most 9). Guide waviness
+is not held to it: its period is estimated from the residual, and a period slightly off drifts in
+phase along the travel (the true waviness of experiments_06 of the independent set, found at 73 mm,
 kept its size on both halves, 97 % and 107 %, but changed by 0.61 with a Wald of 96). Every such
 force, waviness included, must keep its size: the halves' norms may differ by at most a factor
-``max_half_ratio`` unless the difference is weaker than ``min_z_strong`` (the delta method's z
-with the same covariance). The false claim that replaced 9321's cogging, a 38 mm waviness, was
-59 % and 155 % (a factor 2.65, z 2.96); true waviness on four logs differed by a factor 1.09-1.20
-(z up to 4.2: small differences, well measured). A factor 2 is where a sinusoid of one size no
-longer describes the force: one half's force is more than twice the other's.
+``max_half_ratio`` unless the difference is weaker than ``min_z_strong`` (the delta method's z with
+the same covariance). The false claim that replaced 9321's cogging, a 38 mm waviness, was 59 % and
+155 % (a factor 2.65, z 2.96); true waviness on four logs differed by a factor 1.09-1.20 (z up to
+4.2: small differences, well measured). A factor 2 is where a sinusoid of one size no longer
+describes the force: one half's force is more than twice the other's.
 
 Among the candidates that pass all six the one with the largest gain is added; the selection
 stops when none passes or after ``max_effects``. The confidence of each choice is the share of
@@ -137,7 +137,12 @@ from scipy.stats import chi2
 
 from maglev_oc.diagnosis.library import Candidate
 from maglev_oc.regression.base import AXES, AXIS_INDEX, CONSTANT_NAMES
-from maglev_oc.regression.covariance import DEFAULT_BAND, frequencies_for, periodogram_long_run
+from maglev_oc.regression.covariance import (
+    DEFAULT_BAND,
+    frequencies_for,
+    per_log_long_run,
+    periodogram_long_run,
+)
 from maglev_oc.regression.design import Design
 from maglev_oc.regression.solve import SubsetFit, _blocks_of, fit_subset
 from maglev_oc.regression.terms import Estimate
@@ -729,8 +734,8 @@ def _drift_along_travel(
     Waviness, whose period is estimated, is compared alone.
 
     The candidate's columns are split at the training samples' median position and fitted, both
-    halves beside ``current``, by weighted least squares over the fitted samples, with a block
-    sandwich covariance (the fitted 0.5 s blocks). A force at one of the motor's pitches must keep
+    halves beside ``current``, by weighted least squares over the fitted samples, with the shared
+    long-run covariance (:func:`_fitted_halves`). A force at one of the motor's pitches must keep
     its coefficients (a Wald test of their difference); any must keep its size (the halves' norms,
     the delta method's z of their difference), which a period estimated slightly off keeps."""
     period = _spatial_period(cand, physical)
@@ -787,14 +792,11 @@ def _drift_along_travel(
 
 def _fitted_halves(design: Design, cand: Candidate, current: Sequence[str]):
     """(the split position [m], the candidate's coefficients on the lower and on the upper half,
-    their (2k, 2k) block sandwich covariance), fitted beside ``current``; None when a half is
-    empty or the fit is singular.
-
-    The scores are summed over the fitted 0.5 s blocks, which overstates the variance of filtered
-    equation errors (``regression.solve._long_run_meat``'s doc: 2.3x on a synthetic log), so the
-    Wald and z of the halves' difference err low: a stand-in may pass, a true force is not refused
-    for it. The shared per-sample periodogram (``_long_run_meat``) is the consistent choice; it
-    was not swapped in at the end of session (v) because every bench log would need rerunning."""
+    their (2k, 2k) sandwich covariance), fitted beside ``current``; None when a half is empty or
+    the fit is singular. The sandwich's meat is the regression layer's long-run covariance of the
+    per-sample scores (:func:`~maglev_oc.regression.covariance.per_log_long_run`, as every fit's),
+    not a sum over the 0.5 s blocks, which overstates the variance of filtered equation errors
+    (``regression.solve._long_run_meat``'s doc: 2.3x on a synthetic log)."""
     fitted = design.fit & (design.block_of >= 0)
     x3 = design.prepared.x[2]
     middle = float(np.median(x3[fitted]))
@@ -808,16 +810,16 @@ def _fitted_halves(design: Design, cand: Candidate, current: Sequence[str]):
     # weighted rows of the fitted samples, axis by axis: (p, rows), (rows,)
     X = np.concatenate([columns[:, a, fitted] * design.weights[a] for a in axes], axis=1)
     y = np.concatenate([design.target[a, fitted] * design.weights[a] for a in axes])
-    blocks = np.tile(design.block_of[fitted], axes.size)
     gram = X @ X.T
     try:
         coef = np.linalg.solve(gram, X @ y)
         ginv = np.linalg.inv(gram)
     except np.linalg.LinAlgError:
         return None
-    scores = np.zeros((int(blocks.max()) + 1, X.shape[0]))
-    np.add.at(scores, blocks, (X * (y - coef @ X)).T)
-    cov = (ginv @ (scores.T @ scores) @ ginv)[m:, m:]
+    # per-sample scores w^2 x_t r_t, both axes summed: the shared long-run covariance
+    scores = (X * (y - coef @ X)).reshape(X.shape[0], axes.size, -1).sum(axis=1)
+    meat, _ = per_log_long_run(scores, design.prepared.segment[fitted], design.prepared.sample_time)
+    cov = (ginv @ meat @ ginv)[m:, m:]
     k = own.shape[0]
     return middle, coef[m : m + k], coef[m + k :], cov
 

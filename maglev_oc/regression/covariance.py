@@ -46,6 +46,7 @@ __all__ = [
     "correlation_from",
     "frequencies_for",
     "long_run_covariance",
+    "per_log_long_run",
     "periodogram_long_run",
 ]
 
@@ -104,6 +105,23 @@ def periodogram_long_run(influence: np.ndarray, m: int) -> np.ndarray:
         return (re @ re.T + im @ im.T) / k
     f = np.fft.rfft(d, axis=1)[:, 1 : m + 1]
     return np.einsum("pk,qk->pq", f, np.conj(f)).real / f.shape[1]
+
+
+def per_log_long_run(
+    scores: np.ndarray, log: np.ndarray, sample_time: float, band: float = DEFAULT_BAND
+) -> tuple[np.ndarray, int]:
+    """(the long-run covariance (p, p) of per-sample ``scores`` (p, n), the frequencies averaged):
+    :func:`periodogram_long_run` over each log's samples (``log`` (n,): which log each comes from),
+    the logs' covariances added (independent logs), symmetrised."""
+    s = np.asarray(scores, dtype=float)
+    meat = np.zeros((s.shape[0], s.shape[0]))
+    total = 0
+    for which in np.unique(log):
+        part = s[:, log == which]
+        m = frequencies_for(part.shape[1], sample_time, band)
+        meat += periodogram_long_run(part, m)
+        total += m
+    return 0.5 * (meat + meat.T), total
 
 
 DIRECT_DFT_SIZE = 1_000_000

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maglev_oc.regression.covariance import DEFAULT_BAND, frequencies_for, periodogram_long_run
+from maglev_oc.regression.covariance import DEFAULT_BAND, per_log_long_run
 from maglev_oc.regression.design import Design
 
 __all__ = ["SubsetFit", "fit_nonlinear", "fit_subset", "predicted", "residuals"]
@@ -218,15 +218,7 @@ def _long_run_meat(
     noise = _blocks_of(design.noise, slice(None), idx)
     corr = share * np.einsum("bpq,q->bp", noise, coef) / np.maximum(sizes, 1)[:, None]
     scores += corr[blocks].T
-    segment = design.prepared.segment[fit]
-    meat = np.zeros((idx.size, idx.size))
-    total = 0
-    for log in np.unique(segment):
-        s = scores[:, segment == log]
-        m = frequencies_for(s.shape[1], design.prepared.sample_time, band)
-        meat += periodogram_long_run(s, m)
-        total += m
-    return 0.5 * (meat + meat.T), total
+    return per_log_long_run(scores, design.prepared.segment[fit], design.prepared.sample_time, band)
 
 
 def _blocks_of(a: np.ndarray, blocks, idx: np.ndarray) -> np.ndarray:
