@@ -41,6 +41,7 @@ from maglev_oc.control.nmpc.rti import rti_parts
 from maglev_oc.control.nmpc.status import DIAG_NAMES
 from maglev_oc.diagnosis.feedback import compensation_study
 from maglev_oc.diagnosis.library import candidate_library
+from maglev_oc.diagnosis.magnetics import EndProfile
 from maglev_oc.diagnosis.pipeline import _holding_shares
 from maglev_oc.errors import SolverError
 from maglev_oc.model.parameters import LumpedConstants
@@ -218,10 +219,10 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     built_for = []
     widths = []
 
-    def spy(fitted, data, held=None, *, end_width):
+    def spy(fitted, data, held=None, *, end_profile):
         built_for.append(fitted.constants.C1)
-        widths.append(end_width)
-        return candidate_library(fitted, data, held, end_width=end_width)
+        widths.append(end_profile)
+        return candidate_library(fitted, data, held, end_profile=end_profile)
 
     monkeypatch.setattr(refit, "candidate_library", spy)
     args = (model, start, data, ["guide_friction_horizontal"], train, hold, np.array([0.0, 1.0]))
@@ -234,10 +235,11 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     assert start.constants.C1 not in built_for
     # the same fits of the same columns: rounding only
     np.testing.assert_allclose(handed.constants.as_array(), built.constants.as_array(), rtol=1e-12)
-    # each rebuilt library has the end effects' width handed in (the scanned one), not the default
+    # each rebuilt library has the end effects' fall-off handed in (the scanned one), not the default
     widths.clear()
-    refit.converged_references(*args, end_width=0.02)
-    assert widths and set(widths) == {0.02}
+    scanned = EndProfile(0.02, "rounded")
+    refit.converged_references(*args, end_profile=scanned)
+    assert widths and set(widths) == {scanned}
 
 
 # --- the compensation study ------------------------------------------------------------------------------

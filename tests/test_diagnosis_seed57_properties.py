@@ -2,7 +2,7 @@
 
 * a log exactly as long as the shortest a diagnosis takes is diagnosed (the bound is inclusive,
   as its message says: "at least");
-* the end effects are reported at the fall-off width the scan chose (``_end_width``);
+* the end effects are reported at the fall-off width the scan chose (``_end_profile``);
 * when the chosen effects move the constants by more than ``REFIT_TOLERANCE``, the selection is
   repeated around the converged constants, and the model it keeps is the converged one.
 
@@ -37,20 +37,21 @@ def test_a_log_as_long_as_the_shortest_diagnosed_is_accepted(generated):
 def test_the_end_effects_are_reported_at_the_width_the_scan_chose(generated, monkeypatch):
     """The end effects' fall-off width is scanned once they are chosen (or shown); the selection
     then judges them at that width, which the finding reports. The scan's answers are recorded as
-    it runs (the real scan), and the reported width must be the last one it gave."""
-    scans: list[float | None] = []
-    scan = pipeline.best_end_width
+    it runs (the real scan), and the reported width and shape must be the last it gave."""
+    scans: list = []
+    scan = pipeline.best_end_profile
 
     def recording(*args, **kw):
         scans.append(scan(*args, **kw))
         return scans[-1]
 
-    monkeypatch.setattr(pipeline, "best_end_width", recording)
+    monkeypatch.setattr(pipeline, "best_end_profile", recording)
     path, _ = generated("single", _stem("end_effect_large"))
     d = diagnose_path(path)
     (end,) = [e for e in d.effects if e.name == "end_effects"]
     assert scans and scans[-1] is not None, scans
-    assert end.parameters["width"].value == pytest.approx(scans[-1], rel=1e-12)
+    assert end.parameters["width"].value == pytest.approx(scans[-1].width, rel=1e-12)
+    assert scans[-1].describe() in end.finding
 
 
 def test_effects_that_move_the_constants_have_the_selection_repeated_around_them(generated, monkeypatch):

@@ -46,7 +46,8 @@ from maglev_oc.diagnosis.guides import (
     waviness_candidate,
 )
 from maglev_oc.diagnosis.magnetics import (
-    END_WIDTH,
+    END_PROFILE,
+    EndProfile,
     cogging_candidates,
     end_effects_candidate,
     field_shape_candidate,
@@ -63,7 +64,7 @@ __all__ = [
     "VARIABLES",
     "Candidate",
     "candidate_library",
-    "end_effects_at_widths",
+    "end_effects_at",
     "held_by_sticking_guides",
     "refine_waviness_period",
     "smooth_probes",
@@ -76,7 +77,7 @@ def candidate_library(
     data: PreparedLogs,
     held: Mapping[str, float] | None = None,
     *,
-    end_width: float = END_WIDTH,
+    end_profile: EndProfile = END_PROFILE,
 ) -> list[Candidate]:
     """Every candidate for ``data``, with magnetic references from ``model`` (the base fit).
 
@@ -85,23 +86,25 @@ def candidate_library(
     on that axis are held the same way (:func:`~maglev_oc.regression.terms.held_by_guides`), or a force found
     beside sticking guides would be sized by the samples where it moves the stage only (half its
     size beside 2 N of vertical friction on independent logs).
-    ``end_width`` [m]: the end effects' fall-off width (:func:`end_effects_at_widths` chooses it).
+    ``end_profile``: the end effects' fall-off, shape and width (refit.best_end_profile chooses
+    it among :func:`end_effects_at` those of ``END_PROFILES``).
     """
     ctx = LibraryContext(model, data)
-    return [_held(c, held) for c in _candidates(ctx, end_width)]
+    return [_held(c, held) for c in _candidates(ctx, end_profile)]
 
 
-def end_effects_at_widths(
+def end_effects_at(
     model: StageModel,
     data: PreparedLogs,
-    widths: Sequence[float],
+    profiles: Sequence[EndProfile],
     held: Mapping[str, float] | None = None,
 ) -> list[Candidate]:
-    """The end effects at each of ``widths`` [m], held as :func:`candidate_library` holds them,
-    with the terms named apart (``end_effects_w0``, ...) so that one design can carry them all."""
+    """The end effects with each of the fall-off ``profiles``, held as :func:`candidate_library`
+    holds them, with the terms named apart (``end_effects_w0``, ...) so that one design can carry
+    them all."""
     ctx = LibraryContext(model, data)
     out = []
-    for k, w in enumerate(widths):
+    for k, w in enumerate(profiles):
         c = _held(end_effects_candidate(ctx, w), held)
         out.append(dataclasses.replace(c, term=dataclasses.replace(c.term, name=f"{c.name}_w{k}")))
     return out
@@ -131,13 +134,13 @@ def held_by_sticking_guides(c: Candidate) -> bool:
     return c.family not in ("friction", "profile") and c.variable != "gap"
 
 
-def _candidates(ctx: LibraryContext, end_width: float) -> list[Candidate]:
+def _candidates(ctx: LibraryContext, end_profile: EndProfile) -> list[Candidate]:
     return [
         *friction_candidates(ctx),
         *level_candidates(ctx),
         cable_candidate(ctx),
         *cogging_candidates(ctx),
-        end_effects_candidate(ctx, end_width),
+        end_effects_candidate(ctx, end_profile),
         gap_dependence_candidate(ctx),
         field_shape_candidate(ctx),
         ripple_candidate(ctx),

@@ -5,6 +5,7 @@ of a finite stator are known for)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -24,9 +25,13 @@ from maglev_oc.regression.terms import REFERENCE_GAP, AccelerationTerm, cogging_
 from maglev_oc.results import Estimate
 
 __all__ = [
+    "END_PROFILE",
+    "END_PROFILES",
+    "END_SHAPES",
     "END_WIDTH",
     "END_WIDTHS",
     "END_WIDTH_STEP",
+    "EndProfile",
     "cogging_candidates",
     "end_effects_candidate",
     "field_shape_candidate",
@@ -45,6 +50,58 @@ sizes is over the two widths either side of the one found. Over half and twice t
 overstated their uncertainty fivefold once the width was fitted: on 41 logs with end effects
 (fresh draws, variants, sets, experiments) the sizes' errors were 0.13 of their standard errors
 RMS, none beyond one."""
+
+END_SHAPES = ("exponential", "rounded")
+"""How the losses fall inwards from a logged end, u the distance from it and w the width:
+``exponential``, exp(-u / w), steepest at the end (the end field fringing into the gap decays
+exponentially away from an iron edge); ``rounded``, exp(-(u / w)^2), flat at the end and falling
+faster further in (the mover's overlap with the stator fading over a length, its corners rounded
+by the fringing). Fitted with the exponential alone, losses shaped as a raised cosine (flat at the
+end, zero further in than a few widths) left a misfit along the travel that other candidates took
+(bench/README, *End effects that are not exponential*)."""
+
+
+class EndProfile(NamedTuple):
+    """The shape (:data:`END_SHAPES`) and width [m] of the end effects' fall-off."""
+
+    width: float
+    shape: str = "exponential"
+
+    def fall(self, u):
+        """The loss at distance ``u`` [m] inside an end relative to the end's (CasADi). Beyond the
+        end (u < 0) the exponential keeps growing, the rounded profile stays at 1."""
+        if self.shape == "exponential":
+            return ca.exp(-u / self.width)
+        return ca.exp(-((ca.fmax(u, 0) / self.width) ** 2))
+
+    def fall_at(self, u: float) -> float:
+        """:meth:`fall` at a distance ``u`` >= 0 [m], a float."""
+        r = u / self.width
+        return math.exp(-r if self.shape == "exponential" else -(r**2))
+
+    def scaled(self, factor: float) -> EndProfile:
+        """The same shape, ``factor`` times as wide."""
+        return EndProfile(self.width * factor, self.shape)
+
+    def describe(self) -> str:
+        """How the losses fall inwards, in words."""
+        if self.shape == "exponential":
+            return f"the losses fall by 1/e every {self.width * 1e3:.0f} mm inwards"
+        return f"the losses stay flat near the ends, then fall to 1/e {self.width * 1e3:.0f} mm inwards"
+
+
+END_GROWTH_Z = 3.0
+"""An end whose own fall (the thrust's and attraction's fractions lost where its profile is 1,
+summed) is negative by more than this many standard errors makes the end effects implausible: the
+forces of a mover overhanging a stator end fall there. A linear trend along the travel (a guide
+misalignment beside a tilted base, drawn pair 9002 of the independent generator) fitted as losses
+of +2.5 % at one end and -2.3 % at the other, each many standard errors from zero; the far end of a
+true one-ended fall is zero within its errors."""
+END_PROFILE = EndProfile(END_WIDTH)
+"""The end effects' fall-off before it is scanned: exponential, :data:`END_WIDTH` wide."""
+END_PROFILES = tuple(EndProfile(w, shape) for shape in END_SHAPES for w in END_WIDTHS)
+"""The profiles scanned once the end effects are chosen (refit.best_end_profile): each of
+:data:`END_WIDTHS` in each of :data:`END_SHAPES`."""
 
 
 def cogging_candidates(ctx: LibraryContext) -> list[Candidate]:
@@ -103,24 +160,24 @@ def _cogging_physical(term: AccelerationTerm, period: float):
     return convert
 
 
-def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Candidate:
+def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE) -> Candidate:
     """Thrust (and the currents' normal force) and the magnets' attraction falling towards each end
-    of the logged travel, over ``width``.
+    of the logged travel, with the fall-off ``profile`` (shape and width).
 
     Each end has its own losses: a user's log need not be centred on the stator (a log of the
     independent generator over -5..45 mm, its stator's ends at +-50 mm, fell at the high end only,
     and a loss shared by both ends did not fit it). The profile is anchored at the logged ends; a
-    stator end beyond them by d only scales its exponential by exp(-d / width), so the reported
+    stator end beyond them by d only scales an exponential by exp(-d / width), so the reported
     losses are those at the logged ends.
     """
     lo, hi = ctx.position_range
     c_ref = ctx.references
-    narrow, wide = width / END_WIDTH_STEP, width * END_WIDTH_STEP
+    narrow, wide = profile.scaled(1 / END_WIDTH_STEP), profile.scaled(END_WIDTH_STEP)
 
-    def fn(w):
+    def fn(p: EndProfile):
         def build(x, u, du, q):
             l = ctx.shapes(x)
-            high, low = ca.exp((x[2] - hi) / w), ca.exp((lo - x[2]) / w)
+            high, low = p.fall(hi - x[2]), p.fall(x[2] - lo)
             thrust = -c_ref.C1 * l[0] * u[0]
             winding_normal = -(c_ref.C3 * l[2] * u[1] + c_ref.C4 * l[3] * (u[0] ** 2 + u[1] ** 2))
             magnets = -c_ref.C2 * l[1]
@@ -133,33 +190,49 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
 
     def physical(q, cov, c):
         # the loss at an end minus at the centre of the travel, both ends' profiles summed: with
-        # a = exp(-L / 2w), L the travel, (1 - a)(q_end - a q_other); the two ends' mean (1 - a)^2 q_mean
-        a = float(np.exp(-(hi - lo) / (2 * width)))
+        # a the profile at the centre (L / 2 from each end, L the travel) and b at the other end,
+        # q_end (1 - a) - q_other (a - b); the two ends' mean (q_low + q_high) / 2 (1 - 2a + b).
+        # (The exponential's b is a^2: (1 - a)(q_end - a q_other) and (1 - a)^2 q_mean.)
+        a, b = profile.fall_at((hi - lo) / 2), profile.fall_at(hi - lo)
         out = {}
         for k, (label, ref) in enumerate((("thrust", "C1"), ("attraction", "C2"))):
             s = ctx.reference_ratio(ref, c)
             sl = slice(2 * k, 2 * k + 2)
             qk, ck = q[sl], cov[sl, sl]
             out[f"{label}_loss_at_low_end"] = delta_method(
-                lambda v, s=s: s * (1 - a) * (v[0] - a * v[1]), qk, ck, "1"
+                lambda v, s=s: s * (v[0] * (1 - a) - v[1] * (a - b)), qk, ck, "1"
             )
             out[f"{label}_loss_at_high_end"] = delta_method(
-                lambda v, s=s: s * (1 - a) * (v[1] - a * v[0]), qk, ck, "1"
+                lambda v, s=s: s * (v[1] * (1 - a) - v[0] * (a - b)), qk, ck, "1"
             )
             out[f"{label}_loss_at_ends"] = delta_method(
-                lambda v, s=s: s * (1 - a) ** 2 * (v[0] + v[1]) / 2, qk, ck, "1"
+                lambda v, s=s: s * (1 - 2 * a + b) * (v[0] + v[1]) / 2, qk, ck, "1"
+            )
+        # each end's own fall: the thrust's and the attraction's fractions lost, summed, where
+        # that end's profile is 1 (the other end's left out)
+        s_t, s_a = ctx.reference_ratio("C1", c), ctx.reference_ratio("C2", c)
+        for k, end in enumerate(("low", "high")):
+            out[f"forces_lost_at_{end}_end_alone"] = delta_method(
+                lambda v, k=k: s_t * v[k] + s_a * v[2 + k], q, cov, "1"
             )
         out.update(
             low_end_position=Estimate(lo, 0.0, "m"),
             high_end_position=Estimate(hi, 0.0, "m"),
-            width=Estimate(width, 0.0, "m"),
+            width=Estimate(profile.width, 0.0, "m"),
         )
         return out
 
     def falls(e):
-        if e["thrust_loss_at_ends"].value + e["attraction_loss_at_ends"].value > 0:
-            return None
-        return "the forces grow, not fall, towards the ends"
+        if e["thrust_loss_at_ends"].value + e["attraction_loss_at_ends"].value <= 0:
+            return "the forces grow, not fall, towards the ends"
+        for end in ("low", "high"):
+            own = e[f"forces_lost_at_{end}_end_alone"]
+            if own.value + END_GROWTH_Z * own.stderr < 0:  # NaN (no covariance) compares False
+                return (
+                    f"the forces grow towards the {end} end (its own profile's losses sum to "
+                    f"{fmt(own, 100, '%')}): a smooth dependence on the position of another kind"
+                )
+        return None
 
     return Candidate(
         AccelerationTerm(
@@ -168,12 +241,14 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
             "the currents make) and the magnets' attraction fall smoothly.",
             "both",
             ("winding_loss_low", "winding_loss_high", "magnet_loss_low", "magnet_loss_high"),
-            function=fn(width),
+            function=fn(profile),
             physical=physical,
             signature="thrust- and attraction-proportional residual growing towards the ends of the travel",
             # the scanned widths either side (the width is fitted on that grid once chosen)
             variants=(fn(narrow), fn(wide)),
-            variant_note=f"fall-off width {narrow * 1e3:.3g}-{wide * 1e3:.3g} mm",
+            variant_note=(
+                f"{profile.shape} fall-off, width {narrow.width * 1e3:.3g}-{wide.width * 1e3:.3g} mm"
+            ),
         ),
         "profile",
         "position",
@@ -192,8 +267,8 @@ def end_effects_candidate(ctx: LibraryContext, width: float = END_WIDTH) -> Cand
             f"{fmt(e['thrust_loss_at_low_end'], 100, '%')} at {lo * 1e3:.0f} mm and "
             f"{fmt(e['thrust_loss_at_high_end'], 100, '%')} at {hi * 1e3:.0f} mm, "
             f"the magnets' attraction by {fmt(e['attraction_loss_at_low_end'], 100, '%')} and "
-            f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre; the "
-            f"losses fall by 1/e every {width * 1e3:.0f} mm inwards."
+            f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre; "
+            f"{profile.describe()}."
         ),
     )
 

@@ -50,11 +50,11 @@ from maglev_oc.diagnosis.library import (
     smooth_probes,
     waviness_candidate,
 )
-from maglev_oc.diagnosis.magnetics import END_WIDTH
+from maglev_oc.diagnosis.magnetics import END_PROFILE, EndProfile
 from maglev_oc.diagnosis.prediction import output_error
 from maglev_oc.diagnosis.refit import (
     REFIT_TOLERANCE,
-    best_end_width,
+    best_end_profile,
     constants_of,
     converged_references,
     fitted_model,
@@ -339,17 +339,17 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     force) inflates that axis's base residual, and a candidate acting on both axes (the amplifiers'
     lag) would otherwise be sized on the other axis almost alone.
 
-    The first selection that chooses the end effects has their fall-off width scanned
-    (:func:`_end_width`); at another width than the library's the selection is repeated with it
+    The first selection that chooses the end effects has their fall-off's shape and width scanned
+    (:func:`_end_profile`); at another profile than the library's the selection is repeated with it
     (a third time when that was the second)."""
     held: dict[str, float] = {}
-    end_width, scanned = END_WIDTH, False
+    end_profile, scanned = END_PROFILE, False
     # a line-like shape is judged by what is left beside it only in the kept selection, once the
     # residual has been searched for guide waviness (SelectionSettings.judge_lines)
     early = dataclasses.replace(session.settings, judge_lines=False)
     relaxed = dataclasses.replace(early, max_axis_loss=math.inf)
     for attempt in range(3):
-        full = candidate_library(fitted, session.data, held, end_width=end_width)
+        full = candidate_library(fitted, session.data, held, end_profile=end_profile)
         effects = list(dict.fromkeys(c.reported_name for c in full))
         unknown = sorted(set(exclude) - set(effects))
         if unknown:
@@ -358,20 +358,20 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         design = session.library_design(fitted, library)
         sel = session.select(design, library, relaxed if attempt == 0 else early)
         if not sel.selected:
-            found = None if scanned or attempt == 2 else _end_width(session, fitted, library, sel, held)
+            found = None if scanned or attempt == 2 else _end_profile(session, fitted, library, sel, held)
             scanned = scanned or found is not None
-            if found is None or found == end_width:
+            if found is None or found == end_profile:
                 break
-            end_width = found
+            end_profile = found
             del design, sel  # the next design replaces this one: never hold both (samples x columns)
             continue
         rebalanced = _rebalanced(session, design, sel) if attempt == 0 else None
         if rebalanced is not None:
             session = dataclasses.replace(session, weights=rebalanced)
         shares = _holding_shares(sel, library)
-        found = None if scanned else _end_width(session, fitted, library, sel, held)
+        found = None if scanned else _end_profile(session, fitted, library, sel, held)
         scanned = scanned or found is not None
-        width = found or end_width
+        profile = found or end_profile
         converged = converged_references(
             session.model,
             fitted,
@@ -382,11 +382,11 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             session.weights,
             held=shares,
             # the first round's library, built above
-            library=full if shares == held and width == end_width else None,
-            end_width=width,
+            library=full if shares == held and profile == end_profile else None,
+            end_profile=profile,
         )
-        rewidthed = width != end_width
-        end_width = width
+        rewidthed = profile != end_profile
+        end_profile = profile
         same = shares == held and rebalanced is None and not rewidthed
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
@@ -425,18 +425,19 @@ def _rebalanced(session: _Session, design: Design, sel: Selection) -> np.ndarray
     return weights if max(change, 1.0 / change) > REBALANCE_FACTOR else None
 
 
-def _end_width(
+def _end_profile(
     session: _Session,
     fitted: StageModel,
     library: Sequence[Candidate],
     sel: Selection,
     held: dict[str, float],
-) -> float | None:
-    """The end effects' width (:func:`~maglev_oc.diagnosis.refit.best_end_width`) fitted beside the
-    base constants and the effects chosen before them, when the selection chose them; else
-    None. The effects chosen after them are left out: they may be the misfit of a wrong
-    width (a 0.017 N vertical cogging at 38 mm beside a thrust-only end effect falling over 20 mm,
-    fitted at 15 mm, on 3 of 6 draws of the independent generator; none at the scanned width).
+) -> EndProfile | None:
+    """The end effects' fall-off, shape and width
+    (:func:`~maglev_oc.diagnosis.refit.best_end_profile`), fitted beside the base constants and the
+    effects chosen before them, when the selection chose them; else None. The effects chosen after
+    them are left out: they may be the misfit of a wrong width (a 0.017 N vertical cogging at 38 mm
+    beside a thrust-only end effect falling over 20 mm, fitted at 15 mm, on 3 of 6 draws of the
+    independent generator; none at the scanned width).
 
     Also when the selection did not choose them although the held-out data showed them (their
     last judgement's pooled gain at least ``min_gain``, whatever test it failed), beside every
@@ -444,8 +445,8 @@ def _end_width(
     A loss that rises as a raised cosine over the outer 30 mm of a +-40 mm travel, 7.5 % at the
     logged ends, was judged at 15 mm "not specific" (a smooth function of the gap explained
     more), and nothing was claimed; at the scanned width it is found (bench/README, *End effects
-    in other shapes*). The scan only chooses the width; the selection then judges the candidate
-    at that width by every test."""
+    in other shapes*). The scan only chooses the profile; the selection then judges the candidate
+    with it by every test."""
     name = next((c.name for c in library if c.reported_name == "end_effects"), None)
     if name is None:
         return None
@@ -458,7 +459,7 @@ def _end_width(
             return None
         before = [by_name[n].term for n in sel.selected]
     data, train, hold, weights = session.data, session.train, session.hold, session.weights
-    return best_end_width(fitted, data, before, train, hold, weights, held, settings=session.settings)
+    return best_end_profile(fitted, data, before, train, hold, weights, held, settings=session.settings)
 
 
 def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, float]:

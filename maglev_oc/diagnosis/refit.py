@@ -9,8 +9,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate, LibraryContext
-from maglev_oc.diagnosis.library import candidate_library, end_effects_at_widths
-from maglev_oc.diagnosis.magnetics import END_WIDTH, END_WIDTHS
+from maglev_oc.diagnosis.library import candidate_library, end_effects_at
+from maglev_oc.diagnosis.magnetics import END_PROFILE, END_PROFILES, EndProfile
 from maglev_oc.diagnosis.selection import SelectionSettings, fitted_constants, separable
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
@@ -37,6 +37,9 @@ within 1 % of the exact derivative over its band (``SavitzkyGolay.tolerance``), 
 parameter proportional to an acceleration carries it."""
 REFIT_TOLERANCE = 0.02
 """Rebuild the library when the refitted constants move by more than this from its references."""
+CENTRE_FALL = math.exp(-1.5)
+"""Largest value at the centre of the logged travel, relative to the ends, of an end-effect
+profile that :func:`best_end_profile` scans (an exponential a third of the travel wide)."""
 
 
 def constants_of(design: Design, fit: SubsetFit, model: StageModel) -> dict[str, Estimate]:
@@ -78,7 +81,7 @@ def converged_references(
     max_rounds: int = 12,
     held: Mapping[str, float] | None = None,
     library: Sequence[Candidate] | None = None,
-    end_width: float = END_WIDTH,
+    end_profile: EndProfile = END_PROFILE,
 ) -> StageModel:
     """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
     the effects' magnetic references (which scale some of their columns) agree with them.
@@ -86,14 +89,14 @@ def converged_references(
     Terms such as the commutation offset are bilinear in a constant and their own parameter;
     their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
     repeated here (a few tenths of a second each: only the chosen effects' columns) until the
-    constants move by less than ``tolerance``. ``held``, ``end_width``: as :func:`candidate_library`
-    takes them; ``library``: ``candidate_library(fitted, data, held, end_width=end_width)`` when the
+    constants move by less than ``tolerance``. ``held``, ``end_profile``: as :func:`candidate_library`
+    takes them; ``library``: ``candidate_library(fitted, data, held, end_profile=end_profile)`` when the
     caller has it (the first round's)."""
     for k in range(max_rounds):
         current = (
             library
             if k == 0 and library is not None
-            else candidate_library(fitted, data, held, end_width=end_width)
+            else candidate_library(fitted, data, held, end_profile=end_profile)
         )
         by_name = {c.name: c for c in current}
         terms = [by_name[n].term for n in chosen]
@@ -111,7 +114,7 @@ def converged_references(
     return fitted
 
 
-def best_end_width(
+def best_end_profile(
     model: StageModel,
     data: PreparedLogs,
     others: Sequence[AccelerationTerm],
@@ -119,40 +122,49 @@ def best_end_width(
     hold: np.ndarray,
     weights: np.ndarray | None,
     held: Mapping[str, float] | None = None,
-    widths: Sequence[float] = END_WIDTHS,
+    profiles: Sequence[EndProfile] = END_PROFILES,
     settings: SelectionSettings | None = None,
-    current: float = END_WIDTH,
-) -> float:
-    """The end effects' fall-off width among ``widths`` [m] whose joint fit with the base constants
-    and the ``others`` terms leaves the smallest weighted training residual, among the widths at
-    which they stay end effects and separable from those as ``settings`` judge it (``current``
-    when none is). One design carries every width's columns; each fit is a solve of its Gram
-    blocks.
+    current: EndProfile = END_PROFILE,
+) -> EndProfile:
+    """The end effects' fall-off (shape and width) among ``profiles`` whose joint fit with the base
+    constants and the ``others`` terms leaves the smallest weighted training residual, among the
+    profiles with which they stay end effects and separable from those as ``settings`` judge it
+    (``current`` when none is). One design carries every profile's columns; each fit is a solve
+    of its Gram blocks.
 
-    * End effects: a width up to a third of the logged travel (or ``current``), so that the fall
-      at the centre of the travel is at most exp(-1.5) = 22 % of the fall at its ends. A wider
-      fall is a smooth dependence on the position, which would take up any smooth misfit along
-      the travel whatever its cause: beside vertical guide friction on an off-centre travel of
-      40 mm (the experiments bench, no end effect planted), the scan went to its widest, 48 mm,
-      and a 0.5 % end effect was claimed; not at 15 mm.
+    * End effects: a profile that falls at the centre of the logged travel to at most exp(-1.5) =
+      22 % of its value at the ends (an exponential up to a third of the travel wide), or
+      ``current``. A wider fall is a smooth dependence on the position, which would take up any
+      smooth misfit along the travel whatever its cause: beside vertical guide friction on an
+      off-centre travel of 40 mm (the experiments bench, no end effect planted), the scan went to
+      its widest, 48 mm, and a 0.5 % end effect was claimed; not at 15 mm.
+    * Plausible: the sizes it gives pass the candidate's physical checks (no end where the forces
+      grow: a rounded profile 24 mm wide fitted a linear trend along the travel as a fall at one
+      end and a growth at the other, drawn pair 9002).
     * Separable: the wider the fall, the more it looks like a change of the constants over a
       short travel (the variants bench's end effect falling over 35 mm fitted best at 38 mm, where
       its variance inflation, 307, made it not separable; at 15 mm it was found and sized right).
     """
     settings = settings or SelectionSettings()
     lo, hi = LibraryContext(model, data).position_range
-    widest = max((hi - lo) / 3.0, current)
-    widths = [w for w in widths if w <= widest]
-    scanned = end_effects_at_widths(model, data, widths, held)
+    centre = (hi - lo) / 2.0
+    profiles = [p for p in profiles if p == current or p.fall_at(centre) <= CENTRE_FALL * (1 + 1e-9)]
+    scanned = end_effects_at(model, data, profiles, held)
     design = build_design(
         data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
     )
     fixed = ["base", *(t.name for t in others)]
     cost = {}
-    for w, c in zip(widths, scanned, strict=True):
+    for p, c in zip(profiles, scanned, strict=True):
         fit = fit_subset(design, [*fixed, c.name], covariance=False)
-        if separable(design, c, fit, settings):
-            cost[float(w)] = fit.chi_square
+        if not separable(design, c, fit, settings):
+            continue
+        # physically plausible with this profile, judged as the selection judges it (with the
+        # standard errors of the fit)
+        full = fit_subset(design, [*fixed, c.name])
+        coef, cov = full.group(design, c.name)
+        if c.plausible(c.term.physical_parameters(coef, cov, fitted_constants(full))) is None:
+            cost[p] = fit.chi_square
     return min(cost, key=cost.get) if cost else current
 
 
