@@ -57,6 +57,9 @@ def _wrap(text: str, width: int) -> str:
 
 _POSITION_PARAMETERS = ("at_gap", "period", "low_end_position", "high_end_position", "width", "decay_length")
 """Parameters [m] that say where an effect acts, not how large it is (left out of the sizes)."""
+_CHECK_PARAMETERS = ("forces_lost_at_low_end_alone", "forces_lost_at_high_end_alone")
+"""Parameters an effect's plausibility is judged on (an end effect's each end on its own), shown in
+the table of every parameter, not among the sizes."""
 
 
 def _size_parameters(effect: Effect) -> dict:
@@ -66,6 +69,7 @@ def _size_parameters(effect: Effect) -> dict:
         for k, v in effect.parameters.items()
         if not k.startswith("rms_force")
         and k not in effect.candidate.nuisance
+        and k not in _CHECK_PARAMETERS
         and not (v.unit == "m" and k in _POSITION_PARAMETERS)
     }
 
