@@ -107,17 +107,20 @@ whole-log fit's size, it stands in for a dependence on the position of another s
 specific" (the residual goes to ``unexplained``). A drawn pair of the independent generator (seed
 9321: thrust and attraction falling over the last 46 mm before a stator end, a cosine profile the
 library's exponential end effects fit only in part) claimed a 38 mm normal cogging whose halves
-differed by 1.23 of its size (Wald 70 against 18); true cogging (15 fits on 13 logs of the sets,
-experiments and random pairs) differed by at most 0.07 of its size (Wald at most 9). Guide waviness
-is not held to it: its period is estimated from the residual, and a period slightly off drifts in
-phase along the travel (the true waviness of experiments_06 of the independent set, found at 73 mm,
-kept its size on both halves, 97 % and 107 %, but changed by 0.61 with a Wald of 96). Every such
-force, waviness included, must keep its size: the halves' norms may differ by at most a factor
-``max_half_ratio`` unless the difference is weaker than ``min_z_strong`` (the delta method's z with
-the same covariance). The false claim that replaced 9321's cogging, a 38 mm waviness, was 59 % and
-155 % (a factor 2.65, z 2.96); true waviness on four logs differed by a factor 1.09-1.20 (z up to
-4.2: small differences, well measured). A factor 2 is where a sinusoid of one size no longer
-describes the force: one half's force is more than twice the other's.
+differed by 1.23 of its size (Wald 54 against 18; before the end effects' rounded profile, which now
+fits that log); true cogging (89 fits on 82 logs of every bench of the independent generator)
+differed by at most 0.15 of its size, though with a Wald up to 162: a strong force is measured well
+enough for small differences between its halves to be significant, so the size of the change
+decides, not its Wald alone. Guide waviness is not held to it: its period is estimated from the
+residual, and a period slightly off drifts in phase along the travel (the true waviness of
+experiments_06 of the independent set, found at 73 mm, kept its size on both halves, 97 % and 107 %,
+but changed by 0.61 with a Wald of 55). Every such force, waviness included, must keep its size: the
+halves' norms may differ by at most a factor ``max_half_ratio`` unless the difference is weaker than
+``min_z_strong`` (the delta method's z with the same covariance). The false claim that replaced
+9321's cogging, a 38 mm waviness, was 59 % and 155 % (a factor 2.65, z 2.30); true waviness on three
+logs differed by a factor 1.09-1.20 (z up to 3.5: small differences, well measured). A factor 2 is
+where a sinusoid of one size no longer describes the force: one half's force is more than twice the
+other's.
 
 Among the candidates that pass all six the one with the largest gain is added; the selection
 stops when none passes or after ``max_effects``. The confidence of each choice is the share of
