@@ -4,14 +4,20 @@
   their signal) returns, says it is not a success and why, and does not crash;
 * when the first selection's effects change the balance of the axes' residuals by more than
   ``REBALANCE_FACTOR``, everything after it (the converged constants included) uses the new
-  weights.
+  weights;
+* a chosen effect that an unexplained dependence on another variable explains as well is "not
+  specific" (a code path no quick log reached: found by coverage, not by a mutant).
 
 Logs from ``tests/independent`` (the independent generator), diagnosed with the defaults.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from types import SimpleNamespace
+
 import numpy as np
+import pytest
 
 import maglev_oc.regression.data as data_module
 from maglev_oc.diagnosis import pipeline
@@ -61,3 +67,33 @@ def test_a_rebalanced_selection_converges_the_constants_with_the_new_weights(gen
     assert rebalanced and rebalanced[0] is not None, "this log must rebalance for the test to mean anything"
     assert weights_used, "the constants were converged"
     np.testing.assert_array_equal(weights_used[0], rebalanced[0])
+
+
+def test_an_unexplained_dependence_that_explains_an_effect_as_well_makes_it_not_specific(generated):
+    """``_explained_by_unexplained``: a chosen effect no longer stands when an unexplained
+    dependence on another variable explains what it explains (its held-out contribution vanishes
+    beside it); a dependence on its own variable is its own imperfect shape, not a rival. The
+    limiting case: a rival whose columns are the effect's own (the vertical cogging of this log,
+    renamed), said to depend on the gap: the cogging becomes "not specific", the reason naming the
+    gap; said to depend on the position (the cogging's own variable), nothing changes; and with no
+    unexplained dependence there is nothing to judge."""
+    captured = {}
+    original = pipeline._explained_by_unexplained
+
+    def recording(session, model, chosen, unexplained):
+        captured.setdefault("args", (session, model, chosen))
+        return original(session, model, chosen, unexplained)
+
+    path, _ = generated("single", _stem("normal_cogging_large"))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pipeline, "_explained_by_unexplained", recording)
+        diagnose_path(path)
+    session, model, chosen = captured["args"]
+    (cogging,) = chosen
+    assert cogging.name == "cogging_vertical_19mm" and cogging.variable == "position"
+    copy = dataclasses.replace(cogging.term, name="rival")
+    (stale,) = original(session, model, chosen, [SimpleNamespace(term=copy, depends_on="gap")])
+    assert stale.name == cogging.name and stale.verdict == "not specific"
+    assert "explained as well by a dependence on the gap" in stale.reason
+    assert original(session, model, chosen, [SimpleNamespace(term=copy, depends_on="position")]) == []
+    assert original(session, model, chosen, []) == []
