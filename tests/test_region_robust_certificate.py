@@ -97,10 +97,13 @@ def test_robust_p_aimed_at_a_start_reaches_further_along_it(certifier, proc, con
         robust_lyapunov_matrix(certifier, nominal, plants, direction=np.zeros(10))
 
 
-def test_result_convention_and_bounds(certified):
+def test_result_convention_and_bounds(certified, robust_nominal):
     check_result(certified)
     assert 0 < certified.level <= certified.nominal_level
     assert set(certified.timings) >= {"nominal", "certify", "total"}
+    # the nominal certificate's own time is carried over, and the total is the two steps'
+    assert certified.timings["nominal"] == robust_nominal.timings["total"] > 0
+    assert certified.timings["total"] == certified.timings["certify"] + certified.timings["nominal"]
 
 
 def test_nominal_point_gives_the_nominal_level(certifier, robust_nominal, proc, constants):
