@@ -197,3 +197,43 @@ def test_the_json_of_a_diagnosis_carries_each_effects_numbers_under_the_contract
         assert j["contribution_rms"] == e.contribution_rms.to_dict()
         assert j["force_rms_N"] == e.force_rms.to_dict()
         assert set(j["contribution_rms"]) == set(j["force_rms_N"]) == {"vertical", "horizontal"}
+
+
+def test_the_designers_noise_covariance_is_the_differentiators_second_derivative_of_white_noise():
+    """ExperimentDesigner.covariance with no residual floor: white encoder noise of variance s^2
+    reaches the equation error through the Savitzky-Golay second derivative, so the covariance is
+    s^2 H^-1 (sum over axes of G G') H^-1, G the columns filtered by that derivative. Its taps are
+    computed here from their definition (the least-squares polynomial of the filter's order over
+    its window, twice its t^2 coefficient at the centre), not by scipy; 1e-9 relative (rounding).
+    A residual floor adds its own white part on top."""
+    from maglev_oc.identification import design as D
+    from maglev_oc.identification.equation_error import EquationError
+    from maglev_oc.identification.experiments import LOG_RATE_HZ
+    from maglev_oc.regression.base import CONSTANT_NAMES
+    from maglev_oc.regression.design import build_design
+    from maglev_oc.sim.recording import result_to_log
+
+    model = StageModel()
+    designer = D.ExperimentDesigner(model, residual_floor=0.0)
+    log = result_to_log(designer.simulate(D.papers_reference(10.0)), rate_hz=LOG_RATE_HZ)
+    cov = designer.covariance(log)
+
+    prep = EquationError(log, model, estimate=CONSTANT_NAMES).prepared
+    design = build_design(prep, model, estimate=CONSTANT_NAMES, weights=np.ones(2))
+    x = design.columns * design.fit[None, None, :]  # the fitted samples' columns
+    sg = prep.differentiator
+    half = sg.acceleration_window // 2
+    tau = np.arange(-half, half + 1) * sg.sample_time
+    vandermonde = tau[:, None] ** np.arange(sg.polyorder + 1)[None, :]
+    taps = 2.0 * np.linalg.pinv(vandermonde)[2]  # y''(centre) = sum_k taps_k y(centre + tau_k)
+    assert taps @ (0.5 * tau**2) == pytest.approx(1.0, rel=1e-9)  # the second derivative of t^2 / 2
+    H = sum(x[:, a, :] @ x[:, a, :].T for a in range(2))
+    G = [np.array([np.convolve(row, taps, mode="full") for row in x[:, a, :]]) for a in range(2)]
+    M = designer.noise_variance * sum(g @ g.T for g in G)
+    Hi = np.linalg.inv(H)
+    np.testing.assert_allclose(cov, Hi @ M @ Hi, rtol=1e-9, atol=0.0)
+    # a residual floor (a white equation error of variance floor * fs / 2) adds floor fs / 2 H^-1
+    floor = 1e-4
+    with_floor = D.ExperimentDesigner(model, residual_floor=floor).covariance(log)
+    added = floor / (2 * sg.sample_time) * Hi
+    np.testing.assert_allclose(with_floor - cov, added, rtol=1e-6, atol=1e-9 * np.max(np.abs(added)))
