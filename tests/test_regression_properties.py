@@ -68,3 +68,29 @@ def test_a_zero_sine_cosine_pair_has_no_phase():
     out = amplitude_phase("N")(np.zeros(2), np.eye(2), {})
     assert out["amplitude"].value == 0 and math.isnan(out["amplitude"].stderr)
     assert math.isnan(out["phase"].stderr)
+
+
+def test_the_long_run_covariance_of_several_logs_adds_each_logs_own():
+    """covariance.per_log_long_run (the meat of every equation-error fit and of the diagnosis's
+    halves rule): over samples labelled by log, the sum of each log's averaged periodogram at its
+    own number of frequencies, the same as long_run_covariance over the logs as a list; the logs'
+    order in the series does not matter (each log's samples are taken in their order)."""
+    from maglev_oc.regression.covariance import (
+        frequencies_for,
+        long_run_covariance,
+        per_log_long_run,
+        periodogram_long_run,
+    )
+
+    rng = np.random.default_rng(3)
+    parts = [rng.normal(size=(3, n)).cumsum(axis=1) * 1e-3 for n in (4000, 2500)]
+    series = np.concatenate(parts, axis=1)
+    labels = np.repeat([5, 2], [4000, 2500])
+    meat, m = per_log_long_run(series, labels, 1e-3)
+    by_hand = sum(periodogram_long_run(p, frequencies_for(p.shape[1], 1e-3)) for p in parts)
+    assert m == frequencies_for(4000, 1e-3) + frequencies_for(2500, 1e-3)
+    np.testing.assert_allclose(meat, 0.5 * (by_hand + by_hand.T), rtol=1e-12)
+    listed = long_run_covariance(parts, np.eye(3), 1e-3).covariance
+    np.testing.assert_allclose(meat, listed, rtol=1e-12)
+    swapped, _ = per_log_long_run(np.concatenate(parts[::-1], axis=1), labels[::-1], 1e-3)
+    np.testing.assert_allclose(swapped, meat, rtol=1e-12)
