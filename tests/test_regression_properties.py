@@ -83,12 +83,13 @@ def test_the_long_run_covariance_of_several_logs_adds_each_logs_own():
     )
 
     rng = np.random.default_rng(3)
-    parts = [rng.normal(size=(3, n)).cumsum(axis=1) * 1e-3 for n in (4000, 2500)]
+    # 60 s and 20 s at 1 kHz: 15 and 5 frequencies each (20 over the two taken as one)
+    parts = [rng.normal(size=(3, n)).cumsum(axis=1) * 1e-3 for n in (60_000, 20_000)]
     series = np.concatenate(parts, axis=1)
-    labels = np.repeat([5, 2], [4000, 2500])
+    labels = np.repeat([5, 2], [60_000, 20_000])
     meat, m = per_log_long_run(series, labels, 1e-3)
     by_hand = sum(periodogram_long_run(p, frequencies_for(p.shape[1], 1e-3)) for p in parts)
-    assert m == frequencies_for(4000, 1e-3) + frequencies_for(2500, 1e-3)
+    assert m == frequencies_for(60_000, 1e-3) + frequencies_for(20_000, 1e-3) == 20
     np.testing.assert_allclose(meat, 0.5 * (by_hand + by_hand.T), rtol=1e-12)
     listed = long_run_covariance(parts, np.eye(3), 1e-3).covariance
     np.testing.assert_allclose(meat, listed, rtol=1e-12)
