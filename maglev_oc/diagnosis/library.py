@@ -104,8 +104,8 @@ def end_effects_at(
     them all."""
     ctx = LibraryContext(model, data)
     out = []
-    for k, w in enumerate(profiles):
-        c = _held(end_effects_candidate(ctx, w), held)
+    for k, profile in enumerate(profiles):
+        c = _held(end_effects_candidate(ctx, profile), held)
         out.append(dataclasses.replace(c, term=dataclasses.replace(c.term, name=f"{c.name}_w{k}")))
     return out
 

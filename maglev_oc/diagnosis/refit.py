@@ -156,14 +156,13 @@ def best_end_profile(
     fixed = ["base", *(t.name for t in others)]
     cost = {}
     for p, c in zip(profiles, scanned, strict=True):
-        fit = fit_subset(design, [*fixed, c.name], covariance=False)
+        # with its covariance: plausibility is judged as the selection judges it, standard errors
+        # included
+        fit = fit_subset(design, [*fixed, c.name])
         if not separable(design, c, fit, settings):
             continue
-        # physically plausible with this profile, judged as the selection judges it (with the
-        # standard errors of the fit)
-        full = fit_subset(design, [*fixed, c.name])
-        coef, cov = full.group(design, c.name)
-        if c.plausible(c.term.physical_parameters(coef, cov, fitted_constants(full))) is None:
+        coef, cov = fit.group(design, c.name)
+        if c.plausible(c.term.physical_parameters(coef, cov, fitted_constants(fit))) is None:
             cost[p] = fit.chi_square
     return min(cost, key=cost.get) if cost else current
 
