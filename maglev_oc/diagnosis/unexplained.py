@@ -25,7 +25,13 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.diagnosis.library import PROBE_VARIABLES, Candidate, smooth_probes
-from maglev_oc.diagnosis.selection import SelectionSettings, _holdout_residual, evidence, holdout_significance
+from maglev_oc.diagnosis.selection import (
+    SelectionSettings,
+    _holdout_residual,
+    evidence,
+    holdout_significance,
+    stands_in_for_the_fit,
+)
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
@@ -115,7 +121,14 @@ def find_unexplained(
         cur_fit = fit_subset(design, current, covariance=False)
         r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        open_probes = [e for e in remaining if found[e[0].axis] < max_per_axis]
+        # a probe confounded with the fit it joins stands in for its constants (a smooth function of
+        # the gap for C2's column): it shows no dependence they lack (selection._rival_gains)
+        open_probes = [
+            e
+            for e in remaining
+            if found[e[0].axis] < max_per_axis
+            and not stands_in_for_the_fit(design, current, design.groups[e[0].name], settings.max_vif)
+        ]
         if not open_probes:
             break
         entry, r1 = _best_probe(design, current, open_probes, mse0, counted)
