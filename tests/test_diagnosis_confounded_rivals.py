@@ -27,7 +27,7 @@ from maglev_oc.diagnosis.selection import (
     SelectionSettings,
     _HeldOutGrams,
     _rival_gains,
-    stands_in_for_the_fit,
+    stands_in_for_the_constants,
 )
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
@@ -81,10 +81,10 @@ def test_only_the_gap_on_the_vertical_axis_stands_in_for_the_constants(noisy_cog
         vif = _inflation_by_inverse(design, first)
         confounded = axis == "vertical" and var == "gap"
         assert (vif > 2 * MAX_VIF) if confounded else (vif < 2.0), (axis, var, vif)
-        assert stands_in_for_the_fit(design, ["base"], [first], MAX_VIF) is confounded
+        assert stands_in_for_the_constants(design, [first], MAX_VIF) is confounded
         # the threshold is the argument's, not a constant of the code
-        assert stands_in_for_the_fit(design, ["base"], [first], 0.5 * vif) is True
-        assert stands_in_for_the_fit(design, ["base"], [first], 2.0 * vif) is False
+        assert stands_in_for_the_constants(design, [first], 0.5 * vif) is True
+        assert stands_in_for_the_constants(design, [first], 2.0 * vif) is False
 
 
 def test_the_confounded_probe_is_no_rival_although_it_explains_the_most(noisy_cogged):

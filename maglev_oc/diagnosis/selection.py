@@ -1110,27 +1110,25 @@ def _rival_columns(design: Design, probes: dict[tuple[str, str], str], axis: str
     return cols[-1:] + cols[:-1] if axis == "horizontal" else cols
 
 
-def stands_in_for_the_fit(
-    design: Design, current: Sequence[str], columns: Sequence[int], max_vif: float
-) -> bool:
+def stands_in_for_the_constants(design: Design, columns: Sequence[int], max_vif: float) -> bool:
     """Whether the design's ``columns`` (a generic probe's) have a variance inflation above ``max_vif``
-    against the fit of the groups ``current``: what they explain there they explain by standing in
-    for that fit's parameters, not beside them (see :func:`_rival_gains`). A probe's constant (its
-    ``P0``, horizontal probes only) is left out of the judged columns and counted with the fit, as
-    a candidate's nuisance parameters are: a constant force already in the fit makes it collinear,
-    which says nothing about the probe's shape."""
+    against the base constants: what they explain beside C1..C4 they explain by standing in for
+    them, not beside them (see :func:`_rival_gains`). A probe's constant (its ``P0``, horizontal
+    probes only) is counted with the constants, not judged, as a candidate's nuisance parameters
+    are. Only the constants: a probe collinear with a chosen effect's columns (a smooth function of
+    the position beside end effects) rivals that effect's shape, which is what it is there for."""
     columns = [int(c) for c in columns]
     judged = [c for c in columns if not design.names[c].endswith(".P0")]
     if not judged:
         return False
-    idx = np.concatenate([design.indices(current), [c for c in columns if c not in judged]]).astype(int)
+    idx = np.concatenate([design.indices(["base"]), [c for c in columns if c not in judged]]).astype(int)
     cols = np.concatenate([idx, judged])
     every = slice(None)
     g = (_blocks_of(design.gram, every, cols) - _blocks_of(design.noise, every, cols)).sum(axis=0)
     own = np.arange(cols.size) >= idx.size
     try:
         return _inflation(g, own, ~own & (np.diag(g) > 0)) > max_vif
-    except np.linalg.LinAlgError:  # singular on their own or beside it: the fit handles that as before
+    except np.linalg.LinAlgError:  # singular on their own or beside them: the fit handles that as before
         return False
 
 
@@ -1149,8 +1147,9 @@ def _rival_gains(
     axis, or for an effect on both axes any split of k between the two axes' probes. ``around``:
     the held-out mean squares about the fit of ``current`` (on the samples that count).
 
-    A rival held to the candidates' separability test: one whose columns' variance inflation
-    against ``current``'s exceeds ``max_vif`` does not rival anything. It stands in for the
+    A rival held to the candidates' separability test from the constants: one whose columns'
+    variance inflation against C1..C4 exceeds ``max_vif`` does not rival anything
+    (:func:`stands_in_for_the_constants`). It stands in for the
     constants, not for a dependence they lack: a smooth function of the gap on the vertical axis
     is nearly C2's column (variance inflation 400-47 000 on clean logs of the independent
     generator, every other probe under 1.3), and where the logged currents are noisy it takes
@@ -1164,7 +1163,7 @@ def _rival_gains(
 
     def stands_in(key: tuple[int, ...]) -> bool:
         if key not in confounded:
-            confounded[key] = stands_in_for_the_fit(design, current, key, max_vif)
+            confounded[key] = stands_in_for_the_constants(design, key, max_vif)
         return confounded[key]
 
     variables = sorted({var for _, var in probes})

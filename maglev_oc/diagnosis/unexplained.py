@@ -30,7 +30,7 @@ from maglev_oc.diagnosis.selection import (
     _holdout_residual,
     evidence,
     holdout_significance,
-    stands_in_for_the_fit,
+    stands_in_for_the_constants,
 )
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
@@ -121,13 +121,13 @@ def find_unexplained(
         cur_fit = fit_subset(design, current, covariance=False)
         r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        # a probe confounded with the fit it joins stands in for its constants (a smooth function of
-        # the gap for C2's column): it shows no dependence they lack (selection._rival_gains)
+        # a probe confounded with the base constants stands in for them (a smooth function of the
+        # gap for C2's column): it shows no dependence they lack (selection._rival_gains)
         open_probes = [
             e
             for e in remaining
             if found[e[0].axis] < max_per_axis
-            and not stands_in_for_the_fit(design, current, design.groups[e[0].name], settings.max_vif)
+            and not stands_in_for_the_constants(design, design.groups[e[0].name], settings.max_vif)
         ]
         if not open_probes:
             break
