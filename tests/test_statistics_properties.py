@@ -731,3 +731,48 @@ def test_min_gain_is_judged_on_the_axes_the_candidate_acts_on(with_friction, mea
     assert _verdict(j, _friction_candidate(), axes, cur, between, None)[0] == "passes"
     above = dataclasses.replace(SelectionSettings(), min_gain=own * UP)
     assert _verdict(j, _friction_candidate(), axes, cur, above, None)[0] == "not significant"
+
+
+# --------------------------------------------------------------------------------------------
+# a column the fit's other columns span
+
+
+def test_a_duplicated_column_gets_no_coefficient_and_leaves_the_fit_as_it_was(with_friction):
+    """The viscous column added a second time (``extra``): exactly spanned by the first, so its
+    coefficient is 0, the other coefficients, the held-out error and the compensation are those of
+    the fit without it (rtol 1e-9, the same normal equations less a row and column of zeros), and
+    its covariance row is 0. Left in, the singular normal equations stopped the errors-in-variables
+    compensation at a share of 0, which the selection reads as "dominated by the errors of the
+    logged currents" (a cable carrier refused beside a generic probe's constant)."""
+    d = with_friction
+    one = fit_subset(d, ["base", "viscous_horizontal"])
+    col = int(d.groups["viscous_horizontal"][0])
+    two = fit_subset(d, ["base", "viscous_horizontal"], extra=[col])
+    np.testing.assert_allclose(two.coef[:-1], one.coef, rtol=1e-9)
+    assert two.coef[-1] == 0.0 and np.all(two.covariance[-1] == 0.0)
+    np.testing.assert_allclose(two.holdout_rms, one.holdout_rms, rtol=1e-9)
+    assert two.compensation == one.compensation
+
+
+@pytest.mark.parametrize("later", [False, True])
+def test_spanned_columns_are_exact_combinations_of_the_ones_before_them(later):
+    """On a Gram X'X of random columns: a column that is a combination of the others is spanned,
+    the later of them in the fit's order (x3 = combo - 0.5 x0 + 2 x1, so with the combination first
+    x3 is the spanned one); a column whose share of variance left beyond the kept ones is 1e-6 is
+    not (SPANNED is 1e-9: only duplicates, never columns the data barely tell apart); a dead
+    column is neither."""
+    from maglev_oc.regression.solve import SPANNED, _spanned
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((500, 4))
+    combo = x @ np.array([0.5, -2.0, 0.0, 1.0])
+    other = rng.standard_normal(500)
+    other -= x @ np.linalg.lstsq(x, other, rcond=None)[0]  # orthogonal to the four
+    eps = 1e-3 * np.linalg.norm(combo) / np.linalg.norm(other)
+    near = combo + eps * other  # variance left beyond the four: 1e-6 / (1 + 1e-6) of its own
+    assert 1e-7 > SPANNED
+    first = [combo, *x.T] if later else [*x.T, combo]
+    a = np.column_stack([*first, near, np.zeros(500)])
+    g = a.T @ a
+    out = _spanned(g, np.diag(g) <= 0)
+    np.testing.assert_array_equal(out, [False, False, False, False, True, False, False])

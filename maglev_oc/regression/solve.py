@@ -91,6 +91,38 @@ def _sorted(a: np.ndarray) -> bool:
     return bool(np.all(np.diff(a) > 0))
 
 
+SPANNED = 1e-9
+"""A column is spanned by the columns before it in a fit when its share of variance left after
+projecting on them is below this: only exact duplicates (two constant forces on one axis, filtered
+alike, differ at 1e-16), never columns the data barely tell apart (a variance inflation of 1e9)."""
+
+
+def _spanned(gram: np.ndarray, dead: np.ndarray) -> np.ndarray:
+    """(p,) bool: the live columns whose variance left after projecting on the live columns before
+    them (in the fit's order) is below :data:`SPANNED` of their own. A duplicate left in the
+    normal equations makes them singular, and the errors-in-variables compensation would then
+    stop at a share of 0, as if the logged currents' errors dominated."""
+    p = gram.shape[0]
+    out = np.zeros(p, dtype=bool)
+    scale = np.sqrt(np.where(dead, 1.0, np.diag(gram)))
+    g = gram / np.outer(scale, scale)
+    kept: list[int] = []
+    for j in range(p):
+        if dead[j]:
+            continue
+        if kept:
+            b = g[kept, j]
+            try:
+                left = 1.0 - float(b @ np.linalg.solve(g[np.ix_(kept, kept)], b))
+            except np.linalg.LinAlgError:
+                left = 1.0
+            if left < SPANNED:
+                out[j] = True
+                continue
+        kept.append(j)
+    return out
+
+
 def _solve_spd(g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """Solution and inverse of a symmetric system; False when it is not positive definite."""
     try:
@@ -135,8 +167,10 @@ def fit_subset(
     rhs = _blocks_of(design.rhs, sel, idx).sum(axis=0)
     yy = float(design.yy[sel].sum())
     message = ""
-    # columns that vanish on the fitted rows (they act only on a locked axis): coefficient 0
+    # columns that vanish on the fitted rows (they act only on a locked axis), or that the columns
+    # before them span (a generic probe's constant beside a constant force): coefficient 0
     dead = np.diag(gram_raw) <= 1e-12 * max(float(np.max(np.diag(gram_raw), initial=0.0)), 1e-300)
+    dead |= _spanned(gram_raw, dead)
     rhs = np.where(dead, 0.0, rhs)
 
     def system(share: float) -> np.ndarray:
