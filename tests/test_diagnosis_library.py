@@ -834,6 +834,37 @@ def test_end_effects_whose_forces_grow_at_one_end_are_implausible(plant):
     assert cand.plausible(cand.term.physical_parameters(q, np.full((4, 4), np.nan), {})) is None
 
 
+def test_end_effects_that_fall_at_neither_end_overall_are_implausible(plant):
+    """End effects are a fall at the logged ends: the thrust's or the attraction's loss at the ends
+    (their mean, relative to the centre) must be positive by END_FALL_Z standard errors. A fit that
+    is one end up and the other down (a trend along the travel) has both near zero. At the bound,
+    1e-6 either side, with either loss the one that carries it: beyond it (both within) refused,
+    within it accepted; without standard errors not judged. The drawn pair that motivated it
+    (9002 on the noisy rig): +1.8 % attraction at one end and -1.7 % at the other."""
+    from maglev_oc.diagnosis.magnetics import END_FALL_Z, end_effects_candidate
+
+    cand = end_effects_candidate(LibraryContext(StageModel(), plant.data), EndProfile(0.015))
+    q = np.array([0.03, 0.02, 0.02, 0.01])  # both ends fall: plausible as it stands
+    base = cand.term.physical_parameters(q, 1e-6 * np.eye(4), {})
+    assert cand.plausible(base) is None
+    se = 0.004
+    for carrier in ("thrust", "attraction"):
+        other = "attraction" if carrier == "thrust" else "thrust"
+        for factor, refused in ((1 - 1e-6, True), (1 + 1e-6, False)):
+            p = dict(base)
+            p[f"{carrier}_loss_at_ends"] = Estimate(END_FALL_Z * se * factor, se, "1")
+            p[f"{other}_loss_at_ends"] = Estimate(0.5 * se, se, "1")  # 0.5 standard errors
+            reason = cand.plausible(p)
+            if refused:
+                assert reason is not None and "falls at the ends" in reason, reason
+            else:
+                assert reason is None, reason
+    p = dict(base)
+    p["thrust_loss_at_ends"] = Estimate(0.001, math.nan, "1")
+    p["attraction_loss_at_ends"] = Estimate(0.001, math.nan, "1")
+    assert cand.plausible(p) is None
+
+
 def test_every_candidate_can_travel_in_a_stage_file(plant):
     # the stage file accepts effects by name (model.stagefile.EFFECT_NAMES, patterns): every
     # candidate the library builds must be one of them, or a found effect could not be written
