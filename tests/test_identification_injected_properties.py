@@ -237,6 +237,8 @@ def test_identify_validates_on_the_validation_logs(model, twin_log):
     assert out.validation.inputs.shape == expected.inputs.shape
     np.testing.assert_allclose(out.validation.residuals, expected.residuals, rtol=1e-9, atol=1e-12)
     assert "held.csv" in out.validation.data
+    # and it says what was validated: the identified constants, by the method that fitted them
+    assert out.validation.model == f"identified constants ({out.best.method})"
 
 
 def _moving_log(duration: float) -> Log:
