@@ -147,7 +147,7 @@ from maglev_oc.regression.covariance import (
     periodogram_long_run,
 )
 from maglev_oc.regression.design import Design
-from maglev_oc.regression.solve import SubsetFit, _blocks_of, fit_subset
+from maglev_oc.regression.solve import SubsetFit, _blocks_of, _spanned, fit_subset
 from maglev_oc.regression.terms import Estimate
 
 __all__ = [
@@ -662,11 +662,15 @@ def judge(
     if _own_gain(pooled_axes) >= settings.min_gain and z >= min(settings.min_z, settings.min_z_strong):
         fit = fit_subset(design, [*current, cand.name])  # the long-run covariance, for the Wald test
     coef, cov = fit.group(design, cand.name)
+    # the coefficients the fit estimated: one held at 0 because the fit's other columns span its
+    # own (a spring's constant beside a chosen constant force, regression.solve._spanned) has a
+    # covariance row of 0 and is no part of the test, nor of its degrees of freedom
+    live = np.diag(cov) > 0 if np.all(np.isfinite(cov)) else np.zeros(coef.size, dtype=bool)
     try:
-        wald = float(coef @ np.linalg.solve(cov, coef)) if np.all(np.isfinite(cov)) else 0.0
+        wald = float(coef[live] @ np.linalg.solve(cov[np.ix_(live, live)], coef[live])) if live.any() else 0.0
     except np.linalg.LinAlgError:
         wald = 0.0
-    threshold = float(chi2.isf(settings.alpha, coef.size))
+    threshold = float(chi2.isf(settings.alpha, max(int(live.sum()), 1)))
     # its size: how much adding it changes the model's prediction on the held-out block (not
     # the RMS of its own columns, which collinearity with the constants can make large)
     n_counted = np.full(2, r0.shape[1]) if counted is None else np.maximum(counted.sum(axis=1), 1)
@@ -1054,8 +1058,13 @@ def _separability(
     ).sum(axis=0)
     reported = [q for q in cand.term.parameter_names if q not in cand.nuisance]
     own_cols = design.groups[cand.name][[cand.term.parameter_names.index(q) for q in reported]]
-    own = np.isin(idx, own_cols)
-    others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0)
+    # columns the fit held at 0 because the columns before them span them (regression.solve) are
+    # no part of either span: the fit did not estimate them
+    spanned = _spanned(g, np.diag(g) <= 0)
+    own = np.isin(idx, own_cols) & ~spanned
+    if not own.any():
+        return np.inf, ("the effects already chosen",)
+    others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0) & ~spanned
     # the directions judged: each reported coefficient, or the one combination that is the
     # effect's size (in the order of the fit's columns)
     size_direction = getattr(cand, "size_direction", None)  # (a stand-in may have none)
@@ -1065,7 +1074,7 @@ def _separability(
         direction = np.asarray(size_direction(fitted_constants(fit)), dtype=float)[order][:, None]
     try:
         vif = _inflation(g, own, others, direction)
-        live = np.diag(g) > 0
+        live = (np.diag(g) > 0) & ~spanned
         full = np.full(g.shape, np.nan)
         full[np.ix_(live, live)] = np.linalg.inv(g[np.ix_(live, live)])
         sd = np.sqrt(np.abs(np.diag(full)))
