@@ -63,8 +63,10 @@ effects already chosen (bias-compensated least squares on the training blocks,
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
    (:func:`~maglev_oc.diagnosis.library.smooth_probes`: a constant and Legendre polynomials of the
-   gap, the position or a velocity): a rival that explains more by more than ``rival_margin``
-   means the data show a dependence on that variable, not this effect's shape, and the residual
+   gap, the position or a velocity; one that stands in for the constants, at a variance inflation
+   above ``max_vif`` against them, is no rival: :func:`stands_in_for_the_constants`): a rival that
+   explains more by more than ``rival_margin`` means the data show a dependence on that variable,
+   not this effect's shape, and the residual
    goes to ``unexplained`` instead of to the nearest candidate. Nor may an effect that acts on
    both axes make either one's held-out error (pooled gain) worse by more than
    ``max_axis_loss``: its parameters fix what it does on both, so a loss on one axis means the
