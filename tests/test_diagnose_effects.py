@@ -265,20 +265,20 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
-def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str]):
+def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str], rig=None):
     """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these two kinds
-    (each effect drawn from its own generator, seeded by the log's seed and the kind's index),
-    diagnosed with the defaults and scored: (effects, diagnosis, score)."""
+    (each effect drawn from its own generator, seeded by the log's seed and the kind's index), on
+    ``rig`` (default the generator's own, as ``--rig``), diagnosed with the defaults and scored:
+    (effects, diagnosis, score)."""
     import numpy as np
 
     from tests.independent import write_log
     from tests.independent.draws import KINDS, draw
-    from tests.independent.simulate import Scenario, simulate
+    from tests.independent.simulate import Rig, Scenario, simulate
 
     effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
-    path, truth_path = write_log(
-        simulate(Scenario(name="+".join(kinds), seed=seed, effects=effects)), tmp_path, stem="pair"
-    )
+    scenario = Scenario(name="+".join(kinds), seed=seed, effects=effects, rig=rig or Rig())
+    path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
 

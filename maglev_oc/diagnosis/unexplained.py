@@ -114,21 +114,20 @@ def find_unexplained(
     current = ["base", *[c.name for c in explained]]
     out: list[Unexplained] = []
     found = {axis: 0 for axis in AXES}
-    remaining = list(probes)
+    # a probe confounded with the base constants stands in for them (a smooth function of the gap
+    # for C2's column): it shows no dependence they lack (selection._rival_gains)
+    remaining = [
+        e
+        for e in probes
+        if not stands_in_for_the_constants(design, design.groups[e[0].name], settings.max_vif)
+    ]
     counted = evidence(design, explained, settings)  # the samples that count (see there)
     n_counted = np.full(2, design.held_out_target.shape[1]) if counted is None else counted.sum(axis=1)
     while remaining:
         cur_fit = fit_subset(design, current, covariance=False)
         r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        # a probe confounded with the base constants stands in for them (a smooth function of the
-        # gap for C2's column): it shows no dependence they lack (selection._rival_gains)
-        open_probes = [
-            e
-            for e in remaining
-            if found[e[0].axis] < max_per_axis
-            and not stands_in_for_the_constants(design, design.groups[e[0].name], settings.max_vif)
-        ]
+        open_probes = [e for e in remaining if found[e[0].axis] < max_per_axis]
         if not open_probes:
             break
         entry, r1 = _best_probe(design, current, open_probes, mse0, counted)
