@@ -611,6 +611,60 @@ def test_the_commutation_angle_is_judged_separable_as_one_shared_size(plant):
             assert ("horizontal_guides_not_level",) in partners and () in partners, partners
 
 
+def test_the_commutation_angle_is_each_axis_coefficient_over_its_constant(plant):
+    # the thrust i_d makes is C1 l1 d i_d and the attraction i_q makes C3 l3 d i_q: each axis's
+    # coefficient over its constant is the angle (tests/test_diagnosis_size_separability.py), and
+    # the reported angle is that ratio: the same coefficients over twice the constant, half the angle
+    library = candidate_library(StageModel(), plant.data)
+    (cand,) = [c for c in library if c.name == "commutation_offset"]
+    assert dict(zip(cand.term.parameter_names, cand.size_relative_to, strict=True)) == {
+        "angle_thrust": "C1",
+        "angle_attraction": "C3",
+    }
+    q, cov = np.array([0.03, 0.02]), np.diag([1e-6, 1e-6])
+    ref = StageModel().constants
+    at_ref = cand.term.physical_parameters(q, cov, {"C1": ref.C1, "C3": ref.C3})
+    doubled = cand.term.physical_parameters(q, cov, {"C1": 2 * ref.C1, "C3": 2 * ref.C3})
+    for axis in ("horizontal", "vertical"):
+        assert doubled[f"angle_{axis}"].value == pytest.approx(at_ref[f"angle_{axis}"].value / 2, rel=1e-12)
+
+
+def test_the_thrusts_angle_is_judged_separable_as_the_delta_method_says(plant):
+    # The thrust's coefficient q judged alone (the attraction's a nuisance) at a fixed angle q / C1:
+    # the selection's variance inflation is var(q / C1) by the delta method on the inverse normal
+    # matrix (gradient 1 / C1, -q / C1^2) over var(q / C1) with everything else known, computed here
+    # from the Gram directly. q set to a 3.4 degree offset's (0.06 C1, where the two differ: the
+    # coefficient's own inflation is not it). 1e-6 relative: rounding of solves on ~10 columns.
+    from maglev_oc.diagnosis.selection import _blocks_of, _separability
+
+    library = candidate_library(StageModel(), plant.data)
+    (cand,) = [c for c in library if c.name == "commutation_offset"]
+    design = build_design(plant.data, plant.model, terms=[cand.term], fit=plant.train, holdout=plant.hold)
+    fit = fit_subset(design, ["base", cand.name])
+    position = list(fit.index)
+    k_q, k_n = (position.index(j) for j in design.groups[cand.name])
+    k_c = fit.names.index("C1")
+    coef = fit.coef.copy()
+    coef[k_q] = 0.06 * coef[k_c]
+    at = dataclasses.replace(fit, coef=coef)
+    thrust = dataclasses.replace(cand, size_direction=None, nuisance=("angle_attraction",))
+    vif, _ = _separability(design, thrust, at, SelectionSettings())
+
+    every = slice(None)
+    g = _blocks_of(design.gram, every, fit.index).sum(axis=0) - fit.compensation * _blocks_of(
+        design.noise, every, fit.index
+    ).sum(axis=0)
+    keep = [k for k in range(len(position)) if k != k_n and g[k, k] > 0]
+    gk = g[np.ix_(keep, keep)]
+    q, c = keep.index(k_q), keep.index(k_c)
+    grad = np.zeros(len(keep))
+    grad[q], grad[c] = 1.0 / coef[k_c], -coef[k_q] / coef[k_c] ** 2
+    expected = grad @ np.linalg.solve(gk, grad) / (grad[q] ** 2 / gk[q, q])
+    assert vif == pytest.approx(expected, rel=1e-6)
+    coefficient = dataclasses.replace(thrust, size_relative_to=())
+    assert _separability(design, coefficient, at, SelectionSettings())[0] != pytest.approx(expected, rel=1e-3)
+
+
 def test_a_spring_along_the_track_needs_a_stiffness_the_log_resolves(plant):
     # The cable carrier is a constant force plus a spring. Without a resolved stiffness (positive
     # by 2 standard errors) it is the constant force alone, the tilt's candidate: a tilt beside a

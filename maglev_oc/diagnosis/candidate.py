@@ -93,6 +93,13 @@ class Candidate:
     judged for that one combination (the effect as a whole), not for each coefficient alone,
     which a constant may be collinear with while the shared size is well determined. None: every
     direction (the effect's coefficients are its sizes)."""
+    size_relative_to: tuple[str, ...] = ()
+    """For an effect whose size is each coefficient over a base constant (one of C1..C4 per
+    parameter of the term, in its order): the size is unchanged when the constant and the
+    coefficient scale together, so separability is judged with each constant's column carrying
+    the column of a judged coefficient along (the model's derivative in the constant at a fixed
+    size; :func:`~maglev_oc.diagnosis.selection._at_fixed_size`). Empty: the sizes are the
+    coefficients themselves."""
     beside_friction: bool = True
     """Whether its evidence on an axis with claimed guide friction counts. False for an effect of
     the currents' rates (the amplifiers' lag): the regulator makes an axis's current rate follow

@@ -46,7 +46,11 @@ effects already chosen (bias-compensated least squares on the training blocks,
    reaches ``max_vif`` (sqrt(1 - 1/100) = 0.995: for a single parameter, a correlation rho with any
    other forces a variance inflation of at least 1 / (1 - rho^2), so the two rules then agree; at
    0.99, a variance inflation of 50, a 2.4 degree commutation offset of a drawn independent log,
-   estimated to 0.15 %, was refused at a variance inflation of 76). A confounded candidate goes to
+   estimated to 0.15 %, was refused at a variance inflation of 76). A size that is a coefficient
+   over a constant (the commutation angle, ``Candidate.size_relative_to``) is judged at a fixed
+   size (:func:`_at_fixed_size`): the loop cancels a commutation offset's thrust with i_q, which
+   ties C1's column to the offset's the more, the larger the offset (a 3.4 degree offset's
+   coefficient at 112, its angle at 1.0). A confounded candidate goes to
    ``not_separable`` with what it is confounded with; it is never claimed (a constant vertical
    force, for example, is nearly collinear with a common scale of the vertical magnetic force,
    which near equilibrium always carries the weight). A force periodic in the position at one of
@@ -1066,7 +1070,8 @@ def _separability(
     own = np.isin(idx, own_cols) & ~spanned
     if not own.any():
         return np.inf, ("the effects already chosen",)
-    others = ~np.isin(idx, design.groups[cand.name]) & (np.diag(g) > 0) & ~spanned
+    live = (np.diag(g) > 0) & ~spanned
+    others = ~np.isin(idx, design.groups[cand.name]) & live
     # the directions judged: each reported coefficient, or the one combination that is the
     # effect's size (in the order of the fit's columns)
     size_direction = getattr(cand, "size_direction", None)  # (a stand-in may have none)
@@ -1074,9 +1079,19 @@ def _separability(
     if size_direction is not None:
         order = [int(np.flatnonzero(own_cols == c)[0]) for c in idx[own]]
         direction = np.asarray(size_direction(fitted_constants(fit)), dtype=float)[order][:, None]
+    # a size that is a coefficient over a constant is judged at a fixed size: the coefficients the
+    # judged directions weigh, each with its constant
+    relative = getattr(cand, "size_relative_to", ())  # (a stand-in may have none)
+    ratios = dict(zip(cand.term.parameter_names, relative, strict=True)) if relative else {}
+    weighed = idx[own][np.any(direction != 0, axis=1)]
+    pairs = [
+        (int(col), ratios[q])
+        for q, col in zip(reported, own_cols, strict=True)
+        if q in ratios and col in weighed
+    ]
+    g = _at_fixed_size(g, fit, pairs, live)
     try:
         vif = _inflation(g, own, others, direction)
-        live = (np.diag(g) > 0) & ~spanned
         full = np.full(g.shape, np.nan)
         full[np.ix_(live, live)] = np.linalg.inv(g[np.ix_(live, live)])
         sd = np.sqrt(np.abs(np.diag(full)))
@@ -1101,6 +1116,25 @@ def _separability(
         if np.nanmax(np.abs(own_corr[:, j]), initial=0.0) > settings.max_correlation
     ]
     return vif, tuple(dict.fromkeys(partners))
+
+
+def _at_fixed_size(
+    g: np.ndarray, fit: SubsetFit, pairs: Sequence[tuple[int, str]], live: np.ndarray
+) -> np.ndarray:
+    """The Gram ``g`` of ``fit``'s columns reparametrized for sizes that are coefficients over
+    constants (``Candidate.size_relative_to``): ``pairs`` of (design column of a coefficient q, name
+    of its constant C). With s = q / C as the parameter, C's column becomes X_C + s X_q, the model's
+    derivative in C at a fixed size (T' g T, T the identity with s at (q, C)). A pair whose
+    coefficient or constant the fit did not estimate (not ``live``) is left as it is."""
+    position = {int(j): k for k, j in enumerate(fit.index)}
+    t = np.eye(g.shape[0])
+    for col, constant in pairs:
+        q = position.get(col)
+        c = fit.names.index(constant) if constant in fit.names else None
+        if q is None or c is None or not (live[q] and live[c] and fit.coef[c] > 0):
+            continue
+        t[q, c] = fit.coef[q] / fit.coef[c]
+    return g if np.array_equal(t, np.eye(g.shape[0])) else t.T @ g @ t
 
 
 def _owner(design: Design, column: int) -> str:
