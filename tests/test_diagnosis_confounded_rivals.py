@@ -111,6 +111,34 @@ def test_the_confounded_probe_is_no_rival_although_it_explains_the_most(noisy_co
     assert beside.value("C3") < 0.5 * base.value("C3")
 
 
+def test_a_rival_on_both_axes_takes_every_split_of_its_coefficients_the_probes_allow(noisy_cogged):
+    # an effect on both axes with k coefficients is rivalled by k probe columns split any way
+    # between the vertical probe (4 columns) and the horizontal one (5, with its constant). At
+    # k = 6 the splits that put 0 or 1 on the vertical axis need more columns than the horizontal
+    # probe has, and only the later ones exist: the best rival is the best of those, recomputed
+    # here fit by fit (the same fits and mean squares: equal to rounding)
+    design, probes = noisy_cogged
+    base = fit_subset(design, ["base"], covariance=False)
+    around = _HeldOutGrams(design).around(base)
+    mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
+    k = 6
+    got = _rival_gains(design, ["base"], mse0, probes, {("both", k)}, around)[("both", k)]
+    best = (-np.inf, "")
+    for var in sorted({v for _, v in probes}):
+        for kv in range(k + 1):
+            cv = list(design.groups[probes[("vertical", var)]])[:kv]
+            h = list(design.groups[probes[("horizontal", var)]])
+            ch = (h[-1:] + h[:-1])[: k - kv]  # the horizontal constant first, as a rival takes them
+            if len(cv) < kv or len(ch) < k - kv:
+                continue
+            ms = around.mean_squares(fit_subset(design, ["base"], covariance=False, extra=(*cv, *ch)))
+            gain = float(np.mean(1.0 - ms / mse0))
+            if gain > best[0]:
+                best = (gain, var)
+    assert np.isfinite(best[0])
+    assert got[1] == best[1] and got[0] == pytest.approx(best[0], rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("effect", "seed", "name"),
     [("normal_cogging", 702, "cogging_vertical_19mm"), ("cable_carrier", 703, "cable_carrier_force")],

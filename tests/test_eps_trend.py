@@ -195,6 +195,16 @@ def test_result_convention_and_explanation(study, model):
     assert equivalent > 0
     assert f"{study.papers_damping / equivalent:.1f} times the {equivalent:.1f} N s/m" in text
     assert "the papers' direction for all of them" in text
+    # the instrumental-variable limit against the recursion's end values (C1..C3, every eps) and the
+    # largest change of C2 in our runs, recomputed from the tables
+    lim, d3 = study.limit_default_table3, study.default_table3
+    gap = max(
+        abs(lim.values[i, j] / d3.values[i, j] - 1) for i in range(3) for j in range(d3.values.shape[1])
+    )
+    assert f"within {100 * gap:.2f} % for C1..C3" in text
+    assert 0 < gap < 0.05  # "matches": the recursion's end is the limit to a few per cent
+    runs = (study.default_table3, study.default_table2, study.friction_table3, study.friction_table2)
+    assert f"at most {100 * max(abs(t.change['C2']) for t in runs):.1f} % in any of our runs" in text
     report = study.report()
     assert "friction" in report and "papers" in report and study.status in report
     assert set(study.timings) >= {"total"} and study.timings["total"] > 0

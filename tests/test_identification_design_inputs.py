@@ -117,3 +117,20 @@ def test_a_reference_file_must_carry_every_column(tmp_path):
     )
     with pytest.raises(InputError, match=r"header .* is not"):
         D.read_reference(csv)
+
+
+def test_a_sampled_reference_is_read_only_and_leaves_the_callers_arrays_alone():
+    # a reference file's samples are data: the reference holds read-only copies, so neither a later
+    # write through it nor the caller's own arrays can change what was designed and written
+    t = np.arange(5) * 1e-3
+    values = np.zeros((6, 5))
+    values[0] = 0.015
+    ref = D.SampledReference(t, values)
+    for held in (ref.t, ref.values):
+        assert not held.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            held[0] = 1.0
+    assert t.flags.writeable and values.flags.writeable
+    t[1] = 0.5
+    values[0, 0] = 0.02
+    assert ref.t[1] == 1e-3 and ref.values[0, 0] == 0.015

@@ -117,6 +117,26 @@ def test_nominal_point_gives_the_nominal_level(certifier, robust_nominal, proc, 
         assert certifier.run(nominal, tiny).level == nominal.level
 
 
+def test_a_search_succeeds_exactly_when_it_certifies(certifier, robust_nominal, proc, constants, cov):
+    """One branch and bound (RobustSearch) succeeds when, and only when, it certifies its level: at
+    the nominal point the nominal level is certified (the test above), with the Lyapunov
+    equation's P at 20 mm the 0.5 confidence set is refuted (the test below); and every attempt of
+    a certificate's ladder follows the same rule."""
+    nominal_point = certifier.certify(
+        robust_nominal.reference, robust_nominal.P, robust_nominal.level, PlantSet.point(constants)
+    )
+    lyapunov = proc.run(Reference.setpoint(0.02))
+    refuted = certifier.certify(
+        lyapunov.reference, lyapunov.P, lyapunov.level, PlantSet.confidence(constants, cov, 0.5)
+    )
+    assert (nominal_point.status, refuted.status) == ("certified", "refuted")
+    assert nominal_point.success and not refuted.success
+    for search in (nominal_point, refuted):
+        check_result(search)
+    ladder = certifier.run(robust_nominal, PlantSet.confidence(constants, cov, 0.5)).attempts
+    assert ladder and all(a.success == (a.status == "certified") for a in ladder)
+
+
 def _shrinks(certifier, nominal, sets):
     levels = [certifier.run(nominal, s).level for s in sets]
     assert all(lv <= nominal.level for lv in levels)

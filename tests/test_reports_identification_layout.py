@@ -181,6 +181,18 @@ def test_identification_scorecard_numbers_are_the_studys(small_identification):
     check_identification_scorecard(st, trend, rows)
 
 
+def test_the_table_ii_model_is_the_vertical_runs_eps_001_estimate_and_says_so(small_identification):
+    # 000 Sec. V-C predicts the equilibrium currents and the cogging from Table II's constants (NPFSI
+    # at eps = 0.01, x3 = 0): the study's model for that carries exactly that run's C2..C4, the
+    # nominal C1 (the vertical runs do not move x3), and a source naming where they come from
+    st, _ = small_identification
+    run = next(r for r in st.table2 if r.eps == 0.01)
+    c = st.table2_model.constants
+    assert {k: getattr(c, k) for k in ("C2", "C3", "C4")} == {k: run.values[k] for k in ("C2", "C3", "C4")}
+    assert c.C1 == st.nominal.constants.C1
+    assert c.source == "Table II style: NPFSI eps = 0.01, x3 = 0"
+
+
 def test_identification_scorecard_has_no_internal_names(small_identification):
     from maglev_oc.analyses.identification import scorecard_rows
 

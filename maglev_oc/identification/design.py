@@ -332,8 +332,9 @@ class SampledReference:
     description: str = ""
 
     def __post_init__(self) -> None:
-        t = np.asarray(self.t, dtype=float)
-        v = np.asarray(self.values, dtype=float)
+        # copies, made read-only: the caller's arrays stay as they were, writeable
+        t = np.array(self.t, dtype=float)
+        v = np.array(self.values, dtype=float)
         if t.ndim != 1 or t.size < 2 or t[0] != 0 or np.any(np.diff(t) <= 0):
             raise InputError("SampledReference.t must start at 0 and increase")
         if v.shape != (6, t.size) or not np.all(np.isfinite(v)):
