@@ -88,6 +88,23 @@ def test_doptimal_inside_feasibility_set_and_budget(doptimal, designer):
     assert np.all(pred.peak_current < PEAK_CURRENT_LIMIT)
 
 
+def test_the_grids_per_axis_criteria_split_the_joint_one(doptimal):
+    # Each grid row scores a shape by -log det of the relative covariance of (C1..C4) (joint), of
+    # C1 alone (horizontal) and of C2..C4 (vertical). C1 is fitted on the horizontal axis alone and
+    # C2..C4 on the vertical, so the predicted covariance has no cross terms and the joint is the sum
+    # of the two (Fischer's inequality, det S <= det S11 det S22, with equality), to rounding (1e-9)
+    rows = [r for r in doptimal.candidates if r.get("feasible") and "log_det_C1" in r]
+    assert rows
+    for r in rows:
+        gap = r["log_det"] - (r["log_det_C1"] + r["log_det_C2_C4"])
+        assert abs(gap) < 1e-9, (r["shape"], gap)
+    assert np.all(doptimal.prediction.covariance[0, 1:4] == 0.0)
+    # and on the chosen design's own covariance, from its definition
+    pred = doptimal.prediction
+    rel = pred.covariance[:4, :4] / np.outer(pred.nominal[:4], pred.nominal[:4])
+    assert pred.log_det == pytest.approx(-np.linalg.slogdet(rel)[1], rel=1e-12)
+
+
 def test_doptimal_log_det_at_least_papers(doptimal):
     """Same duration, same current budget (the papers' excitation's own peaks). The papers'
     excitation is in the searched family (the incumbent), so this checks that the search and the
