@@ -101,3 +101,29 @@ def test_equilibrium_currents_diverge_where_cogging_acts(truth_model, model):
     assert np.max(np.abs(c0.error)) < 2e-3  # A
     assert cp.error[0] > 2 * cp.error[1] > 0.02
     assert_allclose(atp.measured_gap, gaps, atol=5e-6)
+
+
+def test_the_equilibrium_current_is_the_settled_window_of_each_hold(monkeypatch, model):
+    # 000 Sec. V-B reads the current once the stage has settled: the mean (and spread) of the
+    # commanded i_d and the mean gap over the last `window` seconds of each hold. The twin's runs
+    # start at rest at the set-point, so on them the whole hold and its last window give the same
+    # current to 5e-5 A and a test of the numbers alone cannot tell them apart: the runs are
+    # replaced here by recorded ramps (i_d = 1 + t A, gap = set-point + t mm) whose windows are known
+    import maglev_oc.identification.experiments as experiments
+
+    hold, window, dt = 1.0, 0.3, 2e-4
+
+    def ramp(twin, controller, scenario, seed, backend="vm"):
+        t = np.arange(0.0, hold, dt)
+        gap = scenario.x0[0]
+        u = np.vstack([np.zeros_like(t), 1.0 + t])
+        y = np.vstack([gap + 1e-3 * t, np.zeros_like(t)])
+        return type("Run", (), {"t": t, "u": u, "y": y})()
+
+    monkeypatch.setattr(experiments, "_run", ramp)
+    out = equilibrium_current_runs(model, (0.012, 0.02), hold=hold, window=window)
+    t = np.arange(0.0, hold, dt)
+    tail = t[t >= hold - window]
+    assert_allclose(out.current, 1.0 + tail.mean(), rtol=1e-12)
+    assert_allclose(out.current_std, tail.std(), rtol=1e-12)
+    assert_allclose(out.measured_gap, np.array([0.012, 0.02]) + 1e-3 * tail.mean(), rtol=1e-12)
