@@ -139,6 +139,40 @@ def test_a_rival_on_both_axes_takes_every_split_of_its_coefficients_the_probes_a
     assert got[1] == best[1] and got[0] == pytest.approx(best[0], rel=1e-9)
 
 
+def test_a_split_that_stands_in_for_the_constants_does_not_end_the_search(noisy_cogged, monkeypatch):
+    # the splits of a both-axes rival are judged one by one: one that stands in for the constants
+    # is skipped and the later ones still rival. Here every split with no vertical column is made
+    # to stand in (a recorder in place of the variance-inflation test): the best rival is the best
+    # of the others, recomputed fit by fit
+    import maglev_oc.diagnosis.selection as selection
+
+    design, probes = noisy_cogged
+    vertical = {
+        int(c) for (axis, _), name in probes.items() if axis == "vertical" for c in design.groups[name]
+    }
+
+    def horizontal_only(design, columns, max_vif):
+        return not any(int(c) in vertical for c in columns)
+
+    monkeypatch.setattr(selection, "stands_in_for_the_constants", horizontal_only)
+    base = fit_subset(design, ["base"], covariance=False)
+    around = _HeldOutGrams(design).around(base)
+    mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
+    k = 3
+    got = selection._rival_gains(design, ["base"], mse0, probes, {("both", k)}, around, MAX_VIF)[("both", k)]
+    best = (-np.inf, "")
+    for var in sorted({v for _, v in probes}):
+        for kv in range(1, k + 1):  # kv = 0 stands in
+            cv = list(design.groups[probes[("vertical", var)]])[:kv]
+            h = list(design.groups[probes[("horizontal", var)]])
+            ch = (h[-1:] + h[:-1])[: k - kv]
+            ms = around.mean_squares(fit_subset(design, ["base"], covariance=False, extra=(*cv, *ch)))
+            gain = float(np.mean(1.0 - ms / mse0))
+            if gain > best[0]:
+                best = (gain, var)
+    assert got[1] == best[1] and got[0] == pytest.approx(best[0], rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("effect", "seed", "name"),
     [("normal_cogging", 702, "cogging_vertical_19mm"), ("cable_carrier", 703, "cable_carrier_force")],

@@ -1210,3 +1210,11 @@ def test_only_the_effects_of_the_currents_rates_are_judged_off_the_axes_with_fri
     lib = candidate_library(plant.model, plant.data)
     hidden = {c.name for c in lib if not c.beside_friction}
     assert hidden == {c.name for c in lib if c.variable == "current_rate"} == {"current_amplifier_lag"}
+
+
+def test_each_end_profile_says_its_width_in_whole_millimetres():
+    # the finding's words for the fall-off name the scanned width (rounded to the millimetre as the
+    # report prints it) for both shapes
+    for profile in END_PROFILES:
+        (number,) = re.findall(r"(\d+) mm", profile.describe())
+        assert int(number) == round(profile.width * 1e3), (profile, profile.describe())

@@ -942,3 +942,19 @@ def test_fit_report_gives_each_parameter_its_own_unit_and_none_to_a_parameter_wi
     )
     line = next(ln for ln in other.report().splitlines() if ln.startswith("    k_unitless"))
     assert "[" not in line, line
+
+
+@pytest.mark.parametrize("which", ["equation_error", "output_error"])
+def test_a_fit_result_is_read_only_and_reports_without_timings(ee_fit, shooting_fit, which):
+    # a FitResult is what a script, a report and the diagnosis read: its arrays cannot be changed
+    # through it (the covariance and correlation a report prints, the residuals), and its report
+    # reads even a result rebuilt without timings (a missing total prints as nan, not a crash)
+    import dataclasses
+
+    fit = ee_fit if which == "equation_error" else shooting_fit
+    for held in (fit.covariance, fit.correlation, *fit.residuals):
+        assert not held.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        fit.covariance[0, 0] = 0.0
+    bare = dataclasses.replace(fit, timings={})
+    assert "wall time          = nan s" in bare.report()
