@@ -183,6 +183,25 @@ def test_constrained_gauss_newton_converges_only_where_the_constraints_hold(tole
         np.testing.assert_allclose(out.w, DATA / np.linalg.norm(DATA), atol=1e-5)
 
 
+@pytest.mark.parametrize("start", [(0.3, 0.2), (5.0, -3.0)])
+def test_constrained_gauss_newton_keeps_an_exact_penalty_when_the_multipliers_are_large(start):
+    # the closest point of the unit circle to data 4.1 away: the constraint's multiplier is about
+    # 3 (|data| - 1), the full Gauss-Newton steps overshoot the circle and the line search on the
+    # l1 merit 0.5 |r|^2 + rho |c|_1 must shorten them. That merit is exact only for rho above the
+    # largest multiplier (Nocedal & Wright, Theorem 17.3); the solver takes twice it. With rho at a
+    # fifth of it the search accepted steps away from the circle and failed there (|c| 0.4-0.8).
+    # Converged within the default 30 iterations (measured 15 and 20) to data / |data| (1e-5, as above;
+    # measured 6e-7: Gauss-Newton converges linearly here and stops on a step below 1e-6)
+    data = np.array([4.0, 1.0])
+
+    def far(w):
+        return w - data, np.array([w @ w - 1.0]), sp.identity(2, format="csr"), sp.csr_matrix(2 * w[None, :])
+
+    out = constrained_gauss_newton(far, np.array(start), np.ones(2))
+    assert out.status == "converged", out.message
+    np.testing.assert_allclose(out.w, data / np.linalg.norm(data), atol=1e-5)
+
+
 # --- what identify and the study report ----------------------------------------------------------------
 def test_identify_reports_only_the_methods_it_was_asked_for(model, two_logs):
     # output error alone: the equation-error fit it starts from is not reported (nor taken as the
