@@ -1127,14 +1127,18 @@ def _at_fixed_size(
     derivative in C at a fixed size (T' g T, T the identity with s at (q, C)). A pair whose
     coefficient or constant the fit did not estimate (not ``live``) is left as it is."""
     position = {int(j): k for k, j in enumerate(fit.index)}
-    t = np.eye(g.shape[0])
+    moves = {}
     for col, constant in pairs:
         q = position.get(col)
         c = fit.names.index(constant) if constant in fit.names else None
-        if q is None or c is None or not (live[q] and live[c] and fit.coef[c] > 0):
-            continue
-        t[q, c] = fit.coef[q] / fit.coef[c]
-    return g if np.array_equal(t, np.eye(g.shape[0])) else t.T @ g @ t
+        if q is not None and c is not None and live[q] and live[c] and fit.coef[c] > 0:
+            moves[q, c] = fit.coef[q] / fit.coef[c]
+    if not moves:
+        return g
+    t = np.eye(g.shape[0])
+    for at, s in moves.items():
+        t[at] = s
+    return t.T @ g @ t
 
 
 def _owner(design: Design, column: int) -> str:
