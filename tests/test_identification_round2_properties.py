@@ -202,6 +202,29 @@ def test_constrained_gauss_newton_keeps_an_exact_penalty_when_the_multipliers_ar
     np.testing.assert_allclose(out.w, data / np.linalg.norm(data), atol=1e-5)
 
 
+@pytest.mark.parametrize("start", [0.5, -0.3, 0.05, 1.0])
+def test_constrained_gauss_newton_stops_on_a_shortened_step_only_when_the_step_taken_is_small(start):
+    # a large-residual problem where Gauss-Newton overshoots: r = (k x, y^2 + p) on the line y = x,
+    # p = 0.75 k^2. At the minimizer x = 0 the Gauss-Newton curvature is k^2 and the true one k^2 +
+    # 2p = 2.5 k^2, so every full step lands at -1.5 x, the merit rejects it and the halved step
+    # lands at -x/4: convergence is linear through shortened steps, and the error left is 1/5 of
+    # the step taken. The shortcut "a step below 1000 x tolerance" is documented for a *full*
+    # step (quadratic convergence); taking it on a halved one stopped at |x| 2e-8 to 8e-8.
+    # Default tolerance 1e-9 on the step taken, so |x| < 2e-10 in exact arithmetic; 1e-8 leaves
+    # room for the merit's rounding (measured 1.2e-10 to 4.5e-10, in 14-17 iterations).
+    k = 0.1
+    p = 0.75 * k * k
+
+    def overshoot(w):
+        x, y = w
+        Jr = sp.csr_matrix(np.array([[k, 0.0], [0.0, 2.0 * y]]))
+        return np.array([k * x, y * y + p]), np.array([y - x]), Jr, sp.csr_matrix(np.array([[-1.0, 1.0]]))
+
+    out = constrained_gauss_newton(overshoot, np.array([start, start]), np.ones(2))
+    assert out.status == "converged", out.message
+    assert np.max(np.abs(out.w)) < 1e-8
+
+
 # --- what identify and the study report ----------------------------------------------------------------
 def test_identify_reports_only_the_methods_it_was_asked_for(model, two_logs):
     # output error alone: the equation-error fit it starts from is not reported (nor taken as the
