@@ -205,3 +205,37 @@ def test_a_richer_form_is_chosen_only_when_it_improves_on_the_simpler_one_signif
     alone = S._form_of_effect(design, passing[1], passing[1:2], by_name, held_out, None, settings)
     assert alone.name == rich  # a richer form passing alone is the effect's form
     assert S._form_of_effect(design, passing[2], passing, by_name, held_out, None, settings).name == other
+
+
+@pytest.mark.parametrize("axis, row", [("vertical", 1), ("horizontal", 3)])
+def test_a_coulomb_friction_on_an_axis_that_moves_slowly_says_it_is_the_friction_at_those_speeds(axis, row):
+    """Guides whose friction falls over the first mm/s (Stribeck speeds of ball and roller guides
+    reach 10 mm/s) push back harder there than at their Coulomb level, and a log that never leaves
+    those speeds cannot tell them apart: the independent generator's gap axes, 90 % of samples below
+    4-5 mm/s against Stribeck speeds of 6-8 mm/s, gave Coulomb forces 1.3-1.45 times the truth.
+    The Coulomb-only forms then say so with the axis's 90th-percentile speed (read from the axis's
+    own speed row, the other axis fast); a Stribeck form has measured the fall and does not; an
+    axis whose 90th percentile is at or above 10 mm/s gets no caveat."""
+    from maglev_oc.diagnosis.guides import STRIBECK_SPEED_LARGEST
+    from maglev_oc.results import Estimate
+
+    n = 1000
+    speed = np.linspace(-1.0, 1.0, n)  # |speed| has its 90th percentile at 0.9
+    est = {k: Estimate(1.0, 0.1, "N") for k in ("coulomb", "breakaway")}
+    est["viscous"] = Estimate(3.0, 0.5, "N s/m")
+    for p90, caveat in ((4.3e-3, True), (STRIBECK_SPEED_LARGEST, False), (30e-3, False)):
+        x = np.vstack([np.full(n, 0.015), np.zeros(n), np.zeros(n), np.zeros(n)])
+        x[1 if axis == "horizontal" else 3] = 0.2  # the other axis moves fast
+        x[row] = speed * p90 / 0.9
+        ctx = LibraryContext(StageModel(), SimpleNamespace(x=x, valid=np.ones(n, dtype=bool), settings={}))
+        forms = {c.name: c for c in friction_candidates(ctx) if c.name.startswith(f"guide_friction_{axis}")}
+        for name, c in forms.items():
+            words = c.describe(est)
+            slow = f"nine samples in ten move the {axis} axis slower than {p90 * 1e3:.1f} mm/s"
+            assert (slow in words) == (caveat and "stribeck" not in name), (name, words)
+            assert words.startswith(f"The {axis} linear guides resist motion with 1 ± 0.1 N")
+    # the boundary itself: 10 mm/s is fast enough, anything below is not
+    from maglev_oc.diagnosis.guides import _slow_axis_words
+
+    assert _slow_axis_words(axis, STRIBECK_SPEED_LARGEST) == ""
+    assert "slower than 10.0 mm/s" in _slow_axis_words(axis, np.nextafter(STRIBECK_SPEED_LARGEST, 0.0))

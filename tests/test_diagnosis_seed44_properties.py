@@ -45,14 +45,14 @@ def test_a_viscous_part_within_two_standard_errors_of_zero_is_reported_as_not_re
         "breakaway": Estimate(2.4, 0.7, "N"),
         "viscous": Estimate(47.6, 81.0, "N s/m"),
     }
-    words = _friction_words("vertical", form)(est)
+    words = _friction_words("vertical", form, 0.05)(est)  # a fast axis: no caveat
     assert words.startswith("The vertical linear guides resist motion with 1.8 ± 0.7 N of Coulomb friction")
     assert words.endswith(
         "(and hold the axis while it sticks); their viscous friction is not resolved on this log "
         "(48 ± 80 N s/m)."
     )
     est["viscous"] = Estimate(4.91, 0.12, "N s/m")
-    words = _friction_words("horizontal", form)(est)
+    words = _friction_words("horizontal", form, 0.05)(est)
     assert words.endswith("4.9 ± 0.1 N s/m of viscous friction (and hold the axis while it sticks).")
     assert "not resolved" not in words
     if form == "full":  # the sentence as before the check
