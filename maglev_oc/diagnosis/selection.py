@@ -857,6 +857,12 @@ def _beside_friction(verdict: str, reason: str, axes: np.ndarray, hidden: Sequen
     return verdict, f"{reason} (judged on the {judged} axis alone: {why})"
 
 
+def percent(gain: float) -> str:
+    """A held-out gain in words' percent; below -100 % (a fit the logged currents' errors
+    dominate makes the error many times larger) only its bound."""
+    return f"{gain:.1%}" if gain >= -1.0 else "< -100 %"
+
+
 def _verdict(
     j: Judgement,
     cand: Candidate,
@@ -880,8 +886,8 @@ def _verdict(
     if not (gain >= settings.min_gain and quarter > 0 and (z >= settings.min_z or strong)):
         # the gain is the pooled one (all four quarters); the last quarter's is given beside it
         return "not significant", (
-            f"held-out error on its axes falls by {gain:.1%} (last quarter {quarter:.1%}; z = {z:.1f}; "
-            f"needs {settings.min_gain:.1%}, a drop on the quarter, z >= {settings.min_z:g})"
+            f"held-out error on its axes falls by {percent(gain)} (last quarter {percent(quarter)}; "
+            f"z = {z:.1f}; needs {settings.min_gain:.1%}, a drop on the quarter, z >= {settings.min_z:g})"
         )
     if wald < threshold:
         return "not significant", f"Wald {wald:.3g} below {threshold:.3g} (alpha {settings.alpha:g})"

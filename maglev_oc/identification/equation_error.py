@@ -35,7 +35,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from maglev_oc.data.logs import Log
+from maglev_oc.data.logs import Log, LogError
 from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.identification.result import FitResult
@@ -47,8 +47,9 @@ from maglev_oc.regression.base import (
     GAP_OFFSET_SCALE,
 )
 from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from
-from maglev_oc.regression.data import as_log_list, delayed_inputs, prepare
+from maglev_oc.regression.data import PreparedLogs, as_log_list, delayed_inputs, prepare
 from maglev_oc.regression.design import Design, build_design
+from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
 from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES
@@ -128,6 +129,10 @@ class EquationError:
     logging_error : bool
         Remove the logged currents' errors from the normal equations (default True; see
         :mod:`maglev_oc.regression.data`).
+    calibrate_noise : bool
+        Take those errors at the level where the fit on a 2 Hz band agrees with the fit on its
+        own (default True; :mod:`maglev_oc.regression.noise_scale`, the diagnosis's rule); False
+        keeps the noise floor's estimate.
 
     Use :meth:`fit` (any subset of samples, e.g. with a block held out) and :meth:`residuals`
     (on every valid sample, for held-out errors).
@@ -143,6 +148,7 @@ class EquationError:
         differentiator: SavitzkyGolay | None = None,
         input_delay: float = 0.0,
         logging_error: bool = True,
+        calibrate_noise: bool = True,
     ) -> None:
         t0 = time.perf_counter()
         self.logs = as_log_list(logs)
@@ -172,6 +178,14 @@ class EquationError:
             {"bandwidth": DEFAULT_BANDWIDTH} if differentiator is None else {"differentiator": differentiator}
         )
         self.prepared = prepare(shifted, logging_error=logging_error, **kw)
+        self._shifted = shifted
+        self._narrow: PreparedLogs | None = None
+        # a narrow band well below the fit's own, and an error to scale
+        self.calibrate_noise = bool(
+            calibrate_noise
+            and self.prepared.differentiator.bandwidth >= 2.0 * LOW_BAND
+            and np.any(self.prepared.current_noise > 0)
+        )
         self.differentiator = self.prepared.differentiator
         self.sample_time = self.prepared.sample_time
         self.kernel = self.prepared.kernel
@@ -260,7 +274,11 @@ class EquationError:
         fit_mask = self._fit_mask(samples)
         init = self._initial(initial)
         solve_t0 = time.perf_counter()
-        design, sub, status, message, iterations = self._solve(fit_mask, init, hac_band)
+        design, sub, status, message, iterations = self._solve(self.prepared, fit_mask, init, hac_band)
+        scale = self._noise_scale(samples, design, sub) if self.calibrate_noise else None
+        if scale is not None and scale.calibrated:
+            prepared = self.prepared.with_noise_scale(scale.scale)
+            design, sub, status, message, iterations = self._solve(prepared, fit_mask, init, hac_band)
         solve_time = time.perf_counter() - solve_t0
         if sub.message:
             message = f"{message}; {sub.message}"
@@ -303,18 +321,47 @@ class EquationError:
                 "total": time.perf_counter() - t0 + self.prepare_time,
             },
             sources=tuple(log.source for log in self.logs),
-            settings=self._settings(hac_band, design.weights, sub.compensated),
+            settings={
+                **self._settings(hac_band, design.weights, sub.compensated),
+                "current_noise_scale": None if scale is None else scale.to_dict(),
+            },
         )
 
     # ------------------------------------------------------------------------------------
-    def _fit_mask(self, samples) -> np.ndarray:
-        """The fitted samples of the prepared (rate-reduced) data; refuses too few."""
-        prep = self.prepared
-        masks = [
+    def _noise_scale(self, samples, design: Design, sub) -> NoiseScale:
+        """The scale of the logged currents' errors at which this fit and the same fit on
+        :data:`~maglev_oc.regression.noise_scale.LOW_BAND` agree on the constants."""
+        if self._narrow is None:
+            try:
+                self._narrow = prepare(self._shifted, bandwidth=LOW_BAND)
+            except (InputError, LogError) as err:  # a log too short for the narrow band's window
+                return NoiseScale.not_calibrated(f"no {LOW_BAND:g} Hz fit to compare with: {err}")
+        narrow = self._narrow
+        fit, _ = narrow.masks(0.0, self._sample_masks(samples))
+        if fit.sum() < 10 * len(self.names) + 2 * narrow.kernel.size:
+            return NoiseScale.not_calibrated(f"too few samples for a {LOW_BAND:g} Hz fit to compare with")
+        low = build_design(
+            narrow,
+            self.model,
+            estimate=self.estimate,
+            terms=self.terms,
+            fit=fit,
+            at=sub.coef,
+            weights=design.weights,
+        )
+        return band_consistent_scale(design, low, list(design.groups))
+
+    def _sample_masks(self, samples) -> list[np.ndarray]:
+        """Per log, the samples to fit, at the prepared (reduced) rate."""
+        return [
             _reduced_mask(m, round(self.sample_time / log.sample_time))
             for m, log in zip(_sample_masks(samples, self.logs), self.logs, strict=True)
         ]
-        fit_mask, _ = prep.masks(0.0, masks)
+
+    def _fit_mask(self, samples) -> np.ndarray:
+        """The fitted samples of the prepared (rate-reduced) data; refuses too few."""
+        prep = self.prepared
+        fit_mask, _ = prep.masks(0.0, self._sample_masks(samples))
         n_used, p = int(fit_mask.sum()), len(self.names)
         min_samples = 2 * self.kernel.size
         if n_used < 10 * p + min_samples:
@@ -332,13 +379,13 @@ class EquationError:
             init[self.names.index(key)] = float(value)
         return init
 
-    def _solve(self, fit_mask: np.ndarray, init: np.ndarray, hac_band: float):
+    def _solve(self, prepared: PreparedLogs, fit_mask: np.ndarray, init: np.ndarray, hac_band: float):
         """(design, fit, status, message, iterations): one linear solve, or Gauss-Newton with the
         exact Jacobian when a parameter enters nonlinearly (axis weights of the first design)."""
 
         def build(at: np.ndarray, weights=None) -> Design:
             return build_design(
-                self.prepared,
+                prepared,
                 self.model,
                 estimate=self.estimate,
                 terms=self.terms,

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import fftconvolve, savgol_coeffs, welch
@@ -228,6 +228,23 @@ class PreparedLogs:
     @property
     def n_logs(self) -> int:
         return len(self.sources)
+
+    def with_noise_scale(self, scale: float) -> PreparedLogs:
+        """The same samples with the logged currents' error estimate multiplied by ``scale``
+        (:mod:`~maglev_oc.regression.noise_scale`), recorded in ``settings``."""
+        if not (math.isfinite(scale) and scale >= 0.0):
+            raise InputError(f"noise scale must be finite and not negative, got {scale!r}")
+        return replace(
+            self,
+            current_noise=self.current_noise * scale,
+            settings={**self.settings, "current_noise_scale": float(scale)},
+        )
+
+    def same_samples(self, other: PreparedLogs) -> bool:
+        """Whether ``other`` holds these very arrays (one made from the other by
+        :meth:`with_noise_scale`): their designs' columns are the same."""
+        fields = ("t", "x", "u", "du", "acc", "valid", "kernel")
+        return all(getattr(self, f) is getattr(other, f) for f in fields)
 
     @property
     def edge(self) -> int:

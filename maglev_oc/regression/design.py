@@ -451,7 +451,7 @@ def build_design(
     n, P = prep.n, len(names)
     cache = _REUSED.get()
     reused = None
-    if cache is not None and cache.prepared is prep and GAP_OFFSET not in estimate:
+    if cache is not None and cache.prepared.same_samples(prep) and GAP_OFFSET not in estimate:
         reused = cache.columns(model, estimate, terms, at_vec, P)
     if reused is not None:
         columns, known, sens, where = reused

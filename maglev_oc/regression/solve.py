@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_oc.errors import InputError
 from maglev_oc.regression.covariance import DEFAULT_BAND, per_log_long_run
 from maglev_oc.regression.design import Design
 
@@ -152,18 +153,22 @@ def fit_subset(
     covariance: bool = True,
     band: float = DEFAULT_BAND,
     extra: Sequence[int] = (),
+    noise_scale: float = 1.0,
 ) -> SubsetFit:
     """Least squares on the chosen groups (and any ``extra`` single columns) over the fitted blocks.
 
     ``blocks``: indices of blocks to sum (with repetition, for a bootstrap); the covariance needs
     all blocks in order. With ``compensate`` the logged currents' errors are removed from the
     normal equations; if that leaves them indefinite (an error estimate larger than the signal),
-    the fit falls back to ordinary least squares and says so in ``message``.
+    the fit falls back to ordinary least squares and says so in ``message``. ``noise_scale``
+    multiplies the design's estimate of those errors (:mod:`~maglev_oc.regression.noise_scale`).
     """
+    if not (np.isfinite(noise_scale) and noise_scale >= 0.0):
+        raise InputError(f"noise_scale must be finite and not negative, got {noise_scale!r}")
     idx = np.concatenate([design.indices(groups), np.asarray(extra, dtype=int)])
     sel = slice(None) if blocks is None else np.asarray(blocks)
     gram_raw = _blocks_of(design.gram, sel, idx).sum(axis=0)
-    noise = _blocks_of(design.noise, sel, idx).sum(axis=0)
+    noise = noise_scale * _blocks_of(design.noise, sel, idx).sum(axis=0)
     rhs = _blocks_of(design.rhs, sel, idx).sum(axis=0)
     yy = float(design.yy[sel].sum())
     message = ""
@@ -209,7 +214,7 @@ def fit_subset(
     cov = np.full((idx.size, idx.size), np.nan)
     total_m = 0
     if covariance and blocks is None and design.gram.shape[0]:
-        meat, total_m = _long_run_meat(design, idx, coef, share, band)
+        meat, total_m = _long_run_meat(design, idx, coef, share * noise_scale, band)
         meat[dead, :] = 0.0
         meat[:, dead] = 0.0
         cov = ginv @ meat @ ginv

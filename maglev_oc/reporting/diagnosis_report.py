@@ -267,7 +267,8 @@ def _verdict_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     rows = []
     for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
         reason = "\n".join(textwrap.wrap(j.reason or "—", 60))
-        rows.append((plain(j.name), j.verdict, f"{first.get(j.name, j).gain * 100:.1f}", reason))
+        gain = first.get(j.name, j).gain
+        rows.append((plain(j.name), j.verdict, f"{gain * 100:.1f}" if gain >= -1.0 else "< -100", reason))
     return rows
 
 
@@ -380,6 +381,7 @@ def write_diagnosis_report(
             "Lumped constants",
             ("constant", "base model alone", "refitted with the effects", "unit"),
             _constant_rows(diag),
+            notes=_noise_scale_notes(diag),
         )
         verdicts = Table(
             "Every candidate and its verdict",
@@ -415,24 +417,65 @@ def write_diagnosis_report(
             **(timings or {}),
             **{f"diagnosis: {k.replace('_', ' ')}": v for k, v in diag.timings.items()},
         }
-        pdf.add_page(
-            "Appendix: wall times and settings",
-            [
-                Table(
-                    "Wall times [s]", ("step", "wall time [s]"), [(k, f"{v:.2f}") for k, v in times.items()]
-                ),
-                Table(
-                    "Settings of the diagnosis",
-                    ("setting", "value"),
-                    [
-                        (_SETTING_WORDS.get(k, k.replace("_", " ")), _wrap(str(v), 70))
-                        for k, v in _flat(diag.settings).items()
-                    ],
-                    font_size=7.5,  # every selection threshold: about 40 rows
-                ),
-            ],
+        settings = Table(
+            "Settings of the diagnosis",
+            ("setting", "value", "setting", "value"),
+            _two_columns(
+                [
+                    (_SETTING_WORDS.get(k, k.replace("_", " ")), _wrap(str(v), 34))
+                    for k, v in _flat(_compact_noise_scale(diag.settings)).items()
+                ]
+            ),
+            font_size=7.5,  # every selection threshold: about 45 settings
         )
+        wall = Table(
+            "Wall times [s]",
+            ("step", "wall time [s]"),
+            [(k, f"{v:.2f}") for k, v in times.items()],
+            font_size=7.5,  # a closed-loop study's steps beside the diagnosis's: about 20 rows
+        )
+        # on a second page when both do not fit one (a closed-loop study adds its own times)
+        _pack(pdf, [[("Appendix: wall times and settings", [wall, *split_table(settings)])]])
     return pdf.contents
+
+
+def _noise_scale_notes(diag: Diagnosis) -> list[str]:
+    """What the constants' errors-in-variables correction took the logged currents' error to be
+    (:mod:`maglev_oc.regression.noise_scale`), when it was not the noise floor's estimate."""
+    scale = diag.settings.get("current_noise_scale")
+    if not isinstance(scale, dict) or scale.get("scale", 1.0) == 1.0:
+        return []
+    return [
+        f"The logged currents' error is taken at {scale['scale']:.2f} times their noise floor's "
+        "estimate: there the constants fitted on a 2 Hz band and on the diagnosis's own agree "
+        f"(disagreement {scale['misfit_best']:.1f} against {scale['misfit_at_one']:.1f} at 1, sum of "
+        "squared standardized differences)."
+    ]
+
+
+def _two_columns(pairs: list[tuple[str, str]]) -> list[tuple[str, str, str, str]]:
+    """(name, value) pairs as rows of two pairs, the first half down the left columns and the rest
+    down the right ones (in reading order, half the height)."""
+    half = -(-len(pairs) // 2)
+    right = pairs[half:]
+    return [(*pairs[k], *(right[k] if k < len(right) else ("", ""))) for k in range(half)]
+
+
+def _compact_noise_scale(settings: dict) -> dict:
+    """``settings`` with the noise scale's record as one line (the appendix's table)."""
+    scale = settings.get("current_noise_scale")
+    if not isinstance(scale, dict):
+        return settings
+    if scale.get("best") is None:  # not looked for (effects found, or no narrow band)
+        return {
+            **settings,
+            "current_noise_scale": f"{scale['scale']:.3g} (the floor's estimate; not calibrated)",
+        }
+    line = (
+        f"{scale['scale']:.3g} (bands agree best at {scale['best']:.3g}: misfit "
+        f"{scale['misfit_best']:.2f}, against {scale['misfit_at_one']:.2f} at 1)"
+    )
+    return {**settings, "current_noise_scale": line}
 
 
 def _validation_part(diag: Diagnosis) -> Part | None:
@@ -459,6 +502,7 @@ _SETTING_WORDS = {
     "logging_error_share": "share of the current error from logging",
     "max_rate_hz": "highest sample rate kept [Hz]",
     "control_rate_hz": "control loop's rate [Hz]",
+    "current_noise_scale": "current error's scale (two bands)",
 }
 
 
