@@ -236,3 +236,43 @@ def test_the_report_states_the_scale_in_one_line_and_in_a_note_when_calibrated()
     (note,) = _noise_scale_notes(diag)
     assert "0.71 times their noise floor's estimate" in note and "40.4 at 1" in note
     assert _noise_scale_notes(SimpleNamespace(settings={"current_noise_scale": kept})) == []
+
+
+def test_the_diagnosis_calibrates_only_when_the_base_model_explains_the_log(monkeypatch):
+    """diagnose: the scale is looked for only when the first pass chose nothing and left nothing
+    unexplained; a calibrated pass that then finds something is not kept (the first pass is run
+    again on the floor's estimate). The passes are stood in for by recorders."""
+    import contextlib
+
+    from maglev_oc.diagnosis import pipeline as P
+
+    for selected, unexplained in ((["guide_friction_horizontal"], []), ([], ["horizontal: position"])):
+        stage = SimpleNamespace(sel=SimpleNamespace(selected=selected), unexplained=unexplained)
+        out = P._noise_scale(stage, None)
+        assert not out.calibrated and "effects were found" in out.message
+
+    class Data:
+        def with_noise_scale(self, s):
+            return ("scaled", s)
+
+    floor = Data()
+    taken = NS.NoiseScale(0.7, 0.7, 0.1, 20.0, ("C1",), "taken")
+    monkeypatch.setattr(P, "_prepare", lambda *a: (floor, None, None))
+    monkeypatch.setattr(P, "reusing_columns", lambda data: contextlib.nullcontext())
+    monkeypatch.setattr(P, "_noise_scale", lambda stage, run: taken)
+    monkeypatch.setattr(P, "_finished", lambda stage, run, bandwidth, scale: (stage.data, scale))
+    for found_when_scaled in (False, True):
+        passes = []
+
+        def selected(run, data, found=found_when_scaled, passes=passes):
+            passes.append(data)
+            chosen = ["constant_vertical_force"] if found and data != floor else []
+            return SimpleNamespace(data=data, sel=SimpleNamespace(selected=chosen), unexplained=[])
+
+        monkeypatch.setattr(P, "_selected", selected)
+        data, scale = P.diagnose([None])
+        if found_when_scaled:  # not kept: the floor's estimate, the first pass again
+            assert passes == [floor, ("scaled", 0.7), floor] and data is floor
+            assert not scale.calibrated and "calibrated on" in scale.message
+        else:
+            assert passes == [floor, ("scaled", 0.7)] and data == ("scaled", 0.7) and scale is taken

@@ -279,12 +279,12 @@ def _noise_scale(stage: _Stage, run: _Run) -> NoiseScale:
     was claimed in its place; three of 130 pairs gained a false claim. On the clean logs of eight
     rig settings it gave C1 within 0.45 % of the truth where the floor's estimate gave up to
     +4.5 %."""
-    session, sel, design = stage.session, stage.sel, stage.design
-    if sel.selected or stage.unexplained:
+    if stage.sel.selected or stage.unexplained:
         return NoiseScale.not_calibrated(
             "the floor's estimate: effects were found, and the bands' agreement would take their "
             "misfit for the currents' errors"
         )
+    session, sel, design = stage.session, stage.sel, stage.design
     data = session.data
     try:
         narrow = prepare(list(run.logs), bandwidth=LOW_BAND, max_rate=data.settings["max_rate_hz"])
