@@ -30,6 +30,11 @@ Steps:
 8. :mod:`maglev_oc.validation` — the base model and the model with the effects validated on the
    held-out block: whiteness of the prediction residuals, their independence from past
    currents, fit % of long simulations.
+
+When steps 2-6 find nothing and leave nothing unexplained, the logged currents' error is
+calibrated (:mod:`maglev_oc.regression.noise_scale`: the level at which the constants fitted on
+2 Hz and on the band agree) and steps 2-6 run again with it; that pass is kept if it finds nothing
+either. The settings record the scale (``current_noise_scale``).
 """
 
 from __future__ import annotations
