@@ -275,6 +275,10 @@ def test_polygon_interval_budget_limits_the_proof(builder):
     assert builder.build(sinus, 3e-3).success
     refused = builder.build(sinus, 3e-3, max_cells=1)
     assert refused.status == "not_proved" and "could not be proved" in refused.message
+    # a refusal after the branch and bound reports the cells it spent (16 per first cover, as
+    # above); one before it (a gap range reaching 0) spent none (seed 64: it said 0 for both)
+    assert refused.cells >= 16 and refused.cells % 16 == 0
+    assert builder.build(sinus, 0.025).cells == 0
 
 
 def test_sdp_candidate_keeps_its_construction_level_and_solve_time(builder):

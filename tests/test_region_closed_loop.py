@@ -69,3 +69,28 @@ def test_validation():
         RegulatorLoop(K_h=[1, 2, 3])
     with pytest.raises(ValueError, match="Hurwitz"):
         RegulatorLoop(K_h=np.ones(5))
+
+
+@pytest.mark.parametrize(
+    "fastest_growing, stable", [(0.5, False), (1e-3, False), (-1e-3, True), (-0.5, True)]
+)
+def test_gains_are_refused_exactly_when_a_closed_loop_pole_is_not_in_the_left_half_plane(
+    fastest_growing, stable
+):
+    # gains placed (scipy.signal.place_poles on the augmented horizontal axis) so that its
+    # rightmost closed-loop pole is at ``fastest_growing`` [1/s], the others at -4..-7: A_cl is
+    # Hurwitz exactly when that pole is negative (a check at another bound, 1 1/s, let 0.5 pass)
+    from scipy.signal import place_poles
+
+    from maglev_oc.region.closed_loop import augmented_axis
+
+    a, b = augmented_axis(RegulatorLoop().omega0)
+    gains = -place_poles(a, b, [fastest_growing, -4.0, -5.0, -6.0, -7.0]).gain_matrix[0]
+    np.testing.assert_allclose(
+        np.max(np.linalg.eigvals(a + b @ gains[None, :]).real), fastest_growing, atol=1e-6
+    )
+    if stable:
+        RegulatorLoop(K_h=gains)
+    else:
+        with pytest.raises(ValueError, match="Hurwitz"):
+            RegulatorLoop(K_h=gains)

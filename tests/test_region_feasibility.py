@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import casadi as ca
 import numpy as np
@@ -101,8 +102,18 @@ def test_a_setpoint_is_held_exactly_when_its_equilibrium_current_fits(model, gap
     gap = gap_mm * 1e-3
     current = abs(float(equilibrium_currents(model, [gap]).current[0]))
     FeasibleSet(model, current_limit=current + 1e-3).check_setpoint(gap)
-    with pytest.raises(InputError, match="needs \\|u\\| >"):
-        FeasibleSet(model, current_limit=current - 1e-3).check_setpoint(gap)
+    tight = FeasibleSet(model, current_limit=current - 1e-3)
+    with pytest.raises(InputError, match="needs \\|u\\| >") as refused:
+        tight.check_setpoint(gap)
+    # the refusal gives the gaps held at rest within the limit: the set-point is at one end of that
+    # range (1 mA under its current, the boundary is within a step of the 401-point grid, 0.055 mm),
+    # and the range's middle is held
+    lo, hi = (
+        float(v)
+        for v in re.search(r"within the limits: \(([\d.]+), ([\d.]+)\) mm", str(refused.value)).groups()
+    )
+    assert min(abs(lo - gap_mm), abs(hi - gap_mm)) <= 0.1
+    tight.check_setpoint(0.5 * (lo + hi) * 1e-3)
 
 
 # --- the bisection that replaces Newton on a boundary line ---------------------------------------
@@ -140,3 +151,29 @@ def test_a_refused_setpoint_names_its_reason_on_either_side_of_r_zero(model, mar
     why = "needs \\|u\\| > 0.5 A" if margin > 0 else "no equilibrium \\(R < 0\\)"
     with pytest.raises(InputError, match=why):
         feasible.check_setpoint(gap)
+
+
+def test_a_newton_that_does_not_converge_hands_its_bracket_to_the_bisection(feasible, monkeypatch):
+    """The boundary's Newton is stopped after one iteration on every bracket: each must then be
+    counted as a failure and bisected, and the boundary is as exact as before (the bisection's 60
+    halvings of a grid step); an unconverged Newton raising instead (CasADi's default) or its
+    iterate being taken would not do."""
+    from maglev_oc.region import feasibility as F
+
+    real = ca.rootfinder
+
+    def one_iteration(name, plugin, g, opts=None):
+        return real(name, plugin, g, {**(opts or {}), "max_iter": 1})
+
+    monkeypatch.setattr(F.ca, "rootfinder", one_iteration)
+    loop = RegulatorLoop()
+    fm = feasibility_map(
+        feasible, loop, Reference.setpoint(0.02), ("e1", "e1_rate"), (-0.011, 0.009), (-0.6, 0.6), n=41
+    )
+    pts = fm.boundary["headroom"]
+    assert fm.newton_failures >= pts.shape[1] > 20
+    fn = feasible.loop_function(loop, Reference.setpoint(0.02))
+    z = np.zeros((10, pts.shape[1]))
+    z[0], z[1] = pts
+    h = np.asarray(fn.map(pts.shape[1])(z, np.zeros((1, pts.shape[1]))))
+    np.testing.assert_allclose(h[1], 0, atol=1e-9)

@@ -81,3 +81,16 @@ def test_slices_skip_a_setpoint_without_a_certificate_and_go_on(monkeypatch):
     out = study._slices(run, None, [_reference_study(20.0)])
     assert calls == [(20.0, ("e1", "e2")), (20.0, ("e1", "e1_rate"))]
     assert len(out["Lyapunov P"]) == 2 and out["SDP P"] == ()
+
+
+def test_the_robust_study_says_which_certificate_each_set_point_sweeps(monkeypatch):
+    # a set-point whose best certificate is the SDP's is swept in "SDP P", one whose best is the
+    # Lyapunov equation's in "Lyapunov P" (the report's table names the set the starts were drawn
+    # from; seed 64: the label was "Lyapunov P" for both with every test passing)
+    monkeypatch.setattr(study, "robustness_table", lambda specs, covariance, **kw: [])
+    lyapunov = _reference_study(20.0)
+    by_sdp = _reference_study(15.0)
+    by_sdp.best = SimpleNamespace(success=True, P=2 * np.eye(10), level=0.3)  # not the Lyapunov one
+    run = _run(robust_runs=3, horizon=1.0, seed=0, robust_probe_runs=0, linear=False, certify_boxes=False)
+    out = study._robust(run, [lyapunov, by_sdp], None, "assumed")
+    assert out.certificates == {"20 mm": "Lyapunov P", "15 mm": "SDP P"}

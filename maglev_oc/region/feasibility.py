@@ -494,7 +494,7 @@ class _Slice:
     def _line_roots(self, j: int, vj: np.ndarray, direction: int, g, solver, found: list) -> int:
         """Roots of constraint j on every grid line of one direction that brackets a sign change,
         appended to ``found`` as slice coordinates where the other constraints hold; returns the
-        number of brackets where Newton left the bracket (bisection was used)."""
+        number of brackets where Newton did not converge or left the bracket (bisection was used)."""
         lines = vj.T if direction == 0 else vj
         grid = self.ys if direction == 0 else self.xs
         other = self.xs if direction == 0 else self.ys
@@ -515,7 +515,8 @@ class _Slice:
                 dvec[self.ix] = 1.0
             par = np.concatenate([p, dvec])
             root = float(solver(start, par))
-            if not (lo - 1e-12 <= root <= hi + 1e-12) or not np.isfinite(root):
+            converged = bool(solver.stats().get("success", True))  # error_on_fail off: it says so here
+            if not (converged and np.isfinite(root) and lo - 1e-12 <= root <= hi + 1e-12):
                 failures += 1
                 root = _bisect(g, lo, hi, par)
             pt = p + root * dvec

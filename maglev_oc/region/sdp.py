@@ -170,10 +170,12 @@ class PolygonBuilder:
         radius = self._sampled_radii(F, dirs, halfwidth, periodic) * shrink
         radii, cells_used, pending = self._proved_radii(F, dirs, radius, halfwidth, periodic, max_cells)
         if pending.size:
-            return self._fail(halfwidth, t0, f"vertices {pending.tolist()} could not be proved inside F")
+            message = f"vertices {pending.tolist()} could not be proved inside F"
+            return self._fail(halfwidth, t0, message, cells_used)
         verts = dirs * radii[None, :]
         if np.any(radius <= 0):
-            return self._fail(halfwidth, t0, "the origin dv = 0 is not strictly inside F on this range")
+            message = "the origin dv = 0 is not strictly inside F on this range"
+            return self._fail(halfwidth, t0, message, cells_used)
         hull = ConvexHull(verts.T)
         return InnerPolygon(
             True,
@@ -271,11 +273,12 @@ class PolygonBuilder:
         return ~failed, used
 
     @staticmethod
-    def _fail(halfwidth, t0, message) -> InnerPolygon:
+    def _fail(halfwidth, t0, message, cells: int = 0) -> InnerPolygon:
+        """Not proved, with the interval evaluations spent before it gave up."""
         z = np.zeros((2, 0))
         timings = {"total": time.perf_counter() - t0}
         return InnerPolygon(
-            False, "not_proved", message, halfwidth, z, np.zeros((0, 2)), np.zeros(0), 0, timings
+            False, "not_proved", message, halfwidth, z, np.zeros((0, 2)), np.zeros(0), int(cells), timings
         )
 
 
