@@ -193,6 +193,12 @@ def test_a_rival_is_compared_with_the_gain_over_the_same_samples():
         rivals = {("both", 1): (rival, "gap")}
         out = _verdict(j, cand, np.array([0, 1]), SimpleNamespace(compensation=1.0), s, rivals)[0]
         assert out == verdict
+    # the reason names the rival's variable in words and both gains (a variable's identifier, with
+    # its underscore, is not a word)
+    rivals = {("both", 1): (0.4, "gap_rate")}
+    _, reason = _verdict(j, cand, np.array([0, 1]), SimpleNamespace(compensation=1.0), s, rivals)
+    assert reason.startswith("a smooth function of the gap rate explains more of the held-out error")
+    assert "(40.0% against 30.0%)" in reason
 
 
 def test_pooled_gains_are_the_drop_of_the_summed_squares_over_every_part():

@@ -195,6 +195,8 @@ def test_result_convention_and_explanation(study, model):
     assert equivalent > 0
     assert f"{study.papers_damping / equivalent:.1f} times the {equivalent:.1f} N s/m" in text
     assert "the papers' direction for all of them" in text
+    # the study's default friction is the rig twin's, and the sentence says so and where it is from
+    assert "With the rig twin's guide friction (" in text and "set from the papers' 10 um settling" in text
     # the instrumental-variable limit against the recursion's end values (C1..C3, every eps) and the
     # largest change of C2 in our runs, recomputed from the tables
     lim, d3 = study.limit_default_table3, study.default_table3

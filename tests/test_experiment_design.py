@@ -174,6 +174,10 @@ def test_a_grid_shape_that_cannot_be_fitted_is_kept_with_its_reason(model, desig
     d = design_experiment("doptimal", DURATION, model=model, designer=designer, grid=SMALL_GRID)
     grid_rows = [r for r in d.candidates if r["shape"] != "papers' sum of sines"]
     assert [r["feasible"] for r in grid_rows] == [False, True]
+    # the papers' excitation is a candidate beside the grid's, with its predicted log det (the
+    # design's baseline: the same prediction)
+    (papers,) = [r for r in d.candidates if r["shape"] == "papers' sum of sines"]
+    assert papers["feasible"] and papers["log_det"] == d.baseline.log_det
     assert grid_rows[0]["shape"] == SMALL_GRID[0].to_dict()
     assert grid_rows[0]["message"] == "planted: no scaling fits"
     assert d.settings["vertical"] in (SMALL_GRID[1].to_dict(), "papers' sum of sines")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from maglev_oc.region.interval import CenteredForm, IntervalFunction
 
@@ -335,3 +337,24 @@ def test_the_centred_form_encloses_the_microsteppers_constraints():
     (c_lo,), _ = region._centred(lo, hi)
     (n_lo,), _ = region._ifn(lo, hi)
     assert np.all(c_lo >= n_lo) and np.mean(c_lo > n_lo) > 0.5  # tighter on most of these boxes
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(min_value=1e2, max_value=1e7, allow_nan=False),
+    st.floats(min_value=1e2, max_value=1e7, allow_nan=False),
+    st.sampled_from([-1.0, 1.0]),
+)
+def test_rounding_is_enclosed_at_any_magnitude(x, y, sign):
+    """On point boxes the enclosure of x y and x + y must hold the exact (rational) result: the
+    float result is rounded to the nearest double, half an ulp off, so the padding has to grow
+    with the magnitude (4 eps relative); an absolute padding of 4 eps left the exact product
+    outside for |x y| above about 8 (mutation seed 64)."""
+    from fractions import Fraction
+
+    a, b = ca.SX.sym("a"), ca.SX.sym("b")
+    f = IntervalFunction(ca.Function("f", [a, b], [a * b, a + b]))
+    lo, hi = f([np.array([[sign * x]]), np.array([[y]])], [np.array([[sign * x]]), np.array([[y]])])
+    exact = (Fraction(sign * x) * Fraction(y), Fraction(sign * x) + Fraction(y))
+    for k, value in enumerate(exact):
+        assert Fraction(float(lo[k][0, 0])) <= value <= Fraction(float(hi[k][0, 0])), k
