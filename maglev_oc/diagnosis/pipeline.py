@@ -281,7 +281,7 @@ def _noise_scale(stage: _Stage, run: _Run) -> NoiseScale:
     independent generator's noisy rig (bench/README, *The logged currents' error from two bands*):
     on a pair of guide friction and a one-ended end effect the end effect's misfit drove the scale
     to 0, the fit lost its errors-in-variables correction and a vertical guide friction (z 10.6)
-    was claimed in its place; three of 130 pairs gained a false claim. On the clean logs of eight
+    was claimed in its place; three of 136 noisy-rig logs gained a false claim. On the clean logs of eight
     rig settings it gave C1 within 0.45 % of the truth where the floor's estimate gave up to
     +4.5 %."""
     if stage.sel.selected or stage.unexplained:
