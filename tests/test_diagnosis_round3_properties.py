@@ -385,6 +385,10 @@ def test_a_geometry_or_commutation_error_beyond_its_physical_bound_is_refused_on
             assert p[parameter].value == pytest.approx(q[0], rel=1e-12)
             reason = cand.plausible(p)
             assert (reason is None) == ok, (name, sign, factor, reason)
+            if not ok:  # the reason names what is beyond its bound, in words
+                words = {"gap_sensor_offset": "gap offset", "guide_misalignment": "guide slope"}
+                assert reason.startswith(words.get(name, reason.split(" of ")[0])), reason
+                assert f"beyond the physical bound {bound:g}" in reason, reason
 
 
 # --- the pipeline's small helpers ----------------------------------------------------------------------
@@ -525,3 +529,22 @@ def test_a_linear_physical_quantitys_standard_error_is_not_negative_for_a_negati
     )
     assert (out["force"].value, out["force"].stderr, out["force"].unit) == (-1.0, 0.4, "N")
     assert out["length"].value == pytest.approx(3e-3) and out["length"].stderr == pytest.approx(3e-4)
+
+
+def test_the_outcome_says_what_was_found_in_words():
+    # status and message of each outcome (SPEC 3's words); the unexplained-only one must say that
+    # no named effect was found and part of the residual is unexplained (seed 65: its words could
+    # be changed with every test passing)
+    from types import SimpleNamespace as NS
+
+    from maglev_oc.diagnosis.pipeline import _outcome
+
+    sel = NS(base=NS(compensated=True))
+    data = NS(current_noise=np.array([1e-4, 1e-4]))
+    status, success, message = _outcome([], [], [NS()], sel, data)
+    assert (status, success) == ("unexplained_only", True)
+    assert message == "no named effect found, but part of the residual is unexplained"
+    status, _, message = _outcome([], [], [], sel, data)
+    assert status == "nothing_found" and message.startswith("no missing effect found")
+    _, success, message = _outcome([], [], [], NS(base=NS(compensated=False)), data)
+    assert not success and "errors-in-variables compensation failed" in message
