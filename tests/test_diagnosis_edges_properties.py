@@ -47,6 +47,22 @@ def test_one_window_in_the_held_out_block_is_enough_for_an_output_error(model):
     assert math.isfinite(err["horizontal"])
 
 
+def test_a_horizon_of_one_sample_simulates_one_step(model):
+    """The output error's windows last ``horizon`` rounded to samples, at least one: a horizon of
+    one sample (or less) is a one-step prediction, recomputed here from ``simulate_windows`` with
+    h = 1 on the same window starts (seed 65: a floor of 2 samples went unseen)."""
+    from maglev_oc.validation import simulate_windows, window_starts
+
+    data = prepare([_synthetic(model, seconds=12.0, position_noise=2e-6)], bandwidth=10.0)
+    _, hold = data.masks(0.25)
+    ts = data.sample_time
+    starts = window_starts(data, hold, 1, round(0.25 / ts))
+    traj, meas = simulate_windows(data, starts, 1, model)
+    rms = np.sqrt(np.mean((traj[[0, 2]] - meas[[0, 2]]).reshape(2, -1) ** 2, axis=1))
+    for horizon in (ts, 0.4 * ts):
+        assert output_error(data, hold, model, horizon=horizon)["horizontal"] == rms[1]
+
+
 def test_a_diagnosis_with_only_confounded_candidates_says_none_was_separable():
     """Nothing claimed and nothing unexplained, but candidates that explain part of the residual
     and cannot be told from the constants: the outcome says no effect could be separated (not

@@ -263,3 +263,25 @@ def test_a_multisine_design_fills_the_papers_budget_and_records_its_settings(mod
     assert np.all(ratio <= 1 + 1e-9) and np.max(ratio) > 0.95, ratio
     assert d.settings["duration_s"] == DURATION and d.settings["seed"] == 0
     assert set(d.settings["vertical"]) == {"band_hz", "tones", "tilt"}
+
+
+def test_a_scaling_whose_prediction_failed_is_never_the_best(model, monkeypatch):
+    # every prediction fails (infeasible for another reason than the budget, with a larger log det
+    # each time): no scaling fits, and fit_to_budget says so rather than returning a failed one
+    # (seed 65: "success or larger" kept the first failed prediction as the best)
+    from types import SimpleNamespace
+
+    designer = ExperimentDesigner(model)
+    calls = []
+
+    def failing(ref, effect=False, budget=None):
+        calls.append(ref)
+        return SimpleNamespace(
+            success=False, log_det=10.0 * len(calls), peak_current=np.array([0.1, 0.5]), message="planted"
+        )
+
+    monkeypatch.setattr(designer, "predict", failing)
+    make = lambda v, h: papers_reference(DURATION)  # noqa: E731 - the family's shape is not read
+    with pytest.raises(SolverError, match="planted"):
+        designer.fit_to_budget(make, CurrentBudget())
+    assert len(calls) == 4  # every pass tried (the default iterations)
