@@ -337,9 +337,12 @@ class EquationError:
             except (InputError, LogError) as err:  # a log too short for the narrow band's window
                 return NoiseScale.not_calibrated(f"no {LOW_BAND:g} Hz fit to compare with: {err}")
         narrow = self._narrow
-        fit, _ = narrow.masks(0.0, self._sample_masks(samples))
-        if fit.sum() < 10 * len(self.names) + 2 * narrow.kernel.size:
-            return NoiseScale.not_calibrated(f"too few samples for a {LOW_BAND:g} Hz fit to compare with")
+        try:
+            fit = self._fit_mask(samples, narrow)
+        except InputError as err:
+            return NoiseScale.not_calibrated(
+                f"too few samples for a {LOW_BAND:g} Hz fit to compare with: {err}"
+            )
         low = build_design(
             narrow,
             self.model,
@@ -358,12 +361,13 @@ class EquationError:
             for m, log in zip(_sample_masks(samples, self.logs), self.logs, strict=True)
         ]
 
-    def _fit_mask(self, samples) -> np.ndarray:
-        """The fitted samples of the prepared (rate-reduced) data; refuses too few."""
-        prep = self.prepared
+    def _fit_mask(self, samples, prep: PreparedLogs | None = None) -> np.ndarray:
+        """The fitted samples of the prepared (rate-reduced) data, or of ``prep`` (the same logs
+        on another band); refuses too few."""
+        prep = self.prepared if prep is None else prep
         fit_mask, _ = prep.masks(0.0, self._sample_masks(samples))
         n_used, p = int(fit_mask.sum()), len(self.names)
-        min_samples = 2 * self.kernel.size
+        min_samples = 2 * prep.kernel.size
         if n_used < 10 * p + min_samples:
             raise InputError(
                 f"only {n_used} usable samples (after leaving out {prep.edge} at each edge of each log); "
