@@ -182,3 +182,25 @@ def test_traces_of_several_residuals_are_each_ones_own_trace(signals):
         assert together.peaks == alone.peaks
         for name, binned in alone.binned.items():
             np.testing.assert_array_equal(together.binned[name].mean, binned.mean)
+
+
+@pytest.mark.parametrize("where", [1, 150, -2])
+def test_a_sinusoid_at_any_inner_period_of_the_grid_is_a_peak_there(signals, where):
+    """The periodogram's grid runs from 4 mm to 1.5 x the position's span (here 96 mm, 300
+    periods 1.1 % apart). A sinusoid in the position at any period inside the grid, the second and
+    the second-to-last included, is a peak at that period (a local maximum: only the grid's own
+    ends cannot be one), on the axis that carries it and not on the other. The noise is small
+    (share of the sinusoid 0.93): near the grid's long end neighbouring periods explain nearly the
+    same share, and a noise as large as the sinusoid moves the maximum to the end."""
+    x, du = signals
+    span = float(np.ptp(x[2]))
+    periods = np.geomspace(4e-3, max(min(1.5 * span, 0.15), 0.01), 300)
+    lam = periods[where]
+    rng = np.random.default_rng(3)
+    residual = 0.1 * rng.standard_normal((2, x.shape[1]))
+    residual[1] += 0.5 * np.sin(2 * math.pi * x[2] / lam + 0.4)
+    tr = trace(x, du, residual, StageParameters(), TS)
+    assert_allclose(tr.periods, periods, rtol=1e-12)
+    found = [p for axis, p, _ in tr.peaks if axis == "horizontal"]
+    assert any(p == pytest.approx(lam, rel=1e-9) for p in found), (lam, found)
+    assert not [p for axis, p, _ in tr.peaks if axis == "vertical"]

@@ -77,3 +77,20 @@ def test_the_constraint_functions_are_the_margin_and_each_pairs_current_headroom
             u, R = (np.asarray(a).ravel() for a in TRANSFORM(gap0 + ell[0], ell[1:4]))
             want = [float(R[0]), limit2 - u[0] ** 2 - u[1] ** 2, limit2 - u[2] ** 2 - u[3] ** 2]
             assert h == pytest.approx(want, rel=1e-9, abs=1e-9), (gap0, ell)
+
+
+@pytest.mark.parametrize("budget", [64, 1024])
+def test_the_bisection_closes_its_bracket_when_the_box_budget_binds(budget):
+    """When the box budget, not a refutation, stops the proof (at 64 and 1024 boxes a pass the
+    set-point (0, 0, 25 mm) is certified near 0.71 and 1.83, far below the refuted 4.33), the
+    level returned is the bisection's: certified with that budget, and not certified 10 % above
+    it (``rel_tol`` 5 %: the bracket is closed to 5 %, so 1.1x lies above the budget's limit).
+    A bisection that stops early or halves the wrong end returns a level the same budget still
+    certifies at 1.1x."""
+    region = MicrostepperRegion(PLATFORM)
+    setpoint = (0.0, 0.0, 0.025)
+    res = region.largest_level(setpoint, rel_tol=0.05, max_boxes=budget)
+    assert res.success and res.level < 0.5 * res.refuted_level, res.message
+    assert "box budget spent" in res.message
+    assert region.certify(setpoint, res.level, max_boxes=budget)[0] == "certified"
+    assert region.certify(setpoint, 1.1 * res.level, max_boxes=budget)[0] != "certified"

@@ -12,6 +12,7 @@ import re
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 from maglev_oc.identification.layout import CONSTANT_NAMES
 from maglev_oc.model.equilibrium import equilibrium_currents
@@ -191,6 +192,21 @@ def test_the_table_ii_model_is_the_vertical_runs_eps_001_estimate_and_says_so(sm
     assert {k: getattr(c, k) for k in ("C2", "C3", "C4")} == {k: run.values[k] for k in ("C2", "C3", "C4")}
     assert c.C1 == st.nominal.constants.C1
     assert c.source == "Table II style: NPFSI eps = 0.01, x3 = 0"
+
+
+def test_the_single_shooting_figure_is_the_first_second_with_the_true_constants(small_identification):
+    """The figure "Why the output-error fit uses multiple shooting (first second of the log)"
+    draws ``st.open_loop``: the true-constant model driven by the logged currents over the first
+    second (1001 samples at 1 kHz), from the zero-phase state at the first sample. Recomputed here
+    from the log and the truth; the gap runs away from the encoder within that second (000: the
+    vertical pole is 33-64 1/s, a 1 mm error grows e-fold in under 30 ms)."""
+    from maglev_oc.identification.output_error import simulate_open_loop
+
+    st, _ = small_identification
+    assert st.open_loop.shape == (4, round(1.0 / st.log.sample_time) + 1)
+    assert_allclose(st.open_loop, simulate_open_loop(st.log, st.truth, 1.0), rtol=1e-12, equal_nan=True)
+    done = np.isfinite(st.open_loop[0])
+    assert not done.all() or np.max(np.abs(st.open_loop[0] - st.log.x[0, : done.size])) > 1e-3
 
 
 def test_identification_scorecard_has_no_internal_names(small_identification):
