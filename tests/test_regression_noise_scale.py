@@ -38,12 +38,14 @@ class _Linear:
     the two designs' lines cross at ``at``; the narrow one's covariance is diag(se^2), the wide
     one's 100 times it (the differences are scaled by the narrow fit's standard errors)."""
 
-    def __init__(self, at, slopes, se):
+    def __init__(self, at, slopes, se, offset=None):
         self.at, self.slopes, self.se = at, slopes, np.asarray(se, dtype=float)
+        self.offset = offset or {}
 
     def __call__(self, design, groups, *, covariance=True, noise_scale=1.0):
         slope = np.asarray(self.slopes[design.name], dtype=float)
         coef = np.array([1.0, 2.0]) + slope * (noise_scale - self.at)
+        coef = coef + np.asarray(self.offset.get(design.name, 0.0), dtype=float)
         se = self.se * (10.0 if design.name == "wide" else 1.0)
         return SimpleNamespace(index=np.array([0, 1]), coef=coef, covariance=np.diag(se**2))
 
@@ -81,19 +83,43 @@ def test_a_crossing_beyond_the_largest_scale_is_held_at_it(monkeypatch):
     assert out.best == pytest.approx(NS.MAX_SCALE, abs=1e-3)
 
 
-@pytest.mark.parametrize("margin, taken", [(1.02, True), (0.98, False)])
-def test_the_scale_is_taken_only_when_the_data_tell_it_from_one_at_95_percent(monkeypatch, margin, taken):
-    # the disagreement at 1 less the one at the crossing (0) is (3 (1 - at) / se)^2 on C1; placed
-    # 2 % either side of the chi-square(1) 95 % quantile (3.84, scipy), the scale is taken or not
-    se = np.array([0.01, 1e6])  # C4's difference counts for nothing
-    gap = np.sqrt(margin * chi2.ppf(0.95, 1)) * se[0] / 3.0
-    fake = _Linear(1.0 - gap, {"wide": [4.0, 0.0], "narrow": [1.0, 0.0]}, se)
+@pytest.mark.parametrize("margin, taken", [(0.98, True), (1.02, False)])
+def test_the_scale_is_taken_where_the_bands_agree_and_not_where_they_agree_nowhere(
+    monkeypatch, margin, taken
+):
+    # C1's lines cross at 0.6, C4's are offset so that they cross elsewhere: the least disagreement
+    # of the two is (off / se4)^2 a1^2 / (a1^2 + a2^2), with a1, a2 the differences' slopes over
+    # their standard errors (least squares in s). Placed 2 % either side of the chi-square 95 %
+    # point with one degree of freedom (two parameters compared, less the scale: 3.84, scipy),
+    # the best scale is taken or the floor's estimate stands
+    se = np.array([0.01, 0.001])
+    a1, a2 = 3.0 / se[0], 0.05 / se[1]
+    off = np.sqrt(margin * chi2.ppf(0.95, 1) * (a1**2 + a2**2)) / a1 * se[1]
+    fake = _Linear(0.6, {"wide": [4.0, 0.1], "narrow": [1.0, 0.05]}, se, offset={"wide": [0.0, off]})
     monkeypatch.setattr(NS, "fit_subset", fake)
     out = NS.band_consistent_scale(*_designs(), ["base"])
-    assert out.best == pytest.approx(1.0 - gap, abs=1e-4)
+    assert out.misfit_best == pytest.approx(margin * chi2.ppf(0.95, 1), rel=1e-4)
+    assert out.agreement == pytest.approx(chi2.ppf(0.95, 1), rel=1e-12)
     assert out.calibrated is taken
     assert out.scale == (out.best if taken else 1.0)
-    assert ("not distinguishable" in out.message) is not taken
+    assert ("agree at no level" in out.message) is not taken
+
+
+@pytest.mark.parametrize("at", [0.37, 0.83, 1.6])
+def test_the_scales_range_is_where_the_disagreement_is_within_3_84_of_the_least(monkeypatch, at):
+    # one effective parameter (C4's standard error huge): the disagreement is (3 (s - at) / se)^2,
+    # within chi-square(1)'s 95 % point (3.84) of its least (0) for |s - at| <= 1.96 se / 3; the
+    # range is that interval on the search's 0.05 grid (its outermost grid points inside), and 1
+    # lies in it only when it is that close to the crossing
+    se = np.array([0.02, 1e6])
+    fake = _Linear(at, {"wide": [4.0, 0.0], "narrow": [1.0, 0.0]}, se)
+    monkeypatch.setattr(NS, "fit_subset", fake)
+    out = NS.band_consistent_scale(*_designs(), ["base"])
+    half = np.sqrt(chi2.ppf(0.95, 1)) * se[0] / 3.0
+    lo, hi = out.interval
+    assert at - half <= lo <= at - half + 0.05 and at + half - 0.05 <= hi <= at + half
+    assert out.calibrated and out.scale == pytest.approx(at, abs=1e-3)
+    assert out.to_dict()["interval"] == [lo, hi]
 
 
 # --- the solver's scale and the prepared data's ----------------------------------------------------------
@@ -244,20 +270,25 @@ def test_a_shifted_gap_reading_estimated_as_an_offset_leaves_the_calibrated_cons
 def test_the_report_states_the_scale_in_one_line_and_in_a_note_when_calibrated():
     from maglev_oc.reporting.diagnosis_report import _compact_noise_scale, _noise_scale_notes
 
-    taken = NS.NoiseScale(0.713, 0.713, 0.48, 40.43, ("C1",), "m").to_dict()
+    taken = NS.NoiseScale(0.713, 0.713, 0.48, 40.43, ("C1",), "m", (0.6, 0.85), 3.84).to_dict()
+    nowhere = NS.NoiseScale(1.0, 0.52, 12.1, 30.2, ("C1", "C2"), "m", (0.45, 0.6), 3.84).to_dict()
     kept = NS.NoiseScale.not_calibrated("effects were found").to_dict()
     assert kept["best"] is None and kept["scale"] == 1.0
     line = _compact_noise_scale({"a": 1, "current_noise_scale": taken})
     assert line == {
         "a": 1,
-        "current_noise_scale": "0.713 (bands agree best at 0.713: misfit 0.48, against 40.43 at 1)",
+        "current_noise_scale": "0.713 (bands agree at 0.713: misfit 0.48, against 40.43 at 1)",
     }
+    assert _compact_noise_scale({"current_noise_scale": nowhere})["current_noise_scale"] == (
+        "1 (bands agree at no level; least at 0.52: misfit 12.10, against 30.20 at 1)"
+    )
     assert _compact_noise_scale({"current_noise_scale": kept})["current_noise_scale"].startswith(
         "1 (the floor"
     )
     diag = SimpleNamespace(settings={"current_noise_scale": taken})
     (note,) = _noise_scale_notes(diag)
-    assert "0.71 times their noise floor's estimate" in note and "40.4 at 1" in note
+    assert "0.71 (95 % range 0.60-0.85) times their noise floor's estimate" in note and "40.4 at 1" in note
+    assert _noise_scale_notes(SimpleNamespace(settings={"current_noise_scale": nowhere})) == []
     assert _noise_scale_notes(SimpleNamespace(settings={"current_noise_scale": kept})) == []
 
 

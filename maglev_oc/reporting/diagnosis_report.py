@@ -445,8 +445,10 @@ def _noise_scale_notes(diag: Diagnosis) -> list[str]:
     scale = diag.settings.get("current_noise_scale")
     if not isinstance(scale, dict) or scale.get("scale", 1.0) == 1.0:
         return []
+    lo, hi = scale.get("interval") or (None, None)
+    span = f" (95 % range {lo:.2f}-{hi:.2f})" if lo is not None and hi is not None else ""
     return [
-        f"The logged currents' error is taken at {scale['scale']:.2f} times their noise floor's "
+        f"The logged currents' error is taken at {scale['scale']:.2f}{span} times their noise floor's "
         "estimate: there the constants fitted on a 2 Hz band and on the diagnosis's own agree "
         f"(disagreement {scale['misfit_best']:.1f} against {scale['misfit_at_one']:.1f} at 1, sum of "
         "squared standardized differences)."
@@ -471,8 +473,9 @@ def _compact_noise_scale(settings: dict) -> dict:
             **settings,
             "current_noise_scale": f"{scale['scale']:.3g} (the floor's estimate; not calibrated)",
         }
+    verdict = "agree" if scale["scale"] != 1.0 else "agree at no level; least"
     line = (
-        f"{scale['scale']:.3g} (bands agree best at {scale['best']:.3g}: misfit "
+        f"{scale['scale']:.3g} (bands {verdict} at {scale['best']:.3g}: misfit "
         f"{scale['misfit_best']:.2f}, against {scale['misfit_at_one']:.2f} at 1)"
     )
     return {**settings, "current_noise_scale": line}
