@@ -50,6 +50,12 @@ def twin_log(model: StageModel, truth_model: StageModel) -> Log:
     return excitation_log(truth_model, duration=6.0, seed=7, controller_model=model)
 
 
+# fixtures several property-test files share (module scope: built once in each file that uses one)
+from tests._diagnosis_cases import cogged, data, horizontal_all, two_effects, two_periodic  # noqa: E402, F401
+from tests._identification_cases import two_logs  # noqa: E402, F401
+from tests._region_cases import loop  # noqa: E402, F401
+from tests._regression_cases import friction_data  # noqa: E402, F401
+
 # C objects and the NMPC's libraries compiled once per run, shared by the workers
 from tests.compile_support import object_cache, shared_compile_cache  # noqa: E402, F401
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _verdict
+from tests._diagnosis_cases import _judgement as injected_judgement
 from tests.diagnosis_support import diagnose_path
-from tests.test_diagnosis_injected_properties import _judgement as injected_judgement
 
 
 def _judgement(quarter, pooled) -> Judgement:
