@@ -557,14 +557,14 @@ def _fit4(method: str, success: bool = True, scale: float = 1.0) -> FitResult:
     )
 
 
-@pytest.mark.parametrize("oe_success", [True, False])
-def test_outcome_report_and_json_name_the_constants_of_the_best_fit(model, oe_success):
+@pytest.mark.parametrize("ee_success", [True, False])
+def test_outcome_report_and_json_name_the_constants_of_the_best_fit(model, ee_success):
     """``maglev_oc identify`` prints the outcome's report and writes its JSON; the stage file and
-    the user take ``identified_constants`` from them. Those must be the best fit's (output error
-    if it converged, else equation error), printed to 6 digits and stored exactly, with the source
+    the user take ``identified_constants`` from them. Those must be the best fit's (equation error
+    if it converged, else output error), printed to 6 digits and stored exactly, with the source
     naming the method; the JSON nests each fit's and run's own JSON and carries status, message,
     timings, estimate and sources."""
-    ee, oe = _fit4("equation_error"), _fit4("output_error", success=oe_success, scale=1.001)
+    ee, oe = _fit4("equation_error", success=ee_success), _fit4("output_error", scale=1.001)
     runs = (make_npfsi(eps=0.001), make_npfsi(eps=0.01))
     outcome = IdentificationOutcome(
         equation_error=ee,
@@ -575,7 +575,7 @@ def test_outcome_report_and_json_name_the_constants_of_the_best_fit(model, oe_su
         sources=("run_a.csv", "run_b.csv"),
         timings={"equation_error": 0.5, "output_error": 2.25, "npfsi": 0.75, "total": 3.5},
     )
-    best = oe if oe_success else ee
+    best = ee if ee_success else oe
     assert outcome.best is best
     text = outcome.report()
     assert text.count("[[Fit: ") == 2 and text.count("[[NPFSI") == 2

@@ -197,7 +197,7 @@ def test_cli_all_methods(tmp_path, good_csv, capsys):
     data = json.loads(out.read_text())
     assert data["output_error"]["success"]
     assert [r["eps"] for r in data["npfsi"]] == [0.001, 0.01, 0.05]
-    assert data["identified_constants"]["source"].startswith("identified (output_error)")
+    assert data["identified_constants"]["source"].startswith("identified (equation_error)")
 
 
 def test_npfsi_estimates_the_constants_asked_for(good_log, model):

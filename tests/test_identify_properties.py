@@ -70,6 +70,7 @@ OUTCOME_KEYS = {
     "status",
     "message",
     "timings",
+    "warnings",  # constants a stage of this geometry cannot have (IdentificationOutcome.warnings)
     "validation",  # residual whiteness and fit % of the best fit (maglev_oc.validation)
 }
 CLI_KEYS = OUTCOME_KEYS | {"stage"}  # the file also holds the stage file it amounts to
@@ -223,6 +224,7 @@ def _slower(log: Log, source: str) -> Log:
 def test_identify_json_has_the_schema_a_script_reads(cli_json):
     assert set(cli_json) == CLI_KEYS
     assert cli_json["success"] is True and cli_json["status"] == "converged"
+    assert cli_json["warnings"] == []  # the twin's constants are within a few per cent of the papers'
     for method in ("equation_error", "output_error"):
         fit = cli_json[method]
         assert set(fit) == FIT_KEYS, method
@@ -279,12 +281,12 @@ def test_identify_json_numbers_are_the_results_attributes(outcome, model):
     # output error starts from the equation-error fit identify already has (not a second one)
     assert dict(outcome.output_error.initial) == dict(outcome.equation_error.values)
     assert outcome.output_error.timings["initial_fit"] == 0.0
-    # the best fit (output error, converged) gives the identified constants
-    assert outcome.best is outcome.output_error
+    # the best fit (equation error, converged) gives the identified constants
+    assert outcome.best is outcome.equation_error
     for k in CONSTANT_NAMES:
-        assert d["identified_constants"][k] == outcome.output_error.values[k]
+        assert d["identified_constants"][k] == outcome.equation_error.values[k]
         assert d["base_constants"][k] == getattr(model.constants, k)
-    assert d["identified_constants"]["source"].startswith("identified (output_error)")
+    assert d["identified_constants"]["source"].startswith("identified (equation_error)")
     assert d["estimate"] == list(CONSTANT_NAMES)
     t = d["timings"]
     parts = ("equation_error", "output_error", "npfsi", "validation")

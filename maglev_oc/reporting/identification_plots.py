@@ -611,6 +611,7 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         "autocorrelated.",
         "Wall times: " + ", ".join(f"{k} {v:.2f} s" for k, v in outcome.timings.items()),
     ]
+    summary[2:2] = [f"Warning: {w}" for w in outcome.warnings]
     with PdfReport(path, "maglev_oc — identification", subtitle="maglev-oc identify") as pdf:
         pdf.add_text("Identification of C1..C4", summary, first_page=True)
         if rows:
