@@ -173,3 +173,28 @@ def test_the_compensation_studys_after_regulator_compensates_the_found_force(mod
         for res in (study.result_before, study.result_after)
     ]
     assert errors[1] < errors[0]
+
+
+def test_with_nothing_found_the_key_figure_shows_one_loop_and_says_why():
+    """A diagnosis that found nothing has nothing to compensate: the key figure draws the FL loop
+    with the refitted constants alone (one line, the run's |encoder - reference| in um, no
+    before/after legend) under a caption that says nothing was found, not "what the found effects
+    explain"."""
+    from types import SimpleNamespace
+
+    from maglev_oc.reporting.diagnosis_plots import key_plot
+
+    t = np.linspace(0.0, 1.0, 11)
+    y = np.vstack([0.0195 + 1e-6 * t, 1e-6 * t])
+    reference = np.zeros((6, t.size))
+    reference[0] = 0.0195
+    run = SimpleNamespace(t=t, y=y, reference=reference)
+    study = SimpleNamespace(result_before=run, result_after=run, scenario="sinusoid")
+    fig = Figure(figsize=(6, 4))
+    title = key_plot(stub_diagnosis(), study)(fig, (0.0, 0.0, 1.0, 1.0))
+    assert "nothing found" in title.lower() and "found effects explain" not in title
+    (ax,) = fig.axes
+    (line,) = ax.get_lines()
+    # (1e-9: the gap error is a difference of two numbers near 19.5 mm)
+    np.testing.assert_allclose(line.get_ydata(), np.hypot(1e-6 * t, 1e-6 * t) * 1e6, rtol=1e-9)
+    assert not fig.legends

@@ -165,6 +165,22 @@ def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 
         n = len(shown) + (study is not None)
         if n == 0:
             return caption(fig, rect, "Nothing found: the refitted papers' model explains the log")
+        if not shown:  # nothing to compensate: the loop with the refitted constants, one line
+            ax = fig.add_subplot(grid(fig, rect, 1, 1, top=0.075, bottom=0.085)[0, 0])
+            res = study.result_after
+            err = np.hypot(res.y[0] - res.reference[0], res.y[1] - res.reference[3]) * M_TO_UM
+            ax.plot(*thin(res.t, err, 1500), color=AFTER, lw=0.7)
+            ax.set_ylim(0, None)
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel("|tracking error|, both axes [µm]")
+            ax.set_title(f"FL regulator with the refitted constants, {study.scenario}", fontsize=8.5)
+            return caption(
+                fig,
+                rect,
+                "Key figure: nothing found; the FL regulator with the refitted constants",
+                "The refitted papers' model explains the log to its noise, so there is nothing to "
+                "compensate. The closed loop's error (encoder − reference) on the rig twin.",
+            )
         gs = grid(fig, rect, 1, n, wspace=0.38, top=0.075, bottom=0.085)
         for k, (effect, a) in enumerate(shown):
             _before_after(fig.add_subplot(gs[0, k]), diag, effect, a, effect_contribution(diag, effect))
