@@ -34,7 +34,12 @@ Steps:
 When steps 2-6 find nothing and leave nothing unexplained, the logged currents' error is
 calibrated (:mod:`maglev_oc.regression.noise_scale`: the level at which the constants fitted on
 2 Hz and on the band agree) and steps 2-6 run again with it; that pass is kept if it finds nothing
-either. The settings record the scale (``current_noise_scale``).
+either. When they choose effects and leave nothing unexplained, the claims stand as made on the
+floor's estimate, and the kept selection (constants and effects) is refitted at the level where
+the bands agree with the effects in the model (on the independent generator's noisy rig: C1
+beside the effects within 1 % on 105 of 145 logs, against 32 at the floor's estimate; every claim
+as before; bench/README, *The constants beside the effects*).
+The settings record the scale (``current_noise_scale``).
 """
 
 from __future__ import annotations
@@ -195,6 +200,13 @@ def diagnose(
     with reusing_columns(data):
         run = _Run(tuple(logs), train, hold, model, clock, holdout_fraction, settings, tuple(exclude))
         stage = run.selected(data)
+        if stage.sel.selected and not stage.unexplained:
+            # the claims are made (on the floor's estimate): their sizes and the constants are
+            # refitted where the bands agree with the chosen effects in the model
+            scale = clock("noise_scale", _band_scale, stage, run)
+            if scale.calibrated:
+                stage = _at_scale(stage, scale.scale)
+            return _finished(stage, run, bandwidth, scale)
         scale = clock("noise_scale", _noise_scale, stage, run)
         if scale.calibrated:  # everything again on the calibrated errors (the columns are reused)
             stage = run.selected(data.with_noise_scale(scale.scale))
@@ -289,6 +301,12 @@ def _noise_scale(stage: _Stage, run: _Run) -> NoiseScale:
             "the floor's estimate: effects were found, and the bands' agreement would take their "
             "misfit for the currents' errors"
         )
+    return _band_scale(stage, run)
+
+
+def _band_scale(stage: _Stage, run: _Run) -> NoiseScale:
+    """The scale at which the kept selection's fit (base constants and chosen effects) on the band
+    and on :data:`~maglev_oc.regression.noise_scale.LOW_BAND` agree on the base constants."""
     session, sel, design = stage.session, stage.sel, stage.design
     data = session.data
     try:
@@ -299,6 +317,19 @@ def _noise_scale(stage: _Stage, run: _Run) -> NoiseScale:
     terms = [design.term(g) for g in sel.final.groups if g != "base"]
     low = build_design(narrow, stage.fitted, terms=terms, fit=train, holdout=hold, weights=session.weights)
     return band_consistent_scale(design, low, sel.final.groups)
+
+
+def _at_scale(stage: _Stage, scale: float) -> _Stage:
+    """The kept selection refitted with the logged currents' error at ``scale`` times the floor's
+    estimate: the claims stay, their sizes and the constants move (the data too, for the sizes
+    refitted on other designs and bands)."""
+    session = dataclasses.replace(stage.session, data=stage.session.data.with_noise_scale(scale))
+    sel = dataclasses.replace(
+        stage.sel,
+        base=fit_subset(stage.design, ["base"], noise_scale=scale),
+        final=fit_subset(stage.design, list(stage.sel.final.groups), noise_scale=scale),
+    )
+    return dataclasses.replace(stage, session=session, sel=sel)
 
 
 def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> Diagnosis:

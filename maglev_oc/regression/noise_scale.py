@@ -15,9 +15,14 @@ on a narrow band (:data:`LOW_BAND`) and on the fit's own, the constants agree on
 error level. :func:`band_consistent_scale` finds the multiple s of the estimated error at which
 they agree best (standardized differences of the compared parameters, squared and summed), and
 takes it when the bands do agree there (the disagreement below the 95 % point of chi-square with
-one degree of freedom fewer than the parameters compared); when they agree at no level, the
-model lacks something that depends on the band, and the floor's estimate stands (s = 1). The
-scales whose disagreement is within the chi-square(1) 95 % point of the best form its 95 % range.
+one degree of freedom fewer than the parameters compared) and its 95 % range (the scales whose
+disagreement is within the chi-square(1) 95 % point of the best) excludes 0. When they agree at
+no level, the model lacks something that depends on the band; when the range reaches 0 (no error
+at all in the logged currents, which a loop logged by taking every q-th command always has), the
+bands do not tell the level. Either way the floor's estimate stands (s = 1). Beside effects the
+diagnosis has chosen, a range reaching 0 is what an effect's misfit does: on the independent
+generator's noisy rig an end effect beside guide friction gave 0 (range 0-0.05), and the refit
+at it put C1 7.5 % low.
 
 s = 1 is not privileged: the floor's estimate is itself an estimate, biased by any command
 content in the floor's band. A first version took the best scale only when it fitted 95 % better
@@ -156,7 +161,7 @@ def band_consistent_scale(
     )
     agreement = float(chi2.ppf(CONFIDENCE, max(int(live.sum()) - 1, 1)))
     where = f"{best:.2f} (95 % range {interval[0]:.2f}-{interval[1]:.2f})"
-    if at_best <= agreement:
+    if at_best <= agreement and interval[0] > 0:
         return NoiseScale(
             best,
             best,
@@ -169,15 +174,23 @@ def band_consistent_scale(
             interval,
             agreement,
         )
+    if at_best <= agreement:
+        why = (
+            f"the bands agree best at {where}, a range down to no error at all in the logged "
+            "currents: the bands do not tell their level here"
+        )
+    else:
+        why = (
+            f"the bands agree at no level (the least disagreement, {at_best:.2f} at {best:.2f}, is "
+            f"above {agreement:.2f}); the model lacks something that depends on the band"
+        )
     return NoiseScale(
         1.0,
         best,
         at_best,
         at_one,
         names,
-        f"the logged currents' error as its floor estimates it: the bands agree at no level (the "
-        f"least disagreement, {at_best:.2f} at {best:.2f}, is above {agreement:.2f}); the model "
-        "lacks something that depends on the band",
+        f"the logged currents' error as its floor estimates it: {why}",
         interval,
         agreement,
     )
