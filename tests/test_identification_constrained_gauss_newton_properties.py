@@ -147,3 +147,12 @@ def test_a_singular_hessian_is_damped_by_a_millionth_of_its_scale(scale):
     damp = 1e-6 * max(scale, 1.0)
     step = _factor(H, Jc).solve(np.array([1.0, 1.0]))
     np.testing.assert_allclose(step, [1.0 / (scale + damp), 1.0 / damp], rtol=1e-12)
+
+
+def test_with_no_iteration_allowed_the_start_is_returned_and_no_iteration_counted():
+    """``max_iterations=0``: the solver takes no step, says it hit its limit, and counts 0
+    iterations (the start is not an iteration)."""
+    start = np.array([0.3, 0.2])
+    out = constrained_gauss_newton(_circle, start, np.ones(2), max_iterations=0)
+    assert out.status == "iteration_limit" and out.iterations == 0
+    np.testing.assert_array_equal(out.w, start)

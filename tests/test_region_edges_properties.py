@@ -266,3 +266,13 @@ def test_the_certified_study_checks_its_largest_set_with_the_configs_seed(model,
     # no runs asked for: no check
     out = certified(dataclasses.replace(config, certify_runs=0))
     assert sweeps == [] and out.checked is None and (out.runs, out.violations) == (0, 0)
+
+
+@pytest.mark.parametrize("cover", [1, 0, -3])
+def test_a_cover_of_fewer_than_two_boxes_is_refused_by_name(model, linear, cover):
+    """``RoaCertifier(cover=...)``: the Jacobian box is the union over a cover of the level set's
+    angles, which needs two pieces at least; fewer is a clear error that names the option and the
+    value given."""
+    loop = LinearizedLoop(model, linear, Reference.setpoint(0.02))
+    with pytest.raises(InputError, match=rf"cover must be >= 2, got {cover}"):
+        RoaCertifier(loop, cover=cover)

@@ -98,3 +98,28 @@ def test_a_solver_stopped_before_optimality_gives_no_matrix(proc, builder, monke
     res = enlarge(proc, ref, fractions=(0.75,), builder=builder)
     check_result(res)
     assert not res.success and res.certified is None
+
+
+def test_an_inaccurate_optimum_keeps_its_matrix_and_says_so(proc, builder, monkeypatch):
+    """Clarabel's "optimal_inaccurate" (it reached its looser tolerances) is a solution whose
+    accuracy the certificate re-checks downstream: solve_sdp returns its Q with that status, not
+    nothing. The same solve marked so after the fact gives the optimal solve's Q exactly."""
+    import cvxpy as cp
+
+    from maglev_oc.region.sdp import solve_sdp
+
+    ref = Reference.setpoint(0.02)
+    poly = builder.build(ref, 5e-3)
+    status, Q, _ = solve_sdp(proc.loop, ref, poly, proc.feasible, 0.05, (1.0, 1.0))
+    assert status == "optimal" and Q is not None
+    solve = cp.Problem.solve
+
+    def inaccurate(self, **kw):
+        out = solve(self, **kw)
+        self._status = "optimal_inaccurate"
+        return out
+
+    monkeypatch.setattr(cp.Problem, "solve", inaccurate)
+    status2, Q2, _ = solve_sdp(proc.loop, ref, poly, proc.feasible, 0.05, (1.0, 1.0))
+    assert status2 == "optimal_inaccurate"
+    np.testing.assert_array_equal(Q2, Q)
