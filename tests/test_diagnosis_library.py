@@ -1218,3 +1218,33 @@ def test_each_end_profile_says_its_width_in_whole_millimetres():
     for profile in END_PROFILES:
         (number,) = re.findall(r"(\d+) mm", profile.describe())
         assert int(number) == round(profile.width * 1e3), (profile, profile.describe())
+
+
+def test_a_parameter_with_no_variance_left_is_confounded_with_everything_it_meets(plant, monkeypatch):
+    """_separability: where the inverse of the joint fit's Gram gives one of the candidate's
+    coefficients a variance of 0 (a Gram singular to rounding: the candidate nested in columns
+    already in the fit), its correlations are 0/0. They are read as 1, so every other parameter is
+    a partner and the candidate is not claimed, and no RuntimeWarning is raised (pyproject turns
+    maglev_oc's into errors). The zero variance is planted in the inverse the function computes."""
+    from maglev_oc.diagnosis.selection import _separability
+
+    library = candidate_library(StageModel(), plant.data)
+    (cand,) = [c for c in library if c.name == "horizontal_guides_not_level"]
+    design = build_design(plant.data, plant.model, terms=[cand.term], fit=plant.train, holdout=plant.hold)
+    fit = fit_subset(design, ["base", cand.name])
+    settings = SelectionSettings()
+    _, before = _separability(design, cand, fit, settings)
+    assert before == ()  # a tilt is separable from C1..C4 on this log
+    own = int(np.flatnonzero(np.isin(fit.index, design.groups[cand.name]))[0])
+    inv = np.linalg.inv
+
+    def planted(a):
+        out = inv(a).copy()
+        if out.shape == (fit.index.size, fit.index.size):
+            out[own, :] = 0.0
+            out[:, own] = 0.0
+        return out
+
+    monkeypatch.setattr(np.linalg, "inv", planted)
+    _, partners = _separability(design, cand, fit, settings)
+    assert set(partners) == {"C1", "C2", "C3", "C4"}, partners  # everything else in this fit
