@@ -86,6 +86,16 @@ def test_a_constant_is_questioned_beyond_30_percent_and_5_standard_errors(name, 
         assert out.to_dict()["warnings"] == [] and "WARNING" not in out.report()
 
 
+def test_a_change_with_a_zero_standard_error_is_questioned_without_dividing_by_it():
+    # a fit that reports a standard error of 0 (e.g. the constant at a bound of a constrained
+    # path): a 50 % change is still a warning, worded without a division by zero (no RuntimeWarning,
+    # which pyproject turns into an error for maglev_oc)
+    values = dict(START)
+    values["C1"] = 0.5 * START["C1"]
+    (w,) = _outcome(values, dict.fromkeys(START, 0.0)).warnings
+    assert w.startswith("C1 = ") and "infinitely many standard errors" in w
+
+
 @pytest.fixture(scope="module")
 def independent(tmp_path_factory):
     """(clean log, log with the horizontal guides' friction): 30 s of the independent generator."""

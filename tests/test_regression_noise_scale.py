@@ -323,6 +323,7 @@ def test_the_report_states_the_scale_in_one_line_and_in_a_note_when_calibrated()
 
     taken = NS.NoiseScale(0.713, 0.713, 0.48, 40.43, ("C1",), "m", (0.6, 0.85), 3.84).to_dict()
     nowhere = NS.NoiseScale(1.0, 0.52, 12.1, 30.2, ("C1", "C2"), "m", (0.45, 0.6), 3.84).to_dict()
+    from_zero = NS.NoiseScale(1.0, 0.1, 0.4, 9.0, ("C1", "C2"), "m", (0.0, 0.5), 3.84).to_dict()
     kept = NS.NoiseScale.not_calibrated("effects were found").to_dict()
     assert kept["best"] is None and kept["scale"] == 1.0
     line = _compact_noise_scale({"a": 1, "current_noise_scale": taken})
@@ -332,6 +333,10 @@ def test_the_report_states_the_scale_in_one_line_and_in_a_note_when_calibrated()
     }
     assert _compact_noise_scale({"current_noise_scale": nowhere})["current_noise_scale"] == (
         "1 (bands agree at no level; least at 0.52: misfit 12.10, against 30.20 at 1)"
+    )
+    # they agree (0.4 within 3.84), but down to no error at all: not taken, and not "at no level"
+    assert _compact_noise_scale({"current_noise_scale": from_zero})["current_noise_scale"] == (
+        "1 (bands agree, in a range from 0 (not taken), at 0.1: misfit 0.40, against 9.00 at 1)"
     )
     assert _compact_noise_scale({"current_noise_scale": kept})["current_noise_scale"].startswith(
         "1 (the floor"

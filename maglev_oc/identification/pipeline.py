@@ -236,9 +236,10 @@ class IdentificationOutcome(Result):
                     "the vertical forces differ from the model's: a gap sensor offset, a constant "
                     "vertical force or the field's shape over the gap take the place of the constant"
                 )
+            z = f"{abs(value - start) / se:.0f}" if se > 0 else "infinitely many"
             out.append(
                 f"{k} = {value:.4g} is {abs(change):.0%} {'below' if change < 0 else 'above'} its starting "
-                f"value {start:.4g} ({abs(value - start) / se:.0f} standard errors): {why}. A stage of "
+                f"value {start:.4g} ({z} standard errors): {why}. A stage of "
                 "this geometry does not change that much; run `maglev-oc diagnose` on this log, whose "
                 "refit carries the constants beside the effects it finds."
             )

@@ -29,7 +29,7 @@ content in the floor's band. A first version took the best scale only when it fi
 than 1; on `../shared/logs/independent_clean.csv` the bands agreed best at 0.74 (C1 14.78, the
 2 Hz fits 14.69-14.81, the output-error fit 14.70) and 1 was inside the range, so C1 stayed at
 the floor's 14.93. On 20 clean logs of each rig the best scale gives C1 as close or closer (mean
-error +0.00 % and +0.05 % against +0.05 % and +0.11 %, largest unchanged).
+error +0.00 % and +0.06 % against +0.05 % and +0.11 %, largest unchanged).
 
 Measured (bench/README, *The logged currents' error from two bands*): on clean logs of the
 independent generator under eight rig settings, C1 within 0.45 % of the truth (before: up to
@@ -71,7 +71,8 @@ class NoiseScale:
 
     Attributes
     ----------
-    scale : float  taken (1 when the bands agree at no level, or nothing was looked for)
+    scale : float  taken (1 when the bands agree at no level, agree in a range reaching 0, or
+        nothing was looked for)
     best : float  where the bands agree best, in [0, MAX_SCALE]
     misfit_best, misfit_one : float  the bands' disagreement (sum of squared standardized
         differences of the compared parameters) at ``best`` and at 1

@@ -156,6 +156,16 @@ def _before_after_handles() -> tuple[list[Line2D], list[str]]:
 
 
 # --- page 1 ----------------------------------------------------------------------------------------------
+def _tracking_panel(ax, runs) -> None:
+    """|encoder - reference| of both axes [um] over time, one line per (run, colour)."""
+    for res, color in runs:
+        err = np.hypot(res.y[0] - res.reference[0], res.y[1] - res.reference[3]) * M_TO_UM
+        ax.plot(*thin(res.t, err, 1500), color=color, lw=0.7)
+    ax.set_ylim(0, None)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("|tracking error|, both axes [µm]")
+
+
 def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 3) -> Draw:
     """The residual each found effect explains, before and after, on held-out data (the first
     ``n_effects`` panels), and the FL regulator's tracking error before and after compensating them."""
@@ -167,12 +177,7 @@ def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 
             return caption(fig, rect, "Nothing found: the refitted papers' model explains the log")
         if not shown:  # nothing to compensate: the loop with the refitted constants, one line
             ax = fig.add_subplot(grid(fig, rect, 1, 1, top=0.075, bottom=0.085)[0, 0])
-            res = study.result_after
-            err = np.hypot(res.y[0] - res.reference[0], res.y[1] - res.reference[3]) * M_TO_UM
-            ax.plot(*thin(res.t, err, 1500), color=AFTER, lw=0.7)
-            ax.set_ylim(0, None)
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel("|tracking error|, both axes [µm]")
+            _tracking_panel(ax, ((study.result_after, AFTER),))
             ax.set_title(f"FL regulator with the refitted constants, {study.scenario}", fontsize=8.5)
             return caption(
                 fig,
@@ -186,12 +191,7 @@ def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 
             _before_after(fig.add_subplot(gs[0, k]), diag, effect, a, effect_contribution(diag, effect))
         if study is not None:
             ax = fig.add_subplot(gs[0, n - 1])
-            for res, color in ((study.result_before, BEFORE), (study.result_after, AFTER)):
-                err = np.hypot(res.y[0] - res.reference[0], res.y[1] - res.reference[3]) * M_TO_UM
-                ax.plot(*thin(res.t, err, 1500), color=color, lw=0.7)
-            ax.set_ylim(0, None)
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel("|tracking error|, both axes [µm]")
+            _tracking_panel(ax, ((study.result_before, BEFORE), (study.result_after, AFTER)))
             ax.set_title(f"FL regulator, {study.scenario}", fontsize=8.5)
         h, lab = _before_after_handles()
         _legend_below(fig, rect, h, lab, 2, y=-0.008)

@@ -473,7 +473,12 @@ def _compact_noise_scale(settings: dict) -> dict:
             **settings,
             "current_noise_scale": f"{scale['scale']:.3g} (the floor's estimate; not calibrated)",
         }
-    verdict = "agree" if scale["scale"] != 1.0 else "agree at no level; least"
+    if scale["scale"] != 1.0:
+        verdict = "agree"
+    elif scale["misfit_best"] <= (scale.get("agreement_threshold") or -math.inf):
+        verdict = "agree, in a range from 0 (not taken),"
+    else:
+        verdict = "agree at no level; least"
     line = (
         f"{scale['scale']:.3g} (bands {verdict} at {scale['best']:.3g}: misfit "
         f"{scale['misfit_best']:.2f}, against {scale['misfit_at_one']:.2f} at 1)"

@@ -605,13 +605,13 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         + c.source
         + "): "
         + ", ".join(f"{k} = {getattr(c, k):.6g}" for k in CONSTANT_NAMES),
+        *(f"Warning: {w}" for w in outcome.warnings),
         "Equation error: the Savitzky-Golay acceleration (zero phase) against the model's, both filtered "
         "by the same kernel; output error: multiple shooting over 50 ms segments joined by continuity "
         "within 0.2 s windows. Standard errors are long-run (HAC) ones: residuals of both fits are "
         "autocorrelated.",
         "Wall times: " + ", ".join(f"{k} {v:.2f} s" for k, v in outcome.timings.items()),
     ]
-    summary[2:2] = [f"Warning: {w}" for w in outcome.warnings]
     with PdfReport(path, "maglev_oc — identification", subtitle="maglev-oc identify") as pdf:
         pdf.add_text("Identification of C1..C4", summary, first_page=True)
         if rows:
