@@ -113,6 +113,10 @@ class Candidate:
     position): the equal-complexity comparison is then a tie by construction, so its shape is
     judged by what is left: the rival's further orders must not explain significantly more of the
     held-out data beside it."""
+    physical_sign: int = 0
+    """+1 when only a positive size is physical (a friction's Coulomb force, a lag, a loss of force):
+    the detection limit (:mod:`~maglev_oc.diagnosis.limits`) is then sought in that direction
+    alone; 0 when either sign is (a ripple's phase, a slope, a tilt)."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen

@@ -274,6 +274,7 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
             f"{fmt(e[f'loss_at_{i_ref:g}_A'], 100, '%')} at {i_ref:g} A and "
             f"{fmt(e['loss_at_9_A'], 100, '%')} at 9 A (extrapolated)."
         ),
+        physical_sign=1,  # saturation loses force per ampere
     )
 
 
@@ -323,6 +324,7 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
         # true 1.2 ms lag made the vertical held-out error worse there while the free viscous
         # coefficient moved by ten of its standard errors
         beside_friction=False,
+        physical_sign=1,  # a lag, not a lead
     )
 
 

@@ -106,6 +106,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                     fallback_for=None if viscous else (stribeck_name if stribeck else name),
                     fallback_when=None if viscous else negative_viscous,
                     form_of=name if stribeck else None,
+                    physical_sign=1,  # friction opposes the motion
                 )
             )
     return out
@@ -286,6 +287,7 @@ def cable_candidate(ctx: LibraryContext) -> Candidate:
         # the independent generator claimed 0.32 N/m for the horizontal force of a 69 mm guide
         # waviness, whose bow the next orders explained as well again)
         rival_span=("horizontal", "position", 2),
+        physical_sign=1,  # a spring pulls back towards its neutral position
     )
 
 

@@ -284,6 +284,7 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
             f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre; "
             f"{profile.describe()}."
         ),
+        physical_sign=1,  # forces lost towards the ends, not gained
     )
 
 

@@ -60,6 +60,7 @@ from maglev_oc.diagnosis.library import (
     smooth_probes,
     waviness_candidate,
 )
+from maglev_oc.diagnosis.limits import detection_limits
 from maglev_oc.diagnosis.magnetics import END_PROFILE, EndProfile
 from maglev_oc.diagnosis.prediction import output_error
 from maglev_oc.diagnosis.refit import (
@@ -341,6 +342,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     design0, base0, data, model = stage.design0, stage.base0, session.data, run.model
     effects = clock("effects", _effects, session, fitted, library, design, sel)
     final = fitted_model(model, sel.final, data.moving, "diagnose: refit with the effects")
+    limits = clock("limits", detection_limits, design, library, sel, session.settings, fitted)
     oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects)
     val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
     timings["total"] = sum(timings.values())
@@ -356,6 +358,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
         not_separable=not_sep,
         rejected=rejected,
         unexplained=unexplained,
+        detection_limits=limits,
         error_before=_per_axis(sel.base.holdout_rms, data.moving),
         error_after=_per_axis(sel.final.holdout_rms, data.moving),
         output_error_before=oe_before,
@@ -383,7 +386,8 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
 class _Clock:
     """Runs a step and adds its wall time to its name's; shows the step on a terminal."""
 
-    STEPS = 8  # prepare, base_fit, selection, waviness, unexplained, effects, output_error, validation
+    # prepare, base_fit, selection, waviness, unexplained, effects, limits, output_error, validation
+    STEPS = 9
 
     def __init__(self, timings: dict[str, float]) -> None:
         self.timings = timings

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.selection import Judgement, Selection
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
@@ -101,6 +102,8 @@ class Diagnosis(Result):
     timings: dict[str, float] = field(default_factory=dict)
     validation_before: Validation | None = None  # the base model on the held-out block
     validation_after: Validation | None = None  # the model with the effects
+    # the effects the log did not show, and the size below which it could not
+    detection_limits: list[DetectionLimit] = field(default_factory=list)
 
     @property
     def ranking(self) -> list[tuple[str, float]]:
@@ -162,6 +165,7 @@ class Diagnosis(Result):
                 }
                 for j in self.rejected
             ],
+            "detection_limits": [d.to_dict() for d in self.detection_limits],
             "candidate_ranking": [{"name": n, "holdout_gain": _num(g)} for n, g in self.ranking],
             "selection_steps": [
                 {
@@ -205,6 +209,9 @@ class Diagnosis(Result):
             )
         for u in self.unexplained:
             lines.append(f"  unexplained: {u.description}")
+        for d in self.detection_limits:
+            size = f"{d.value:.3g} {d.unit}" if math.isfinite(d.value) else d.reason
+            lines.append(f"  not seen: {d.name} ({d.parameter}) — smallest size this log would show: {size}")
         for a, before in self.error_before.items():
             if math.isfinite(before):
                 lines.append(f"  held-out error {a}: {before:.4g} -> {self.error_after[a]:.4g} m/s^2")

@@ -136,6 +136,7 @@ held-out gain at that step (given the earlier choices).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Sequence
@@ -510,6 +511,20 @@ class _CrossFit:
         ]
         self._fits: dict[tuple[str, ...], list[np.ndarray]] = {}
 
+    def retargeted(self, design: Design) -> _CrossFit:
+        """The same parts over ``design``, a design of the same columns, blocks and weights with
+        another target (:func:`maglev_oc.diagnosis.limits.with_target`): the columns are shared,
+        the targets and the summed right-hand sides are ``design``'s."""
+        out = copy.copy(self)
+        out.design = design
+        out.target = [np.ascontiguousarray(design.target[:, samples]) for samples in self.samples]
+        out.summed = [
+            dataclasses.replace(old, rhs=design.rhs[b].sum(axis=0)[None], yy=design.yy[b].sum(keepdims=True))
+            for old, b in zip(self.summed, self.blocks, strict=True)
+        ]
+        out._fits = {}
+        return out
+
     def residuals(self, groups: Sequence[str]) -> list[np.ndarray]:
         """Per part, the (2, m) residual on its samples of the fit of ``groups`` on the other blocks."""
         key = tuple(groups)
@@ -616,6 +631,17 @@ def _block_z(ratios: np.ndarray, logs: np.ndarray, block_seconds: float) -> floa
     return mean / se if se > 0 else 0.0
 
 
+def judged_axes(design: Design, cand: Candidate, friction_axes: frozenset[int]):
+    """(acts, hidden, left, axes): the moving axes ``cand`` acts on, those of them with claimed
+    friction where its evidence does not count (``Candidate.beside_friction``), the others, and
+    the axes it is judged on (the others; all it acts on when none is left, and then it is not
+    separable if it passes)."""
+    acts = _axes(cand, design.moving)
+    hidden = () if getattr(cand, "beside_friction", True) else tuple(a for a in acts if a in friction_axes)
+    left = np.array([a for a in acts if a not in hidden], dtype=int)
+    return acts, hidden, left, (left if left.size else acts)
+
+
 def judge(
     design: Design,
     cand: Candidate,
@@ -640,10 +666,7 @@ def judge(
     others); ``periodic``: the design's forces periodic in the position alone with their periods
     (:func:`_pool_periods`), those the travel does not tell from ``cand``'s fitted beside it when
     its halves are compared (:func:`_drift_along_travel`)."""
-    acts = _axes(cand, design.moving)
-    hidden = () if getattr(cand, "beside_friction", True) else tuple(a for a in acts if a in friction_axes)
-    left = np.array([a for a in acts if a not in hidden], dtype=int)
-    axes = left if left.size else acts  # with none left: judged as before, and not separable if it passes
+    _, hidden, left, axes = judged_axes(design, cand, friction_axes)
     fit = fit_subset(design, [*current, cand.name], covariance=False)
     r1 = _holdout_residual(design, fit, counted)
     mse1 = np.mean(r1**2, axis=1)

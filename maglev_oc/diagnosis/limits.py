@@ -1,0 +1,403 @@
+"""How large each effect the diagnosis did not claim would have had to be for this log to show it.
+
+"Not found" means absent or too small for the log. A control engineer needs to know which: a
+thrust ripple of 3 % that a log of this rig cannot show is a ripple still to look for with a
+better experiment, not a ripple ruled out. For every library effect whose last judgement was
+"not significant" or "too small" (the log did not show it; refusals for other reasons, such as
+"not separable", already say what the log would need), the selection's own tests of visibility
+are repeated on this log with an effect of that kind added to it at growing sizes:
+
+1. the effect of unit size, along the candidate's first coefficient (or its ``size_direction``,
+   the commutation angle's), of the sign that is physical where only one is
+   (``Candidate.physical_sign``), is computed at the currents the plant felt
+   (:func:`felt_currents`: those that make the refitted model produce the measured accelerations),
+   not at the logged ones, whose errors would carry the effect too;
+2. s times it is added to the measured accelerations, and the fits with and without the candidate
+   (beside the base constants and the effects claimed) are made as the selection makes them;
+3. the tests that decide whether a log shows an effect are run as the selection runs them
+   (:func:`~maglev_oc.diagnosis.selection.judge`'s test 1 and its size test): the held-out gain
+   pooled over the held-out quarter and the cross-fitted training parts at least ``min_gain``, a
+   drop on the quarter, z at least ``min_z``, and a change of the held-out prediction of at least
+   ``min_effect`` RMS on one of its axes.
+
+The smallest such size is the detection limit, reported in the candidate's first physical
+parameter (a ripple's amplitude, a lag's time constant beyond the hold, a friction's Coulomb
+force); when that size is one the candidate's plausibility test refuses, or no size up to
+:data:`STEP` ** :data:`MAX_STEPS` standard errors shows it (a column made of the logged signals'
+errors more than of their signal predicts nothing however large the effect), the effect is not
+seen at any size. Every fit is linear in the target (the errors-in-variables correction depends
+only on the columns), so the residuals at size s are r + s r_unit: two pairs of fits per
+candidate, and the search over s is arithmetic on residuals.
+
+**A lower bound.** The limit is the size below which this log cannot show the effect. An effect
+above it can still go unclaimed: the tests of separability, plausibility and the rivals can
+refuse it; a shape other than the candidate's (a Stribeck friction, an end effect of another
+profile) is seen at another size; and in closed loop the regulator answers a real effect with its
+currents (a tilt's steady force with a steady thrust current, which the constants then share),
+which an effect added to a log does not do. On the independent generator's noisy rig (bench/README,
+*What a log could not have shown*) tilts and cable carriers were found from 1 to 3 times their
+limits; thrust ripples from under 2 times on two seeds of five, and on the other three, whose
+horizontal motion needs little thrust, not at 30 %: there the logged thrust current is mostly its
+errors, and an effect proportional to it predicts nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy import sparse
+
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.selection import (
+    Judgement,
+    Selection,
+    SelectionSettings,
+    _CrossFit,
+    _friction_axes,
+    _holdout_residual,
+    evidence,
+    fitted_constants,
+    holdout_significance,
+    judged_axes,
+    pooled_gains,
+    pooled_significance,
+)
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.design import Design, build_design
+from maglev_oc.regression.solve import fit_subset
+
+__all__ = ["DetectionLimit", "detection_limits", "felt_currents", "with_target"]
+
+STEP = 1.5
+"""Ratio between the sizes tried before the limit is bracketed (then bisected)."""
+MAX_STEPS = 35
+"""Sizes tried upwards from the fit's naive standard error (1.5^35, about 1.5e6 of them; the limits
+of the independent generator's logs lie 3-300 of them up): an effect not seen by then is reported
+as not seen at any size."""
+BISECTIONS = 7
+"""Halvings of the bracket (in log size): the limit to 1.5^(1/128), 0.3 %."""
+
+
+@dataclass(frozen=True)
+class DetectionLimit:
+    """The smallest size of one effect that this log would have shown.
+
+    ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
+    parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
+    that held it back just below the limit ("z", "gain", "size" or "quarter")."""
+
+    name: str
+    parameter: str
+    value: float
+    unit: str
+    binding: str
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "parameter": self.parameter,
+            "value": self.value if math.isfinite(self.value) else None,
+            "unit": self.unit,
+            "binding_test": self.binding,
+            "reason": self.reason,
+        }
+
+
+def _replaced(design: Design, target, rhs, yy, hold_rhs, hold_yy) -> Design:
+    return dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
+
+
+@dataclass(frozen=True)
+class _Residuals:
+    """Held-out residuals (2, n_hold) and the cross-fitted parts' ((2, m) each), without and with
+    the candidate, zero where a sample does not count."""
+
+    r0: np.ndarray
+    r1: np.ndarray
+    parts0: list[np.ndarray]
+    parts1: list[np.ndarray]
+
+    def at(self, unit: _Residuals, s: float) -> _Residuals:
+        return _Residuals(
+            self.r0 + s * unit.r0,
+            self.r1 + s * unit.r1,
+            [a + s * b for a, b in zip(self.parts0, unit.parts0, strict=True)],
+            [a + s * b for a, b in zip(self.parts1, unit.parts1, strict=True)],
+        )
+
+
+@dataclass(frozen=True)
+class _Context:
+    design: Design
+    current: list[str]
+    settings: SelectionSettings
+    fold: _CrossFit | None
+    counted: np.ndarray | None
+    counted_parts: list[np.ndarray | None]
+    friction: frozenset[int]
+    felt: dict[str, np.ndarray]  # the candidates' columns at the currents the plant felt
+
+
+def detection_limits(
+    design: Design,
+    library: Sequence[Candidate],
+    selection: Selection,
+    settings: SelectionSettings,
+    model: StageModel,
+) -> list[DetectionLimit]:
+    """The detection limit of every library effect not claimed whose last judgement in
+    ``selection`` was that the log did not show it, in the order of its held-out gain as judged;
+    ``model``: the references the library's columns were built with (its currents are inverted
+    for the currents the plant felt)."""
+    by_name = {c.name: c for c in library}
+    current = list(selection.final.groups)
+    chosen = [by_name[n] for n in current if n in by_name]
+    claimed = {c.reported_name for c in chosen}
+    judged = [
+        (j, by_name[j.name])
+        for j in sorted(selection.last.values(), key=lambda j: -j.gain)
+        if j.name in by_name and j.name in design.groups and j.verdict in UNSEEN_VERDICTS
+    ]
+    judged = [(j, c) for j, c in judged if not (c.fallback_for or c.form_of or c.reported_name in claimed)]
+    if not judged:
+        return []
+    fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
+    ctx = _Context(
+        design,
+        current,
+        settings,
+        fold,
+        evidence(design, chosen, settings),
+        fold.counted(chosen, settings) if fold else [],
+        frozenset(_friction_axes(chosen)),
+        _felt_columns(design, model, [c for _, c in judged]),
+    )
+    return [_limit(ctx, cand, j) for j, cand in judged]
+
+
+UNSEEN_VERDICTS = ("not significant", "too small")
+"""The verdicts that say the log did not show an effect (the others say it showed something that
+was refused, with their own reasons)."""
+EIV_REASON = "its columns are dominated by the errors of the logged currents"
+"""The selection's reason when a candidate's fit needs less of the errors-in-variables correction
+than the fit without it (:func:`~maglev_oc.diagnosis.selection._verdict`): its columns are the
+logged currents' errors more than their signal, at any size of the effect."""
+NO_SIZE = (
+    "not seen at any size tried: predicted from the logged signals, the effect does not improve the "
+    "held-out error however large it is"
+)
+
+
+def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
+    design, current = ctx.design, ctx.current
+    index = design.indices([cand.name])
+    full = fit_subset(design, [*current, cand.name], covariance=False)
+    constants = fitted_constants(full)
+    direction = _direction(cand, constants, index.size)
+    first, unit_name = _first_parameter(cand, direction, constants)
+    signs = (1.0, -1.0)
+    if cand.physical_sign:  # only one sign is physical: the direction along which its size grows
+        grows = _physical(cand, direction, constants)[0] - _physical(cand, 0 * direction, constants)[0]
+        direction = direction * (1.0 if grows * cand.physical_sign > 0 else -1.0)
+        signs = (1.0,)
+    if judged.reason.startswith(EIV_REASON):
+        return DetectionLimit(
+            cand.name, first, math.inf, unit_name, "", f"not seen at any size: {judged.reason}"
+        )
+    logged = _residuals(ctx, design, cand)
+    felt = np.tensordot(direction, ctx.felt.get(cand.name, design.columns[index]), axes=1)
+    unit = _residuals(ctx, with_target(design, felt), cand)
+    _, _, _, axes = judged_axes(design, cand, ctx.friction)
+    # the sizes tried start at the naive standard error along the direction
+    pos = np.searchsorted(full.index, index)
+    start = math.sqrt(max(float(direction @ full.naive[np.ix_(pos, pos)] @ direction), 0.0)) or 1e-12
+    sizes = []
+    for sign in signs:
+        found = _smallest(ctx, logged, unit, axes, sign, start)
+        if found is None:
+            return DetectionLimit(cand.name, first, math.inf, unit_name, "", NO_SIZE)
+        sizes.append(found)
+    s, binding = max(sizes, key=lambda t: abs(t[0]))
+    at_limit = cand.term.physical_parameters(s * direction, np.zeros((index.size, index.size)), constants)
+    why = cand.plausible(at_limit)
+    if why:
+        return DetectionLimit(cand.name, first, math.inf, unit_name, binding, f"only where {why}")
+    return DetectionLimit(
+        cand.name, first, abs(_physical(cand, s * direction, constants)[0]), unit_name, binding
+    )
+
+
+def _felt_columns(
+    design: Design, model: StageModel, candidates: Sequence[Candidate]
+) -> dict[str, np.ndarray]:
+    """Per candidate of the currents, its filtered columns (p, 2, n) evaluated at the currents the
+    plant felt (:func:`felt_currents`) instead of the logged ones. The logged currents' errors
+    (a sample of a current that changed four more times before the next log line) would carry an
+    effect put in with the logged columns and make it look stronger than it is: a 10 % thrust
+    ripple put into a noisy rig's clean log with the logged columns explained 5.6 % of its held-out
+    error at z 5.0; the log of that plant with the ripple in it, 1.3 % at z 1.1."""
+    terms = [c.term for c in candidates if c.term.depends_on_inputs()]
+    felt = felt_currents(design.prepared, model) if terms else None
+    if felt is None:
+        return {}
+    index = np.concatenate([design.indices([t.name]) for t in terms])
+    columns = build_design(
+        felt,
+        model,
+        estimate=(),
+        terms=terms,
+        fit=design.fit,
+        holdout=design.holdout,
+        at=design.at[index],
+        weights=design.weights,
+    ).columns
+    out, k = {}, 0
+    for t in terms:
+        out[t.name] = columns[k : k + t.n_parameters]
+        k += t.n_parameters
+    return out
+
+
+def felt_currents(prepared: PreparedLogs, model: StageModel, iterations: int = 3) -> PreparedLogs | None:
+    """``prepared`` with the currents (and their rates) that make ``model`` produce the measured
+    accelerations: the currents the plant felt, within the band, as far as the model is right
+    (Newton on the two accelerations in the two currents from the logged ones). None when the
+    model cannot be inverted on some valid sample (a singular Jacobian, a non-finite value)."""
+    xs, us, acc = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("a", 2)
+    out = model.f(xs, us)[[1, 3]]
+    step = ca.Function("newton", [xs, us, acc], [us - ca.solve(ca.jacobian(out, us), out - acc)])
+    n = prepared.n
+    mapped = step.map(n)
+    u = prepared.u.copy()
+    for _ in range(iterations):
+        u = np.asarray(mapped(prepared.x, u, prepared.acc))
+    # on an axis that does not move its acceleration is not measured: the logged current stays
+    for a, moving in enumerate(prepared.moving):
+        if not moving:
+            u[1 - a] = prepared.u[1 - a]
+    if not np.all(np.isfinite(u[:, prepared.valid])):
+        return None
+    u = np.where(np.isfinite(u), u, prepared.u)
+    du = np.empty_like(u)
+    for start, stop in prepared.segment_bounds:
+        du[:, start:stop] = np.gradient(u[:, start:stop], prepared.sample_time, axis=1)
+    return dataclasses.replace(prepared, u=u, du=du)
+
+
+def with_target(design: Design, target: np.ndarray) -> Design:
+    """``design`` with ``target`` (2, n) as its target: the blocks' right-hand sides and energies and
+    the held-out normal equations recomputed from its columns."""
+    weighted = target * design.weights[:, None] ** 2  # both factors of the weighted products
+    per_sample = np.einsum("pan,an->np", design.columns, weighted)  # (n, P), no copy of the columns
+    inside = np.flatnonzero(design.block_of >= 0)
+    blocks = design.block_of[inside]
+    n_blocks = design.rhs.shape[0]
+    members = sparse.csr_matrix((np.ones(inside.size), (blocks, inside)), shape=(n_blocks, target.shape[1]))
+    rhs = np.asarray(members @ per_sample)
+    yy = np.bincount(blocks, np.sum(target[:, inside] * weighted[:, inside], axis=0), n_blocks)
+    hold = design.holdout
+    hold_rhs = np.stack([design.columns[:, a][:, hold] @ target[a, hold] for a in range(2)])
+    hold_yy = np.array([float(target[a, hold] @ target[a, hold]) for a in range(2)])
+    return _replaced(design, target, rhs, yy, hold_rhs, hold_yy)
+
+
+def _residuals(ctx: _Context, design: Design, cand: Candidate) -> _Residuals:
+    with_it = [*ctx.current, cand.name]
+    fits = [fit_subset(design, g, covariance=False) for g in (ctx.current, with_it)]
+    r0, r1 = (_holdout_residual(design, f, ctx.counted) for f in fits)
+    if ctx.fold is None:
+        return _Residuals(r0, r1, [], [])
+    fold = ctx.fold.retargeted(design)
+
+    def counted(parts):
+        return [
+            r if c is None else np.where(c, r, 0.0) for r, c in zip(parts, ctx.counted_parts, strict=True)
+        ]
+
+    return _Residuals(r0, r1, counted(fold.residuals(ctx.current)), counted(fold.residuals(with_it)))
+
+
+def _failing(ctx: _Context, r: _Residuals, axes: np.ndarray) -> str:
+    """The first of the visibility tests that residuals ``r`` fail ("" if none)."""
+    settings, design = ctx.settings, ctx.design
+    if axes.size == 0:
+        return "axes"
+    mse0 = np.maximum(np.mean(r.r0[axes] ** 2, axis=1), 1e-300)
+    quarter = float(np.mean(1.0 - np.mean(r.r1[axes] ** 2, axis=1) / mse0))
+    parts = list(zip(r.parts0, r.parts1, strict=True))
+    if ctx.fold is not None:
+        gain = float(np.mean(pooled_gains([(r.r0, r.r1), *parts], axes)))
+        z = pooled_significance(design, ctx.fold, (r.r0, r.r1), parts, axes)
+    else:
+        gain = quarter
+        z = holdout_significance(design, r.r0, r.r1, axes)[1]
+    if gain < settings.min_gain:
+        return "gain"
+    if not quarter > 0:
+        return "quarter"
+    if z < settings.min_z:
+        return "z"
+    n = np.full(2, r.r0.shape[1]) if ctx.counted is None else np.maximum(ctx.counted.sum(axis=1), 1)
+    contribution = np.sqrt(np.sum((r.r0 - r.r1) ** 2, axis=1) / n)
+    if np.max(contribution[axes]) < settings.min_effect:
+        return "size"
+    return ""
+
+
+def _smallest(
+    ctx: _Context, logged: _Residuals, unit: _Residuals, axes: np.ndarray, sign: float, start: float
+) -> tuple[float, str] | None:
+    """(size, the test failing just below it) of the smallest size along ``sign`` times the
+    direction at which the log shows the effect; None when no size tried does."""
+    below, why = 0.0, "gain"
+    s = start
+    for _ in range(MAX_STEPS):
+        failing = _failing(ctx, logged.at(unit, sign * s), axes)
+        if not failing:
+            break
+        below, why = s, failing
+        s *= STEP
+    else:
+        return None
+    above = s
+    for _ in range(BISECTIONS):
+        mid = math.sqrt(max(below, start / STEP) * above)
+        failing = _failing(ctx, logged.at(unit, sign * mid), axes)
+        if failing:
+            below, why = mid, failing
+        else:
+            above = mid
+    return sign * above, why
+
+
+def _direction(cand: Candidate, constants: dict[str, float], size: int) -> np.ndarray:
+    """A unit vector in the candidate's coefficients along which its reported size grows: its
+    ``size_direction`` where it has one (the commutation angle moves both axes' coefficients),
+    else its first coefficient (a ripple's sine over the slot pitch, a friction's Coulomb force, a
+    lag's delay)."""
+    d = np.zeros(size)
+    if cand.size_direction is not None:
+        v = np.asarray(cand.size_direction(constants), dtype=float)
+        d[: v.size] = v
+    else:
+        d[0] = 1.0
+    return d / np.linalg.norm(d)
+
+
+def _physical(cand: Candidate, coef: np.ndarray, constants: dict[str, float]) -> tuple[float, str, str]:
+    """(value, name, unit) of the candidate's first physical parameter at ``coef``."""
+    values = cand.term.physical_parameters(coef, np.zeros((coef.size, coef.size)), constants)
+    name, est = next(iter(values.items()))
+    return float(est.value), name, est.unit
+
+
+def _first_parameter(cand: Candidate, direction: np.ndarray, constants: dict[str, float]) -> tuple[str, str]:
+    _, name, unit = _physical(cand, direction, constants)
+    return name, unit

@@ -1,0 +1,144 @@
+"""The detection limits of the effects a diagnosis did not claim (``maglev_oc.diagnosis.limits``).
+
+* The retargeted design's normal equations: a design given its own target again has the block
+  right-hand sides, energies and held-out normal equations that ``build_design`` accumulated
+  (another code path, to 1e-9), and a target in the span of the columns has those that follow
+  from the Grams (X'X gamma, gamma'X'X gamma);
+* the felt currents invert the model: at them the model reproduces the measured accelerations
+  (Newton converged, to 1e-8 of the acceleration's RMS), and with C1 scaled by 1.1 the felt thrust
+  current is the truth model's divided by 1.1 (the thrust is linear in i_q), their rates are their
+  derivatives;
+* on a clean log, every effect the selection judged not shown (and only those) gets a limit, in the
+  JSON too (null when no size shows it);
+* a limit is a lower bound of what the real selection finds: the clean log's plant with the guides
+  tilted to half the limit's force claims nothing, to four times it claims the tilt (bench/README,
+  *What a log could not have shown*: on five noisy-rig seeds the tilt and the cable carrier were
+  found from 1.0-3 times their limits).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.diagnosis.candidate import LibraryContext
+from maglev_oc.diagnosis.currents import ripple_candidate
+from maglev_oc.diagnosis.limits import UNSEEN_VERDICTS, felt_currents, with_target
+from maglev_oc.regression.data import prepare
+from maglev_oc.regression.design import build_design
+from tests.diagnosis_support import diagnose_path
+from tests.independent import write_log
+from tests.independent.effects import TiltedBase
+from tests.independent.sets import named_set
+from tests.independent.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def prepared(twin_log):
+    return prepare([twin_log], bandwidth=10.0)
+
+
+@pytest.fixture(scope="module")
+def design(prepared, truth_model):
+    train, hold = prepared.masks(0.25)
+    ripple = ripple_candidate(LibraryContext(truth_model, prepared))
+    return build_design(prepared, truth_model, terms=[ripple.term], fit=train, holdout=hold)
+
+
+@pytest.fixture(scope="module")
+def clean(generated):
+    """A clean log of the independent generator (default rig), its diagnosis and its truth."""
+    path, truth = generated("clean", "clean_01")
+    return diagnose_path(path), truth
+
+
+def _close(a, b, rtol=1e-9):
+    scale = max(float(np.max(np.abs(b))), 1e-300)
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) <= rtol * scale
+
+
+def test_a_design_given_its_own_target_has_the_normal_equations_it_was_built_with(design):
+    again = with_target(design, design.target.copy())
+    assert _close(again.rhs, design.rhs)
+    assert _close(again.yy, design.yy)
+    assert _close(again.hold_rhs, design.hold_rhs)
+    assert _close(again.hold_yy, design.hold_yy)
+
+
+def test_a_target_in_the_span_of_the_columns_has_the_normal_equations_of_the_grams(design):
+    index = design.indices(["thrust_ripple"])
+    gamma = np.array([0.03, -0.01, 0.02, 0.005])
+    target = np.tensordot(gamma, design.columns[index], axes=1)
+    d = with_target(design, target)
+    assert _close(d.rhs, design.gram[:, :, index] @ gamma)
+    assert _close(d.yy, np.einsum("bij,i,j->b", design.gram[:, index][:, :, index], gamma, gamma))
+    assert _close(d.hold_rhs, design.hold_gram[:, :, index] @ gamma)
+    assert _close(d.hold_yy, np.einsum("aij,i,j->a", design.hold_gram[:, index][:, :, index], gamma, gamma))
+
+
+def test_the_felt_currents_make_the_model_produce_the_measured_accelerations(prepared, truth_model):
+    felt = felt_currents(prepared, truth_model)
+    assert felt is not None
+    v = prepared.valid
+    acc = truth_model.dynamics(felt.x[:, v], felt.u[:, v])[[1, 3]]
+    for a in range(2):
+        rms = float(np.sqrt(np.mean(prepared.acc[a, v] ** 2)))
+        assert np.max(np.abs(acc[a] - prepared.acc[a, v])) <= 1e-8 * rms
+    # their rates are their derivatives (central differences inside the log)
+    inner = slice(1, -1)
+    central = (felt.u[:, 2:] - felt.u[:, :-2]) / (2 * prepared.sample_time)
+    assert np.allclose(felt.du[:, inner], central, rtol=1e-12, atol=1e-12)
+
+
+def test_a_larger_thrust_constant_feels_a_proportionally_smaller_thrust_current(prepared, truth_model):
+    # x4' = -C1 l1(x1) i_q / M_h: the thrust current that produces a measured acceleration scales
+    # with 1 / C1 whatever i_d does
+    c = truth_model.constants
+    stronger = truth_model.with_constants(dataclasses.replace(c, C1=1.1 * c.C1))
+    base, scaled = felt_currents(prepared, truth_model), felt_currents(prepared, stronger)
+    v = prepared.valid
+    assert _close(scaled.u[0, v], base.u[0, v] / 1.1, rtol=1e-8)
+
+
+def test_every_effect_the_selection_judged_not_shown_and_only_those_gets_a_limit(clean):
+    d, _ = clean
+    # the judged forms of an effect (a friction with its viscous part held at zero, with its
+    # Stribeck rise) are the effect's: one limit each, under the effect's own name
+    unseen = {
+        n
+        for n, j in d.selection.last.items()
+        if j.verdict in UNSEEN_VERDICTS and not n.endswith(("_without_viscous", "_with_stribeck"))
+    }
+    limits = {x.name for x in d.detection_limits}
+    assert limits == unseen, limits ^ unseen
+    for x in d.detection_limits:
+        assert math.isinf(x.value) == bool(x.reason), x
+        assert x.value > 0, x
+    rows = {r["name"]: r for r in json.loads(json.dumps(d.to_dict()))["detection_limits"]}
+    for x in d.detection_limits:
+        assert rows[x.name]["value"] == (x.value if math.isfinite(x.value) else None)
+        assert rows[x.name]["unit"] == x.unit and rows[x.name]["parameter"] == x.parameter
+
+
+@pytest.mark.slow
+def test_a_tilt_below_its_limit_is_not_claimed_and_one_well_above_it_is(clean, tmp_path):
+    d, truth = clean
+    limit = next(x for x in d.detection_limits if x.name == "horizontal_guides_not_level")
+    assert limit.unit == "N" and math.isfinite(limit.value)
+    scenario = dict(named_set("clean"))["clean_01"]
+    weight = truth["plant"]["geometry"]["M_h"] * truth["plant"]["G_m_per_s2"]
+    claims = {}
+    for factor in (0.5, 4.0):
+        tilted = dataclasses.replace(
+            scenario, effects=(TiltedBase(angle=math.asin(factor * limit.value / weight)),)
+        )
+        csv, _ = write_log(simulate(tilted), tmp_path, stem=f"tilt_{factor:g}")
+        claims[factor] = {e.name: e for e in diagnose_path(csv).effects}
+    assert not claims[0.5], claims[0.5]
+    found = claims[4.0].get("horizontal_guides_not_level")
+    assert found is not None, claims[4.0]
+    assert found.parameters["force"].value == pytest.approx(4.0 * limit.value, rel=0.3)
