@@ -826,6 +826,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}")
     for u in diag.unexplained:
         print(f"  unexplained: {u.description}")
+    seen = [d for d in diag.detection_limits if math.isfinite(d.value)]
+    if seen:
+        from maglev_oc.reporting.diagnosis_plots import plain
+        from maglev_oc.reporting.diagnosis_report import LIMITS_IN_WORDS, limit_size
+
+        words = ", ".join(f"{plain(d.name)} below {limit_size(d)}" for d in seen[:LIMITS_IN_WORDS])
+        print(f"  this log could not have shown: {words} (all in the JSON's detection_limits)")
     print(f"  wrote {args.json} ({diag.timings['total']:.1f} s)")
     if args.report:
         from maglev_oc.diagnosis.feedback import compensation_study

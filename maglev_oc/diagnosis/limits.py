@@ -189,6 +189,7 @@ EIV_REASON = "its columns are dominated by the errors of the logged currents"
 """The selection's reason when a candidate's fit needs less of the errors-in-variables correction
 than the fit without it (:func:`~maglev_oc.diagnosis.selection._verdict`): its columns are the
 logged currents' errors more than their signal, at any size of the effect."""
+PHYSICS_RULES_OUT = "not seen at any size the physics allows"
 NO_SIZE = (
     "not seen at any size tried: predicted from the logged signals, the effect does not improve the "
     "held-out error however large it is"
@@ -228,7 +229,7 @@ def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
     at_limit = cand.term.physical_parameters(s * direction, np.zeros((index.size, index.size)), constants)
     why = cand.plausible(at_limit)
     if why:
-        return DetectionLimit(cand.name, first, math.inf, unit_name, binding, f"only where {why}")
+        return DetectionLimit(cand.name, first, math.inf, unit_name, binding, f"{PHYSICS_RULES_OUT}: {why}")
     return DetectionLimit(
         cand.name, first, abs(_physical(cand, s * direction, constants)[0]), unit_name, binding
     )

@@ -247,9 +247,7 @@ def _limit_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
 def _limit_notes(diag: Diagnosis) -> list[str]:
     """The table's note, and the effects no size would show, with why."""
     never = [d for d in diag.detection_limits if not math.isfinite(d.value)]
-    return [_LIMIT_NOTE] + [
-        f"Not at any size: {plain(d.name)}, {d.reason.removeprefix('not seen at any size: ')}." for d in never
-    ]
+    return [_LIMIT_NOTE] + [f"{plain(d.name).capitalize()}: {d.reason}." for d in never]
 
 
 _LIMIT_NOTE = (
