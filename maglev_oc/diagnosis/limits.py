@@ -29,16 +29,19 @@ seen at any size. Every fit is linear in the target (the errors-in-variables cor
 only on the columns), so the residuals at size s are r + s r_unit: two pairs of fits per
 candidate, and the search over s is arithmetic on residuals.
 
-**A lower bound.** The limit is the size below which this log cannot show the effect. An effect
-above it can still go unclaimed: the tests of separability, plausibility and the rivals can
-refuse it; a shape other than the candidate's (a Stribeck friction, an end effect of another
-profile) is seen at another size; and in closed loop the regulator answers a real effect with its
-currents (a tilt's steady force with a steady thrust current, which the constants then share),
-which an effect added to a log does not do. On the independent generator's noisy rig (bench/README,
-*What a log could not have shown*) tilts and cable carriers were found from 1 to 3 times their
-limits; thrust ripples from under 2 times on two seeds of five, and on the other three, whose
-horizontal motion needs little thrust, not at 30 %: there the logged thrust current is mostly its
-errors, and an effect proportional to it predicts nothing.
+**How close.** The limit is this log's, for an effect of the candidate's shape added to it. A real
+effect can differ: the tests of separability, plausibility and the rivals can refuse one above the
+limit; a shape other than the candidate's (a Stribeck friction, an end effect of another profile)
+is seen at another size; and in closed loop the regulator answers a real effect with its currents
+(a tilt's steady force with a steady thrust current, which the constants then share), which an
+effect added to a log does not do. Measured with ``bench/diagnose_limits.py`` (bench/README, *What
+a log could not have shown*): on the independent generator's default rig, thrust ripples were
+claimed from 0.8 to 1.4 times their limits and tilts at 1.4 times (their limit there is the size
+test's floor); on its noisy rig, as noisy as ``../shared/logs``' clean log, tilts and cable carriers
+from 1 to 3 times their limits on most seeds and up to 16 times on one, thrust ripples under 2
+times on two seeds of five and not at 30 % on the other three, whose horizontal motion needs
+little thrust: there the logged thrust current is mostly its errors, and an effect proportional to
+it predicts nothing. On such a rig the limit is a lower bound.
 """
 
 from __future__ import annotations
