@@ -142,3 +142,22 @@ def test_a_tilt_below_its_limit_is_not_claimed_and_one_well_above_it_is(clean, t
     found = claims[4.0].get("horizontal_guides_not_level")
     assert found is not None, claims[4.0]
     assert found.parameters["force"].value == pytest.approx(4.0 * limit.value, rel=0.3)
+
+
+@pytest.mark.parametrize(
+    ("value", "unit", "words"),
+    [
+        (0.065, "1", "6.5 %"),  # ratios in per cent
+        (4.8e-4, "s", "0.48 ms"),
+        (math.pi / 180, "rad", "1 deg"),
+        (2.5e-3, "m", "2.5 mm"),
+        (1.8e-6, "m", "1.8 µm"),  # a waviness amplitude: micrometres, not "1.8e-06 m"
+        (0.3, "N/m", "0.3 N/m"),
+        (math.inf, "N", "no size"),
+    ],
+)
+def test_a_limit_is_written_in_the_units_an_engineer_reads(value, unit, words):
+    from maglev_oc.diagnosis.limits import DetectionLimit
+    from maglev_oc.reporting.diagnosis_report import limit_size
+
+    assert limit_size(DetectionLimit("x", "size", value, unit, "z")).replace("\u00a0", " ") == words

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -222,20 +222,21 @@ def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
     # the sizes tried start at the naive standard error along the direction
     pos = np.searchsorted(full.index, index)
     start = math.sqrt(max(float(direction @ full.naive[np.ix_(pos, pos)] @ direction), 0.0)) or 1e-12
-    sizes = []
+
+    def physics(size: float) -> str | None:  # the candidate's plausibility at that size
+        at = cand.term.physical_parameters(size * direction, np.zeros((index.size, index.size)), constants)
+        return cand.plausible(at)
+
+    sizes, refused = [], []
     for sign in signs:
-        found = _smallest(ctx, logged, unit, axes, sign, start)
+        found = _smallest(ctx, logged, unit, axes, sign, start, physics, refused)
         if found is None:
-            return DetectionLimit(cand.name, first, math.inf, unit_name, "", NO_SIZE)
+            why = f"{PHYSICS_RULES_OUT}: {refused[-1]}" if refused else NO_SIZE
+            return DetectionLimit(cand.name, first, math.inf, unit_name, "", why)
         sizes.append(found)
     s, binding = max(sizes, key=lambda t: abs(t[0]))
-    at_limit = cand.term.physical_parameters(s * direction, np.zeros((index.size, index.size)), constants)
-    why = cand.plausible(at_limit)
-    if why:
-        return DetectionLimit(cand.name, first, math.inf, unit_name, binding, f"{PHYSICS_RULES_OUT}: {why}")
-    return DetectionLimit(
-        cand.name, first, abs(_physical(cand, s * direction, constants)[0]), unit_name, binding
-    )
+    value = abs(_physical(cand, s * direction, constants)[0])
+    return DetectionLimit(cand.name, first, value, unit_name, binding)
 
 
 def _felt_columns(
@@ -356,26 +357,48 @@ def _failing(ctx: _Context, r: _Residuals, axes: np.ndarray) -> str:
 
 
 def _smallest(
-    ctx: _Context, logged: _Residuals, unit: _Residuals, axes: np.ndarray, sign: float, start: float
+    ctx: _Context,
+    logged: _Residuals,
+    unit: _Residuals,
+    axes: np.ndarray,
+    sign: float,
+    start: float,
+    physics: Callable[[float], str | None],
+    refused: list[str],
 ) -> tuple[float, str] | None:
     """(size, the test failing just below it) of the smallest size along ``sign`` times the
-    direction at which the log shows the effect; None when no size tried does."""
+    direction at which the log shows the effect and ``physics`` (its plausibility) allows it; None
+    when no size tried is both (the last plausibility refusal appended to ``refused``). A lag
+    seen at less than the loop's hold is claimed from the smallest lag beyond the hold that the
+    plausibility test accepts; a ripple seen only beyond 30 % of the thrust is not seen at any
+    size the physics allows."""
+
+    def failing(size: float) -> str:
+        shown = _failing(ctx, logged.at(unit, sign * size), axes)
+        if shown:
+            return shown
+        why = physics(sign * size)
+        if why:
+            refused.append(why)
+            return "physics"
+        return ""
+
     below, why = 0.0, "gain"
     s = start
     for _ in range(MAX_STEPS):
-        failing = _failing(ctx, logged.at(unit, sign * s), axes)
-        if not failing:
+        fails = failing(s)
+        if not fails:
             break
-        below, why = s, failing
+        below, why = s, fails
         s *= STEP
     else:
         return None
     above = s
     for _ in range(BISECTIONS):
         mid = math.sqrt(max(below, start / STEP) * above)
-        failing = _failing(ctx, logged.at(unit, sign * mid), axes)
-        if failing:
-            below, why = mid, failing
+        fails = failing(mid)
+        if fails:
+            below, why = mid, fails
         else:
             above = mid
     return sign * above, why

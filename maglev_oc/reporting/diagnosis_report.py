@@ -224,10 +224,12 @@ LIMITS_IN_WORDS = 4
 
 def limit_size(limit: DetectionLimit) -> str:
     """A detection limit's size in the units a control engineer reads: ratios in per cent, times in
-    milliseconds, angles in degrees; "no size" when none shows it."""
+    milliseconds, angles in degrees, lengths in millimetres or micrometres; "no size" when none
+    shows it."""
     if not math.isfinite(limit.value):
         return "no size"
-    scale, unit = {"1": (100.0, "%"), "s": (1e3, "ms"), "rad": (180 / math.pi, "deg")}.get(
+    lengths = (1e3, "mm") if limit.value >= 1e-3 else (1e6, "µm")
+    scale, unit = {"1": (100.0, "%"), "s": (1e3, "ms"), "rad": (180 / math.pi, "deg"), "m": lengths}.get(
         limit.unit, (1.0, limit.unit)
     )
     return f"{limit.value * scale:.2g}{NBSP}{unit}"
@@ -236,7 +238,13 @@ def limit_size(limit: DetectionLimit) -> str:
 def _limit_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     """(effect, size parameter, size below which this log cannot show it, the test that holds it
     back there) of every effect with a finite limit."""
-    words = {"z": "significance", "gain": "held-out gain", "quarter": "held-out quarter", "size": "size"}
+    words = {
+        "z": "significance",
+        "gain": "held-out gain",
+        "quarter": "held-out quarter",
+        "size": "size",
+        "physics": "plausibility",
+    }
     return [
         (plain(d.name), d.parameter.replace("_", " "), limit_size(d), words.get(d.binding, d.binding))
         for d in diag.detection_limits
