@@ -83,8 +83,9 @@ MAX_STEPS = 35
 """Sizes tried upwards from the fit's naive standard error (1.5^35, about 1.5e6 of them; the limits
 of the independent generator's logs lie 3-300 of them up): an effect not seen by then is reported
 as not seen at any size."""
-BISECTIONS = 7
-"""Halvings of the bracket (in log size): the limit to 1.5^(1/128), 0.3 %."""
+BISECTIONS = 5
+"""Halvings of the bracket (in log size): the limit to 1.5^(1/32), 1.3 % (it is reported to two
+significant digits)."""
 
 
 @dataclass(frozen=True)
@@ -219,9 +220,14 @@ def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
     felt = np.tensordot(direction, ctx.felt.get(cand.name, design.columns[index]), axes=1)
     unit = _residuals(ctx, with_target(design, felt), cand)
     _, _, _, axes = judged_axes(design, cand, ctx.friction)
-    # the sizes tried start at the naive standard error along the direction
+    # the sizes tried start at the naive standard error along the direction, or at half the size
+    # whose own change of the held-out prediction reaches the size test's floor if that is larger
+    # (no smaller size passes it: the search's first steps would all fail there)
     pos = np.searchsorted(full.index, index)
     start = math.sqrt(max(float(direction @ full.naive[np.ix_(pos, pos)] @ direction), 0.0)) or 1e-12
+    per_unit = float(np.max(np.sqrt(np.mean((unit.r0 - unit.r1)[axes] ** 2, axis=1)), initial=0.0))
+    if per_unit > 0:
+        start = max(start, 0.5 * ctx.settings.min_effect / per_unit)
 
     def physics(size: float) -> str | None:  # the candidate's plausibility at that size
         at = cand.term.physical_parameters(size * direction, np.zeros((index.size, index.size)), constants)
@@ -374,14 +380,14 @@ def _smallest(
     size the physics allows."""
 
     def failing(size: float) -> str:
-        shown = _failing(ctx, logged.at(unit, sign * size), axes)
-        if shown:
-            return shown
-        why = physics(sign * size)
+        why = physics(sign * size)  # first: it needs no residuals
         if why:
             refused.append(why)
             return "physics"
-        return ""
+        return _failing(ctx, logged.at(unit, sign * size), axes)
+
+    if _never_shown(ctx, unit, axes):
+        return None
 
     below, why = 0.0, "gain"
     s = start
@@ -402,6 +408,21 @@ def _smallest(
         else:
             above = mid
     return sign * above, why
+
+
+def _never_shown(ctx: _Context, unit: _Residuals, axes: np.ndarray) -> bool:
+    """Whether no size can pass the gain tests: as the size grows the residuals tend to s times the
+    unit's, so the gains tend to 1 - |r1_unit|^2 / |r0_unit|^2; below ``min_gain`` (pooled) or not
+    positive (on the quarter) there, no size shows the effect (the logged columns' errors predict
+    more noise than the effect removes)."""
+    if axes.size == 0:
+        return True
+    quarter = 1.0 - np.sum(unit.r1[axes] ** 2) / max(float(np.sum(unit.r0[axes] ** 2)), 1e-300)
+    if ctx.fold is None:
+        return not quarter >= ctx.settings.min_gain
+    parts = list(zip(unit.parts0, unit.parts1, strict=True))
+    pooled = float(np.mean(pooled_gains([(unit.r0, unit.r1), *parts], axes)))
+    return not (quarter > 0 and pooled >= ctx.settings.min_gain)
 
 
 def _direction(cand: Candidate, constants: dict[str, float], size: int) -> np.ndarray:
