@@ -265,7 +265,7 @@ _LIMIT_NOTE = (
     "significance and the size of the change. The tests of separability, plausibility and the rivals "
     "can still refuse an effect larger than its limit, and in closed loop the regulator's own response "
     "hides part of a real effect. On the independent generator's logs real effects were claimed from 0.8 to "
-    "1.4 times these limits on a quiet rig; on one whose logged currents are 20 times noisier, "
+    "1.6 times these limits on a quiet rig; on one whose logged currents are 20 times noisier, "
     "mostly from 1 to 3 times, up to 16 times, and some thrust ripples not at all (bench/README)."
 )
 
