@@ -158,8 +158,20 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         )
         for u in diag.unexplained
     ]
+    seen = [d for d in diag.detection_limits if math.isfinite(d.value)][:LIMITS_ON_SCORECARD]
+    if seen:
+        rows.append(
+            (
+                "not shown by this log",
+                ", ".join(f"{plain(d.name)} below {limit_size(d)}" for d in seen),
+                "may be there, too small for this log (every limit: page 2 on)",
+            )
+        )
     return rows
 
+
+LIMITS_ON_SCORECARD = 3
+"""Detection limits the first page names (the most promising candidates first)."""
 
 SCORECARD_WIDTHS = {3: (30, 44, 44), 4: (26, 26, 34, 34)}
 """Characters per line of the scorecard's columns (without, with the truth column)."""
