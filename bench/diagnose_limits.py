@@ -13,7 +13,10 @@ and is claimed from about it up. Kinds and their size (the limit's parameter):
 * ``ripple``: thrust ripple over the slot pitch, amplitude as a fraction of the thrust;
 * ``tilt``: horizontal guides off level, the force along the track [N];
 * ``cable``: a cable carrier's stiffness [N/m];
-* ``lag``: a first-order amplifier lag, its time constant [s] (no transport delay).
+* ``lag``: a first-order amplifier lag, its time constant [s] (no transport delay);
+* ``friction``: horizontal guide friction (LuGre, breakaway 1.33 times the Coulomb force, the
+  generator's default 2 N s/m viscous part), the Coulomb force [N]; the generator's loop is
+  unstable with it below about 0.1 N on the noisy rig.
 
 Prints one JSON line per seed (the limit, and per size whether the effect was claimed with its
 selection z) and appends it to ``OUT/limits.jsonl``. Not run in CI.
@@ -34,6 +37,7 @@ NAMES = {
     "tilt": "horizontal_guides_not_level",
     "cable": "cable_carrier_force",
     "lag": "current_amplifier_lag",
+    "friction": "guide_friction_horizontal",
 }
 
 
@@ -49,7 +53,13 @@ def main() -> None:
     from bench.diagnose_rigs import RIGS
     from maglev_oc.data.reading import read_log
     from maglev_oc.diagnosis.pipeline import diagnose
-    from tests.independent.effects import AmplifierDynamics, CableCarrier, ThrustRipple, TiltedBase
+    from tests.independent.effects import (
+        AmplifierDynamics,
+        CableCarrier,
+        GuideFriction,
+        ThrustRipple,
+        TiltedBase,
+    )
     from tests.independent.logio import write_log
     from tests.independent.simulate import Rig, Scenario, SimulationError, simulate
 
@@ -65,6 +75,8 @@ def main() -> None:
             return TiltedBase(angle=math.asin(size / (1.594 * 9.81)))  # the generator's M_h g
         if args.kind == "cable":
             return CableCarrier(stiffness=size)
+        if args.kind == "friction":
+            return GuideFriction(axis_="horizontal", coulomb_force=size, static_force=1.33 * size)
         return AmplifierDynamics(bandwidth=1.0 / (2 * math.pi * size), delay=0.0)
 
     def diagnosed(seed: int, stem: str, effects: tuple):
