@@ -195,6 +195,9 @@ def test_every_candidate_judged_not_separable_is_listed_with_what_would_separate
     assert {n.name for n in d.not_separable} == refused
     for n in d.not_separable:
         assert n.confounded_with and n.experiment, n
+    # the log showed them (it could not tell them apart): they have no detection limit, which is
+    # for the effects the log did not show (maglev_oc.diagnosis.limits)
+    assert not refused & {x.name for x in d.detection_limits}
     # and the result records the selection's settings it was judged by (the defaults here)
     from dataclasses import asdict
 
