@@ -58,6 +58,7 @@ from scipy import sparse
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.selection import (
+    EIV_REASON,
     Judgement,
     Selection,
     SelectionSettings,
@@ -75,6 +76,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_subset
+from maglev_oc.results import jsonable
 
 __all__ = ["DetectionLimit", "detection_limits", "felt_currents", "with_target"]
 
@@ -93,9 +95,10 @@ significant digits)."""
 class DetectionLimit:
     """The smallest size of one effect that this log would have shown.
 
-    ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
-    parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
-    that held it back just below the limit ("z", "gain", "size" or "quarter")."""
+        ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
+        parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
+        that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
+    candidate's plausibility)."""
 
     name: str
     parameter: str
@@ -108,15 +111,11 @@ class DetectionLimit:
         return {
             "name": self.name,
             "parameter": self.parameter,
-            "value": self.value if math.isfinite(self.value) else None,
+            "value": jsonable(self.value),
             "unit": self.unit,
             "binding_test": self.binding,
             "reason": self.reason,
         }
-
-
-def _replaced(design: Design, target, rhs, yy, hold_rhs, hold_yy) -> Design:
-    return dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
 
 
 @dataclass(frozen=True)
@@ -190,10 +189,6 @@ def detection_limits(
 UNSEEN_VERDICTS = ("not significant", "too small")
 """The verdicts that say the log did not show an effect (the others say it showed something that
 was refused, with their own reasons)."""
-EIV_REASON = "its columns are dominated by the errors of the logged currents"
-"""The selection's reason when a candidate's fit needs less of the errors-in-variables correction
-than the fit without it (:func:`~maglev_oc.diagnosis.selection._verdict`): its columns are the
-logged currents' errors more than their signal, at any size of the effect."""
 PHYSICS_RULES_OUT = "not seen at any size the physics allows"
 NO_SIZE = (
     "not seen at any size tried: predicted from the logged signals, the effect does not improve the "
@@ -317,7 +312,7 @@ def with_target(design: Design, target: np.ndarray) -> Design:
     hold = design.holdout
     hold_rhs = np.stack([design.columns[:, a][:, hold] @ target[a, hold] for a in range(2)])
     hold_yy = np.array([float(target[a, hold] @ target[a, hold]) for a in range(2)])
-    return _replaced(design, target, rhs, yy, hold_rhs, hold_yy)
+    return dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
 
 
 def _residuals(ctx: _Context, design: Design, cand: Candidate) -> _Residuals:

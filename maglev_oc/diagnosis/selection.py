@@ -171,6 +171,11 @@ __all__ = [
 ]
 
 
+EIV_REASON = "its columns are dominated by the errors of the logged currents"
+"""Why a candidate whose fit needs less of the errors-in-variables correction than the fit without
+it is not significant (:func:`_verdict`): its columns are the logged currents' errors more than
+their signal, whatever the size of the effect (the detection limits read it so)."""
+
 SMOOTH_POSITION = "a smooth dependence on the position"
 """What a position-periodic candidate seen over too few periods is confounded with."""
 
@@ -902,9 +907,7 @@ def _verdict(
     gain, quarter, z, wald, threshold = j.own_pooled_gain, j.own_gain, j.z, j.wald, j.wald_threshold
     rms, peak = j.contribution_rms, j.contribution_peak
     if j.fit.compensation < cur_fit.compensation:
-        return "not significant", (
-            "its columns are dominated by the errors of the logged currents (not identifiable from this log)"
-        )
+        return "not significant", f"{EIV_REASON} (not identifiable from this log)"
     strong = z >= settings.min_z_strong and wald >= settings.strong_wald * threshold
     if not (gain >= settings.min_gain and quarter > 0 and (z >= settings.min_z or strong)):
         # the gain is the pooled one (all four quarters); the last quarter's is given beside it
