@@ -117,6 +117,11 @@ class Candidate:
     """+1 when only a positive size is physical (a friction's Coulomb force, a lag, a loss of force):
     the detection limit (:mod:`~maglev_oc.diagnosis.limits`) is then sought in that direction
     alone; 0 when either sign is (a ripple's phase, a slope, a tilt)."""
+    thrust_proportional: bool = False
+    """Whether its horizontal force is proportional to the thrust current (a thrust ripple, the
+    thrust's dependence on the gap, saturation): where the logged thrust current is mostly its
+    logging error it is judged on that current too
+    (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen

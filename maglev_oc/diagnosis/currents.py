@@ -105,6 +105,7 @@ def ripple_candidate(ctx: LibraryContext) -> Candidate:
             f"The thrust ripples by {fmt(e['amplitude'], 100, '%')} of its value over the slot pitch and "
             f"{fmt(e['amplitude_pole_pitch'], 100, '%')} over the pole pitch."
         ),
+        thrust_proportional=True,
     )
 
 
@@ -275,6 +276,7 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
             f"{fmt(e['loss_at_9_A'], 100, '%')} at 9 A (extrapolated)."
         ),
         physical_sign=1,  # saturation loses force per ampere
+        thrust_proportional=True,
     )
 
 

@@ -52,13 +52,13 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 from scipy import sparse
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.selection import (
     EIV_REASON,
+    THRUST_SIDE,
     Judgement,
     Selection,
     SelectionSettings,
@@ -72,8 +72,8 @@ from maglev_oc.diagnosis.selection import (
     pooled_gains,
     pooled_significance,
 )
+from maglev_oc.diagnosis.thrust_current import THRUST, felt_currents, judged_on_thrust_current, thrust_side
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.solve import fit_subset
 from maglev_oc.results import jsonable
@@ -95,10 +95,12 @@ significant digits)."""
 class DetectionLimit:
     """The smallest size of one effect that this log would have shown.
 
-        ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
-        parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
-        that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
-    candidate's plausibility)."""
+    ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
+    parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
+    that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
+    candidate's plausibility). ``side``: "" when the accelerations would show it first,
+    :data:`~maglev_oc.diagnosis.selection.THRUST_SIDE` when the logged thrust current would
+    (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
 
     name: str
     parameter: str
@@ -106,6 +108,7 @@ class DetectionLimit:
     unit: str
     binding: str
     reason: str = ""
+    side: str = ""
 
     def to_dict(self) -> dict:
         return {
@@ -115,6 +118,7 @@ class DetectionLimit:
             "unit": self.unit,
             "binding_test": self.binding,
             "reason": self.reason,
+            "judged_on": self.side or "accelerations",
         }
 
 
@@ -147,6 +151,13 @@ class _Context:
     counted_parts: list[np.ndarray | None]
     friction: frozenset[int]
     felt: dict[str, np.ndarray]  # the candidates' columns at the currents the plant felt
+    # on the thrust side: (2, n_hold) the acceleration per unit of each row's residual (the thrust
+    # current's per ampere, zero on the other row), for the size test; None on the accelerations
+    per_unit: np.ndarray | None = None
+
+    def change(self, r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
+        """The change of the held-out prediction, as acceleration."""
+        return r0 - r1 if self.per_unit is None else (r0 - r1) * self.per_unit
 
 
 def detection_limits(
@@ -173,17 +184,38 @@ def detection_limits(
     if not judged:
         return []
     fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
+    counted = evidence(design, chosen, settings)
     ctx = _Context(
         design,
         current,
         settings,
         fold,
-        evidence(design, chosen, settings),
+        counted,
         fold.counted(chosen, settings) if fold else [],
         frozenset(_friction_axes(chosen)),
         _felt_columns(design, model, [c for _, c in judged]),
     )
-    return [_limit(ctx, cand, j) for j, cand in judged]
+    side = thrust_side(design, model) if any(c.thrust_proportional for _, c in judged) else None
+    on_side = None
+    if side is not None:
+        per_unit = np.zeros((2, side.per_ampere.size))
+        per_unit[THRUST] = side.per_ampere
+        side_fold = _CrossFit(side.design, settings.cross_parts) if settings.cross_parts else None
+        on_side = dataclasses.replace(
+            ctx,
+            design=side.design,
+            fold=side_fold,
+            counted_parts=side_fold.counted(chosen, settings) if side_fold else [],
+            felt={},  # the restated columns are the felt currents' already
+            per_unit=per_unit,
+        )
+    out = []
+    for j, cand in judged:
+        limit = _limit(ctx, cand, j)
+        if on_side is not None and judged_on_thrust_current(cand, side):
+            limit = min(limit, _limit(on_side, cand, j, np.array([THRUST])), key=lambda lim: lim.value)
+        out.append(limit)
+    return out
 
 
 UNSEEN_VERDICTS = ("not significant", "too small")
@@ -196,7 +228,11 @@ NO_SIZE = (
 )
 
 
-def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
+def _limit(
+    ctx: _Context, cand: Candidate, judged: Judgement, rows: np.ndarray | None = None
+) -> DetectionLimit:
+    """``rows``: the rows judged (on the thrust side, the thrust current's); default the candidate's
+    axes as the selection judges them."""
     design, current = ctx.design, ctx.current
     index = design.indices([cand.name])
     full = fit_subset(design, [*current, cand.name], covariance=False)
@@ -208,20 +244,21 @@ def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
         grows = _physical(cand, direction, constants)[0] - _physical(cand, 0 * direction, constants)[0]
         direction = direction * (1.0 if grows * cand.physical_sign > 0 else -1.0)
         signs = (1.0,)
-    if judged.reason.startswith(EIV_REASON):
+    side = "" if ctx.per_unit is None else THRUST_SIDE
+    if judged.reason.startswith(EIV_REASON) and not side:
         return DetectionLimit(
             cand.name, first, math.inf, unit_name, "", f"not seen at any size: {judged.reason}"
         )
     logged = _residuals(ctx, design, cand)
     felt = np.tensordot(direction, ctx.felt.get(cand.name, design.columns[index]), axes=1)
     unit = _residuals(ctx, with_target(design, felt), cand)
-    _, _, _, axes = judged_axes(design, cand, ctx.friction)
+    axes = judged_axes(design, cand, ctx.friction)[3] if rows is None else rows
     # the sizes tried start at the naive standard error along the direction, or at half the size
     # whose own change of the held-out prediction reaches the size test's floor if that is larger
     # (no smaller size passes it: the search's first steps would all fail there)
     pos = np.searchsorted(full.index, index)
     start = math.sqrt(max(float(direction @ full.naive[np.ix_(pos, pos)] @ direction), 0.0)) or 1e-12
-    per_unit = float(np.max(np.sqrt(np.mean((unit.r0 - unit.r1)[axes] ** 2, axis=1)), initial=0.0))
+    per_unit = float(np.max(np.sqrt(np.mean(ctx.change(unit.r0, unit.r1)[axes] ** 2, axis=1)), initial=0.0))
     if per_unit > 0:
         start = max(start, 0.5 * ctx.settings.min_effect / per_unit)
 
@@ -234,11 +271,11 @@ def _limit(ctx: _Context, cand: Candidate, judged: Judgement) -> DetectionLimit:
         found = _smallest(ctx, logged, unit, axes, sign, start, physics, refused)
         if found is None:
             why = f"{PHYSICS_RULES_OUT}: {refused[-1]}" if refused else NO_SIZE
-            return DetectionLimit(cand.name, first, math.inf, unit_name, "", why)
+            return DetectionLimit(cand.name, first, math.inf, unit_name, "", why, side)
         sizes.append(found)
     s, binding = max(sizes, key=lambda t: abs(t[0]))
     value = abs(_physical(cand, s * direction, constants)[0])
-    return DetectionLimit(cand.name, first, value, unit_name, binding)
+    return DetectionLimit(cand.name, first, value, unit_name, binding, "", side)
 
 
 def _felt_columns(
@@ -270,32 +307,6 @@ def _felt_columns(
         out[t.name] = columns[k : k + t.n_parameters]
         k += t.n_parameters
     return out
-
-
-def felt_currents(prepared: PreparedLogs, model: StageModel, iterations: int = 3) -> PreparedLogs | None:
-    """``prepared`` with the currents (and their rates) that make ``model`` produce the measured
-    accelerations: the currents the plant felt, within the band, as far as the model is right
-    (Newton on the two accelerations in the two currents from the logged ones). None when the
-    model cannot be inverted on some valid sample (a singular Jacobian, a non-finite value)."""
-    xs, us, acc = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("a", 2)
-    out = model.f(xs, us)[[1, 3]]
-    step = ca.Function("newton", [xs, us, acc], [us - ca.solve(ca.jacobian(out, us), out - acc)])
-    n = prepared.n
-    mapped = step.map(n)
-    u = prepared.u.copy()
-    for _ in range(iterations):
-        u = np.asarray(mapped(prepared.x, u, prepared.acc))
-    # on an axis that does not move its acceleration is not measured: the logged current stays
-    for a, moving in enumerate(prepared.moving):
-        if not moving:
-            u[1 - a] = prepared.u[1 - a]
-    if not np.all(np.isfinite(u[:, prepared.valid])):
-        return None
-    u = np.where(np.isfinite(u), u, prepared.u)
-    du = np.empty_like(u)
-    for start, stop in prepared.segment_bounds:
-        du[:, start:stop] = np.gradient(u[:, start:stop], prepared.sample_time, axis=1)
-    return dataclasses.replace(prepared, u=u, du=du)
 
 
 def with_target(design: Design, target: np.ndarray) -> Design:
@@ -352,7 +363,7 @@ def _failing(ctx: _Context, r: _Residuals, axes: np.ndarray) -> str:
     if z < settings.min_z:
         return "z"
     n = np.full(2, r.r0.shape[1]) if ctx.counted is None else np.maximum(ctx.counted.sum(axis=1), 1)
-    contribution = np.sqrt(np.sum((r.r0 - r.r1) ** 2, axis=1) / n)
+    contribution = np.sqrt(np.sum(ctx.change(r.r0, r.r1) ** 2, axis=1) / n)
     if np.max(contribution[axes]) < settings.min_effect:
         return "size"
     return ""

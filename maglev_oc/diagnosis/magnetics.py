@@ -419,4 +419,5 @@ def _gap_candidate(ctx: LibraryContext, *, field: bool) -> Candidate:
         separates,
         bounded,
         says,
+        thrust_proportional=field,
     )

@@ -83,6 +83,7 @@ from maglev_oc.diagnosis.selection import (
     judge,
     select,
 )
+from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
@@ -151,10 +152,18 @@ class _Session:
         return self.design(model, _terms(library, self.probes))
 
     def select(
-        self, design: Design, library: Sequence[Candidate], settings: SelectionSettings | None = None
+        self,
+        design: Design,
+        library: Sequence[Candidate],
+        model: StageModel,
+        settings: SelectionSettings | None = None,
     ) -> Selection:
+        """The selection on ``design`` (built about ``model``'s constants), the candidates
+        proportional to the thrust current judged on it too where the logged thrust current is
+        mostly its error (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
         probes = {k: t.name for k, t in self.probes.items()}
-        return select(design, library, settings or self.settings, probes)
+        side = thrust_side(design, model) if any(c.thrust_proportional for c in library) else None
+        return select(design, library, settings or self.settings, probes, side)
 
 
 @one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)
@@ -276,7 +285,7 @@ def _selected(run: _Run, data: PreparedLogs) -> _Stage:
         del design, sel  # the design with the waviness replaces this one: never hold both
         library, design, sel = clock("waviness", _with_waviness, session, fitted, library, periods)
     elif _has_lines(library, sel):
-        sel = clock("selection", session.select, design, library)  # the line-like shapes judged last
+        sel = clock("selection", session.select, design, library, fitted)  # the line-like shapes judged last
     sel, not_sep, rejected, unexplained = clock(
         "unexplained", _separate_unexplained, session, fitted, library, design, sel, tr
     )
@@ -480,7 +489,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             raise InputError(f"exclude: unknown candidate(s) {unknown}; the library has {effects}")
         library = [c for c in full if c.reported_name not in exclude]  # an effect with its fallback
         design = session.library_design(fitted, library)
-        sel = session.select(design, library, relaxed if attempt == 0 else early)
+        sel = session.select(design, library, fitted, relaxed if attempt == 0 else early)
         if not sel.selected:
             found = None if scanned or attempt == 2 else _end_profile(session, fitted, library, sel, held)
             scanned = scanned or found is not None
@@ -515,7 +524,7 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
-                sel = session.select(design, library, early)
+                sel = session.select(design, library, fitted, early)
             break
         fitted, held = converged, shares
         if attempt > 0 and not rewidthed:
@@ -655,7 +664,7 @@ def _with_waviness(session: _Session, fitted: StageModel, library, periods: list
     wavy = {c.name: c for c in (waviness_candidate(fitted, session.data, lam) for lam in periods)}
     library = [*library, *wavy.values()]
     design = session.library_design(fitted, library)
-    return library, design, session.select(design, library)
+    return library, design, session.select(design, library, fitted)
 
 
 def _separate_unexplained(session: _Session, fitted, library, design: Design, sel: Selection, tr):
@@ -764,6 +773,7 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
                 signature=cand.term.signature,
                 coefficients=coef,
                 candidate=cand,
+                judged_on=step.judgements[name].side or "accelerations",
             )
         )
     return _merged_guide_geometry(effects)

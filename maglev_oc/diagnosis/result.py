@@ -49,6 +49,9 @@ class Effect:
     signature: str
     coefficients: np.ndarray
     candidate: Candidate = field(repr=False)
+    # what the held-out test predicted: "accelerations", or the logged thrust current where the
+    # accelerations could not show an effect of it (:mod:`~maglev_oc.diagnosis.thrust_current`)
+    judged_on: str = "accelerations"
 
 
 @dataclass(frozen=True)
@@ -130,6 +133,7 @@ class Diagnosis(Result):
                     "confidence": _num(e.confidence),
                     "holdout_gain": _num(e.gain),
                     "z": _num(e.z),
+                    "judged_on": e.judged_on,
                     "contribution_rms": e.contribution_rms.to_dict(),
                     "force_rms_N": e.force_rms.to_dict(),
                     "runner_up": e.runner_up,
@@ -162,6 +166,7 @@ class Diagnosis(Result):
                     "reason": j.reason,
                     "holdout_gain": _num(j.gain),
                     "z": _num(j.z),
+                    "judged_on": j.side or "accelerations",
                 }
                 for j in self.rejected
             ],
@@ -179,6 +184,7 @@ class Diagnosis(Result):
                             "z": _num(j.z),
                             "wald": _num(j.wald),
                             "vif": _num(j.vif),
+                            "judged_on": j.side or "accelerations",
                         }
                         for j in sorted(s.judgements.values(), key=lambda j: -j.gain)
                     ],
@@ -202,7 +208,8 @@ class Diagnosis(Result):
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
         for e in self.effects:
-            lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {e.finding}")
+            seen = "" if e.judged_on == "accelerations" else f"; seen predicting {e.judged_on}"
+            lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")
         for n in self.not_separable:
             lines.append(
                 f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}"
@@ -211,7 +218,10 @@ class Diagnosis(Result):
             lines.append(f"  unexplained: {u.description}")
         for d in self.detection_limits:
             size = f"{d.value:.3g} {d.unit}" if math.isfinite(d.value) else d.reason
-            lines.append(f"  not seen: {d.name} ({d.parameter}) — smallest size this log would show: {size}")
+            side = f" (predicting {d.side})" if d.side and math.isfinite(d.value) else ""
+            lines.append(
+                f"  not seen: {d.name} ({d.parameter}) — smallest size this log would show: {size}{side}"
+            )
         for a, before in self.error_before.items():
             if math.isfinite(before):
                 lines.append(f"  held-out error {a}: {before:.4g} -> {self.error_after[a]:.4g} m/s^2")

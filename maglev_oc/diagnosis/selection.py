@@ -146,6 +146,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from maglev_oc.diagnosis.library import Candidate
+from maglev_oc.diagnosis.thrust_current import THRUST, ThrustSide, judged_on_thrust_current
 from maglev_oc.regression.base import AXES, AXIS_INDEX, CONSTANT_NAMES
 from maglev_oc.regression.covariance import (
     DEFAULT_BAND,
@@ -175,6 +176,10 @@ EIV_REASON = "its columns are dominated by the errors of the logged currents"
 """Why a candidate whose fit needs less of the errors-in-variables correction than the fit without
 it is not significant (:func:`_verdict`): its columns are the logged currents' errors more than
 their signal, whatever the size of the effect (the detection limits read it so)."""
+
+THRUST_SIDE = "the logged thrust current"
+"""What a candidate judged on the thrust side (:mod:`~maglev_oc.diagnosis.thrust_current`) was judged
+by predicting."""
 
 SMOOTH_POSITION = "a smooth dependence on the position"
 """What a position-periodic candidate seen over too few periods is confounded with."""
@@ -230,6 +235,9 @@ class Judgement:
     # (2,) the drop per axis over the held-out quarter and the cross-fitted training parts
     # together (:func:`pooled_gains`); None when the selection has no parts (then ``gain_axes``)
     pooled_gain_axes: np.ndarray | None = None
+    # "" when judged on the accelerations; THRUST_SIDE when its held-out test, Wald test, size and
+    # rivals are those of the regression restated in the thrust current (:class:`_ThrustStep`)
+    side: str = ""
 
     @property
     def own_gain(self) -> float:
@@ -636,6 +644,130 @@ def _block_z(ratios: np.ndarray, logs: np.ndarray, block_seconds: float) -> floa
     return mean / se if se > 0 else 0.0
 
 
+@dataclass(frozen=True, eq=False)
+class _HeldOutTest:
+    """Test 1 of one candidate on one design: the fit with it, its held-out residual, the drop per
+    axis over the held-out quarter (``gain_axes``) and pooled with the cross-fitted parts
+    (``pooled_axes``), and the z of each."""
+
+    fit: SubsetFit
+    r1: np.ndarray
+    gain_axes: np.ndarray
+    pooled_axes: np.ndarray
+    z: float
+    z_holdout: float
+
+    def shows(self, settings: SelectionSettings) -> bool:
+        """Whether the test passes on its own (the strong path also needs the Wald test)."""
+        return (
+            _own_gain(self.pooled_axes) >= settings.min_gain
+            and _own_gain(self.gain_axes) > 0
+            and self.z >= settings.min_z
+        )
+
+
+def _held_out_test(
+    design: Design,
+    groups: list[str],
+    r0: np.ndarray,
+    counted: np.ndarray | None,
+    cross: _CrossParts | None,
+    axes: np.ndarray,
+) -> _HeldOutTest:
+    """Test 1 of the module doc for the fit of ``groups`` against ``r0``, the held-out residual
+    without the candidate (zero where a sample does not count), on ``axes``."""
+    fit = fit_subset(design, groups, covariance=False)
+    r1 = _holdout_residual(design, fit, counted)
+    mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
+    gain_axes = np.full(2, np.nan)
+    gain_axes[axes] = 1.0 - np.mean(r1**2, axis=1)[axes] / mse0[axes]
+    _, z_holdout = holdout_significance(design, r0, r1, axes)
+    if cross is None:
+        return _HeldOutTest(fit, r1, gain_axes, gain_axes, z_holdout, z_holdout)
+    parts = [
+        (r0p, r1p if c is None else np.where(c, r1p, 0.0))
+        for r0p, r1p, c in zip(cross.r0, cross.fold.residuals(groups), cross.counted, strict=True)
+    ]
+    pooled_axes = np.full(2, np.nan)
+    pooled_axes[axes] = pooled_gains([(r0, r1), *parts], axes)
+    z = pooled_significance(design, cross.fold, (r0, r1), parts, axes)
+    return _HeldOutTest(fit, r1, gain_axes, pooled_axes, z, z_holdout)
+
+
+class _ThrustSide:
+    """The thrust side of one selection (:mod:`~maglev_oc.diagnosis.thrust_current`): the restated
+    design's held-out Grams and cross-fitted parts, built once."""
+
+    def __init__(self, side: ThrustSide, settings: SelectionSettings, probes: dict | None) -> None:
+        self.side, self.design, self.settings, self.probes = side, side.design, settings, probes
+        self.held = _HeldOutGrams(side.design)
+        self.fold = _CrossFit(side.design, settings.cross_parts) if settings.cross_parts else None
+
+    def step(
+        self, current: list[str], chosen: Sequence[Candidate], counted: np.ndarray | None
+    ) -> _ThrustStep:
+        """The side at a step whose model is ``current`` (``chosen`` its effects)."""
+        around = self.held.around(fit_subset(self.design, current, covariance=False), counted)
+        cross = _CrossParts.of(self.fold, current, chosen, self.settings) if self.fold else None
+        return _ThrustStep(self, list(current), counted, around, cross, {})
+
+
+@dataclass(frozen=True, eq=False)
+class _ThrustStep:
+    """The thrust side at one step: the held-out residual of the step's model there and its
+    cross-fitted parts, and the rivals' gains there (computed when first asked for)."""
+
+    owner: _ThrustSide
+    current: list[str]
+    counted: np.ndarray | None
+    around: _Around
+    cross: _CrossParts | None
+    _rivals: dict
+
+    @property
+    def design(self) -> Design:
+        return self.owner.design
+
+    def covers(self, cand: Candidate) -> bool:
+        return judged_on_thrust_current(cand, self.owner.side)
+
+    def seen(self, cand: Candidate) -> _HeldOutTest:
+        """Test 1 on the thrust current alone."""
+        rows = np.array([THRUST], dtype=int)
+        return _held_out_test(
+            self.design, [*self.current, cand.name], self.around.residual, self.counted, self.cross, rows
+        )
+
+    def contribution(self, seen: _HeldOutTest) -> tuple[np.ndarray, np.ndarray]:
+        """(RMS, largest half-second RMS) per axis of the change of the held-out prediction, as the
+        horizontal acceleration of the thrust current's change (:attr:`ThrustSide.per_ampere`)."""
+        change = np.zeros_like(seen.r1)
+        change[THRUST] = (self.around.residual - seen.r1)[THRUST] * self.owner.side.per_ampere
+        n = change.shape[1] if self.counted is None else max(int(self.counted[THRUST].sum()), 1)
+        rms = np.sqrt(np.sum(change**2, axis=1) / n)
+        return rms, _block_peak(self.design, change, self.counted)
+
+    def rivals(self, cand: Candidate) -> dict[tuple[str, int], tuple[float, str]] | None:
+        """The generic rivals of ``cand``'s size on the thrust current (:func:`_rival_gains`)."""
+        if not self.owner.probes:
+            return None
+        key = (cand.axis, _reported(cand))
+        if key not in self._rivals:
+            mse0 = np.maximum(np.mean(self.around.residual**2, axis=1), 1e-30)
+            self._rivals.update(
+                _rival_gains(
+                    self.design,
+                    self.current,
+                    mse0,
+                    self.owner.probes,
+                    {key},
+                    self.around,
+                    self.owner.settings.max_vif,
+                )
+            )
+        return self._rivals
+
+
 def judged_axes(design: Design, cand: Candidate, friction_axes: frozenset[int]):
     """(acts, hidden, left, axes): the moving axes ``cand`` acts on, those of them with claimed
     friction where its evidence does not count (``Candidate.beside_friction``), the others, and
@@ -661,6 +793,7 @@ def judge(
     cross: _CrossParts | None = None,
     friction_axes: frozenset[int] = frozenset(),
     periodic: Sequence[tuple[Candidate, float]] = (),
+    thrust: _ThrustStep | None = None,
 ) -> Judgement:
     """``r0``, ``mse0``: the held-out residual of ``current`` and its mean square, zero and left out
     where ``counted`` is False (:func:`evidence`); ``beside``: the effects already chosen with their
@@ -670,46 +803,48 @@ def judge(
     guide friction among ``current`` (a candidate not judged ``beside_friction`` is judged on the
     others); ``periodic``: the design's forces periodic in the position alone with their periods
     (:func:`_pool_periods`), those the travel does not tell from ``cand``'s fitted beside it when
-    its halves are compared (:func:`_drift_along_travel`)."""
+    its halves are compared (:func:`_drift_along_travel`); ``thrust``: the thrust side at this step
+    (:class:`_ThrustStep`), on which a candidate proportional to the thrust current is judged too
+    when the accelerations do not show it: if the logged thrust current does, the held-out test,
+    the Wald test, the size and the rivals are that side's."""
     _, hidden, left, axes = judged_axes(design, cand, friction_axes)
-    fit = fit_subset(design, [*current, cand.name], covariance=False)
-    r1 = _holdout_residual(design, fit, counted)
-    mse1 = np.mean(r1**2, axis=1)
-    gain_axes = np.full(2, np.nan)
-    gain_axes[axes] = 1.0 - mse1[axes] / mse0[axes]
-    _, z_holdout = holdout_significance(design, r0, r1, axes)
-    z = z_holdout
-    if cross is not None:
-        r1_parts = cross.fold.residuals([*current, cand.name])
-        parts = [
-            (r0p, r1p if c is None else np.where(c, r1p, 0.0))
-            for r0p, r1p, c in zip(cross.r0, r1_parts, cross.counted, strict=True)
-        ]
-        z = pooled_significance(design, cross.fold, (r0, r1), parts, axes)
-        pooled_axes = np.full(2, np.nan)
-        pooled_axes[axes] = pooled_gains([(r0, r1), *parts], axes)
-    else:
-        pooled_axes = gain_axes
+    seen = _held_out_test(design, [*current, cand.name], r0, counted, cross, axes)
+    fit = seen.fit
     # the gain counts every moving axis alike, so an effect on both axes is not diluted
     moving = np.flatnonzero(design.moving)
-    gain = float(np.mean(1.0 - mse1[moving] / mse0[moving]))
-    if _own_gain(pooled_axes) >= settings.min_gain and z >= min(settings.min_z, settings.min_z_strong):
-        fit = fit_subset(design, [*current, cand.name])  # the long-run covariance, for the Wald test
-    coef, cov = fit.group(design, cand.name)
-    # the coefficients the fit estimated: one held at 0 because the fit's other columns span its
-    # own (a spring's constant beside a chosen constant force, regression.solve._spanned) has a
-    # covariance row of 0 and is no part of the test, nor of its degrees of freedom
-    live = np.diag(cov) > 0 if np.all(np.isfinite(cov)) else np.zeros(coef.size, dtype=bool)
-    try:
-        wald = float(coef[live] @ np.linalg.solve(cov[np.ix_(live, live)], coef[live])) if live.any() else 0.0
-    except np.linalg.LinAlgError:
-        wald = 0.0
-    threshold = float(chi2.isf(settings.alpha, max(int(live.sum()), 1)))
+    gain = float(np.mean(1.0 - np.mean(seen.r1**2, axis=1)[moving] / mse0[moving]))
     # its size: how much adding it changes the model's prediction on the held-out block (not
     # the RMS of its own columns, which collinearity with the constants can make large)
     n_counted = np.full(2, r0.shape[1]) if counted is None else np.maximum(counted.sum(axis=1), 1)
-    contrib = np.sqrt(np.sum((r0 - r1) ** 2, axis=1) / n_counted)
-    peak = _block_peak(design, r0 - r1, counted)
+    contrib = np.sqrt(np.sum((r0 - seen.r1) ** 2, axis=1) / n_counted)
+    peak = _block_peak(design, r0 - seen.r1, counted)
+    side, tested, tried = "", None, None
+    if thrust is not None and thrust.covers(cand) and not seen.shows(settings):
+        tried = thrust.seen(cand)
+        if tried.shows(settings):  # predicting the logged thrust current, it shows
+            side, seen = THRUST_SIDE, tried
+            gain = float(_own_gain(seen.gain_axes)) / max(moving.size, 1)
+            contrib, peak = thrust.contribution(seen)
+            tested = fit_subset(thrust.design, [*current, cand.name])  # for the Wald test
+    gain_axes, pooled_axes, z, z_holdout = seen.gain_axes, seen.pooled_axes, seen.z, seen.z_holdout
+    worth_testing = _own_gain(pooled_axes) >= settings.min_gain and z >= min(
+        settings.min_z, settings.min_z_strong
+    )
+    if side or worth_testing:
+        fit = fit_subset(design, [*current, cand.name])  # the long-run covariance, for the Wald test
+    coef, cov = fit.group(design, cand.name)
+    # the Wald test on the side it was seen on: its own fit's coefficients and covariance
+    coef_w, cov_w = (coef, cov) if tested is None else tested.group(thrust.design, cand.name)
+    # the coefficients the fit estimated: one held at 0 because the fit's other columns span its
+    # own (a spring's constant beside a chosen constant force, regression.solve._spanned) has a
+    # covariance row of 0 and is no part of the test, nor of its degrees of freedom
+    live = np.diag(cov_w) > 0 if np.all(np.isfinite(cov_w)) else np.zeros(coef_w.size, dtype=bool)
+    try:
+        q = coef_w[live]
+        wald = float(q @ np.linalg.solve(cov_w[np.ix_(live, live)], q)) if live.any() else 0.0
+    except np.linalg.LinAlgError:
+        wald = 0.0
+    threshold = float(chi2.isf(settings.alpha, max(int(live.sum()), 1)))
     # separability from the normal matrix of the joint fit
     vif, partners = _separability(design, cand, fit, settings)
     measured = Judgement(
@@ -729,10 +864,17 @@ def judge(
         cand.term.physical_parameters(coef, cov, fitted_constants(fit)),
         fit,
         None if cross is None else pooled_axes,
+        side,
     )
-    seen = _periods_seen(cand, measured.physical, design)
+    periods = _periods_seen(cand, measured.physical, design)
     unresolved = _unresolved(cand, measured.physical, beside, design, settings)
-    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, seen, unresolved)
+    rivals = thrust.rivals(cand) if side else rivals
+    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, periods, unresolved)
+    if tried is not None and not side:
+        reason += (
+            f"; predicting the logged thrust current it explains {percent(_own_gain(tried.pooled_axes))} "
+            f"(z = {tried.z:.1f})"
+        )
     if verdict == "passes":
         drift = _drift_along_travel(design, cand, current, settings, measured.physical, periodic)
         if drift is not None:
@@ -743,7 +885,7 @@ def judge(
         confounded: tuple[str, ...] = tuple(f"guide_friction_{AXES[a]}" for a in hidden)
     elif verdict != "not separable":
         confounded = ()
-    elif seen is not None and seen < settings.min_periods:
+    elif periods is not None and periods < settings.min_periods:
         confounded = (SMOOTH_POSITION,)
     elif unresolved and not (measured.vif > settings.max_vif or partners):
         confounded = tuple(name for name, _ in unresolved)
@@ -906,7 +1048,7 @@ def _verdict(
     ``unresolved``: chosen effects whose spatial period the travel does not tell from its own."""
     gain, quarter, z, wald, threshold = j.own_pooled_gain, j.own_gain, j.z, j.wald, j.wald_threshold
     rms, peak = j.contribution_rms, j.contribution_peak
-    if j.fit.compensation < cur_fit.compensation:
+    if not j.side and j.fit.compensation < cur_fit.compensation:
         return "not significant", f"{EIV_REASON} (not identifiable from this log)"
     strong = z >= settings.min_z_strong and wald >= settings.strong_wald * threshold
     if not (gain >= settings.min_gain and quarter > 0 and (z >= settings.min_z or strong)):
@@ -1282,9 +1424,12 @@ def select(
     candidates: Sequence[Candidate],
     settings: SelectionSettings | None = None,
     probes: dict[tuple[str, str], str] | None = None,
+    side: ThrustSide | None = None,
 ) -> Selection:
     """Forward selection over ``candidates`` (groups of ``design``); ``probes``: (axis, variable) ->
-    group name of the generic smooth rivals in the design (see :func:`_rival_gains`)."""
+    group name of the generic smooth rivals in the design (see :func:`_rival_gains`); ``side``: the
+    design restated in the thrust current, on which the candidates proportional to it are judged
+    too (:func:`~maglev_oc.diagnosis.thrust_current.thrust_side`; None: on the accelerations alone)."""
     settings = settings or SelectionSettings()
     rng = np.random.default_rng(settings.seed)
     n_blocks = design.gram.shape[0]
@@ -1294,6 +1439,8 @@ def select(
     fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
     pool = [c.name for c in candidates if _axes(c, design.moving).size]
     periodic = _pool_periods(design, candidates)
+    covered = side is not None and any(judged_on_thrust_current(c, side) for c in candidates)
+    thrust_side = _ThrustSide(side, settings, probes) if covered else None
     current = ["base"]
     base = fit_subset(design, current)
     cur_fit = base
@@ -1312,20 +1459,23 @@ def select(
         chosen = [by_name[n] for n in current[1:]]
         cross = _CrossParts.of(fold, current, chosen, settings) if fold else None
         friction = frozenset(_friction_axes(chosen))
+        thrust = thrust_side.step(current, chosen, counted) if thrust_side else None
         context = (current, cur_fit, r0, mse0, settings, rivals, counted, beside, cross)
         judged = {
-            n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic)
+            n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust)
             for n in pool
             if by_name[n].fallback_for is None
         }
         # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
         # is physically implausible because that parameter lies beyond the bound
         implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
+        again = [n for n in pool if _stands_in(by_name[n], implausible)]
         judged.update(
             {
-                n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic)
-                for n in pool
-                if _stands_in(by_name[n], implausible)
+                n: judge(
+                    design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust
+                )
+                for n in again
             }
         )
         last.update(judged)
@@ -1336,19 +1486,28 @@ def select(
         # with zero stiffness is a constant force) must beat it by more than the penalty
         best = max(passing, key=lambda j: j.gain - settings.parameter_penalty * _reported(by_name[j.name]))
         best = _form_of_effect(design, best, passing, by_name, held_out, counted, settings)
-        # confidence: among the candidates that pass at this step, the share of block-bootstrap
-        # resamples of the training data in which the same effect ranks first
-        contenders = [j.name for j in passing]
-        moving = np.flatnonzero(design.moving)
+        # confidence: among the candidates that pass at this step on the same side, the share of
+        # block-bootstrap resamples of the training data in which the same effect ranks first
+        contenders = [j.name for j in passing if j.side == best.side]
+        # the side's design, held-out Grams, residual and rows (the same blocks on both sides)
+        on, grams, around, moving = (
+            (thrust.design, thrust_side.held, thrust.around, np.array([THRUST]))
+            if best.side
+            else (design, held_out, around0, np.flatnonzero(design.moving))
+        )
         votes = 0
         # each resample's fits are near the full fits: their mean squares about those
-        near = {n: held_out.around(judged[n].fit, counted) for n in contenders} if len(contenders) > 1 else {}
+        near = (
+            {n: grams.around(fit_subset(on, [*current, n], covariance=False), counted) for n in contenders}
+            if len(contenders) > 1
+            else {}
+        )
         for blocks in resamples if len(contenders) > 1 else []:
-            fb = fit_subset(design, current, blocks=blocks, covariance=False)
-            mb = np.maximum(around0.mean_squares(fb), 1e-30)
+            fb = fit_subset(on, current, blocks=blocks, covariance=False)
+            mb = np.maximum(around.mean_squares(fb), 1e-30)
             score = {}
             for n in contenders:
-                f = fit_subset(design, [*current, n], blocks=blocks, covariance=False)
+                f = fit_subset(on, [*current, n], blocks=blocks, covariance=False)
                 gain = float(np.mean(1 - near[n].mean_squares(f)[moving] / mb[moving]))
                 score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
             # the same effect in another of its forms is a vote for the effect
@@ -1390,9 +1549,10 @@ def select(
             chosen = [by_name[n] for n in others[1:]]
             cross = _CrossParts.of(fold, others, chosen, settings) if fold else None
             friction = frozenset(_friction_axes(chosen))
+            thrust = thrust_side.step(others, chosen, counted) if thrust_side else None
 
             context = (others, fit_o, r0, mse0, settings, rivals, counted, beside, cross)
-            j = _judged_again(design, by_name[name], context, friction, probes, periodic)
+            j = _judged_again(design, by_name[name], context, friction, probes, periodic, thrust)
             if j.verdict == "passes":
                 continue
             # the same effect with a parameter at its bound, where the free fit now lies beyond it
@@ -1402,7 +1562,7 @@ def select(
                     jf
                     for c in by_name.values()
                     if c.fallback_for == name and _stands_in(c, {name: j})
-                    for jf in (_judged_again(design, c, context, friction, probes, periodic),)
+                    for jf in (_judged_again(design, c, context, friction, probes, periodic, thrust),)
                     if jf.verdict == "passes"
                 ),
                 None,
@@ -1436,11 +1596,12 @@ def _judged_again(
     friction: frozenset[int],
     probes,
     periodic: Sequence[tuple[Candidate, float]] = (),
+    thrust: _ThrustStep | None = None,
 ) -> Judgement:
     """The backward pass's judgement of ``cand`` beside the others (``context``: judge's arguments
     from ``current`` to ``cross``), its further orders included (:func:`_beyond_its_span`)."""
     others, _, _, _, settings, _, counted, _, _ = context
-    j = judge(design, cand, *context, friction_axes=friction, periodic=periodic)
+    j = judge(design, cand, *context, friction_axes=friction, periodic=periodic, thrust=thrust)
     return _beyond_its_span(design, j, cand, others, counted, probes, settings)
 
 

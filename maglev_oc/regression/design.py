@@ -24,6 +24,7 @@ block scores as a time series (:mod:`~maglev_oc.regression.solve`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -40,7 +41,15 @@ from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.terms import AccelerationTerm
 
-__all__ = ["COLUMN_CACHE_BYTES", "DEFAULT_BLOCK", "ColumnCache", "Design", "build_design", "reusing_columns"]
+__all__ = [
+    "COLUMN_CACHE_BYTES",
+    "DEFAULT_BLOCK",
+    "ColumnCache",
+    "Design",
+    "build_design",
+    "restated",
+    "reusing_columns",
+]
 
 DEFAULT_BLOCK = 0.5
 """[s] Block length: the covariance's spectral window (0.25 Hz) is well inside the block
@@ -487,6 +496,30 @@ def build_design(
         hold_n=int(holdout.sum()),
         at=at_vec,
         prepared=prep,
+    )
+
+
+def restated(design: Design, columns: np.ndarray, target: np.ndarray, weights: np.ndarray) -> Design:
+    """``design`` with other columns (P, 2, n), target (2, n) and per-axis weights (2,): the same
+    parameters, samples, fitted blocks and held-out part, the block sums recomputed, and no
+    errors-in-variables correction (the noise Grams zero): the regression restated in other units,
+    such as the currents the measured accelerations need
+    (:mod:`maglev_oc.diagnosis.thrust_current`)."""
+    weights = np.where(design.moving, np.asarray(weights, dtype=float), 0.0)
+    size = max(1, round(design.block_seconds / design.prepared.sample_time))
+    blocks = _blocks(design.fit, design.prepared.segment, size)
+    acc = _accumulate(columns, target, weights, blocks, design.prepared.segment, None)
+    hold_gram, hold_rhs = _held_out_normal_equations(columns, target, design.holdout)
+    hold = design.holdout
+    return dataclasses.replace(
+        design,
+        columns=columns,
+        target=target,
+        weights=weights,
+        **acc,
+        hold_gram=hold_gram,
+        hold_rhs=hold_rhs,
+        hold_yy=np.array([float(target[a, hold] @ target[a, hold]) for a in range(2)]),
     )
 
 

@@ -1,0 +1,209 @@
+"""Effects of the thrust current judged by how well they predict the logged thrust current.
+
+The selection judges a candidate by how much better the model, with it, predicts held-out
+accelerations from the logged signals. An effect proportional to the thrust current (a thrust
+ripple, the thrust's dependence on the gap, saturation) is then predicted from the logged thrust
+current, and where that current is mostly its logging error the prediction carries the error with
+it: on the independent generator's noisy rig, whose 5 kHz loop logs one control sample in five
+from observers 2.8 times faster than the papers' (currents as noisy as
+``../shared/logs/independent_clean.csv``'s), the error floor of the logged currents made 79-84 % of
+the base fit's horizontal residual on five clean logs (99 % on the shared log; 13-23 % on the
+default rig), and a 30 % thrust ripple explained -1 % of the held-out error at z 0.4. Whatever its
+size it could not be told: its column is the error times the ripple.
+
+The same log read the other way round shows it. The accelerations are measured well (10 um
+encoders, a matched filter), so the model is inverted on them, sample by sample
+(:func:`felt_currents`: the currents that make the model produce the measured accelerations, by
+Newton's method), and the residual is the logged current minus that felt current. To first order
+in a change ``dq`` of the parameters this residual is ``J^-1 X(felt) dq`` (``J`` the model's
+Jacobian in the currents, ``X(felt)`` the design's columns at the felt currents): the whole
+regression restated in amperes (:func:`thrust_side`, :func:`maglev_oc.regression.design.restated`)
+with columns free of the logged currents' error. The same 30 % ripple then explained 17 % of the
+held-out thrust-current error at z 5.2 (seed 202 of bench/diagnose_limits.py); on five clean logs
+of that rig no candidate of the thrust current explained more than 0.1 % (z at most 2.6).
+
+The columns at the felt currents carry the acceleration's own measurement error instead, as much
+as the target does, so this side is used only where the currents' error dominates
+(:data:`ERROR_SHARE`) and only for the candidates whose horizontal force is proportional to the
+thrust current (``Candidate.thrust_proportional``), on the thrust current alone: the levitation
+current, several amperes, is logged with a small relative error, and judged there the
+attraction's gap dependence took the residual of an amplifier lag (eleven_07 of the independent
+set: 10.9 % at z 5.1).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import weakref
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.base import AXIS_INDEX
+from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.design import Design, build_design, restated
+from maglev_oc.regression.solve import fit_subset
+
+__all__ = [
+    "ERROR_SHARE",
+    "ThrustSide",
+    "error_share",
+    "felt_currents",
+    "judged_on_thrust_current",
+    "thrust_side",
+]
+
+ERROR_SHARE = 0.5
+"""The share of the base fit's horizontal residual variance the logged thrust current's error
+floor must explain for the thrust side to be used: the residual is then mostly that error.
+The independent generator's noisy rig 0.79-0.84 on five clean logs, ``../shared/logs``' clean log
+0.99, its default rig 0.13-0.23 (bench/README, *Judged on the thrust current*)."""
+
+THRUST = AXIS_INDEX["horizontal"]
+"""The row of the restated design that holds the thrust current (the row of the axis it drives)."""
+
+
+def felt_currents(prepared: PreparedLogs, model: StageModel, iterations: int = 3) -> PreparedLogs | None:
+    """``prepared`` with the currents (and their rates) that make ``model`` produce the measured
+    accelerations: the currents the plant felt, within the band, as far as the model is right
+    (Newton on the two accelerations in the two currents from the logged ones). None when the
+    model cannot be inverted on some valid sample (a singular Jacobian, a non-finite value)."""
+    xs, us, acc = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("a", 2)
+    out = model.f(xs, us)[[1, 3]]
+    step = ca.Function("newton", [xs, us, acc], [us - ca.solve(ca.jacobian(out, us), out - acc)])
+    n = prepared.n
+    mapped = step.map(n)
+    u = prepared.u.copy()
+    for _ in range(iterations):
+        u = np.asarray(mapped(prepared.x, u, prepared.acc))
+    # on an axis that does not move its acceleration is not measured: the logged current stays
+    for a, moving in enumerate(prepared.moving):
+        if not moving:
+            u[1 - a] = prepared.u[1 - a]
+    if not np.all(np.isfinite(u[:, prepared.valid])):
+        return None
+    u = np.where(np.isfinite(u), u, prepared.u)
+    du = np.empty_like(u)
+    for start, stop in prepared.segment_bounds:
+        du[:, start:stop] = np.gradient(u[:, start:stop], prepared.sample_time, axis=1)
+    return dataclasses.replace(prepared, u=u, du=du)
+
+
+@dataclass(frozen=True, eq=False)
+class ThrustSide:
+    """The regression restated in amperes.
+
+    ``design`` has the original design's parameters, samples and blocks; row a of its target and
+    columns is the current that drives axis a (i_d for the vertical axis, i_q for the horizontal
+    one), its target the logged current in the model's linearization about the base fit, so that
+    the residual of any fit is the logged current minus the current the fitted model needs for
+    the measured accelerations. ``per_ampere``: (n_hold,) the horizontal acceleration per ampere
+    of thrust current on the held-out samples [m/s^2/A], which turns a change of the predicted
+    thrust current back into the force's acceleration. ``share``: of the base fit's horizontal
+    residual variance, what the logged thrust current's error floor explains."""
+
+    design: Design
+    per_ampere: np.ndarray
+    share: float
+
+
+def judged_on_thrust_current(cand: Candidate, side: ThrustSide | None) -> bool:
+    """Whether ``cand`` is judged on the thrust side too: there is one, and its force is the thrust
+    current's on the horizontal axis alone."""
+    return side is not None and cand.thrust_proportional and cand.axis == "horizontal"
+
+
+def _inverse_jacobian(model: StageModel, prepared: PreparedLogs) -> tuple[np.ndarray, np.ndarray]:
+    """(J^-1 (2 currents, 2 axes, n), J (2 axes, 2 currents, n)): the model's Jacobian of the two
+    accelerations in the two currents at ``prepared``'s states and currents, and its inverse."""
+    xs, us = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
+    jac = ca.jacobian(model.f(xs, us)[[1, 3]], us)
+    fn = ca.Function("jacobian", [xs, us], [ca.reshape(jac, 4, 1)]).map(prepared.n)
+    J = np.asarray(fn(prepared.x, prepared.u)).reshape(2, 2, prepared.n, order="F")
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = np.stack([np.stack([J[1, 1], -J[0, 1]]), np.stack([-J[1, 0], J[0, 0]])]) / det
+    return inverse, J
+
+
+_SIDES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""design -> (model, min_share, its thrust side): the selections on one design and its detection
+limits share one restated design (0.8 s of a 60 s log's diagnosis each), which lives as long as
+the design does."""
+
+
+def thrust_side(design: Design, model: StageModel, min_share: float = ERROR_SHARE) -> ThrustSide | None:
+    """The thrust side of ``design`` (whose constants' references ``model`` holds), or None when the
+    horizontal axis does not move, the model cannot be inverted on the log, or the logged thrust
+    current's error floor explains less than ``min_share`` of the base fit's horizontal residual.
+
+    The felt currents are the base fit's; the restated target is
+    ``J^-1 (y - X(logged) q) + J^-1 X(felt) q`` with ``q`` that fit, whose residual at ``q`` is
+    the base fit's residual in amperes."""
+    known = _SIDES.get(design)
+    if known is not None and known[0] is model and known[1] == min_share:
+        return known[2]
+    side = _restated(design, model, min_share)
+    _SIDES[design] = (model, min_share, side)
+    return side
+
+
+def error_share(design: Design, model: StageModel) -> float:
+    """Of the base fit's horizontal residual variance on the fitted samples of ``design``, the share
+    the logged thrust current's error floor explains (``PreparedLogs.current_noise`` through the
+    filter, times the thrust's acceleration per ampere at the logged currents); 0 when the
+    horizontal axis does not move or the currents have no error floor."""
+    prep = design.prepared
+    if not prep.moving[THRUST] or not np.any(prep.current_noise > 0):
+        return 0.0
+    residual = _base_residual(design)
+    _, J = _inverse_jacobian(model, prep)
+    fitted = design.fit
+    floor = prep.current_noise[0] * float(np.sum(prep.kernel**2)) * np.mean(J[THRUST, 0, fitted] ** 2)
+    return float(floor / max(np.mean(residual[THRUST, fitted] ** 2), 1e-300))
+
+
+def _base_residual(design: Design) -> np.ndarray:
+    base = fit_subset(design, ["base"], covariance=False)
+    return design.target - np.tensordot(base.coef, design.columns[base.index], axes=1)
+
+
+def _restated(design: Design, model: StageModel, min_share: float) -> ThrustSide | None:
+    share = error_share(design, model)
+    if share < min_share:
+        return None
+    prep = design.prepared
+    felt = felt_currents(prep, model)
+    if felt is None:
+        return None
+    base = fit_subset(design, ["base"], covariance=False)
+    residual = design.target - np.tensordot(base.coef, design.columns[base.index], axes=1)
+    inverse, J = _inverse_jacobian(model, felt)
+    estimated = tuple(design.names[i] for i in design.groups["base"])
+    at_felt = build_design(
+        felt,
+        model,
+        estimate=estimated,
+        terms=design.terms,
+        fit=design.fit,
+        holdout=design.holdout,
+        at=design.at,
+        weights=design.weights,
+    ).columns
+    rows = [1, 0]  # currents (i_q, i_d) -> the rows of the axes they drive (vertical, horizontal)
+    columns = np.einsum("ian,pan->pin", inverse, at_felt)[:, rows]
+    del at_felt
+    target = np.einsum("ian,an->in", inverse, residual)[rows] + np.tensordot(
+        base.coef, columns[base.index], axes=1
+    )
+    bad = ~(np.all(np.isfinite(target), axis=0) & np.all(np.isfinite(columns), axis=(0, 1)))
+    if np.any(bad & (design.fit | design.holdout)):
+        return None
+    columns[:, :, bad], target[:, bad] = 0.0, 0.0  # samples neither fitted nor held out
+    left = target - np.tensordot(base.coef, columns[base.index], axes=1)
+    rms = np.sqrt(np.mean(left[:, design.fit] ** 2, axis=1))
+    weights = np.where(rms > 0, 1.0 / np.maximum(rms, 1e-300), 0.0)
+    return ThrustSide(restated(design, columns, target, weights), J[THRUST, 0, design.holdout], share)

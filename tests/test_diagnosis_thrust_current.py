@@ -1,0 +1,129 @@
+"""The thrust side (``maglev_oc.diagnosis.thrust_current``): effects of the thrust current judged by
+how well they predict the logged thrust current.
+
+* ``restated`` with a design's own columns, target and weights gives back the block sums and
+  held-out normal equations ``build_design`` accumulated (another code path, to 1e-9), without the
+  errors-in-variables correction;
+* the restated residual is the acceleration residual in amperes: the model's Jacobian in the
+  currents, by central differences of its right-hand side (not CasADi's derivative), times the
+  base fit's restated residual gives back its acceleration residual (to 1e-4 of its RMS, the
+  differences' truncation);
+* the side is used where the logged thrust current's error floor is most of the horizontal
+  residual: on a clean log of the generator's noisy rig (0.79-0.84 of it on five seeds, bench/README
+  *Judged on the thrust current*), not on its default rig (0.13-0.23);
+* slow: on the noisy rig a 5 % thrust ripple (the generator's large one) that the accelerations do
+  not show is claimed from the thrust current and sized within 30 % (the issue's size criterion),
+  while the clean log of the same seed claims nothing and gives the ripple a detection limit below
+  5 % (the limit is the size the log would have shown).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis.candidate import LibraryContext
+from maglev_oc.diagnosis.currents import ripple_candidate
+from maglev_oc.diagnosis.selection import THRUST_SIDE
+from maglev_oc.diagnosis.thrust_current import ERROR_SHARE, error_share, felt_currents, thrust_side
+from maglev_oc.regression.data import prepare
+from maglev_oc.regression.design import build_design, restated
+from maglev_oc.regression.solve import fit_subset
+from tests.diagnosis_support import diagnose_path
+from tests.independent import write_log
+from tests.independent.effects import ThrustRipple
+from tests.independent.simulate import Rig, Scenario, simulate
+
+NOISY = Rig(observer_bandwidth=2800.0)
+"""The generator's rig with currents as noisy as ``../shared/logs/independent_clean.csv``'s
+(``bench/diagnose_rigs.py``'s ``obs2800``)."""
+SEED = 204
+"""A seed whose 5 % ripple the thrust side showed (z 3.7) and the accelerations did not (bench/README,
+*Judged on the thrust current*)."""
+
+
+def _design(path, model):
+    data = prepare([read_log(path)], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    ripple = ripple_candidate(LibraryContext(model, data))
+    return build_design(data, model, terms=[ripple.term], fit=fit, holdout=hold)
+
+
+@pytest.fixture(scope="module")
+def noisy_clean(tmp_path_factory):
+    """A clean 60 s log of the noisy rig: its path."""
+    run = simulate(Scenario(name="clean", seed=SEED, effects=(), rig=NOISY))
+    path, _ = write_log(run, tmp_path_factory.mktemp("thrust_side"), stem="clean")
+    return path
+
+
+@pytest.fixture(scope="module")
+def noisy_design(noisy_clean, model):
+    return _design(noisy_clean, model)
+
+
+def _close(a, b, rtol=1e-9):
+    scale = max(float(np.max(np.abs(b))), 1e-300)
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) <= rtol * scale
+
+
+def test_restated_with_its_own_columns_is_the_design(noisy_design):
+    d = noisy_design
+    again = restated(d, d.columns, d.target, d.weights)
+    for name in ("gram", "rhs", "yy", "hold_gram", "hold_rhs", "hold_yy"):
+        assert _close(getattr(again, name), getattr(d, name)), name
+    assert np.array_equal(again.block_of, d.block_of)
+    assert not np.any(again.noise)  # no errors-in-variables correction in other units
+
+
+def test_the_restated_residual_is_the_acceleration_residual_in_amperes(noisy_design, model):
+    side = thrust_side(noisy_design, model)
+    assert side is not None
+    base = fit_subset(noisy_design, ["base"], covariance=False)
+    residual = noisy_design.target - np.tensordot(base.coef, noisy_design.columns[base.index], axes=1)
+    in_amperes = side.design.target - np.tensordot(base.coef, side.design.columns[base.index], axes=1)
+    # the Jacobian by central differences at the felt currents, on the held-out samples
+    felt = felt_currents(noisy_design.prepared, model)
+    hold = np.flatnonzero(noisy_design.holdout)[::50]
+    f = model.f.map(hold.size)
+    x, u = felt.x[:, hold], felt.u[:, hold]
+    J = np.empty((2, 2, hold.size))  # (axis, current, sample)
+    for i in range(2):
+        h = np.zeros((2, 1))
+        h[i] = 1e-4
+        plus, minus = (np.asarray(f(x, u + s * h))[[1, 3]] for s in (1.0, -1.0))
+        J[:, i] = (plus - minus) / 2e-4
+    currents = in_amperes[[1, 0]][:, hold]  # rows (vertical: i_d, horizontal: i_q) -> (i_q, i_d)
+    back = np.einsum("ain,in->an", J, currents)
+    for a in np.flatnonzero(noisy_design.moving):
+        rms = float(np.sqrt(np.mean(residual[a, hold] ** 2)))
+        assert float(np.max(np.abs(back[a] - residual[a, hold]))) <= 1e-4 * rms, a
+
+
+def test_the_side_is_used_where_the_logged_thrust_current_is_mostly_its_error(noisy_design, generated, model):
+    noisy = error_share(noisy_design, model)
+    default = error_share(_design(generated("clean", "clean_01")[0], model), model)
+    assert ERROR_SHARE < noisy < 1.2  # a share: at most 1, up to the floor's own estimation error
+    assert 0.0 < default < ERROR_SHARE
+    assert thrust_side(_design(generated("clean", "clean_01")[0], model), model) is None
+
+
+@pytest.mark.slow
+def test_a_ripple_the_accelerations_cannot_show_is_seen_on_the_thrust_current(noisy_clean, tmp_path):
+    run = simulate(
+        Scenario(name="ripple", seed=SEED, effects=(ThrustRipple(ratio=0.05, ratio2=0.0),), rig=NOISY)
+    )
+    path, _ = write_log(run, tmp_path, stem="ripple")
+    found = diagnose_path(path)
+    assert [e.name for e in found.effects] == ["thrust_ripple"]
+    ripple = found.effects[0]
+    assert ripple.judged_on == THRUST_SIDE
+    step = found.selection.steps[0].judgements["thrust_ripple"]
+    # on the accelerations alone it would not have passed: the side is what showed it
+    assert step.side == THRUST_SIDE
+    assert abs(ripple.parameters["amplitude"].value - 0.05) <= 0.3 * 0.05
+    clean = diagnose_path(noisy_clean)
+    assert clean.effects == []
+    limits = {d.name: d for d in clean.detection_limits}
+    assert limits["thrust_ripple"].value < 0.05
