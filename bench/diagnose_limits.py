@@ -18,8 +18,10 @@ and is claimed from about it up. Kinds and their size (the limit's parameter):
   generator's default 2 N s/m viscous part), the Coulomb force [N]; the generator's loop is
   unstable with it below about 0.1 N on the noisy rig.
 
-Prints one JSON line per seed (the limit, and per size whether the effect was claimed with its
-selection z) and appends it to ``OUT/limits.jsonl``. Not run in CI.
+Prints one JSON line per seed (the limit and what it was judged on, and per size whether the effect
+was claimed, its selection z, whether the accelerations or the logged thrust current showed it
+(``maglev_oc.diagnosis.thrust_current``) and its size) and appends it to ``OUT/limits.jsonl``. Not
+run in CI.
 """
 
 from __future__ import annotations
@@ -101,6 +103,7 @@ def main() -> None:
             "kind": args.kind,
             "limit": None if limit is None or not math.isfinite(limit.value) else limit.value,
             "limit_reason": None if limit is None else limit.reason,
+            "limit_judged_on": None if limit is None else (limit.side or "accelerations"),
             "clean_claims": [e.name for e in clean.effects],
             "sizes": {},
         }
@@ -113,10 +116,18 @@ def main() -> None:
                 "claimed": name in [e.name for e in d.effects],
                 "claims": [e.name for e in d.effects],
                 "z": None if j is None else j.z,
+                "judged_on": None if j is None else (j.side or "accelerations"),
+                "size": next((_size(e) for e in d.effects if e.name == name), None),
             }
         print(json.dumps(row), flush=True)
         with open(args.out / "limits.jsonl", "a") as fh:
             fh.write(json.dumps(row) + "\n")
+
+
+def _size(effect) -> float | None:
+    """The claimed effect's first physical parameter (the limit's)."""
+    first = next(iter(effect.parameters.values()), None)
+    return None if first is None else first.value
 
 
 if __name__ == "__main__":

@@ -194,12 +194,14 @@ def test_json_follows_the_spec_contract(generated, tmp_path):
     assert ranking[first["chosen"]] == pytest.approx(e["holdout_gain"])
     assert not e["runner_up"].startswith("guide_friction_horizontal")  # another effect, not a form
     for cand in first["candidates"]:
-        assert set(cand) == {"name", "verdict", "holdout_gain", "z", "wald", "vif"}
+        assert set(cand) == {"name", "verdict", "holdout_gain", "z", "wald", "vif", "judged_on"}
         assert cand["wald"] is None or cand["wald"] >= 0  # a quadratic form in the covariance
+        # a default-rig log: its logged thrust current is not mostly error, so no thrust side
+        assert cand["judged_on"] == "accelerations"
     gains = [c["holdout_gain"] for c in first["candidates"] if c["holdout_gain"] is not None]
     assert gains == sorted(gains, reverse=True)  # listed from the most helpful down
     for r in j["rejected"]:
-        assert set(r) == {"name", "verdict", "reason", "holdout_gain", "z"} and r["reason"]
+        assert set(r) == {"name", "verdict", "reason", "holdout_gain", "z", "judged_on"} and r["reason"]
 
 
 def test_bad_or_short_logs_are_refused(generated, tmp_path, capsys):

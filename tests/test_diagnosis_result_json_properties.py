@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.result import Diagnosis, NotSeparable
+from maglev_oc.diagnosis.selection import THRUST_SIDE
 from maglev_oc.results import Estimate, PerAxis, check_result
 from maglev_oc.validation import Validation
 from tests.diagnosis_support import stub_diagnosis
@@ -28,7 +29,9 @@ from tests.diagnosis_support import stub_diagnosis
 
 # --- the result's JSON and text ------------------------------------------------------------------------
 def _judgement(name: str, gain: float, verdict: str = "passes"):
-    return SimpleNamespace(name=name, verdict=verdict, reason="", gain=gain, z=3.0 * gain, wald=1.0, vif=1.0)
+    return SimpleNamespace(
+        name=name, verdict=verdict, reason="", gain=gain, z=3.0 * gain, wald=1.0, vif=1.0, side=""
+    )
 
 
 def _stub_diagnosis(**changes) -> Diagnosis:
@@ -230,7 +233,10 @@ def test_the_metrics_name_their_si_units():
 def test_every_judged_candidate_reports_its_gain_and_z_under_the_same_keys():
     # effects and rejected candidates are judged by the same numbers; the JSON gives them the
     # same names (a reader of the SPEC 3 contract looks up "holdout_gain" and "z" in both)
-    judged = SimpleNamespace(name="thrust_ripple", verdict="not significant", reason="r", gain=0.004, z=1.3)
+    # and what the held-out test predicted: the accelerations, or the logged thrust current
+    judged = SimpleNamespace(
+        name="thrust_ripple", verdict="not significant", reason="r", gain=0.004, z=1.3, side=THRUST_SIDE
+    )
     d = dataclasses.replace(stub_diagnosis(), rejected=[judged])
     (entry,) = d.to_dict()["rejected"]
     assert entry == {
@@ -239,6 +245,7 @@ def test_every_judged_candidate_reports_its_gain_and_z_under_the_same_keys():
         "reason": "r",
         "holdout_gain": 0.004,
         "z": 1.3,
+        "judged_on": THRUST_SIDE,
     }
 
 

@@ -128,6 +128,18 @@ logs differed by a factor 1.09-1.20 (z up to 3.5: small differences, well measur
 where a sinusoid of one size no longer describes the force: one half's force is more than twice the
 other's.
 
+**The thrust side.** Where the logged thrust current's error floor is most of the horizontal
+residual (:mod:`~maglev_oc.diagnosis.thrust_current`: a fast loop logged one sample in five), an
+effect proportional to the thrust current (``Candidate.thrust_proportional``) that the
+accelerations do not show by test 1 is judged again on the regression restated in amperes, which
+predicts the logged thrust current from the measured motion with columns at the currents the
+plant felt (:class:`_ThrustStep`). If it passes test 1 there (the same thresholds, over the same
+quarter and cross-fitted parts), the Wald test, the size (the change of the predicted thrust
+current times the thrust per ampere) and the rivals are that side's too, the others (separability,
+plausibility, the halves) the accelerations'; its ``Judgement.side`` says so, and its confidence is
+voted among the candidates passing on that side. Its gain in the ranking is the thrust current's
+drop averaged over the moving axes, as an effect of one axis's is.
+
 Among the candidates that pass all six the one with the largest gain is added; the selection
 stops when none passes or after ``max_effects``. The confidence of each choice is the share of
 block-bootstrap resamples of the training blocks in which the same candidate has the largest

@@ -141,7 +141,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             plain(e.name),
             effect_sizes(e),
-            f"claimed: held-out error −{_drop(1.0, 1.0 - e.gain)} (z = {e.z:.1f}), "
+            f"claimed: held-out {_held_out_what(e.judged_on)} −{_drop(1.0, 1.0 - e.gain)} (z = {e.z:.1f}), "
             f"chosen in {100 * e.confidence:.0f} % of resamples",
         )
         for e in diag.effects
@@ -168,6 +168,20 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
             )
         )
     return rows
+
+
+def _held_out_what(judged_on: str) -> str:
+    """What an effect's held-out gain is the drop of: the acceleration error, or the error of the
+    logged thrust current predicted from the measured motion (``Effect.judged_on``)."""
+    return "error" if judged_on == "accelerations" else "error of the thrust current"
+
+
+SIDE_SENTENCE = (
+    "It was seen by predicting the logged thrust current from the measured motion: on this log that "
+    "current is mostly its logging error, so accelerations predicted from it could not show an effect "
+    "proportional to it."
+)
+"""Said of a finding the thrust side showed (:mod:`maglev_oc.diagnosis.thrust_current`)."""
 
 
 LIMITS_ON_SCORECARD = 3
@@ -205,6 +219,7 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
     if diag.effects:
         out += [
             f"{k}. {plain(e.name).capitalize()}: {e.finding} {e.explanation}"
+            + ("" if e.judged_on == "accelerations" else f" {SIDE_SENTENCE}")
             for k, e in enumerate(diag.effects, 1)
         ]
     elif diag.not_separable:
@@ -258,7 +273,12 @@ def _limit_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
         "physics": "plausibility",
     }
     return [
-        (plain(d.name), d.parameter.replace("_", " "), limit_size(d), words.get(d.binding, d.binding))
+        (
+            plain(d.name),
+            d.parameter.replace("_", " "),
+            limit_size(d),
+            words.get(d.binding, d.binding) + (" (thrust current)" if d.side else ""),
+        )
         for d in diag.detection_limits
         if math.isfinite(d.value)
     ]
