@@ -821,7 +821,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if math.isfinite(before):
             print(f"  held-out error {a}: {before:.4g} -> {diag.error_after[a]:.4g} m/s^2")
     for e in diag.effects:
-        print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}]: {e.finding}")
+        seen = "" if e.judged_on == "accelerations" else f", seen predicting {e.judged_on}"
+        print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")
     for n in diag.not_separable:
         print(f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}")
     for u in diag.unexplained:

@@ -141,7 +141,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             plain(e.name),
             effect_sizes(e),
-            f"claimed: held-out {_held_out_what(e.judged_on)} −{_drop(1.0, 1.0 - e.gain)} (z = {e.z:.1f}), "
+            f"claimed: held-out error −{_drop(1.0, 1.0 - e.gain)}{_predicting(e.judged_on)} (z = {e.z:.1f}), "
             f"chosen in {100 * e.confidence:.0f} % of resamples",
         )
         for e in diag.effects
@@ -170,10 +170,10 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
     return rows
 
 
-def _held_out_what(judged_on: str) -> str:
-    """What an effect's held-out gain is the drop of: the acceleration error, or the error of the
-    logged thrust current predicted from the measured motion (``Effect.judged_on``)."""
-    return "error" if judged_on == "accelerations" else "error of the thrust current"
+def _predicting(judged_on: str) -> str:
+    """What the held-out error of an effect's claim was the error of (``Effect.judged_on``): nothing
+    said for the accelerations, the logged thrust current named."""
+    return "" if judged_on == "accelerations" else " predicting the logged thrust current"
 
 
 SIDE_SENTENCE = (
