@@ -298,7 +298,9 @@ _LIMIT_NOTE = (
     "can still refuse an effect larger than its limit, and in closed loop the regulator's own response "
     "hides part of a real effect. On the independent generator's logs real effects were claimed from 0.8 to "
     "1.6 times these limits on a quiet rig; on one whose logged currents are 20 times noisier, "
-    "mostly from 1 to 3 times, up to 16 times, and some thrust ripples not at all (bench/README)."
+    "mostly from 1 to 3 times, up to 16 times (bench/README). Where a limit's test is marked "
+    "(thrust current), the effect was judged predicting the logged thrust current from the measured "
+    "motion, as the diagnosis judges effects of that current when its logging error dominates."
 )
 
 
