@@ -166,6 +166,22 @@ def error_share(design: Design, model: StageModel) -> float:
     return float(floor / max(np.mean(residual[THRUST, fitted] ** 2), 1e-300))
 
 
+_CHUNK = 5_000
+"""Samples turned into amperes at a time (:func:`_in_amperes`)."""
+
+
+def _in_amperes(rows: np.ndarray, inverse: np.ndarray) -> np.ndarray:
+    """``rows`` (..., 2 axes, n), accelerations, overwritten with ``inverse`` (2 currents, 2 axes, n)
+    times them, in the rows of the axes the currents drive: row 0 (vertical) i_d, row 1
+    (horizontal) i_q. Returns ``rows``."""
+    for start in range(0, rows.shape[-1], _CHUNK):
+        s = slice(start, start + _CHUNK)
+        vertical, horizontal = rows[..., 0, s].copy(), rows[..., 1, s].copy()
+        rows[..., 0, s] = inverse[1, 0, s] * vertical + inverse[1, 1, s] * horizontal  # i_d
+        rows[..., 1, s] = inverse[0, 0, s] * vertical + inverse[0, 1, s] * horizontal  # i_q
+    return rows
+
+
 def _base_residual(design: Design) -> np.ndarray:
     base = fit_subset(design, ["base"], covariance=False)
     return design.target - np.tensordot(base.coef, design.columns[base.index], axes=1)
@@ -183,7 +199,7 @@ def _restated(design: Design, model: StageModel, min_share: float) -> ThrustSide
     residual = design.target - np.tensordot(base.coef, design.columns[base.index], axes=1)
     inverse, J = _inverse_jacobian(model, felt)
     estimated = tuple(design.names[i] for i in design.groups["base"])
-    at_felt = build_design(
+    columns = build_design(
         felt,
         model,
         estimate=estimated,
@@ -192,13 +208,10 @@ def _restated(design: Design, model: StageModel, min_share: float) -> ThrustSide
         holdout=design.holdout,
         at=design.at,
         weights=design.weights,
-    ).columns
-    rows = [1, 0]  # currents (i_q, i_d) -> the rows of the axes they drive (vertical, horizontal)
-    columns = np.einsum("ian,pan->pin", inverse, at_felt)[:, rows]
-    del at_felt
-    target = np.einsum("ian,an->in", inverse, residual)[rows] + np.tensordot(
-        base.coef, columns[base.index], axes=1
-    )
+    ).columns  # its own copy, turned into amperes in place, a chunk at a time: the peak memory is
+    # the two designs (a 5-minute log's is about 0.5 GB each), not three
+    _in_amperes(columns, inverse)
+    target = _in_amperes(residual.copy(), inverse) + np.tensordot(base.coef, columns[base.index], axes=1)
     bad = ~(np.all(np.isfinite(target), axis=0) & np.all(np.isfinite(columns), axis=(0, 1)))
     if np.any(bad & (design.fit | design.holdout)):
         return None
