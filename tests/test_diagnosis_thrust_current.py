@@ -12,8 +12,8 @@ how well they predict the logged thrust current.
   the currents that make the model produce the measured accelerations), up to the ratio of the
   fitted C1 to the model's, within 5 % of how far the logged one is from it;
 * the side is used where the logged thrust current's error floor is most of the horizontal
-  residual: on a clean log of the generator's noisy rig (0.79-0.84 of it on five seeds, bench/README
-  *Judged on the thrust current*), not on its default rig (0.13-0.23);
+  residual no column explains: on a clean log of the generator's noisy rig (1.03-1.40 times it on
+  five seeds, bench/README *Judged on the thrust current*), not on its default rig (0.23-0.25);
 * slow: on the noisy rig a 5 % thrust ripple (the generator's large one) that the accelerations do
   not show is claimed from the thrust current and sized within 30 % (the issue's size criterion),
   while the clean log of the same seed claims nothing and gives the ripple a detection limit below
@@ -124,7 +124,9 @@ def test_the_model_restated_in_amperes_needs_the_felt_thrust_current_not_the_log
 def test_the_side_is_used_where_the_logged_thrust_current_is_mostly_its_error(noisy_design, generated, model):
     noisy = error_share(noisy_design, model)
     default = error_share(_design(generated("clean", "clean_01")[0], model), model)
-    assert ERROR_SHARE < noisy < 1.2  # a share: at most 1, up to the floor's own estimation error
+    # the floor over the residual no column explains: above 1 where the logged currents' columns
+    # absorb part of their own error (1.03-1.40 on five noisy clean logs, bench/README)
+    assert ERROR_SHARE < noisy < 2.0
     assert 0.0 < default < ERROR_SHARE
     assert thrust_side(_design(generated("clean", "clean_01")[0], model), model) is None
 
