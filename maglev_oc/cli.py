@@ -799,6 +799,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     from maglev_oc.data.logs import check_excitation, read_log
     from maglev_oc.diagnosis.pipeline import diagnose
+    from maglev_oc.diagnosis.selection import SIDE_WORDS
     from maglev_oc.diagnosis.stage_file import diagnosis_stage_file
     from maglev_oc.fileio import write_text_atomic
     from maglev_oc.model.stagefile import StageFile
@@ -821,7 +822,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if math.isfinite(before):
             print(f"  held-out error {a}: {before:.4g} -> {diag.error_after[a]:.4g} m/s^2")
     for e in diag.effects:
-        seen = "" if e.judged_on == "accelerations" else f", seen predicting {e.judged_on}"
+        seen = "" if e.judged_on == "accelerations" else f", seen predicting {SIDE_WORDS[e.judged_on]}"
         print(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")
     for n in diag.not_separable:
         print(f"  not separable: {n.name} (confounded with {', '.join(n.confounded_with)}): {n.experiment}")

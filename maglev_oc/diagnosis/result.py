@@ -10,7 +10,7 @@ import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.limits import DetectionLimit
-from maglev_oc.diagnosis.selection import Judgement, Selection
+from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Selection
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
@@ -208,7 +208,7 @@ class Diagnosis(Result):
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
         for e in self.effects:
-            seen = "" if e.judged_on == "accelerations" else f"; seen predicting {e.judged_on}"
+            seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"
             lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")
         for n in self.not_separable:
             lines.append(
@@ -218,7 +218,7 @@ class Diagnosis(Result):
             lines.append(f"  unexplained: {u.description}")
         for d in self.detection_limits:
             size = f"{d.value:.3g} {d.unit}" if math.isfinite(d.value) else d.reason
-            side = f" (predicting {d.side})" if d.side and math.isfinite(d.value) else ""
+            side = f" (predicting {SIDE_WORDS[d.side]})" if d.side and math.isfinite(d.value) else ""
             lines.append(
                 f"  not seen: {d.name} ({d.parameter}) — smallest size this log would show: {size}{side}"
             )

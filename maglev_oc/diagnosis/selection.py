@@ -189,9 +189,13 @@ EIV_REASON = "its columns are dominated by the errors of the logged currents"
 it is not significant (:func:`_verdict`): its columns are the logged currents' errors more than
 their signal, whatever the size of the effect (the detection limits read it so)."""
 
-THRUST_SIDE = "the logged thrust current"
-"""What a candidate judged on the thrust side (:mod:`~maglev_oc.diagnosis.thrust_current`) was judged
-by predicting."""
+THRUST_SIDE = "thrust_current"
+"""``Judgement.side`` (and ``judged_on`` in the JSON) of a candidate judged on the thrust side
+(:mod:`~maglev_oc.diagnosis.thrust_current`): its held-out test predicted the logged thrust current
+("accelerations" in the JSON otherwise)."""
+
+SIDE_WORDS = {"accelerations": "the accelerations", THRUST_SIDE: "the logged thrust current"}
+"""What each side's held-out test predicted, in words."""
 
 SMOOTH_POSITION = "a smooth dependence on the position"
 """What a position-periodic candidate seen over too few periods is confounded with."""
