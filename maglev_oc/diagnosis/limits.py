@@ -204,12 +204,11 @@ def detection_limits(
     if side is not None:
         per_unit = np.zeros((2, side.per_ampere.size))
         per_unit[THRUST] = side.per_ampere
-        side_fold = _CrossFit(side.design, settings.cross_parts) if settings.cross_parts else None
+        # the same parts as the accelerations' (the same blocks), so the same samples count there
         on_side = dataclasses.replace(
             ctx,
             design=side.design,
-            fold=side_fold,
-            counted_parts=side_fold.counted(chosen, settings) if side_fold else [],
+            fold=_CrossFit(side.design, settings.cross_parts) if settings.cross_parts else None,
             felt={},  # the restated columns are the felt currents' already
             per_unit=per_unit,
         )

@@ -129,7 +129,8 @@ where a sinusoid of one size no longer describes the force: one half's force is 
 other's.
 
 **The thrust side.** Where the logged thrust current's error floor is most of the horizontal
-residual (:mod:`~maglev_oc.diagnosis.thrust_current`: a fast loop logged one sample in five), an
+residual that no column of the design explains (:mod:`~maglev_oc.diagnosis.thrust_current`: a
+fast loop logged one sample in five), an
 effect proportional to the thrust current (``Candidate.thrust_proportional``) that the
 accelerations do not show by test 1 is judged again on the regression restated in amperes, which
 predicts the logged thrust current from the measured motion with columns at the currents the

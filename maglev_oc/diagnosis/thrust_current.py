@@ -57,10 +57,12 @@ __all__ = [
 ]
 
 ERROR_SHARE = 0.5
-"""The share of the base fit's horizontal residual variance the logged thrust current's error
-floor must explain for the thrust side to be used: the residual is then mostly that error.
-The independent generator's noisy rig 0.79-0.84 on five clean logs, ``../shared/logs``' clean log
-0.99, its default rig 0.13-0.23 (bench/README, *Judged on the thrust current*)."""
+"""How large the logged thrust current's error floor must be against the horizontal residual no
+column of the design explains (:func:`error_share`) for the thrust side to be used: that residual
+is then mostly the error. The independent generator's noisy rig 1.03-1.40 on five clean logs and
+1.08-1.25 on six pairs of a ripple beside a large effect, ``../shared/logs``' clean log 1.33, its
+default rig 0.23-0.25 on five clean logs and eight pairs (bench/README, *Judged on the thrust
+current*)."""
 
 THRUST = AXIS_INDEX["horizontal"]
 """The row of the restated design that holds the thrust current (the row of the axis it drives)."""
@@ -102,12 +104,10 @@ class ThrustSide:
     the residual of any fit is the logged current minus the current the fitted model needs for
     the measured accelerations. ``per_ampere``: (n_hold,) the horizontal acceleration per ampere
     of thrust current on the held-out samples [m/s^2/A], which turns a change of the predicted
-    thrust current back into the force's acceleration. ``share``: of the base fit's horizontal
-    residual variance, what the logged thrust current's error floor explains."""
+    thrust current back into the force's acceleration."""
 
     design: Design
     per_ampere: np.ndarray
-    share: float
 
 
 def judged_on_thrust_current(cand: Candidate, side: ThrustSide | None) -> bool:
@@ -138,7 +138,8 @@ the design does."""
 def thrust_side(design: Design, model: StageModel, min_share: float = ERROR_SHARE) -> ThrustSide | None:
     """The thrust side of ``design`` (whose constants' references ``model`` holds), or None when the
     horizontal axis does not move, the model cannot be inverted on the log, or the logged thrust
-    current's error floor explains less than ``min_share`` of the base fit's horizontal residual.
+    current's error floor is less than ``min_share`` of the horizontal residual no column of the
+    design explains (:func:`error_share`).
 
     The felt currents are the base fit's; the restated target is
     ``J^-1 (y - X(logged) q) + J^-1 X(felt) q`` with ``q`` that fit, whose residual at ``q`` is
@@ -152,17 +153,17 @@ def thrust_side(design: Design, model: StageModel, min_share: float = ERROR_SHAR
 
 
 def error_share(design: Design, model: StageModel) -> float:
-    """Of the horizontal residual variance on the fitted samples of ``design`` that none of its
-    columns explains (:func:`_unexplained`), the share the logged thrust current's error floor
-    explains (``PreparedLogs.current_noise`` through the filter, times the thrust's acceleration per
-    ampere at the logged currents); 0 when the horizontal axis does not move or the currents have
-    no error floor.
+    """The logged thrust current's error floor (``PreparedLogs.current_noise`` through the filter,
+    times the thrust's acceleration per ampere at the logged currents) over the horizontal residual
+    variance on the fitted samples of ``design`` that none of its columns explains
+    (:func:`_unexplained`); 0 when the horizontal axis does not move or the currents have no error
+    floor. Above 1 where the columns, made of the logged currents, absorb part of their own error.
 
     Against the residual left by every candidate and generic probe at once, not the base fit's: a
-    large effect beside a ripple (a cable carrier, a detent, a misaligned guide) otherwise took the
-    share below :data:`ERROR_SHARE` and the ripple off the thrust side (noisy-rig pairs of the
-    independent generator: 0.07-0.48 beside those, 0.78-1.03 beside friction, cogging or end
-    effects; bench/README, *Judged on the thrust current*)."""
+    large effect beside a ripple (a cable carrier, a detent, a misaligned guide) took the base
+    fit's share to 0.07-0.48 and the ripple off the thrust side (noisy-rig pairs of the independent
+    generator; 1.08-1.25 against the residual no column explains; bench/README, *Judged on the
+    thrust current*)."""
     prep = design.prepared
     if not prep.moving[THRUST] or not np.any(prep.current_noise > 0):
         return 0.0
@@ -207,8 +208,7 @@ def _in_amperes(rows: np.ndarray, inverse: np.ndarray) -> np.ndarray:
 
 
 def _restated(design: Design, model: StageModel, min_share: float) -> ThrustSide | None:
-    share = error_share(design, model)
-    if share < min_share:
+    if error_share(design, model) < min_share:
         return None
     prep = design.prepared
     felt = felt_currents(prep, model)
@@ -238,4 +238,4 @@ def _restated(design: Design, model: StageModel, min_share: float) -> ThrustSide
     left = target - np.tensordot(base.coef, columns[base.index], axes=1)
     rms = np.sqrt(np.mean(left[:, design.fit] ** 2, axis=1))
     weights = np.where(rms > 0, 1.0 / np.maximum(rms, 1e-300), 0.0)
-    return ThrustSide(restated(design, columns, target, weights), J[THRUST, 0, design.holdout], share)
+    return ThrustSide(restated(design, columns, target, weights), J[THRUST, 0, design.holdout])
