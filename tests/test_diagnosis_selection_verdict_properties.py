@@ -90,6 +90,23 @@ def test_an_effect_large_on_one_of_its_axes_is_not_too_small():
     assert _verdict_of(j) == "too small"
 
 
+def test_too_small_quotes_the_axes_it_was_judged_on():
+    # an effect of the currents' rates beside vertical friction is judged on the horizontal axis
+    # alone (pairs_05 of the independent set): its reason quoted the vertical axis's numbers
+    # (1.8e-3 RMS, 4.2e-3 at its peak: "too weak to be judged where largest") while the test
+    # used the horizontal axis's (1.6e-3 and 1.9e-3)
+    s = SelectionSettings()
+    hidden, judged = (0.8 * s.min_effect, 1.9 * s.min_effect), (0.7 * s.min_effect, 0.8 * s.min_effect)
+    j = _judgement(z=s.min_z + 1, wald=100.0, rms=(hidden[0], judged[0]), peak=(hidden[1], judged[1]))
+    cand = SimpleNamespace(axis="both", plausible=lambda physical: None)
+    verdict, reason = _verdict(
+        j, cand, np.array([1]), SimpleNamespace(compensation=1.0), SelectionSettings(), None
+    )
+    assert verdict == "too small"
+    assert f"{judged[0]:.2g} m/s^2 RMS ({judged[1]:.2g} in its largest" in reason
+    assert "judged where largest" not in reason  # its peak on the judged axis is under the size too
+
+
 def test_own_gain_is_the_mean_over_the_axes_it_acts_on():
     j = _judgement(z=5.0, wald=100.0, gain_axes=(0.02, 0.1))
     assert j.own_gain == pytest.approx(0.06, rel=1e-12)

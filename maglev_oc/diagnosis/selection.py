@@ -1079,11 +1079,14 @@ def _verdict(
     large = axes.size > 0 and np.max(rms[axes]) >= settings.min_effect
     locally = axes.size > 0 and np.max(peak[axes]) >= settings.min_effect and strong
     if not (large or locally):
+        # the numbers of the axes it was judged on (beside claimed friction, not the hidden axis's)
+        on = axes if axes.size else np.arange(rms.size)
+        rms_on, peak_on = float(np.max(rms[on])), float(np.max(peak[on]))
         return "too small", (
-            f"its acceleration is {np.max(rms):.2g} m/s^2 RMS ({np.max(peak):.2g} in its largest held-out "
+            f"its acceleration is {rms_on:.2g} m/s^2 RMS ({peak_on:.2g} in its largest held-out "
             f"half-second), below the {settings.min_effect:g} m/s^2 that the regulated stage would turn into "
             "one encoder count"
-            + ("" if np.max(peak) < settings.min_effect else " and too weak to be judged where largest")
+            + ("" if peak_on < settings.min_effect else " and too weak to be judged where largest")
         )
     if j.vif > settings.max_vif or j.confounded_with:
         what = ", ".join(j.confounded_with) if j.confounded_with else "the base constants"
