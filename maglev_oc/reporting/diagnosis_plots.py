@@ -174,17 +174,25 @@ def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 
         shown = panels(diag)[:n_effects]
         n = len(shown) + (study is not None)
         if n == 0:
+            if diag.unexplained:
+                return caption(fig, rect, "No effect of the library found; part of the residual unexplained")
             return caption(fig, rect, "Nothing found: the refitted papers' model explains the log")
         if not shown:  # nothing to compensate: the loop with the refitted constants, one line
             ax = fig.add_subplot(grid(fig, rect, 1, 1, top=0.075, bottom=0.085)[0, 0])
             _tracking_panel(ax, ((study.result_after, AFTER),))
             ax.set_title(f"FL regulator with the refitted constants, {study.scenario}", fontsize=8.5)
+            why = (
+                "No effect of the library found; part of the residual is unexplained (the scorecard), and "
+                "only a named effect is compensated."
+                if diag.unexplained
+                else "The refitted papers' model explains the log to its noise, so there is nothing to "
+                "compensate."
+            )
             return caption(
                 fig,
                 rect,
                 "Key figure: nothing found; the FL regulator with the refitted constants",
-                "The refitted papers' model explains the log to its noise, so there is nothing to "
-                "compensate. The closed loop's error (encoder − reference) on the rig twin.",
+                f"{why} The closed loop's error (encoder − reference) on the rig twin.",
             )
         gs = grid(fig, rect, 1, n, wspace=0.38, top=0.075, bottom=0.085)
         for k, (effect, a) in enumerate(shown):

@@ -222,6 +222,11 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
             + ("" if e.judged_on == "accelerations" else f" {SIDE_SENTENCE}")
             for k, e in enumerate(diag.effects, 1)
         ]
+    elif diag.unexplained:
+        out.append(
+            "No effect of the library found, but the refitted papers' model does not explain the log to its "
+            "noise: what is left is described below by what it depends on, not named."
+        )
     elif diag.not_separable:
         out.append(
             "No effect found that this log can tell from the lumped constants: the candidates below "
