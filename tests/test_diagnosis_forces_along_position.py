@@ -96,6 +96,12 @@ def test_a_candidate_not_separable_takes_part_of_the_residual_only_where_its_fit
 def test_the_report_does_not_say_the_model_explains_the_log(diagnosed):
     # the report's words said "the papers' model, refitted, explains the log to its noise" when
     # nothing was named, whatever was left unexplained
-    first = _finding_paragraphs(diagnosed)[0]
-    assert first.startswith("No effect of the library found")
-    assert "does not explain the log to its noise" in first
+    paragraphs = _finding_paragraphs(diagnosed)
+    assert paragraphs[0].startswith("No effect of the library found")
+    assert "does not explain the log to its noise" in paragraphs[0]
+    # the candidates judged and refused are in the report's words with their reason (the issue's
+    # "rejected ... candidates with the reason"; they were in the JSON only): here the end effects,
+    # whose fit grows at one end
+    rejected = [p for p in paragraphs if p.startswith("Judged and not claimed (implausible): end effects")]
+    assert len(rejected) == 1 and "one end up, the other down" in rejected[0]
+    assert "not claimed: end_effects (implausible)" in diagnosed.report()

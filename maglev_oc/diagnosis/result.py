@@ -216,6 +216,8 @@ class Diagnosis(Result):
             )
         for u in self.unexplained:
             lines.append(f"  unexplained: {u.description}")
+        for j in self.rejected:
+            lines.append(f"  not claimed: {j.name} ({j.verdict}): {j.reason}")
         for d in self.detection_limits:
             size = f"{d.value:.3g} {d.unit}" if math.isfinite(d.value) else d.reason
             side = f" (predicting {SIDE_WORDS[d.side]})" if d.side and math.isfinite(d.value) else ""

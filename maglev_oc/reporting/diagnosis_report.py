@@ -240,6 +240,7 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
         for n in diag.not_separable
     ]
     out += [f"Not explained by any effect of the library: {u.description}" for u in diag.unexplained]
+    out += [f"Judged and not claimed ({j.verdict}): {plain(j.name)}, {j.reason}." for j in diag.rejected]
     seen = [d for d in diag.detection_limits if math.isfinite(d.value)]
     if seen:
         smallest = ", ".join(f"{plain(d.name)} below {limit_size(d)}" for d in seen[:LIMITS_IN_WORDS])
