@@ -818,6 +818,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     doc["stage"] = diagnosis_stage_file(diag, model, geometry).to_dict()
     write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
     print(diag.message)
+    for w in diag.warnings:
+        print(f"  WARNING: {w}")
     for a, before in diag.error_before.items():
         if math.isfinite(before):
             print(f"  held-out error {a}: {before:.4g} -> {diag.error_after[a]:.4g} m/s^2")

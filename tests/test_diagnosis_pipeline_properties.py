@@ -426,3 +426,28 @@ def test_the_end_effects_profile_is_scanned_when_the_data_show_them_although_not
     below = math.nextafter(settings.min_gain, 0.0)
     assert pipeline._end_profile(session, None, library, sel(both, below), {}) is None
     assert calls == []
+
+
+def test_refitted_constants_no_rig_of_the_design_has_are_a_warning(model):
+    # identify's rule (PLAUSIBLE_CHANGE 30 % and PLAUSIBLE_Z 5 standard errors from the model's)
+    # applied to the constants refitted beside the effects: noisy pair 9872 of the independent
+    # generator ended with C1 = 2.34 +- 0.3 (the model's 14.2, the truth 14.7) beside a cable
+    # carrier sized 1.9 N/m for the true 6.6
+    ref = dict(zip(("C1", "C2", "C3", "C4"), model.constants.as_array(), strict=True))
+
+    def constants(**moved):
+        out = {k: Estimate(v, 0.01 * v, "") for k, v in ref.items()}
+        out.update({k: Estimate(*v, "") for k, v in moved.items()})
+        return out
+
+    (w,) = pipeline.constant_warnings(constants(C1=(2.342, 0.29)), model)
+    assert w.startswith("C1 refitted beside the effects is 2.342, 84% below") and "horizontal axis" in w
+    assert pipeline.constant_warnings(constants(), model) == ()
+    # within 30 %: a rig of the design (the papers' three NPFSI runs differ by up to 12 %)
+    assert pipeline.constant_warnings(constants(C1=(0.75 * ref["C1"], 0.01)), model) == ()
+    # beyond 30 % but within 5 standard errors: a constant the log determines poorly, not a warning
+    assert pipeline.constant_warnings(constants(C4=(2.36 * ref["C4"], 0.069)), model) == ()
+    (w,) = pipeline.constant_warnings(constants(C4=(2.36 * ref["C4"], 0.001)), model)
+    assert "above the model's" in w and "vertical axis" in w
+    # an axis that did not move has no constants (NaN): nothing to warn of
+    assert pipeline.constant_warnings(constants(C1=(math.nan, math.nan)), model) == ()

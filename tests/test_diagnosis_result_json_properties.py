@@ -181,7 +181,12 @@ def test_a_diagnosis_to_dict_carries_its_outcome_and_round_trips_through_json(su
     assert out["settings"] == {"holdout_fraction": 0.25} and out["timings"] == {"total": 1.5}
     assert out["error_before"] == {"vertical": 0.5, "horizontal": 0.25}
     assert out["candidate_ranking"] == [{"name": "cogging", "holdout_gain": 0.12}]
+    assert out["warnings"] == []
     assert json.loads(json.dumps(out)) == out
+    # a warning on the refitted constants is in the JSON and on the text report's second line
+    warned = dataclasses.replace(d, warnings=("C1 refitted beside the effects is 2.342",))
+    assert warned.to_dict()["warnings"] == ["C1 refitted beside the effects is 2.342"]
+    assert warned.report().splitlines()[1] == "  WARNING: C1 refitted beside the effects is 2.342"
 
 
 # --- the JSON's validation block ------------------------------------------------------------------------

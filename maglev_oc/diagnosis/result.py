@@ -107,6 +107,8 @@ class Diagnosis(Result):
     validation_after: Validation | None = None  # the model with the effects
     # the effects the log did not show, and the size below which it could not
     detection_limits: list[DetectionLimit] = field(default_factory=list)
+    # constants refitted beside the effects that no rig of this design has (pipeline.constant_warnings)
+    warnings: tuple[str, ...] = ()
 
     @property
     def ranking(self) -> list[tuple[str, float]]:
@@ -201,12 +203,14 @@ class Diagnosis(Result):
             "success": self.success,
             "status": self.status,
             "message": self.message,
+            "warnings": list(self.warnings),
             "timings": {k: _num(v) for k, v in self.timings.items()},
         }
 
     def report(self) -> str:
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
+        lines += [f"  WARNING: {w}" for w in self.warnings]
         for e in self.effects:
             seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"
             lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")

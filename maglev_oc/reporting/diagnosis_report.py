@@ -215,7 +215,7 @@ def scorecard_table(
 # --- the pages after the scorecard -----------------------------------------------------------------------
 def _finding_paragraphs(diag: Diagnosis) -> list[str]:
     """What was found, in the diagnosis's own sentences."""
-    out = []
+    out = [f"Warning: {w}." for w in diag.warnings]
     if diag.effects:
         out += [
             f"{k}. {plain(e.name).capitalize()}: {e.finding} {e.explanation}"
