@@ -187,6 +187,12 @@ def test_a_diagnosis_to_dict_carries_its_outcome_and_round_trips_through_json(su
     warned = dataclasses.replace(d, warnings=("C1 refitted beside the effects is 2.342",))
     assert warned.to_dict()["warnings"] == ["C1 refitted beside the effects is 2.342"]
     assert warned.report().splitlines()[1] == "  WARNING: C1 refitted beside the effects is 2.342"
+    # and on the PDF's first page: a scorecard row with the constant's clause
+    from maglev_oc.reporting.diagnosis_report import _finding_rows
+
+    warned = dataclasses.replace(d, warnings=("C1 refitted beside the effects is 2.342: the rest",))
+    rows = [r for r in _finding_rows(warned) if r[0] == "warning: a refitted constant"]
+    assert [r[1] for r in rows] == ["C1 refitted beside the effects is 2.342"]
 
 
 # --- the JSON's validation block ------------------------------------------------------------------------

@@ -150,6 +150,15 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (plain(n.name), f"real in the fit, confounded with {', '.join(n.confounded_with)}", "not claimed")
         for n in diag.not_separable
     ]
+    # a constant no stage of this design has (pipeline.constant_warnings: "<what>: <why>")
+    rows += [
+        (
+            "warning: a refitted constant",
+            w.partition(": ")[0],
+            "something the model lacks takes its place: sizes on that axis not to be trusted (page 2)",
+        )
+        for w in diag.warnings
+    ]
     rows += [
         (
             f"{u.axis} residual varying with the {u.depends_on.replace('_', ' ')}",
