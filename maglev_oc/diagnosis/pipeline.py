@@ -27,6 +27,7 @@ Steps:
 7. the refit of base constants and effects together; held-out error per axis before and after,
    and the short-horizon output error (the model simulated over 50 ms windows); an effect in the
    currents' rates (the amplifiers' lag) sized again on half the band (:data:`RATE_TERM_BAND`);
+   refitted constants that no stage of this design has are a warning (:func:`constant_warnings`);
 8. :mod:`maglev_oc.validation` — the base model and the model with the effects validated on the
    held-out block: whiteness of the prediction residuals, their independence from past
    currents, fit % of long simulations.
@@ -106,6 +107,7 @@ __all__ = [
     "Diagnosis",
     "Effect",
     "NotSeparable",
+    "constant_warnings",
     "diagnose",
 ]
 
