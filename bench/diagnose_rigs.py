@@ -263,6 +263,7 @@ def main() -> None:
                 "claimed": s.claimed,
                 "not_separable": [n["name"] for n in result["not_separable"]],
                 "unexplained": [f"{u['axis']}: {u['depends_on']}" for u in result["unexplained"]],
+                "warnings": result["warnings"],  # constants refitted beyond a rig of this design
                 "marks": [s.true_first, s.no_false_claim, s.size_right],
                 "notes": s.notes,
                 "wall_s": time.perf_counter() - t0,
@@ -272,7 +273,9 @@ def main() -> None:
             flags = "".join("x" if v else "." for v in row["marks"])
             print(
                 f"{stem:16s} {scenario.name:38s} {flags}  claimed {s.claimed}  "
-                f"unexplained {row['unexplained']}  {'; '.join(s.notes)}  ({row['wall_s']:.1f} s)",
+                f"unexplained {row['unexplained']}  {'; '.join(s.notes)}"
+                + (f"  warnings {len(row['warnings'])}" if row["warnings"] else "")
+                + f"  ({row['wall_s']:.1f} s)",
                 flush=True,
             )
         n = ran

@@ -44,19 +44,26 @@ def main() -> None:
         for csv in sorted(folder.glob("*.csv")):
             truth = json.loads(csv.with_suffix(".truth.json").read_text())
             t0 = time.perf_counter()
-            effects = diagnose([read_log(csv)]).to_dict()["effects"]
-            s = score(csv.stem, truth, effects)
+            result = diagnose([read_log(csv)]).to_dict()
+            s = score(csv.stem, truth, result["effects"])
             row = {
                 "truth": s.truth,
                 "claimed": s.claimed,
+                # what else a user reads: the residual left unnamed, and constants no rig has
+                "unexplained": [f"{u['axis']}: {u['depends_on']}" for u in result["unexplained"]],
+                "warnings": result["warnings"],
                 "marks": [s.true_first, s.no_false_claim, s.size_right],
                 "notes": s.notes,
                 "wall_s": time.perf_counter() - t0,
             }
             summary[csv.stem] = row
             marks = [m + int(v) for m, v in zip(marks, row["marks"], strict=True)]
-            if not all(row["marks"]):
-                print(f"{csv.stem}: marks {row['marks']}, truth {s.truth}, claimed {s.claimed}", flush=True)
+            if not all(row["marks"]) or row["unexplained"] or row["warnings"]:
+                print(
+                    f"{csv.stem}: marks {row['marks']}, truth {s.truth}, claimed {s.claimed}, "
+                    f"unexplained {row['unexplained']}, warnings {len(row['warnings'])}",
+                    flush=True,
+                )
         n = len(list(folder.glob("*.csv")))
         print(f"{name}: {marks[0]}/{n} true first, {marks[1]}/{n} no false claim, {marks[2]}/{n} sized right")
     args.out.mkdir(parents=True, exist_ok=True)
