@@ -318,6 +318,17 @@ class LibraryContext:
         acc = self.model.f(xs, u)[[1, 3]]
         return ca.substitute(ca.jacobian(acc, xs[0]), xs, x)
 
+    def force_terms(self, x, u):
+        """(thrust, currents' normal force, magnets' attraction): each force's part of the model's
+        acceleration with the references, the thrust's on the horizontal axis and the other two on
+        the vertical one (a share lost of a force changes the acceleration by minus that share of
+        its term)."""
+        l, c = self.shapes(x), self.references
+        thrust = -c.C1 * l[0] * u[0]
+        winding_normal = -(c.C3 * l[2] * u[1] + c.C4 * l[3] * (u[0] ** 2 + u[1] ** 2))
+        magnets = -c.C2 * l[1]
+        return thrust, winding_normal, magnets
+
     def normal_force(self, x, u):
         """The magnetic normal force F_n = M_v (G - x2'_model) [N], positive towards the stator."""
         return self.params.mass_vertical * (self.params.gravity - self.model.f(x, u)[1])

@@ -178,16 +178,12 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
     losses are those at the logged ends.
     """
     lo, hi = ctx.position_range
-    c_ref = ctx.references
     narrow, wide = profile.scaled(1 / END_WIDTH_STEP), profile.scaled(END_WIDTH_STEP)
 
     def fn(p: EndProfile):
         def build(x, u, du, q):
-            l = ctx.shapes(x)
             high, low = p.fall(hi - x[2]), p.fall(x[2] - lo)
-            thrust = -c_ref.C1 * l[0] * u[0]
-            winding_normal = -(c_ref.C3 * l[2] * u[1] + c_ref.C4 * l[3] * (u[0] ** 2 + u[1] ** 2))
-            magnets = -c_ref.C2 * l[1]
+            thrust, winding_normal, magnets = ctx.force_terms(x, u)
             # a loss fraction of each force at an end: acc changes by -loss * force * profile
             winding = q[0] * low + q[1] * high
             magnet = q[2] * low + q[3] * high

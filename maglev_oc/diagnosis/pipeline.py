@@ -88,7 +88,7 @@ from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.errors import InputError
-from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE, PLAUSIBLE_Z
+from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread
 from maglev_oc.progress import progress
@@ -398,20 +398,10 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     )
 
 
-_WHAT_TAKES_ITS_PLACE = {
-    "horizontal": "a force along the track not claimed or not separable on this log: guide friction, a "
-    "detent, a cable carrier, a tilted base or a commutation offset take current that the fit reads as a "
-    "weaker or stronger motor",
-    "vertical": "the field's shape over the gap, a gap sensor offset or a constant vertical force, which a "
-    "log over a narrow range of gaps does not separate from the constants",
-}
-"""What may take a constant's place, per axis (as ``identify`` says it of its own fits)."""
-
-
 def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tuple[str, ...]:
     """The refitted constants that moved from the model's by more than ``identify``'s plausible change
-    (:data:`~maglev_oc.identification.pipeline.PLAUSIBLE_CHANGE`, 30 %, and
-    :data:`~maglev_oc.identification.pipeline.PLAUSIBLE_Z` standard errors), beside the effects found:
+    (:func:`~maglev_oc.identification.pipeline.beyond_plausible`: 30 % and 5 standard errors),
+    beside the effects found (an effect not claimed or not separable on this log takes their place):
     a constant no rig of this design has stands for something the model still lacks, and the sizes
     on its axis are then not to be trusted. A noisy-rig pair of the independent generator (a detent
     of 0.87 N at 15 mm decaying over 3 mm, judged at z 1.9 and not claimed, beside a cable carrier)
@@ -423,15 +413,14 @@ def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tupl
         est, start = constants[name], float(reference[name])
         if not (math.isfinite(est.value) and start > 0):
             continue
-        change = est.value / start - 1.0
-        if abs(change) <= PLAUSIBLE_CHANGE or not abs(est.value - start) > PLAUSIBLE_Z * est.stderr:
+        if not beyond_plausible(est.value, start, est.stderr):
             continue
-        axis = CONSTANT_AXIS[name]
+        change, axis = est.value / start - 1.0, CONSTANT_AXIS[name]
         out.append(
             f"{name} refitted beside the effects is {est.value:.4g}, {abs(change):.0%} "
             f"{'below' if change < 0 else 'above'} the model's {start:.4g}: a stage of this design does not "
             f"differ that much, so something the model still lacks takes its place on the {axis} axis "
-            f"({_WHAT_TAKES_ITS_PLACE[axis]}), and the sizes found on that axis are not to be trusted"
+            f"({WHAT_TAKES_ITS_PLACE[axis]}), and the sizes found on that axis are not to be trusted"
         )
     return tuple(out)
 

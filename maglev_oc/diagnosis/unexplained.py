@@ -19,8 +19,9 @@ and its spectrum.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -75,6 +76,16 @@ class Unexplained:
         return out
 
 
+class _Probe(NamedTuple):
+    """A generic probe of the residual and how a finding of it is said."""
+
+    term: AccelerationTerm
+    key: str  # the variable it depends on, as ``Unexplained.depends_on``
+    words: str  # that variable in words
+    period: float | None = None  # [m] of a periodic probe
+    detail: Callable[[np.ndarray], str] | None = None  # its coefficients -> what they mean physically
+
+
 def _probe(name: str, axis: int, build, k: int) -> AccelerationTerm:
     def fn(x, u, du, q):
         val = build(x, u, du, q)
@@ -111,7 +122,7 @@ def find_unexplained(
     probes = _probes(data, periods) + _force_probes(data, model)
     if not probes:
         return []
-    terms = [c.term for c in explained] + [t for t, *_ in probes]
+    terms = [c.term for c in explained] + [p.term for p in probes]
     design = build_design(data, model, terms=terms, fit=fit_mask, holdout=holdout, weights=weights)
     current = ["base", *[c.name for c in explained]]
     out: list[Unexplained] = []
@@ -121,7 +132,7 @@ def find_unexplained(
     remaining = [
         e
         for e in probes
-        if not stands_in_for_the_constants(design, design.groups[e[0].name], settings.max_vif)
+        if not stands_in_for_the_constants(design, design.groups[e.term.name], settings.max_vif)
     ]
     counted = evidence(design, explained, settings)  # the samples that count (see there)
     n_counted = np.full(2, design.held_out_target.shape[1]) if counted is None else counted.sum(axis=1)
@@ -129,44 +140,40 @@ def find_unexplained(
         cur_fit = fit_subset(design, current, covariance=False)
         r0 = _holdout_residual(design, cur_fit, counted)
         mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        open_probes = [e for e in remaining if found[e[0].axis] < max_per_axis]
+        open_probes = [e for e in remaining if found[e.term.axis] < max_per_axis]
         if not open_probes:
             break
-        entry, r1 = _best_probe(design, current, open_probes, mse0, counted)
-        term = entry[0]
+        entry, r1, fit = _best_probe(design, current, open_probes, mse0, counted)
+        term = entry.term
         a = AXES.index(term.axis)
         gain, z = holdout_significance(design, r0, r1, np.array([a]))
         size = float(np.sqrt(np.sum((r0[a] - r1[a]) ** 2) / max(n_counted[a], 1)))  # net change
         if gain < settings.min_gain or z < settings.min_z or size < settings.min_effect:
             break
-        detail = entry[4]
-        if detail is not None:  # what its coefficients say, in the words of the forces they scale
-            coef, _ = fit_subset(design, [*current, term.name], covariance=False).group(design, term.name)
-            detail = detail(coef)
-        out.append(_unexplained(model, entry, size, gain, z, detail or ""))
+        # what its coefficients say, in the words of the forces they scale
+        detail = "" if entry.detail is None else entry.detail(fit.group(design, term.name)[0])
+        out.append(_unexplained(model, entry, size, gain, z, detail))
         found[term.axis] += 1
         current.append(term.name)
         remaining.remove(entry)
     return out
 
 
-def _probes(data: PreparedLogs, periods: Sequence[tuple[str, float]]) -> list[tuple]:
-    """(term, variable, words, period or None, detail or None) of every probe on a moving axis;
-    ``detail``: its coefficients -> a sentence on what they mean physically."""
-    probes: list[tuple] = []
+def _probes(data: PreparedLogs, periods: Sequence[tuple[str, float]]) -> list[_Probe]:
+    """The additive and periodic probes on the moving axes."""
+    probes: list[_Probe] = []
     for (axis, var), term in smooth_probes(data).items():
         if data.moving[AXES.index(axis)]:
-            probes.append((term, var, PROBE_VARIABLES[var][1], None, None))
+            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1]))
     for axis, period in periods:
         a = AXES.index(axis)
         if data.moving[a]:
             probes.append(
-                (
+                _Probe(
                     _sine_probe(f"probe_{axis}_period_{period * M_TO_UM:.0f}um", a, period),
                     f"position (period {period * M_TO_MM:.1f} mm)",
                     f"the horizontal position, periodically over {period * M_TO_MM:.1f} mm",
                     period,
-                    None,
                 )
             )
     return probes
@@ -177,8 +184,8 @@ FORCE_PROBE_ORDER = 2
 force's share (a constant share is a change of the constants)."""
 
 
-def _force_probes(data: PreparedLogs, model: StageModel) -> list[tuple]:
-    """(term, variable, words, None, detail) of the motor's forces varying smoothly along the travel, one
+def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
+    """The motor's forces varying smoothly along the travel, one
     probe per moving axis: the thrust (horizontally) and, vertically, the magnets' attraction and the
     currents' normal force, each times mean-free Legendre polynomials of the position (orders 1 to
     :data:`FORCE_PROBE_ORDER` over its logged range), with their own coefficients.
@@ -198,23 +205,20 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[tuple]:
     orders = range(1, FORCE_PROBE_ORDER + 1)
     x3 = data.x[2, data.valid]
     means = [float(np.mean(b)) for b in legendre((x3 - c) / h, orders)]
-    ref = ctx.references
     k = len(orders)
 
     def shares(x):
         return [b - m for b, m in zip(legendre((x[2] - c) / h, orders), means, strict=True)]
 
     def vertical(x, u, du, q):
-        l = ctx.shapes(x)
-        winding = -(ref.C3 * l[2] * u[1] + ref.C4 * l[3] * (u[0] ** 2 + u[1] ** 2))
-        magnets = -ref.C2 * l[1]
+        _, winding, magnets = ctx.force_terms(x, u)
         p = shares(x)
         return sum((p[i] * (q[i] * winding + q[k + i] * magnets) for i in range(k)), ca.SX(0))
 
     def horizontal(x, u, du, q):
-        l = ctx.shapes(x)
+        thrust, _, _ = ctx.force_terms(x, u)
         p = shares(x)
-        return sum((p[i] * q[i] for i in range(k)), ca.SX(0)) * (-ref.C1 * l[0] * u[0])
+        return sum((p[i] * q[i] for i in range(k)), ca.SX(0)) * thrust
 
     # each force's share at the logged ends: 1 + sum_i q_i (P_i(+-1) - mean_i); the change from the
     # low end to the high end is sum_i q_i (P_i(1) - P_i(-1)) (the even orders cancel)
@@ -244,32 +248,31 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[tuple]:
         if data.moving[a]:
             name = f"probe_{AXES[a]}_forces_along_position"
             out.append(
-                (
+                _Probe(
                     _probe(name, a, build, n),
                     "position",
                     f"the horizontal position in proportion to {words} (as if they changed along the stator)",
-                    None,
-                    detail,
+                    detail=detail,
                 )
             )
     return out
 
 
-def _best_probe(design, current: list[str], probes: list[tuple], mse0: np.ndarray, counted=None):
-    """(probe, its held-out residual) that lowers the held-out error of its axis the most."""
+def _best_probe(design, current: list[str], probes: list[_Probe], mse0: np.ndarray, counted=None):
+    """(probe, its held-out residual, its fit) that lowers the held-out error of its axis the most."""
     best = None
     for entry in probes:
-        a = AXES.index(entry[0].axis)
-        fit = fit_subset(design, [*current, entry[0].name], covariance=False)
+        a = AXES.index(entry.term.axis)
+        fit = fit_subset(design, [*current, entry.term.name], covariance=False)
         r1 = _holdout_residual(design, fit, counted)
         gain = 1.0 - float(np.mean(r1[a] ** 2)) / mse0[a]
         if best is None or gain > best[0]:
-            best = (gain, entry, r1)
-    return best[1], best[2]
+            best = (gain, entry, r1, fit)
+    return best[1:]
 
 
 def _unexplained(
-    model: StageModel, entry: tuple, size: float, gain: float, z: float, detail: str = ""
+    model: StageModel, entry: _Probe, size: float, gain: float, z: float, detail: str = ""
 ) -> Unexplained:
     term, key, words, period, _ = entry
     p = model.params

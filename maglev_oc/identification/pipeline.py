@@ -45,8 +45,11 @@ __all__ = [
     "METHODS",
     "MIN_DURATION",
     "PLAUSIBLE_CHANGE",
+    "PLAUSIBLE_Z",
     "VERTICAL",
+    "WHAT_TAKES_ITS_PLACE",
     "IdentificationOutcome",
+    "beyond_plausible",
     "check_identifiable",
     "identify",
     "load_logs",
@@ -75,6 +78,22 @@ a cable carrier -7 to -65 %, a misalignment -46 %, a tilted base -59 %, a detent
 PLAUSIBLE_Z = 5.0
 """Standard errors a change beyond :data:`PLAUSIBLE_CHANGE` must also be, to be a warning and not
 a constant the log determines poorly (its standard error says so)."""
+WHAT_TAKES_ITS_PLACE = {
+    "horizontal": "the currents along the track do more than the thrust the model has: guide friction, a "
+    "detent, a cable carrier, a tilted base or a commutation offset take current that the fit then reads "
+    "as a weaker (or stronger) motor",
+    "vertical": "the vertical forces differ from the model's: a gap sensor offset, a constant vertical "
+    "force or the field's shape over the gap take the place of the constant",
+}
+"""What takes the place of a constant that moved beyond the plausible, by the axis it acts on (the
+diagnosis says it of its refit too)."""
+
+
+def beyond_plausible(value: float, start: float, stderr: float) -> bool:
+    """Whether a fitted constant moved from its model value ``start`` by more than
+    :data:`PLAUSIBLE_CHANGE` of it and by more than :data:`PLAUSIBLE_Z` standard errors."""
+    change = value / start - 1 if start else math.inf
+    return abs(change) > PLAUSIBLE_CHANGE and abs(value - start) > PLAUSIBLE_Z * stderr
 
 
 def load_logs(paths: Sequence[str | os.PathLike], *, params: StageParameters | None = None) -> list[Log]:
@@ -222,20 +241,10 @@ class IdentificationOutcome(Result):
             if k not in fit.values:
                 continue
             start, value, se = fit.initial[k], fit.values[k], fit.stderr[k]
-            change = value / start - 1 if start else math.inf
-            if abs(change) <= PLAUSIBLE_CHANGE or not abs(value - start) > PLAUSIBLE_Z * se:
+            if not beyond_plausible(value, start, se):
                 continue
-            if k in HORIZONTAL:
-                why = (
-                    "the currents along the track do more than the thrust the model has: guide "
-                    "friction, a cable carrier, a tilted base or a commutation offset take current that "
-                    "the fit then reads as a weaker (or stronger) motor"
-                )
-            else:
-                why = (
-                    "the vertical forces differ from the model's: a gap sensor offset, a constant "
-                    "vertical force or the field's shape over the gap take the place of the constant"
-                )
+            change = value / start - 1 if start else math.inf
+            why = WHAT_TAKES_ITS_PLACE["horizontal" if k in HORIZONTAL else "vertical"]
             z = f"{abs(value - start) / se:.0f}" if se > 0 else "infinitely many"
             out.append(
                 f"{k} = {value:.4g} is {abs(change):.0%} {'below' if change < 0 else 'above'} its starting "
