@@ -1,13 +1,15 @@
 """Score ``diagnose`` on sets of logs from the independent generator (no code shared with our sim).
 
-    python bench/diagnose_score.py [--sets eleven single pairs clean] [--seed-offset N] [--out DIR]
+    python bench/diagnose_score.py [--sets eleven single pairs clean] [--seed-offset N] [--rig R] [--out D]
 
 Each set is generated once into ``OUT/logs/<set>`` (``python -m tests.independent.generate``; skipped
 when present), every log diagnosed with the defaults, and scored by ``tests/independent/scoring``:
 true effect first, no false claim, size within 30 %. Prints one line per log that misses a mark and
 the totals per set; writes ``OUT/summary.json``. ``--seed-offset N`` adds N to every seed: the same
 scenarios on fresh constants, references and noise, which no rule of the diagnosis was tuned on
-(written to ``OUT/logs/<set>+N``).
+(written to ``OUT/logs/<set>+N``). ``--rig NAME`` records the sets on a rig of
+``bench/diagnose_rigs.py`` instead of the generator's default (``obs2800``: currents as noisy as
+``../shared/logs/independent_clean.csv``'s; written to ``OUT/logs/<set>@NAME``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sets", nargs="+", default=["eleven", "single", "pairs", "clean"])
     parser.add_argument("--seed-offset", type=int, default=0, help="added to every seed (fresh draws)")
+    parser.add_argument("--rig", default="default", help="a rig of bench/diagnose_rigs.py")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_score")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
@@ -33,10 +36,21 @@ def main() -> None:
     from maglev_oc.diagnosis.pipeline import diagnose
     from tests.independent.scoring import score
 
+    if args.rig != "default":
+        sys.path.insert(0, str(ROOT / "bench"))
+        from diagnose_rigs import RIGS
+
+        if args.rig not in RIGS:
+            parser.error(f"--rig: no rig {args.rig!r}; the rigs are {', '.join(RIGS)}")
+
     summary: dict[str, dict] = {}
     for name in args.sets:
         folder = args.out / "logs" / (name + (f"+{args.seed_offset}" if args.seed_offset else ""))
-        if not any(folder.glob("*.csv")):
+        if args.rig != "default":
+            folder = folder.with_name(f"{folder.name}@{args.rig}")
+        if not any(folder.glob("*.csv")) and args.rig != "default":
+            _write_on_rig(name, args.seed_offset, RIGS[args.rig], folder)
+        elif not any(folder.glob("*.csv")):
             cmd = [sys.executable, "-m", "tests.independent.generate", "--set", name, "--out", str(folder)]
             cmd += ["--seed-offset", str(args.seed_offset)]
             subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
@@ -68,6 +82,19 @@ def main() -> None:
         print(f"{name}: {marks[0]}/{n} true first, {marks[1]}/{n} no false claim, {marks[2]}/{n} sized right")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+
+
+def _write_on_rig(name: str, seed_offset: int, rig_settings: dict, folder: Path) -> None:
+    """Write set ``name`` with every scenario's rig changed by ``rig_settings`` into ``folder``."""
+    import dataclasses
+
+    from tests.independent.logio import write_log
+    from tests.independent.sets import named_set
+    from tests.independent.simulate import simulate
+
+    for stem, scenario in named_set(name, seed_offset=seed_offset):
+        rig = dataclasses.replace(scenario.rig, **rig_settings)
+        write_log(simulate(dataclasses.replace(scenario, rig=rig)), folder, stem)
 
 
 if __name__ == "__main__":
