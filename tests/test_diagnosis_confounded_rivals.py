@@ -20,6 +20,7 @@ within 3 %, bench/README), 20x noisier than the generator's default.
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -27,6 +28,8 @@ import pytest
 from maglev_oc.data.reading import read_log
 from maglev_oc.diagnosis.probes import smooth_probes
 from maglev_oc.diagnosis.selection import (
+    Rival,
+    Rivals,
     SelectionSettings,
     _HeldOutGrams,
     _rival_gains,
@@ -103,8 +106,9 @@ def test_the_confounded_probe_is_no_rival_although_it_explains_the_most(noisy_co
     free = _rival_gains(design, ["base"], mse0, probes, sizes, around)
     held = _rival_gains(design, ["base"], mse0, probes, sizes, around, MAX_VIF)
     for key in sizes:
-        assert free[key][1] == "gap" and free[key][0] > 0.05, (key, free[key])
-        assert held[key][1] != "gap" and held[key][0] < 0.5 * free[key][0], (key, held[key])
+        top, kept = free.by_size[key][0], held.by_size[key][0]
+        assert top.variable == "gap" and top.gain > 0.05, (key, top)
+        assert kept.variable != "gap" and kept.gain < 0.5 * top.gain, (key, kept)
     # and what it took was the constants' job: C3 falls by more than half beside it
     gap = list(design.groups[probes[("vertical", "gap")]])
     beside = fit_subset(design, ["base"], covariance=False, extra=gap)
@@ -122,7 +126,7 @@ def test_a_rival_on_both_axes_takes_every_split_of_its_coefficients_the_probes_a
     around = _HeldOutGrams(design).around(base)
     mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
     k = 6
-    got = _rival_gains(design, ["base"], mse0, probes, {("both", k)}, around)[("both", k)]
+    got = _rival_gains(design, ["base"], mse0, probes, {("both", k)}, around).by_size[("both", k)][0]
     best = (-np.inf, "")
     for var in sorted({v for _, v in probes}):
         for kv in range(k + 1):
@@ -136,7 +140,7 @@ def test_a_rival_on_both_axes_takes_every_split_of_its_coefficients_the_probes_a
             if gain > best[0]:
                 best = (gain, var)
     assert np.isfinite(best[0])
-    assert got[1] == best[1] and got[0] == pytest.approx(best[0], rel=1e-9)
+    assert got.variable == best[1] and got.gain == pytest.approx(best[0], rel=1e-9)
 
 
 def test_a_split_that_stands_in_for_the_constants_does_not_end_the_search(noisy_cogged, monkeypatch):
@@ -159,7 +163,8 @@ def test_a_split_that_stands_in_for_the_constants_does_not_end_the_search(noisy_
     around = _HeldOutGrams(design).around(base)
     mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
     k = 3
-    got = selection._rival_gains(design, ["base"], mse0, probes, {("both", k)}, around, MAX_VIF)[("both", k)]
+    rivals = selection._rival_gains(design, ["base"], mse0, probes, {("both", k)}, around, MAX_VIF)
+    got = rivals.by_size[("both", k)][0]
     best = (-np.inf, "")
     for var in sorted({v for _, v in probes}):
         for kv in range(1, k + 1):  # kv = 0 stands in
@@ -170,7 +175,7 @@ def test_a_split_that_stands_in_for_the_constants_does_not_end_the_search(noisy_
             gain = float(np.mean(1.0 - ms / mse0))
             if gain > best[0]:
                 best = (gain, var)
-    assert got[1] == best[1] and got[0] == pytest.approx(best[0], rel=1e-9)
+    assert got.variable == best[1] and got.gain == pytest.approx(best[0], rel=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -250,3 +255,68 @@ def test_a_probe_that_stands_in_for_the_constants_is_not_reported_unexplained(mo
     settings = SelectionSettings()
     assert found(dataclasses.replace(settings, max_vif=np.inf))[0] == ("vertical", "gap")
     assert ("vertical", "gap") not in found(settings)
+
+
+# --- a rival that is another motor -------------------------------------------------------------------
+
+PAPERS = {"C1": 14.2, "C2": 796.99, "C3": 31.04, "C4": 0.07}
+
+
+def _fit(values: dict, sd: dict):
+    """A stand-in of a candidate's fit: its constants and their standard errors."""
+    names = tuple(values)
+    return SimpleNamespace(
+        names=names, value=values.__getitem__, covariance=np.diag([sd[n] ** 2 for n in names])
+    )
+
+
+def _offset_and_its_rivals():
+    # noisy pair 9903's numbers (the test below): the commutation offset's fit has C1 at 14.9 +-
+    # 1.04; the best rival of its size (a constant and a linear function of the gap on the
+    # horizontal axis) has C1 at 9.4 (34 % below the papers' 14.2, 4.6 standard errors from 14.9),
+    # the next (the position) 14.5
+    own = _fit(
+        {"C1": 14.9, "C2": 779.0, "C3": 30.2, "C4": 0.072}, {"C1": 1.04, "C2": 0.26, "C3": 0.05, "C4": 0.002}
+    )
+    vertical = {"C2": 778.7, "C3": 30.1, "C4": 0.073}
+    ranked = (
+        Rival(0.374, "gap", {"C1": 9.4, **vertical}),
+        Rival(0.151, "position", {"C1": 14.5, **vertical}),
+    )
+    return own, ranked
+
+
+def test_a_rival_that_needs_another_motor_does_not_rival_a_candidate_that_keeps_the_stages():
+    own, ranked = _offset_and_its_rivals()
+    key = ("both", 2)
+    assert Rivals({key: ranked}, PAPERS).best(key, own, "both") is ranked[1]
+    # held to nothing (no reference), the best rival counts, as before
+    assert Rivals({key: ranked}, None).best(key, own, "both") is ranked[0]
+    # beyond 30 % but not 2 standard errors from the candidate's (a C1 as uncertain as +-3): a rival
+    assert Rivals({key: ranked}, PAPERS).best(key, _fit({"C1": 14.9}, {"C1": 3.0}), "horizontal") is ranked[0]
+    # the candidate's own fit no stage of this design either (C1 at 5): every rival counts
+    assert Rivals({key: ranked}, PAPERS).best(key, _fit({"C1": 5.0}, {"C1": 0.1}), "horizontal") is ranked[0]
+    # a vertical candidate is held to the vertical constants only: the rival's C1 does not matter
+    vertical = _fit({"C2": 779.0, "C3": 30.2, "C4": 0.072}, {"C2": 0.26, "C3": 0.05, "C4": 0.002})
+    assert Rivals({key: ranked}, PAPERS).best(key, vertical, "vertical") is ranked[0]
+    # no credible rival at all: none
+    assert Rivals({key: ranked[:1]}, PAPERS).best(key, own, "both") is None
+    assert Rivals({}, PAPERS).best(key, own, "both") is None
+
+
+@pytest.mark.slow
+def test_a_commutation_offset_is_not_refused_for_a_rival_with_a_weaker_motor(tmp_path):
+    # random pair 9903 on the noisy rig (--drawn-pairs 24 --seed 9900 --rig obs2800): a cable carrier
+    # (4.3 N/m) and a -2.4 degree commutation offset. The offset makes the levitation current push
+    # along the track and the loop cancels it with i_q, so the base fit's C1 was 0.12 (true 14.75).
+    # The offset (C1 back at 14.9) was refused as "not specific": a constant and a linear function
+    # of the gap on the horizontal axis explained 37 % of the held-out error against its 23 %, with
+    # C1 at 9.4. The carrier was refused the same way, a 0.03 N constant force claimed in their
+    # place (a false claim) and C1 left at 0.51. A rival that needs a motor no stage of this design
+    # has rivals nothing (selection.Rivals.best): both true effects are found and sized within 30 %
+    # (the issue's bound; measured 0 % and 3 %), and nothing is warned of
+    effects, d, s = _drawn_pair(tmp_path, 9903, ("cable_carrier", "commutation_offset"), NOISY)
+    assert effects[0].stiffness == pytest.approx(4.260, abs=1e-3)  # the bench's log
+    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "commutation_offset"]
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes, s.sizes)
+    assert not d.warnings

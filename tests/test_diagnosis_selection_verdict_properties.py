@@ -29,6 +29,8 @@ from scipy.linalg import subspace_angles
 import maglev_oc.diagnosis.selection as selection_module
 from maglev_oc.diagnosis.probes import smooth_probes
 from maglev_oc.diagnosis.selection import (
+    Rival,
+    Rivals,
     SelectionSettings,
     _HeldOutGrams,
     _own_gain,
@@ -146,12 +148,12 @@ def test_a_rival_is_compared_with_the_gain_over_the_same_samples():
     term = SimpleNamespace(parameter_names=("a",))
     cand = SimpleNamespace(axis="both", plausible=lambda physical: None, term=term, nuisance=())
     for rival, verdict in ((0.2, "passes"), (0.3 + 2 * s.rival_margin, "not specific")):
-        rivals = {("both", 1): (rival, "gap")}
+        rivals = Rivals({("both", 1): (Rival(rival, "gap", {}),)})
         out = _verdict(j, cand, np.array([0, 1]), SimpleNamespace(compensation=1.0), s, rivals)[0]
         assert out == verdict
     # the reason names the rival's variable in words and both gains (a variable's identifier, with
     # its underscore, is not a word)
-    rivals = {("both", 1): (0.4, "gap_rate")}
+    rivals = Rivals({("both", 1): (Rival(0.4, "gap_rate", {}),)})
     _, reason = _verdict(j, cand, np.array([0, 1]), SimpleNamespace(compensation=1.0), s, rivals)
     assert reason.startswith("a smooth function of the gap rate explains more of the held-out error")
     assert "(40.0% against 30.0%)" in reason
@@ -256,7 +258,7 @@ def test_a_generic_rival_must_beat_the_candidate_by_more_than_the_margin(rival_g
     # of a state variable with as many coefficients that explains up to 15 % does not make it
     # unspecific, one that explains 16 % does
     j = _judgement(z=10.0, wald=1e3, gain_axes=(np.nan, 0.10))
-    assert _verdict_with(j, rivals={("horizontal", 1): (rival_gain, "gap")})[0] == verdict
+    assert _verdict_with(j, rivals=Rivals({("horizontal", 1): (Rival(rival_gain, "gap", {}),)}))[0] == verdict
 
 
 def test_a_strong_effect_is_judged_on_the_strong_path_when_the_ordinary_z_is_out_of_reach(cogged):
@@ -304,7 +306,7 @@ def test_a_rival_is_a_constant_and_the_lowest_legendre_orders_of_one_variable_on
     r0 = design.held_out_target - np.einsum("p,pan->an", base.coef, design.held_out_columns[base.index])
     mse0 = np.mean(r0**2, axis=1)
     around = _HeldOutGrams(design).around(base)
-    got = _rival_gains(design, ["base"], mse0, probes, {("horizontal", k)}, around)[("horizontal", k)]
+    got = _rival_gains(design, ["base"], mse0, probes, {("horizontal", k)}, around).by_size[("horizontal", k)]
     best, gains = (-np.inf, ""), []
     for (axis, var), group in probes.items():
         if axis != "horizontal":
@@ -317,7 +319,7 @@ def test_a_rival_is_a_constant_and_the_lowest_legendre_orders_of_one_variable_on
         best = max(best, (gain, var))
         gains.append(gain)
     assert np.ptp(gains) > 1e-4 or k == 1  # the variables' rivals differ (with k = 1 all are a constant)
-    assert got[0] == pytest.approx(best[0], rel=1e-7)
+    assert got[0].gain == pytest.approx(best[0], rel=1e-7)
 
 
 def test_the_bootstrap_resamples_draw_from_every_training_block(two_effects, monkeypatch):

@@ -19,6 +19,8 @@ from scipy import stats
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.selection import (
+    Rival,
+    Rivals,
     SelectionSettings,
     _block_z,
     _CrossFit,
@@ -591,10 +593,10 @@ def test_a_generic_rival_better_by_more_than_the_margin_takes_the_residual(with_
     margin the candidate passes."""
     own, margin = measured.gain, SelectionSettings().rival_margin
     for rival, verdict in ((own + margin + 1e-3, "not specific"), (own + margin - 1e-3, "passes")):
-        rivals = {("horizontal", 1): (rival, "position")}
+        rivals = Rivals({("horizontal", 1): (Rival(rival, "position", {}),)})
         assert _judged(with_friction, SelectionSettings(), rivals).verdict == verdict
     wider = SelectionSettings(rival_margin=margin + 2e-3)
-    rivals = {("horizontal", 1): (own + margin + 1e-3, "position")}
+    rivals = Rivals({("horizontal", 1): (Rival(own + margin + 1e-3, "position", {}),)})
     assert _judged(with_friction, wider, rivals).verdict == "passes"
 
 

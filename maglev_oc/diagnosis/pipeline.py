@@ -167,7 +167,8 @@ class _Session:
         mostly its error (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
         probes = {k: t.name for k, t in self.probes.items()}
         side = thrust_side(design, model) if any(c.thrust_proportional for c in library) else None
-        return select(design, library, settings or self.settings, probes, side)
+        reference = dict(zip(CONSTANT_NAMES, self.model.constants.as_array(), strict=True))
+        return select(design, library, settings or self.settings, probes, side, reference)
 
 
 @one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)
@@ -359,8 +360,9 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects)
     val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
     timings["total"] = sum(timings.values())
-    status, success, message = _outcome(effects, not_sep, unexplained, sel, data)
     constants_final = constants_of(design, sel.final, model)
+    warnings = constant_warnings(constants_final, model)
+    status, success, message = _outcome(effects, not_sep, unexplained, sel, data, warnings)
     return Diagnosis(
         success=success,
         status=status,
@@ -394,7 +396,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
         timings=timings,
         validation_before=val_before,
         validation_after=val_after,
-        warnings=constant_warnings(constants_final, model),
+        warnings=warnings,
     )
 
 
@@ -403,7 +405,9 @@ def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tupl
     (:func:`~maglev_oc.identification.pipeline.beyond_plausible`: 30 % and 5 standard errors),
     beside the effects found (an effect not claimed or not separable on this log takes their place):
     a constant no rig of this design has stands for something the model still lacks, and the sizes
-    on its axis are then not to be trusted. A noisy-rig pair of the independent generator (a detent
+    on its axis are then not to be trusted, nor its detection limits there (noisy pair 9922 of the
+    independent generator: a -2.4 degree commutation offset unclaimed beside C1 at 0.25, and "not
+    shown below 1.8 degrees"). A noisy-rig pair of the independent generator (a detent
     of 0.87 N at 15 mm decaying over 3 mm, judged at z 1.9 and not claimed, beside a cable carrier)
     was reported with the cable carrier at 1.9 N/m for the true 6.6 and C1 at 2.3 for the true 14.7,
     and nothing said so."""
@@ -420,7 +424,8 @@ def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tupl
             f"{name} refitted beside the effects is {est.value:.4g}, {abs(change):.0%} "
             f"{'below' if change < 0 else 'above'} the model's {start:.4g}: a stage of this design does not "
             f"differ that much, so something the model still lacks takes its place on the {axis} axis "
-            f"({WHAT_TAKES_ITS_PLACE[axis]}), and the sizes found on that axis are not to be trusted"
+            f"({WHAT_TAKES_ITS_PLACE[axis]}), and the sizes found on that axis, and the sizes this log "
+            "could not have shown there, are not to be trusted"
         )
     return tuple(out)
 
@@ -882,8 +887,11 @@ def _validations(
     return before, after
 
 
-def _outcome(effects, not_sep, unexplained, sel: Selection, data: PreparedLogs) -> tuple[str, bool, str]:
-    """(status, success, message) of a diagnosis."""
+def _outcome(
+    effects, not_sep, unexplained, sel: Selection, data: PreparedLogs, warnings: Sequence[str] = ()
+) -> tuple[str, bool, str]:
+    """(status, success, message) of a diagnosis; ``warnings``: :func:`constant_warnings`'s (with
+    nothing found, a constant no stage of this design has says the model does not explain the log)."""
     if effects:
         status, message = (
             "effects_found",
@@ -895,6 +903,12 @@ def _outcome(effects, not_sep, unexplained, sel: Selection, data: PreparedLogs) 
         # the base model does not explain the log to its noise: these candidates explain part of the
         # residual, but this log cannot tell them from the constants (what would is in not_separable)
         status, message = "nothing_found", "no effect this log can separate from the constants found"
+    elif warnings:
+        status, message = (
+            "nothing_found",
+            "no effect found, but a refitted constant is one no stage of this design has (the warnings): "
+            "something the model lacks takes its place",
+        )
     else:
         status, message = (
             "nothing_found",
