@@ -185,6 +185,9 @@ def key_plot(diag: Diagnosis, study: CompensationStudy | None, n_effects: int = 
                 "No effect of the library found; part of the residual is unexplained (the scorecard), and "
                 "only a named effect is compensated."
                 if diag.unexplained
+                else "No effect found, but a refitted constant is one no stage of this design has (the "
+                "scorecard's warning): nothing named to compensate."
+                if diag.warnings
                 else "The refitted papers' model explains the log to its noise, so there is nothing to "
                 "compensate."
             )

@@ -155,7 +155,8 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             "warning: a refitted constant",
             w.partition(": ")[0],
-            "something the model lacks takes its place: sizes on that axis not to be trusted (page 2)",
+            "something the model lacks takes its place: sizes and limits on that axis not to be trusted "
+            "(page 2)",
         )
         for w in diag.warnings
     ]
@@ -240,6 +241,11 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
         out.append(
             "No effect found that this log can tell from the lumped constants: the candidates below "
             "explain part of the residual, but only an experiment that separates them can say which."
+        )
+    elif diag.warnings:
+        out.append(
+            "No effect found, but a refitted constant is one no stage of this design has (the warning "
+            "above): something the model lacks takes its place, and the log is not explained to its noise."
         )
     else:
         out.append("No missing effect found: the papers' model, refitted, explains the log to its noise.")
