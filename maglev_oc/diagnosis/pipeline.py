@@ -167,8 +167,7 @@ class _Session:
         mostly its error (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
         probes = {k: t.name for k, t in self.probes.items()}
         side = thrust_side(design, model) if any(c.thrust_proportional for c in library) else None
-        reference = dict(zip(CONSTANT_NAMES, self.model.constants.as_array(), strict=True))
-        return select(design, library, settings or self.settings, probes, side, reference)
+        return select(design, library, settings or self.settings, probes, side, _constants(self.model))
 
 
 @one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)
@@ -400,6 +399,11 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     )
 
 
+def _constants(model: StageModel) -> dict[str, float]:
+    """The model's constants C1..C4 by name."""
+    return dict(zip(CONSTANT_NAMES, model.constants.as_array(), strict=True))
+
+
 def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tuple[str, ...]:
     """The refitted constants that moved from the model's by more than ``identify``'s plausible change
     (:func:`~maglev_oc.identification.pipeline.beyond_plausible`: 30 % and 5 standard errors),
@@ -412,7 +416,7 @@ def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tupl
     was reported with the cable carrier at 1.9 N/m for the true 6.6 and C1 at 2.3 for the true 14.7,
     and nothing said so."""
     out = []
-    reference = dict(zip(CONSTANT_NAMES, model.constants.as_array(), strict=True))
+    reference = _constants(model)
     for name in CONSTANT_NAMES:
         est, start = constants[name], float(reference[name])
         if not (math.isfinite(est.value) and start > 0):

@@ -1559,44 +1559,35 @@ def select(
     steps: list[Step] = []
     last: dict[str, Judgement] = {}
 
+    def step_context(model: list[str], fit: SubsetFit, names: Sequence[str]):
+        """(judge's arguments from ``model`` to ``cross``, the axes with friction among ``model``,
+        the thrust side, the held-out mean squares about ``fit``): what judging ``names`` beside
+        ``model`` (fitted as ``fit``) needs."""
+        counted = evidence(design, [by_name[n] for n in model[1:]], settings)
+        around = held_out.around(fit, counted)
+        mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
+        sizes = {(by_name[n].axis, _reported(by_name[n])) for n in names}
+        rivals = (
+            _rival_gains(design, model, mse0, probes, sizes, around, settings.max_vif, reference)
+            if probes
+            else None
+        )
+        periods = _periodic_beside(model, by_name, last)
+        chosen = [by_name[n] for n in model[1:]]
+        cross = _CrossParts.of(fold, model, chosen, settings) if fold else None
+        thrust = thrust_side.step(model, chosen, counted) if thrust_side else None
+        context = (model, fit, around.residual, mse0, settings, rivals, counted, periods, cross)
+        return context, frozenset(_friction_axes(chosen)), thrust, around
+
     def judged_beside(name: str, others: list[str]) -> Judgement:
         """``name`` judged given ``others`` (the backward pass's judgement)."""
         fit_o = fit_subset(design, others, covariance=False)
-        counted = evidence(design, [by_name[n] for n in others[1:]], settings)
-        around = held_out.around(fit_o, counted)
-        r0 = around.residual
-        mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        sizes = {(by_name[name].axis, _reported(by_name[name]))}
-        rivals = (
-            _rival_gains(design, others, mse0, probes, sizes, around, settings.max_vif, reference)
-            if probes
-            else None
-        )
-        beside = _periodic_beside(others, by_name, last)
-        chosen = [by_name[n] for n in others[1:]]
-        cross = _CrossParts.of(fold, others, chosen, settings) if fold else None
-        friction = frozenset(_friction_axes(chosen))
-        thrust = thrust_side.step(others, chosen, counted) if thrust_side else None
-        context = (others, fit_o, r0, mse0, settings, rivals, counted, beside, cross)
+        context, friction, thrust, _ = step_context(others, fit_o, [name])
         return _judged_again(design, by_name[name], context, friction, probes, periodic, thrust)
 
     while pool and len(current) - 1 < settings.max_effects:
-        counted = evidence(design, [by_name[n] for n in current[1:]], settings)
-        around0 = held_out.around(cur_fit, counted)
-        r0 = around0.residual
-        mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-        sizes = {(by_name[n].axis, _reported(by_name[n])) for n in pool}
-        rivals = (
-            _rival_gains(design, current, mse0, probes, sizes, around0, settings.max_vif, reference)
-            if probes
-            else None
-        )
-        beside = _periodic_beside(current, by_name, last)
-        chosen = [by_name[n] for n in current[1:]]
-        cross = _CrossParts.of(fold, current, chosen, settings) if fold else None
-        friction = frozenset(_friction_axes(chosen))
-        thrust = thrust_side.step(current, chosen, counted) if thrust_side else None
-        context = (current, cur_fit, r0, mse0, settings, rivals, counted, beside, cross)
+        context, friction, thrust, around0 = step_context(current, cur_fit, pool)
+        counted = context[6]
         judged = {
             n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust)
             for n in pool
@@ -1621,7 +1612,7 @@ def select(
             found = pair and [judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])]
             if not (found and all(j.verdict == "passes" for j in found)):
                 break
-            for j in found:
+            for j in found:  # confidence 1: no other candidate passed at this step
                 last[j.name] = _accepted(j)
                 steps.append(Step(j.name, 1.0, {**judged, j.name: last[j.name]}))
                 current.append(j.name)
@@ -1850,7 +1841,7 @@ def _estimated_constants(fit: SubsetFit) -> dict[str, float]:
 
 def fitted_constants(fit: SubsetFit) -> dict[str, float]:
     """The fit's constants C1..C4 that were estimated (positive: a locked axis's is not)."""
-    return {n: fit.value(n) for n in CONSTANT_NAMES if n in fit.names and fit.value(n) > 0}
+    return {n: v for n, v in _estimated_constants(fit).items() if v > 0}
 
 
 def _beyond_its_span(
