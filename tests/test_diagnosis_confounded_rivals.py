@@ -378,3 +378,29 @@ def test_the_pair_proposed_is_the_one_that_brings_the_motor_back(model, tmp_path
     if without is not None:
         c1 = fit_subset(design, ["base", *without], covariance=False).value("C1")
         assert abs(c1 / reference["C1"] - 1.0) <= PLAUSIBLE_CHANGE
+
+
+@pytest.mark.slow
+def test_a_guide_waviness_that_does_not_pass_leaves_no_cogging_in_its_place(tmp_path):
+    # random pair 9960 on the noisy rig (--drawn-pairs 24 --seed 9950 --rig obs2800): guides tilted
+    # by 3.5 mrad with 6.2 um of waviness at 51 mm, and a field shape. The first selection chose the
+    # misalignment and a 0.035 N normal cogging at 38.1 mm; beside them the residual still showed a
+    # period of 48.8 mm, 0.38 of a cycle from 38.1 mm over the 65 mm travel. The waviness at that
+    # period lost on the horizontal axis what it gained vertically and did not pass (z 1.7), and the
+    # cogging was claimed (a false claim). A force at a motor pitch is now unresolved from the pool's
+    # waviness too (selection._residual_periods): not separable, named with the waviness
+    from tests.independent.draws import KINDS, draw
+
+    kinds = ("guide_misalignment", "field_shape")
+    effects = tuple(draw(k, np.random.default_rng([9960, KINDS.index(k)])) for k in kinds)
+    assert effects[0].slope == pytest.approx(3.468e-3, abs=1e-6)  # the bench's log
+    scenario = Scenario(name="+".join(kinds), seed=9960, effects=effects, rig=NOISY)
+    path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
+    d = diagnose_path(path)
+    s = score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    assert [e.name for e in d.effects] == ["guide_misalignment"]
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    # the misalignment's slope within 30 % (the bound; measured 3.38 mrad, -2.5 %)
+    assert d.effects[0].parameters["slope"].value == pytest.approx(effects[0].slope, rel=0.3)
+    stand_in = {n.name: n for n in d.not_separable}["cogging_vertical_38mm"]
+    assert any(c.startswith("guide_waviness_") for c in stand_in.confounded_with)

@@ -2,6 +2,9 @@
 
 * two forces periodic in the position whose periods the logged travel does not tell apart
   (``selection._unresolved``: Rayleigh's resolution, travel |1/P - 1/P'| under ``min_beats``);
+* a force at one of the motor's pitches beside a guide waviness at a period the residual showed
+  (``selection._residual_periods``): held to the waviness in the pool, chosen or not, and no other
+  candidate is;
 * an amplifier lag that is only the loop's own zero-order hold (``currents._beyond_hold``).
 
 Both are checked against the inequality written out here (hypothesis), on stand-in candidates
@@ -12,11 +15,12 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from maglev_oc.diagnosis.currents import _beyond_hold
-from maglev_oc.diagnosis.selection import SelectionSettings, _unresolved
+from maglev_oc.diagnosis.selection import SelectionSettings, _residual_periods, _unresolved
 from maglev_oc.results import Estimate
 
 periods = st.floats(0.005, 0.2)  # [m] the motor's and the guides' periods lie in 5-200 mm
@@ -56,6 +60,66 @@ def test_a_periodic_force_is_unresolved_beside_one_of_a_period_the_travel_does_n
         assert bool(out) == (shared and beats < 1.0)
     if out:
         assert out[0][0] == "chosen" and abs(out[0][1] - beats) <= 1e-6 * max(beats, 1.0)
+
+
+FAMILIES = ("periodic", "geometry", "friction", "profile", "current")
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    families=st.lists(st.sampled_from(FAMILIES), min_size=0, max_size=6),
+    ps=st.lists(periods, min_size=6, max_size=6),
+    own=st.sampled_from(FAMILIES),
+    travel=travels,
+    p=periods,
+)
+def test_a_motor_pitch_force_is_held_to_the_pools_waviness_and_nothing_else_is(families, ps, own, travel, p):
+    # the pool: forces periodic in the position, of any family; only a force at a motor pitch
+    # ("periodic") is held to the pool's guide waviness ("geometry", periods the residual showed),
+    # and only to those; then it is unresolved exactly when one of them is under a beat away
+    pool = [(_cand(f"{f}{k}", "both", family=f), ps[k]) for k, f in enumerate(families)]
+    held = _residual_periods(_cand("cand", "vertical", family=own), pool)
+    expected = [(c, q) for c, q in pool if c.family == "geometry"] if own == "periodic" else []
+    assert held == expected
+    out = _unresolved(
+        _cand("cand", "vertical", family=own),
+        {"period": Estimate(p, 0.0, "m")},
+        held,
+        _design(travel),
+        SelectionSettings(),
+    )
+    beats = [travel * abs(1 / p - 1 / q) for _, q in expected]
+    if all(abs(b - 1.0) > 1e-6 for b in beats):
+        assert bool(out) == any(b < 1.0 for b in beats)
+    # a waviness both chosen and in the pool is named once
+    twice = _unresolved(
+        _cand("cand", "vertical", family=own),
+        {"period": Estimate(p, 0.0, "m")},
+        held + held,
+        _design(travel),
+        SelectionSettings(),
+    )
+    assert twice == out
+
+
+def test_noisy_pair_9960s_stand_in_cogging_is_unresolved_from_the_waviness_the_residual_showed():
+    # drawn pair 9960 on the noisy rig: a 38.1 mm normal cogging beside guide waviness the residual
+    # showed at 48.8 mm, over 65 mm of travel: 65 |1/38.1 - 1/48.8| = 0.37 of a cycle, under one
+    # (Rayleigh); a true cogging at the slot pitch (19.05 mm) is 1.08 cycles from it, told apart
+    wavy = _cand("guide_waviness_49mm", "both", family="geometry")
+    cog = _cand("cogging_vertical_38mm", "vertical")
+    out = _unresolved(
+        cog,
+        {"period": Estimate(0.0381, 0.0, "m")},
+        _residual_periods(cog, [(wavy, 0.0488)]),
+        _design(0.065),
+        SelectionSettings(),
+    )
+    assert [n for n, _ in out] == ["guide_waviness_49mm"]
+    assert out[0][1] == pytest.approx(0.065 * (1 / 0.0381 - 1 / 0.0488), rel=1e-6)
+    assert not _unresolved(
+        cog, {"period": Estimate(0.01905, 0.0, "m")}, [(wavy, 0.0488)], _design(0.065), SelectionSettings()
+    )
 
 
 @given(p=periods, travel=travels)

@@ -16,6 +16,7 @@ import re
 import numpy as np
 import pytest
 
+from maglev_oc.diagnosis.guides import waviness_candidate
 from maglev_oc.diagnosis.selection import SelectionSettings, judge
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
@@ -44,11 +45,22 @@ def cogged_design(model):
     return design, lib
 
 
-def _judge(design, cand, settings, beside=(), friction_axes=frozenset()):
+def _judge(design, cand, settings, beside=(), friction_axes=frozenset(), periodic=()):
     base = fit_subset(design, ["base"])
     r0 = residuals(design, base)[:, design.holdout]
     mse0 = np.maximum(np.mean(r0**2, axis=1), 1e-30)
-    return judge(design, cand, ["base"], base, r0, mse0, settings, beside=beside, friction_axes=friction_axes)
+    return judge(
+        design,
+        cand,
+        ["base"],
+        base,
+        r0,
+        mse0,
+        settings,
+        beside=beside,
+        friction_axes=friction_axes,
+        periodic=periodic,
+    )
 
 
 def test_a_period_the_travel_cannot_tell_from_a_chosen_ones_is_confounded_with_it(cogged, model):
@@ -69,6 +81,18 @@ def test_a_period_the_travel_cannot_tell_from_a_chosen_ones_is_confounded_with_i
         j = _judge(design, cog, settings, beside=[(other, p_other)])
         assert j.verdict == verdict, (factor, j.reason)
         assert j.confounded_with == ((other.reported_name,) if verdict == "not separable" else ())
+        # the travel that would tell them apart: min_beats cycles of drift, travel / factor
+        expected = travel / factor if verdict == "not separable" else None
+        assert j.travel_needed == (None if expected is None else pytest.approx(expected, rel=1e-9))
+        # a guide waviness in the pool (a period the residual showed), chosen or not, holds it the
+        # same way; a force at a motor pitch in the pool does not
+        wavy = waviness_candidate(model, design.prepared, p_other)
+        pooled = _judge(design, cog, settings, periodic=[(wavy, p_other)])
+        assert (pooled.verdict, pooled.confounded_with) == (
+            verdict,
+            (wavy.reported_name,) if verdict == "not separable" else (),
+        )
+        assert _judge(design, cog, settings, periodic=[(other, p_other)]).verdict == "passes"
     vertical = lib["cogging_vertical_19mm"]
     assert _judge(design, cog, settings, beside=[(vertical, period)]).verdict == "passes"
 

@@ -779,9 +779,20 @@ def _stands_for_residual(n: NotSeparable, cand: Candidate) -> bool:
 
 def _separating(j: Judgement, cand: Candidate, session: _Session) -> str:
     """The experiment that would separate a candidate judged not separable: a longer travel when
-    the travel was too short for its period (the candidate's own experiment separates it from the
-    base constants, which is not what failed), else the candidate's."""
+    the travel was too short for its period, or does not tell its period from another force's
+    (the candidate's own experiment separates it from the base constants, which is not what
+    failed), else the candidate's."""
     period = j.physical.get("period")
+    if j.travel_needed is not None and period is not None:
+        others = ", ".join(n.replace("_", " ") for n in j.confounded_with)
+        beats = session.settings.min_beats
+        # a stage's travel may be shorter than that (174 mm for 38 and 49 mm over the +-50 mm of
+        # the papers' stage): the candidate's own experiment is the other way
+        return (
+            f"a run over {j.travel_needed * 1e3:.0f} mm of travel or more tells its period of "
+            f"{period.value * 1e3:.1f} mm from that of {others} ({beats:g} cycle of drift between them); "
+            f"else {cand.separate_by}"
+        )
     if SMOOTH_POSITION in j.confounded_with and period is not None and period.value > 0:
         travel = session.settings.min_periods * period.value
         return (

@@ -62,7 +62,10 @@ effects already chosen (bias-compensated least squares on the training blocks,
    period apart); 1.5 refused the 38 mm normal cogging of the closing-the-loop report's twin,
    logged over 1.3 periods. Nor is it separable from a chosen force of the position alone on one of
    its axes whose period the travel does not tell from its own (fewer than ``min_beats`` cycles of
-   drift between the two over the travel, :func:`_unresolved`).
+   drift between the two over the travel, :func:`_unresolved`), nor, at a motor pitch, from a guide
+   waviness in the pool at such a period, chosen or not: the residual showed that period beside
+   the forces chosen before, so the log does not say which of the two the force has
+   (:func:`_residual_periods`).
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -265,6 +268,9 @@ class Judgement:
     # "" when judged on the accelerations; THRUST_SIDE when its held-out test, Wald test, size and
     # rivals are those of the regression restated in the thrust current (:class:`_ThrustStep`)
     side: str = ""
+    # [m] the travel that would tell its period from those of the forces it is unresolved from
+    # (:func:`_unresolved`; None when that is not why it is not separable)
+    travel_needed: float | None = None
 
     @property
     def own_gain(self) -> float:
@@ -901,7 +907,9 @@ def judge(
         side,
     )
     periods = _periods_seen(cand, measured.physical, design)
-    unresolved = _unresolved(cand, measured.physical, beside, design, settings)
+    unresolved = _unresolved(
+        cand, measured.physical, [*beside, *_residual_periods(cand, periodic)], design, settings
+    )
     rivals = thrust.rivals(cand) if side else rivals
     verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, periods, unresolved)
     if tried is not None and not side:
@@ -923,6 +931,11 @@ def judge(
         confounded = (SMOOTH_POSITION,)
     elif unresolved and not (measured.vif > settings.max_vif or partners):
         confounded = tuple(name for name, _ in unresolved)
+        # the closest pair drifts apart least: the travel that gives it min_beats tells them all apart
+        needed = _travel(design) * settings.min_beats / max(min(b for _, b in unresolved), 1e-9)
+        return dataclasses.replace(
+            measured, verdict=verdict, reason=reason, confounded_with=confounded, travel_needed=needed
+        )
     else:
         confounded = partners or ("C1..C4",)
     return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
@@ -1228,9 +1241,33 @@ def _unresolved(
         if not shared or other.reported_name == cand.reported_name:
             continue
         beats = travel * abs(1.0 / period - 1.0 / p)
-        if beats < settings.min_beats:
+        # a waviness both chosen and in the pool (_residual_periods) is named once
+        if beats < settings.min_beats and other.reported_name not in (n for n, _ in out):
             out.append((other.reported_name, beats))
     return out
+
+
+def _residual_periods(
+    cand: Candidate, periodic: Sequence[tuple[Candidate, float]]
+) -> list[tuple[Candidate, float]]:
+    """For a force at one of the motor's pitches (``family`` "periodic"), the guide waviness of
+    ``periodic`` (the design's forces periodic in the position, :func:`_pool_periods`): forces at
+    periods the residual of an earlier selection showed, which no motor period explains. Such a
+    force is not told from one of them whose period the travel does not tell from its own
+    (:func:`_unresolved`), whether that waviness passes or not: the residual showed the period
+    beside the forces chosen then, so the log does not say which of the two periods the force has.
+
+    On the benches of the independent generator (99 logs with cogging, detent, ripple or a guide
+    misalignment, both rigs) a waviness period unresolved from a motor-pitch force chosen in the
+    first selection was found on 4 logs, each a guide misalignment with its waviness and no force
+    at that pitch (0.13-0.46 of a cycle apart), and on none of the 50 whose chosen motor-pitch force
+    is true. Three dropped the stand-in once the waviness was chosen; on the fourth (drawn pair 9960
+    on the noisy rig: 6 um of waviness at 51 mm, residual period 49 mm) the waviness lost on the
+    horizontal axis what it gained vertically, did not pass, and a 0.035 N normal cogging at 38 mm
+    was claimed in its place."""
+    if cand.family != "periodic":
+        return []
+    return [(other, p) for other, p in periodic if other.family == "geometry"]
 
 
 def separable(design: Design, cand: Candidate, fit: SubsetFit, settings: SelectionSettings) -> bool:

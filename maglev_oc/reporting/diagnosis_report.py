@@ -147,7 +147,11 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         for e in diag.effects
     ]
     rows += [
-        (plain(n.name), f"real in the fit, confounded with {', '.join(n.confounded_with)}", "not claimed")
+        (
+            plain(n.name),
+            f"real in the fit, confounded with {', '.join(map(plain, n.confounded_with))}",
+            "not claimed",
+        )
         for n in diag.not_separable
     ]
     # a constant no stage of this design has (pipeline.constant_warnings: "<what>: <why>")
@@ -251,7 +255,7 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
         out.append("No missing effect found: the papers' model, refitted, explains the log to its noise.")
     out += [
         f"Real in the fit but not separable on this log (not claimed): {plain(n.name)}, confounded with "
-        f"{', '.join(n.confounded_with)}. What would separate it: {n.experiment}."
+        f"{', '.join(map(plain, n.confounded_with))}. What would separate it: {n.experiment}."
         for n in diag.not_separable
     ]
     out += [f"Not explained by any effect of the library: {u.description}" for u in diag.unexplained]
