@@ -84,17 +84,47 @@ def test_a_period_the_travel_cannot_tell_from_a_chosen_ones_is_confounded_with_i
         # the travel that would tell them apart: min_beats cycles of drift, travel / factor
         expected = travel / factor if verdict == "not separable" else None
         assert j.travel_needed == (None if expected is None else pytest.approx(expected, rel=1e-9))
-        # a guide waviness in the pool (a period the residual showed), chosen or not, holds it the
-        # same way; a force at a motor pitch in the pool does not
-        wavy = waviness_candidate(model, design.prepared, p_other)
-        pooled = _judge(design, cog, settings, periodic=[(wavy, p_other)])
-        assert (pooled.verdict, pooled.confounded_with) == (
-            verdict,
-            (wavy.reported_name,) if verdict == "not separable" else (),
-        )
+        # a force at a motor pitch in the pool is not a waviness the residual showed: no hold
         assert _judge(design, cog, settings, periodic=[(other, p_other)]).verdict == "passes"
     vertical = lib["cogging_vertical_19mm"]
     assert _judge(design, cog, settings, beside=[(vertical, period)]).verdict == "passes"
+
+
+def test_a_true_cogging_keeps_its_place_beside_a_waviness_that_explains_less(cogged, model):
+    """The planted 19 mm cogging beside a guide waviness in the pool at a period the travel does
+    not tell from its own (0.9 of a cycle): the waviness in its place explains less of the held-out
+    error, so the cogging passes; a candidate that explains nothing (the base model's own test)
+    is matched by any waviness that explains something (selection._explains_as_much)."""
+    from maglev_oc.diagnosis.selection import _explains_as_much, _held_out_test
+
+    design, lib = cogged
+    cog = lib["cogging_horizontal_19mm"]
+    settings = SelectionSettings()
+    travel = float(np.subtract(*np.percentile(design.prepared.x[2, design.fit], [99, 1])))
+    p_wavy = 1.0 / (1.0 / model.params.slot_pitch - 0.9 * settings.min_beats / travel)
+    wavy = waviness_candidate(model, design.prepared, p_wavy)
+    data = design.prepared
+    with_wavy = build_design(
+        data,
+        model,
+        estimate=("C1",),
+        terms=(*design.terms, wavy.term),
+        fit=design.fit,
+        holdout=design.holdout,
+    )
+    j = _judge(with_wavy, cog, settings, periodic=[(wavy, p_wavy)])
+    assert j.verdict == "passes", j.reason
+    base = fit_subset(with_wavy, ["base"])
+    r0 = residuals(with_wavy, base)[:, with_wavy.holdout]
+    axes = np.array([1])
+    own = _held_out_test(with_wavy, ["base", cog.name], r0, None, None, axes)
+    alt = _held_out_test(with_wavy, ["base", wavy.name], r0, None, None, axes)
+    assert alt.pooled_axes[1] < own.pooled_axes[1]
+    assert not _explains_as_much(with_wavy, wavy, own, ["base"], r0, None, None, axes)
+    nothing = _held_out_test(with_wavy, ["base"], r0, None, None, axes)
+    assert _explains_as_much(with_wavy, wavy, nothing, ["base"], r0, None, None, axes) == (
+        alt.pooled_axes[1] >= 0
+    )
 
 
 def test_a_candidate_the_held_out_test_rejects_has_no_wald_statistic(cogged):
