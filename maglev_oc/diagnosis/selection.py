@@ -910,10 +910,11 @@ def judge(
     )
     periods = _periods_seen(cand, measured.physical, design)
     # a waviness the residual showed, at a period the travel does not tell from the candidate's,
-    # that explains as much in its place (module doc, point 4)
+    # that explains as much in its place (module doc, point 4); one not worth testing is not
+    # significant whatever it is unresolved from, and costs no fit
     in_its_place = [
         (w, p)
-        for w, p in _residual_periods(cand, periodic)
+        for w, p in (_residual_periods(cand, periodic) if worth_testing else ())
         if w.name in design.groups
         and w.name not in current
         and _unresolved(cand, measured.physical, [(w, p)], design, settings)
@@ -933,6 +934,7 @@ def judge(
             verdict, reason = "not specific", drift
     if hidden:
         verdict, reason = _beside_friction(verdict, reason, left, hidden)
+    needed = None
     if hidden and not left.size and verdict == "not separable":
         confounded: tuple[str, ...] = tuple(f"guide_friction_{AXES[a]}" for a in hidden)
     elif verdict != "not separable":
@@ -943,12 +945,11 @@ def judge(
         confounded = tuple(name for name, _ in unresolved)
         # the closest pair drifts apart least: the travel that gives it min_beats tells them all apart
         needed = _travel(design) * settings.min_beats / max(min(b for _, b in unresolved), 1e-9)
-        return dataclasses.replace(
-            measured, verdict=verdict, reason=reason, confounded_with=confounded, travel_needed=needed
-        )
     else:
         confounded = partners or ("C1..C4",)
-    return dataclasses.replace(measured, verdict=verdict, reason=reason, confounded_with=confounded)
+    return dataclasses.replace(
+        measured, verdict=verdict, reason=reason, confounded_with=confounded, travel_needed=needed
+    )
 
 
 MIN_BEATING = 0.25
