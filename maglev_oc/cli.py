@@ -832,7 +832,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  unexplained: {u.description}")
     seen = [d for d in diag.detection_limits if math.isfinite(d.value)]
     if seen:
-        from maglev_oc.reporting.diagnosis_plots import plain
+        from maglev_oc.diagnosis.words import plain
         from maglev_oc.reporting.diagnosis_report import LIMITS_IN_WORDS, limit_size
 
         words = ", ".join(f"{plain(d.name)} below {limit_size(d)}" for d in seen[:LIMITS_IN_WORDS])

@@ -20,6 +20,7 @@ within 3 %, bench/README), 20x noisier than the generator's default.
 from __future__ import annotations
 
 import json
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -404,3 +405,6 @@ def test_a_guide_waviness_that_does_not_pass_leaves_no_cogging_in_its_place(tmp_
     assert d.effects[0].parameters["slope"].value == pytest.approx(effects[0].slope, rel=0.3)
     stand_in = {n.name: n for n in d.not_separable}["cogging_vertical_38mm"]
     assert any(c.startswith("guide_waviness_") for c in stand_in.confounded_with)
+    # the experiment that would separate them names the waviness in words, with its period
+    words = stand_in.experiment
+    assert re.search(r"from that of guide waviness \(\d+ mm period\)", words), words

@@ -266,7 +266,7 @@ def check_outcome_rows(diag, study, rows) -> None:
 
 
 def test_diagnosis_scorecard_numbers_are_the_diagnosis(short_diagnosis):
-    from maglev_oc.reporting.diagnosis_plots import plain
+    from maglev_oc.diagnosis.words import plain
     from maglev_oc.reporting.diagnosis_report import scorecard_table
 
     diag, study = short_diagnosis
@@ -282,7 +282,7 @@ def test_diagnosis_scorecard_numbers_are_the_diagnosis(short_diagnosis):
 
 
 def test_effect_names_are_plain_words():
-    from maglev_oc.reporting.diagnosis_plots import plain
+    from maglev_oc.diagnosis.words import plain
 
     assert plain("cogging_vertical_38mm") == "normal cogging (38 mm period)"
     assert plain("cogging_horizontal_19mm") == "cogging along the travel (19 mm period)"

@@ -87,6 +87,7 @@ from maglev_oc.diagnosis.selection import (
 from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
+from maglev_oc.diagnosis.words import plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
 from maglev_oc.model.stage import StageModel
@@ -784,7 +785,7 @@ def _separating(j: Judgement, cand: Candidate, session: _Session) -> str:
     failed), else the candidate's."""
     period = j.physical.get("period")
     if j.travel_needed is not None and period is not None:
-        others = ", ".join(n.replace("_", " ") for n in j.confounded_with)
+        others = ", ".join(plain(n) for n in j.confounded_with)
         beats = session.settings.min_beats
         # a stage's travel may be shorter than that (174 mm for 38 and 49 mm over the +-50 mm of
         # the papers' stage): the candidate's own experiment is the other way

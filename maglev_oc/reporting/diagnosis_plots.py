@@ -8,7 +8,6 @@ Each ``*_plot`` function returns a ``draw(fig, rect) -> title`` for a
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 
 import numpy as np
@@ -17,6 +16,7 @@ from matplotlib.lines import Line2D
 
 from maglev_oc.diagnosis.feedback import CompensationStudy
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
+from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting.pdf import caption, grid
 from maglev_oc.reporting.style import bands, thin
 from maglev_oc.results import AXES
@@ -44,39 +44,6 @@ BEFORE, AFTER = "tab:red", "tab:green"
 """The base model alone (before) and with the found effects (after), in every figure."""
 AXIS_COLORS = ("tab:blue", "tab:orange")
 """Vertical and horizontal, in every figure."""
-
-_WORDS = {
-    "guide_friction_horizontal": "horizontal guide friction",
-    "guide_friction_vertical": "vertical guide friction",
-    "horizontal_guides_not_level": "horizontal guides off level",
-    "constant_vertical_force": "constant vertical force",
-    "attraction_gap_dependence": "gap dependence of the attraction",
-    "magnet_field_gap_dependence": "gap dependence of the magnets' field",
-    "gap_sensor_offset": "gap sensor offset",
-    "thrust_ripple": "thrust ripple",
-    "guide_misalignment": "guides tilted against the stator",
-    "cable_carrier_force": "cable carrier force",
-    "commutation_offset": "commutation angle offset",
-    "end_effects": "end effects",
-    "current_amplifier_lag": "current amplifier lag",
-    "current_saturation": "iron saturated by the current",
-}
-"""The diagnosis library's effects in the words a control engineer uses."""
-
-
-def plain(name: str) -> str:
-    """An effect's name in words: ``cogging_vertical_38mm`` -> ``normal cogging, 38 mm period``,
-    ``guide_friction_horizontal`` -> ``horizontal guide friction``; unknown names lose their
-    underscores."""
-    if name in _WORDS:
-        return _WORDS[name]
-    if m := re.fullmatch(r"cogging_(vertical|horizontal)_(\d+)mm", name):
-        kind = "normal cogging" if m[1] == "vertical" else "cogging along the travel"
-        return f"{kind} ({m[2]} mm period)"
-    if m := re.fullmatch(r"guide_waviness_(\d+)mm", name):
-        return f"guide waviness ({m[1]} mm period)"
-    return name.replace("_", " ")
-
 
 _VARIABLE = {
     "gap": ("gap x1 [mm]", lambda d: d.x[0] * M_TO_MM),

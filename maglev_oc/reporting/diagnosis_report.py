@@ -21,9 +21,9 @@ import numpy as np
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
+from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting import validation_plots
-from maglev_oc.reporting.diagnosis_plots import plain
 from maglev_oc.reporting.pdf import (
     MIN_FILL,
     PdfReport,

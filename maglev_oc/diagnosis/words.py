@@ -1,0 +1,38 @@
+"""The diagnosis's effects named in the words a control engineer uses, for the reports and for
+the sentences the diagnosis itself writes (the experiment that would separate an effect)."""
+
+from __future__ import annotations
+
+import re
+
+_WORDS = {
+    "guide_friction_horizontal": "horizontal guide friction",
+    "guide_friction_vertical": "vertical guide friction",
+    "horizontal_guides_not_level": "horizontal guides off level",
+    "constant_vertical_force": "constant vertical force",
+    "attraction_gap_dependence": "gap dependence of the attraction",
+    "magnet_field_gap_dependence": "gap dependence of the magnets' field",
+    "gap_sensor_offset": "gap sensor offset",
+    "thrust_ripple": "thrust ripple",
+    "guide_misalignment": "guides tilted against the stator",
+    "cable_carrier_force": "cable carrier force",
+    "commutation_offset": "commutation angle offset",
+    "end_effects": "end effects",
+    "current_amplifier_lag": "current amplifier lag",
+    "current_saturation": "iron saturated by the current",
+}
+"""The diagnosis library's effects in the words a control engineer uses."""
+
+
+def plain(name: str) -> str:
+    """An effect's name in words: ``cogging_vertical_38mm`` -> ``normal cogging, 38 mm period``,
+    ``guide_friction_horizontal`` -> ``horizontal guide friction``; unknown names lose their
+    underscores."""
+    if name in _WORDS:
+        return _WORDS[name]
+    if m := re.fullmatch(r"cogging_(vertical|horizontal)_(\d+)mm", name):
+        kind = "normal cogging" if m[1] == "vertical" else "cogging along the travel"
+        return f"{kind} ({m[2]} mm period)"
+    if m := re.fullmatch(r"guide_waviness_(\d+)mm", name):
+        return f"guide waviness ({m[1]} mm period)"
+    return name.replace("_", " ")
