@@ -4,7 +4,8 @@
   (``selection._unresolved``: Rayleigh's resolution, travel |1/P - 1/P'| under ``min_beats``);
 * a force at one of the motor's pitches beside a guide waviness at a period the residual showed
   (``selection._residual_periods``): held to the waviness in the pool, chosen or not, and no other
-  candidate is;
+  candidate is; beside a guide misalignment, a waviness at its own period joins the pool
+  (``pipeline._chosen_pitches``);
 * an amplifier lag that is only the loop's own zero-order hold (``currents._beyond_hold``).
 
 Both are checked against the inequality written out here (hypothesis), on stand-in candidates
@@ -120,6 +121,34 @@ def test_noisy_pair_9960s_stand_in_cogging_is_unresolved_from_the_waviness_the_r
     assert not _unresolved(
         cog, {"period": Estimate(0.01905, 0.0, "m")}, [(wavy, 0.0488)], _design(0.065), SelectionSettings()
     )
+
+
+def test_a_chosen_cogging_beside_a_misalignment_gets_a_waviness_at_its_own_period_as_rival():
+    # drawn pair 10018 on the noisy rig: guides tilted by 3.1 mrad with 4.7 um of waviness at
+    # 57.35 mm, and a thrust ripple; the first selection chose the misalignment, a 0.018 N detent at
+    # the pole pitch (57.15 mm: 0.02 of a cycle from the waviness over the travel) and the ripple.
+    # The residual beside them shows no period (the detent took it), so a waviness at the detent's
+    # own period joins the search: only beside a misalignment, only for forces of the position alone
+    from maglev_oc.diagnosis.pipeline import _chosen_pitches
+
+    def cand(name, family="periodic", variable="position"):
+        return SimpleNamespace(name=name, family=family, variable=variable)
+
+    library = [
+        cand("guide_misalignment", family="geometry"),
+        cand("cogging_horizontal_57mm"),
+        cand("thrust_ripple", family="current"),
+    ]
+    last = {
+        "guide_misalignment": SimpleNamespace(physical={"slope": Estimate(3e-3, 1e-5, "rad")}),
+        "cogging_horizontal_57mm": SimpleNamespace(physical={"period": Estimate(0.05715, 0.0, "m")}),
+        "thrust_ripple": SimpleNamespace(physical={"period": Estimate(0.01905, 0.0, "m")}),
+    }
+    chosen = ["guide_misalignment", "cogging_horizontal_57mm", "thrust_ripple"]
+    # (rounded to 0.1 mm, as the residual's periods are)
+    assert _chosen_pitches(library, SimpleNamespace(selected=chosen, last=last)) == [round(0.05715, 4)]
+    # a detent with straight guides keeps the search as it was
+    assert _chosen_pitches(library, SimpleNamespace(selected=chosen[1:], last=last)) == []
 
 
 @given(p=periods, travel=travels)

@@ -660,8 +660,9 @@ def _waviness_periods(
 ) -> tuple[Trace, list[float]]:
     """Step 5b: the trace of the base fit's residual ``res0`` (step 3), and the periodicities of the
     selection's residual that no force of the library at a motor period explains on that axis
-    (:func:`_periods_on_axis`), at refined periods. The two residuals' traces are computed
-    together: their spatial spectra share the sines of the position."""
+    (:func:`_periods_on_axis`), at refined periods, and beside a chosen guide misalignment the
+    periods of the chosen forces at a motor pitch (:func:`_chosen_pitches`). The two residuals'
+    traces are computed together: their spatial spectra share the sines of the position."""
     data, train = session.data, session.train
     res = residuals(design, sel.final)
     tr, tr_after = traces(
@@ -677,8 +678,31 @@ def _waviness_periods(
             round(refine_waviness_period(fitted, data, res, session.weights, train, lam), 4)
             for _, lam in unexplained_periods(tr_after, tolerance=0.03, on_axis=on_axis)
         }
+        | set(_chosen_pitches(library, sel))
     )
     return tr, periods
+
+
+def _chosen_pitches(library: Sequence[Candidate], sel: Selection) -> list[float]:
+    """[m] the periods of the chosen forces at a motor pitch (cogging, a detent), rounded as the
+    waviness periods are, when a guide misalignment is chosen beside them: a waviness of the guides
+    at that period is their rival, which the travel cannot tell from them
+    (``selection._residual_periods``), and the residual beside them cannot show it (the force took
+    it). Drawn pair 10018 of the independent generator on the noisy rig: guides tilted by 3.1 mrad
+    with 4.7 um of waviness at 57.35 mm; a 0.018 N detent at the pole pitch (57.15 mm) was claimed
+    beside the misalignment, the waviness's push along its sloping guides. Not without a
+    misalignment: guides found straight give no reason to doubt a cogging, and a small true detent
+    could lose its claim to a waviness that explains as much."""
+    by_name = {c.name: c for c in library}
+    if "guide_misalignment" not in sel.selected:
+        return []
+    out = []
+    for name in sel.selected:
+        period = sel.last[name].physical.get("period") if name in sel.last else None
+        cand = by_name[name]
+        if cand.family == "periodic" and cand.variable == "position" and period is not None:
+            out.append(round(period.value, 4))
+    return out
 
 
 def _has_lines(library: Sequence[Candidate], sel: Selection) -> bool:
