@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import re
 
+__all__ = ["plain"]
+
 _WORDS = {
     "guide_friction_horizontal": "horizontal guide friction",
     "guide_friction_vertical": "vertical guide friction",
