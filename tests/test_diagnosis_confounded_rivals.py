@@ -458,3 +458,8 @@ def test_a_guide_waviness_that_does_not_pass_leaves_no_cogging_in_its_place(tmp_
     # the experiment that would separate them names the waviness in words, with its period
     words = stand_in.experiment
     assert re.search(r"from that of guide waviness \(\d+ mm period\)", words), words
+    # one of them at its own period (pipeline._chosen_pitches): no travel between the stoppers
+    # tells them apart (was "a run over 65325889673 mm of travel"), so its own experiment is named
+    assert words.startswith("no run between the stoppers (120 mm)"), words
+    own = "runs at two gaps separate a force that grows as the gap closes from guide waviness"
+    assert words.endswith(own), words

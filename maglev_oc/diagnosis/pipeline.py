@@ -90,6 +90,7 @@ from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
+from maglev_oc.model.hardware import STOPPER_POSITION
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread
 from maglev_oc.progress import progress
@@ -811,8 +812,14 @@ def _separating(j: Judgement, cand: Candidate, session: _Session) -> str:
     if j.travel_needed is not None and period is not None:
         others = ", ".join(plain(n) for n in j.confounded_with)
         beats = session.settings.min_beats
-        # a stage's travel may be shorter than that (174 mm for 38 and 49 mm over the +-50 mm of
-        # the papers' stage): the candidate's own experiment is the other way
+        span = STOPPER_POSITION[1] - STOPPER_POSITION[0]
+        if j.travel_needed > span:
+            # the same period, or one the stoppers leave too little travel to tell (174 mm for 38
+            # and 49 mm): the candidate's own experiment is the way
+            return (
+                f"no run between the stoppers ({span * 1e3:.0f} mm) tells its period of "
+                f"{period.value * 1e3:.1f} mm from that of {others}: {cand.separate_by}"
+            )
         return (
             f"a run over {j.travel_needed * 1e3:.0f} mm of travel or more tells its period of "
             f"{period.value * 1e3:.1f} mm from that of {others} ({beats:g} cycle of drift between them); "
