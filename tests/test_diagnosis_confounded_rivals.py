@@ -432,6 +432,63 @@ def test_a_guide_waviness_at_the_pole_pitch_is_not_claimed_as_a_detent(tmp_path)
 
 
 @pytest.mark.slow
+def test_a_commutation_offset_beside_a_tilted_base_is_found_as_a_pair(tmp_path):
+    # noisy pairs_04 of the independent set at seed offset 3000 (bench/diagnose_score.py --sets
+    # pairs --rig obs2800 --seed-offset 3000): a 1.1 degree commutation offset and guides tilted by
+    # 15 mrad. C1 was 9.99 against the papers' 14.2 (-29.7 %, inside identify's 30 %), no candidate
+    # passed alone (the tilt 32.8 % of the held-out error at z 2.4; the offset lost to a smooth
+    # function of the gap), so the pair step did not run and nothing was claimed. It now runs from
+    # a change of C1 beyond the spread of stages of this design (selection.RIG_SPREAD, 20 %)
+    import dataclasses
+
+    from tests.independent.sets import named_set
+
+    scenario = dict(named_set("pairs", seed_offset=3000))["pairs_04"]
+    scenario = dataclasses.replace(scenario, rig=dataclasses.replace(scenario.rig, observer_bandwidth=2800.0))
+    path, truth_path = write_log(simulate(scenario), tmp_path, stem="pairs_04")
+    d = diagnose_path(path)
+    s = score("pairs_04", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    assert sorted(e.name for e in d.effects) == ["commutation_offset", "horizontal_guides_not_level"]
+    # both sizes within 30 % (the issue's bound; measured +0.9 % on the offset's angle, +0.6 % on
+    # the tilt's force), nothing warned of: C1 is back
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes, s.sizes)
+    assert not d.warnings
+
+
+@pytest.mark.slow
+def test_a_guide_waviness_longer_than_the_travel_is_not_claimed_as_a_spring_and_end_effects(tmp_path):
+    # random pair 10075 on the noisy rig (--drawn-pairs 24 --seed 10070 --rig obs2800): guides
+    # tilted by 4.5 mrad with 7.3 um of waviness at 77 mm over 60 mm of travel, and a 1.1 N detent
+    # at the slot pitch. A cable carrier and end effects were claimed beside the misalignment and
+    # the detent: over the travel the waviness is a bow, and its residual shows no period. Beside a
+    # misalignment and such forces a waviness is now scanned for in a joint fit, from the travel to
+    # three travels (pipeline._waviness_beyond_travel), and the selection judges it against them
+    effects, d, s = _drawn_pair(tmp_path, 10075, ("detent_force", "guide_misalignment"), NOISY)
+    assert effects[1].slope == pytest.approx(-4.4557e-3, abs=1e-6)  # the bench's log
+    assert sorted(e.name for e in d.effects) == ["cogging_horizontal_19mm", "guide_misalignment"]
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes, s.sizes)
+    # the bow found as a waviness longer than the travel (its period is not resolved over 60 mm:
+    # measured 109.9 mm), its size within a factor of two of the truth's 7.3 um (measured 11.1 um: a
+    # longer period, a larger amplitude for the same bow)
+    guides = d.effects[[e.name for e in d.effects].index("guide_misalignment")].parameters
+    assert guides["waviness_period"].value > 0.06
+    assert 0.5 < guides["waviness_amplitude"].value / effects[1].waviness_amplitude < 2.0
+
+
+@pytest.mark.slow
+def test_a_spring_beside_tilted_guides_keeps_the_slope_a_long_waviness_could_stand_for(tmp_path):
+    # random pair 10085 on the noisy rig (--drawn-pairs 24 --seed 10070 --rig obs2800): guides
+    # tilted by 2.9 mrad with 6.2 um of waviness at 56 mm, and a 6 N/m cable carrier. Beside the
+    # misalignment and the carrier, the scan for a waviness longer than the travel was least at its
+    # longest period (three travels): a line of the gap, the slope's own shape. Taken as a waviness
+    # it replaced the slope (the misalignment no longer claimed); such a scan now adds nothing
+    effects, d, s = _drawn_pair(tmp_path, 10085, ("guide_misalignment", "cable_carrier"), NOISY)
+    assert effects[0].slope == pytest.approx(-2.8818e-3, abs=1e-6)  # the bench's log
+    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes, s.sizes)
+
+
+@pytest.mark.slow
 def test_a_guide_waviness_that_does_not_pass_leaves_no_cogging_in_its_place(tmp_path):
     # random pair 9960 on the noisy rig (--drawn-pairs 24 --seed 9950 --rig obs2800): guides tilted
     # by 3.5 mrad with 6.2 um of waviness at 51 mm, and a field shape. The first selection chose the

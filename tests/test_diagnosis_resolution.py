@@ -5,7 +5,8 @@
 * a force at one of the motor's pitches beside a guide waviness at a period the residual showed
   (``selection._residual_periods``): held to the waviness in the pool, chosen or not, and no other
   candidate is; beside a guide misalignment, a waviness at its own period joins the pool
-  (``pipeline._chosen_pitches``);
+  (``pipeline._chosen_pitches``), and beside a misalignment and a force smooth along the track a
+  waviness longer than the travel (``pipeline._waviness_beyond_travel``);
 * an amplifier lag that is only the loop's own zero-order hold (``currents._beyond_hold``).
 
 Both are checked against the inequality written out here (hypothesis), on stand-in candidates
@@ -149,6 +150,36 @@ def test_a_chosen_cogging_beside_a_misalignment_gets_a_waviness_at_its_own_perio
     assert _chosen_pitches(library, SimpleNamespace(selected=chosen, last=last)) == [round(0.05715, 4)]
     # a detent with straight guides keeps the search as it was
     assert _chosen_pitches(library, SimpleNamespace(selected=chosen[1:], last=last)) == []
+
+
+def test_a_waviness_longer_than_the_travel_is_scanned_for_only_beside_a_misalignment_and_a_smooth_force():
+    # drawn pair 10075 on the noisy rig: guides tilted by 4.5 mrad with 7.3 um of waviness at 77 mm
+    # over 60 mm of travel, and a detent; a cable carrier and end effects were claimed beside the
+    # misalignment. Only such forces smooth along the track are what a bow of the guides stands in
+    # for: not a constant force (a tilt), a force periodic at a motor pitch or the guides' shape
+    from maglev_oc.diagnosis.pipeline import _smooth_along_track, _waviness_beyond_travel
+
+    def cand(name, family, variable="position", rival_span=None):
+        return SimpleNamespace(name=name, family=family, variable=variable, rival_span=rival_span)
+
+    library = [
+        cand("guide_misalignment", "geometry"),
+        cand("cogging_horizontal_19mm", "periodic"),
+        cand("horizontal_guides_not_level", "constant"),
+        cand("cable_carrier_force", "constant", rival_span=("horizontal", "position", 2)),
+        cand("end_effects", "profile"),
+        cand("magnet_field_gap_dependence", "profile", variable="gap"),
+        cand("gap_spring", "constant", variable="gap", rival_span=("vertical", "gap", 2)),
+    ]
+    smooth = [c.name for c in library if _smooth_along_track(c)]
+    assert smooth == ["cable_carrier_force", "end_effects"]
+    # without a misalignment, or without a smooth force beside it, nothing is scanned (the session
+    # is not read: None stands for it)
+    for chosen in (
+        ["cogging_horizontal_19mm", "cable_carrier_force"],
+        ["guide_misalignment", "cogging_horizontal_19mm"],
+    ):
+        assert _waviness_beyond_travel(None, None, library, SimpleNamespace(selected=chosen)) == []
 
 
 @given(p=periods, travel=travels)

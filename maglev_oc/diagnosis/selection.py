@@ -174,7 +174,7 @@ from scipy.stats import chi2
 
 from maglev_oc.diagnosis.library import Candidate
 from maglev_oc.diagnosis.thrust_current import THRUST, ThrustSide, judged_on_thrust_current
-from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE, beyond_plausible
+from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE, PLAUSIBLE_Z, beyond_plausible
 from maglev_oc.regression.base import AXES, AXIS_INDEX, CONSTANT_AXIS, CONSTANT_NAMES
 from maglev_oc.regression.covariance import (
     DEFAULT_BAND,
@@ -187,6 +187,7 @@ from maglev_oc.regression.solve import SubsetFit, _blocks_of, _spanned, fit_subs
 from maglev_oc.regression.terms import Estimate
 
 __all__ = [
+    "RIG_SPREAD",
     "SMOOTH_POSITION",
     "Judgement",
     "Selection",
@@ -215,6 +216,18 @@ SIDE_WORDS = {"accelerations": "the accelerations", THRUST_SIDE: "the logged thr
 
 SMOOTH_POSITION = "a smooth dependence on the position"
 """What a position-periodic candidate seen over too few periods is confounded with."""
+
+RIG_SPREAD = 0.2
+"""Relative change of C1 from the model's beyond which, when no candidate passes alone, the pair
+step (:func:`_pairs_restoring_thrust`) looks for two effects along the track that bring it back.
+Stages of this design differ by less: the papers' three NPFSI runs by up to 12 %, the independent
+generator's plants by up to 5 %. Lower than ``identify``'s warning
+(:data:`~maglev_oc.identification.pipeline.PLAUSIBLE_CHANGE`, 30 %) because the pair is only
+proposed; each of the two is then judged beside the other before it is claimed. Noisy pairs_04 of
+the independent set at seed offset 3000 (a 1.1 degree commutation offset and guides tilted by
+15 mrad): C1 at 9.99 against the papers' 14.2 (-29.7 %), no candidate passed alone (the tilt
+explained 32.8 % of the held-out error at z = 2.4, the offset lost to a smooth function of the
+gap), and together they explain 90 % with C1 at 13.86 (true 13.82)."""
 
 
 @dataclass(frozen=True)
@@ -1801,7 +1814,8 @@ def _pairs_restoring_thrust(
 ) -> list[tuple[str, str]]:
     """The two effects along the track that, fitted together beside ``current``, explain the most
     of the held-out horizontal error with C1 back within ``identify``'s plausible change of the
-    model's, when no candidate passes alone and ``cur_fit``'s C1 is one no stage of this design has:
+    model's, when no candidate passes alone and ``cur_fit``'s C1 is one no stage of this design has
+    (beyond :data:`RIG_SPREAD` of the model's, by :data:`PLAUSIBLE_Z` standard errors):
     each pair of their forms that does so by at least ``min_gain``, the most explaining first; empty
     otherwise.
 
@@ -1825,7 +1839,8 @@ def _pairs_restoring_thrust(
         return []
     k = cur_fit.names.index("C1")
     sd = float(np.sqrt(max(cur_fit.covariance[k, k], 0.0))) if np.isfinite(cur_fit.covariance[k, k]) else 0.0
-    if not beyond_plausible(cur_fit.value("C1"), reference["C1"], sd):
+    c1, c1_model = cur_fit.value("C1"), reference["C1"]
+    if not (abs(c1 / c1_model - 1.0) > RIG_SPREAD and abs(c1 - c1_model) > PLAUSIBLE_Z * sd):
         return []
     names = [n for n in pool if by_name[n].axis in ("horizontal", "both") and by_name[n].fallback_for is None]
     before = cur_fit.holdout_rms[AXIS_INDEX["horizontal"]]
