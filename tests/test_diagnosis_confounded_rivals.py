@@ -489,6 +489,23 @@ def test_a_spring_beside_tilted_guides_keeps_the_slope_a_long_waviness_could_sta
 
 
 @pytest.mark.slow
+def test_a_vertical_friction_that_only_holds_the_models_misfit_is_not_claimed(tmp_path):
+    # random pair 10116 on the noisy rig (--drawn-pairs 24 --seed 10100 --rig obs2800): end effects
+    # (a raised cosine over 61 mm from ends at +-50 mm, 11 % of the thrust and 4.5 % of the magnets'
+    # attraction lost at them) and a 4.8 N/m cable carrier. A vertical friction of 0.083 +- 0.036 N
+    # holding 1.30 of the force was claimed beside the carrier: holding the axis at standstill it
+    # took up the model's misfit in the gap there (65 % of the held-out vertical error alone; -0.1 %
+    # beside a smooth function of the gap). Such a friction is now judged beside that function
+    # (selection._beyond_the_misfit)
+    effects, d, s = _drawn_pair(tmp_path, 10116, ("end_effect", "cable_carrier"), NOISY)
+    assert effects[1].stiffness == pytest.approx(4.786, abs=1e-3)  # the bench's log
+    assert [e.name for e in d.effects] == ["cable_carrier_force"]
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    # the carrier within 30 % (the issue's bound; measured 4.8 +- 0.09 N/m, +0.3 %)
+    assert d.effects[0].parameters["stiffness"].value == pytest.approx(effects[1].stiffness, rel=0.3)
+
+
+@pytest.mark.slow
 def test_a_guide_waviness_that_does_not_pass_leaves_no_cogging_in_its_place(tmp_path):
     # random pair 9960 on the noisy rig (--drawn-pairs 24 --seed 9950 --rig obs2800): guides tilted
     # by 3.5 mrad with 6.2 um of waviness at 51 mm, and a field shape. The first selection chose the
