@@ -728,8 +728,8 @@ def _waviness_beyond_travel(
     tilted by 4.5 mrad with 7.3 um of waviness at 77 mm over 60 mm of travel, and a detent): a
     cable carrier and end effects were claimed beside the misalignment. Against the residual
     beside the misalignment the waviness's error varied by 0.5 % between 30 and 90 mm and was least
-    at 57 mm (the pole pitch, where the detent's harmonic takes it); fitted with the constants it
-    falls from 60 mm and is flat within 0.1 % from 85 to 160 mm, below the carrier and end effects'."""
+    at 57 mm, where the waviness does not pass; fitted with the constants it falls from 60 mm and
+    is flat within 0.1 % from 85 to 160 mm, below the carrier and end effects'."""
     by_name = {c.name: c for c in library}
     chosen = sel.selected
     smooth = [n for n in chosen if _smooth_along_track(by_name[n])]
