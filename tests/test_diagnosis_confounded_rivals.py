@@ -380,6 +380,24 @@ def test_the_pair_proposed_is_the_one_that_brings_the_motor_back(model, tmp_path
         assert abs(c1 / reference["C1"] - 1.0) <= PLAUSIBLE_CHANGE
 
 
+def _noisy_named(tmp_path, set_name: str, seed_offset: int, name: str):
+    """Log ``name`` of the independent named set at ``seed_offset`` on the noisy rig, as
+    ``bench/diagnose_score.py --sets SET --rig obs2800 --seed-offset N`` writes it, diagnosed with
+    the defaults and scored: (diagnosis, score)."""
+    import dataclasses
+
+    from tests.independent.sets import named_set
+
+    scenario = dict(named_set(set_name, seed_offset=seed_offset))[name]
+    # the set's own rig (its gains) with the noisy rig's observer
+    scenario = dataclasses.replace(
+        scenario, rig=dataclasses.replace(scenario.rig, observer_bandwidth=NOISY.observer_bandwidth)
+    )
+    path, truth_path = write_log(simulate(scenario), tmp_path, stem=name)
+    d = diagnose_path(path)
+    return d, score(name, json.loads(truth_path.read_text()), d.to_dict()["effects"])
+
+
 @pytest.mark.slow
 def test_three_forces_along_the_track_are_found_in_the_form_of_the_pair_the_data_support(tmp_path):
     # noisy triples_06 of the independent set at seed offset 2000 (bench/diagnose_score.py --sets
@@ -390,15 +408,7 @@ def test_three_forces_along_the_track_are_found_in_the_form_of_the_pair_the_data
     # and the detent, but beside the detent the rise was 0.042 +- 0.023 N (implausible), so
     # nothing along the track was claimed and C1 was warned of. The Coulomb-only form of the same
     # pair (54.6 %) passes; the carrier then passes on its own (selection._pairs_restoring_thrust)
-    import dataclasses
-
-    from tests.independent.sets import named_set
-
-    scenario = dict(named_set("triples", seed_offset=2000))["triples_06"]
-    scenario = dataclasses.replace(scenario, rig=dataclasses.replace(scenario.rig, observer_bandwidth=2800.0))
-    path, truth_path = write_log(simulate(scenario), tmp_path, stem="triples_06")
-    d = diagnose_path(path)
-    s = score("triples_06", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    d, s = _noisy_named(tmp_path, "triples", 2000, "triples_06")
     assert sorted(e.name for e in d.effects) == [
         "cable_carrier_force",
         "cogging_horizontal_19mm",
@@ -439,15 +449,7 @@ def test_a_commutation_offset_beside_a_tilted_base_is_found_as_a_pair(tmp_path):
     # passed alone (the tilt 32.8 % of the held-out error at z 2.4; the offset lost to a smooth
     # function of the gap), so the pair step did not run and nothing was claimed. It now runs from
     # a change of C1 beyond the spread of stages of this design (selection.RIG_SPREAD, 20 %)
-    import dataclasses
-
-    from tests.independent.sets import named_set
-
-    scenario = dict(named_set("pairs", seed_offset=3000))["pairs_04"]
-    scenario = dataclasses.replace(scenario, rig=dataclasses.replace(scenario.rig, observer_bandwidth=2800.0))
-    path, truth_path = write_log(simulate(scenario), tmp_path, stem="pairs_04")
-    d = diagnose_path(path)
-    s = score("pairs_04", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+    d, s = _noisy_named(tmp_path, "pairs", 3000, "pairs_04")
     assert sorted(e.name for e in d.effects) == ["commutation_offset", "horizontal_guides_not_level"]
     # both sizes within 30 % (the issue's bound; measured +0.9 % on the offset's angle, +0.6 % on
     # the tilt's force), nothing warned of: C1 is back
