@@ -182,15 +182,21 @@ def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
 def test_without_the_periods_rule_the_same_log_names_a_detent(generated, monkeypatch):
     # the failure the rule above fixes: with SelectionSettings.min_periods = 0, pairs_03's end
     # effect is named a 57 mm detent (extended tier: more diagnoses of that log, which only show
-    # the rules are what make the difference). A second rule now refuses it too: chosen beside the
+    # the rules are what make the difference). Two more rules now refuse it too: chosen beside the
     # misalignment, the detent has a guide waviness at its own period as rival
-    # (pipeline._chosen_pitches), which explains as much in its place; without both, it is named
+    # (pipeline._chosen_pitches), which explains as much in its place; and beside the misalignment
+    # and the end effects a waviness longer than the travel is scanned for
+    # (pipeline._waviness_beyond_travel: on this log a period is found, and the selection repeated
+    # with that waviness in the pool does not take the detent). Without all three, it is named
     from maglev_oc.diagnosis import pipeline
 
     path, _ = generated("pairs", "pairs_03")
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" not in [e.name for e in off.effects]
     monkeypatch.setattr(pipeline, "_chosen_pitches", lambda library, sel: [])
+    off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
+    assert "cogging_horizontal_57mm" not in [e.name for e in off.effects]
+    monkeypatch.setattr(pipeline, "_waviness_beyond_travel", lambda *args: [])
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" in [e.name for e in off.effects]
 
