@@ -1670,143 +1670,160 @@ def select(
         context, friction, thrust, _ = step_context(others, fit_o, [name])
         return _judged_again(design, by_name[name], context, friction, probes, periodic, thrust)
 
-    while pool and len(current) - 1 < settings.max_effects:
-        context, friction, thrust, around0 = step_context(current, cur_fit, pool)
-        counted = context[6]
-        judged = {
-            n: judge(design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust)
-            for n in pool
-            if by_name[n].fallback_for is None
-        }
-        # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
-        # is physically implausible because that parameter lies beyond the bound
-        implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
-        again = [n for n in pool if _stands_in(by_name[n], implausible)]
-        judged.update(
-            {
-                n: judge(
-                    design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust
-                )
-                for n in again
-            }
-        )
-        last.update(judged)
-        passing = [j for j in judged.values() if j.verdict == "passes"]
-        if not passing:
-            # the pair's forms in turn (guide friction with or without its Stribeck rise): the first
-            # in which each passes beside the other
-            pairs = _pairs_restoring_thrust(design, current, cur_fit, pool, by_name, reference, settings)
-            found = next(
-                (
-                    both
-                    for pair in pairs
-                    for both in ([judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])],)
-                    if all(j.verdict == "passes" for j in both)
-                ),
-                None,
-            )
-            if found is None:
-                break
-            pair = tuple(j.name for j in found)
-            for j in found:  # confidence 1: no other candidate passed at this step
-                last[j.name] = _accepted(j)
-                steps.append(Step(j.name, 1.0, {**judged, j.name: last[j.name]}))
-                current.append(j.name)
-            effects = {by_name[name].reported_name for name in pair}
-            pool = [n for n in pool if by_name[n].reported_name not in effects]
-            cur_fit = fit_subset(design, current)
-            continue
-        # parsimony: a candidate that only adds coefficients to a nested, simpler one (a spring
-        # with zero stiffness is a constant force) must beat it by more than the penalty
-        best = max(passing, key=lambda j: j.gain - settings.parameter_penalty * _reported(by_name[j.name]))
-        best = _form_of_effect(design, best, passing, by_name, held_out, counted, settings)
-        # confidence: among the candidates that pass at this step on the same side, the share of
-        # block-bootstrap resamples of the training data in which the same effect ranks first
-        contenders = [j.name for j in passing if j.side == best.side]
-        # the side's design, held-out Grams, residual and rows (the same blocks on both sides)
-        on, grams, around, moving = (
-            (thrust.design, thrust_side.held, thrust.around, np.array([THRUST]))
-            if best.side
-            else (design, held_out, around0, np.flatnonzero(design.moving))
-        )
-        votes = 0
-        # each resample's fits are near the full fits: their mean squares about those
-        near = (
-            {n: grams.around(fit_subset(on, [*current, n], covariance=False), counted) for n in contenders}
-            if len(contenders) > 1
-            else {}
-        )
-        for blocks in resamples if len(contenders) > 1 else []:
-            fb = fit_subset(on, current, blocks=blocks, covariance=False)
-            mb = np.maximum(around.mean_squares(fb), 1e-30)
-            score = {}
-            for n in contenders:
-                f = fit_subset(on, [*current, n], blocks=blocks, covariance=False)
-                gain = float(np.mean(1 - near[n].mean_squares(f)[moving] / mb[moving]))
-                score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
-            # the same effect in another of its forms is a vote for the effect
-            votes += by_name[max(score, key=score.get)].reported_name == by_name[best.name].reported_name
-        if len(contenders) == 1:
-            votes = len(resamples)
-        judged[best.name] = _accepted(best)
-        last[best.name] = judged[best.name]
-        steps.append(Step(best.name, votes / max(len(resamples), 1), judged))
-        current.append(best.name)
-        effect = by_name[best.name].reported_name  # the effect and its fallback leave the pool together
-        pool = [n for n in pool if by_name[n].reported_name != effect]
-        cur_fit = best.fit
-
-    # backward: an effect chosen early may be explained by later ones (a constant force by a
-    # commutation offset that also makes one); drop any that no longer passes given the others
-    # and judge the shapes that a generic rival's first terms span by that rival's further orders,
-    # given every other effect chosen (:func:`_beyond_its_span`), and a friction holding its axis
-    # beside a smooth function of the axis's state (:func:`_beyond_the_misfit`), even when it is
-    # the only one
     def judged_alone() -> bool:
         """Whether an effect is judged even when it is the only one chosen: a line-like shape
         (:func:`_beyond_its_span`) or a friction holding its axis (:func:`_beyond_the_misfit`)."""
         lines = settings.judge_lines and any(getattr(by_name[n], "rival_span", None) for n in current[1:])
         return lines or any(holds_its_axis(by_name[n]) for n in current[1:])
 
-    dropped = True
-    while dropped and len(current) > (1 if judged_alone() else 2):
-        dropped = False
-        for name in current[1:]:
-            others = [c for c in current if c != name]
-            j = judged_beside(name, others)
-            if j.verdict == "passes":
-                continue
-            # the same effect with a parameter at its bound, where the free fit now lies beyond it
-            # (as in the forward steps): swapped in when it passes
-            stand_in = next(
-                (
-                    jf
-                    for c in by_name.values()
-                    if c.fallback_for == name and _stands_in(c, {name: j})
-                    for jf in (judged_beside(c.name, others),)
-                    if jf.verdict == "passes"
-                ),
-                None,
-            )
-            last[name] = dataclasses.replace(j, reason=f"dropped after the later choices: {j.reason}")
-            if stand_in is None:
-                current = others
-                steps = [st for st in steps if st.chosen != name]
-            else:
-                current = [stand_in.name if c == name else c for c in current]
-                last[stand_in.name] = _accepted(stand_in)
-                steps = [
-                    dataclasses.replace(
-                        st,
-                        chosen=stand_in.name,
-                        judgements={**st.judgements, stand_in.name: last[stand_in.name]},
+    # forward steps, then the backward pass; when that drops an effect, forward steps again: the
+    # candidates judged beside the dropped effect are judged without it (it stays out of the pool,
+    # so each round that goes on has one effect fewer to drop and the loop ends)
+    while True:
+        rounds_dropped = False
+        while pool and len(current) - 1 < settings.max_effects:
+            context, friction, thrust, around0 = step_context(current, cur_fit, pool)
+            counted = context[6]
+            judged = {
+                n: judge(
+                    design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust
+                )
+                for n in pool
+                if by_name[n].fallback_for is None
+            }
+            # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
+            # is physically implausible because that parameter lies beyond the bound
+            implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
+            again = [n for n in pool if _stands_in(by_name[n], implausible)]
+            judged.update(
+                {
+                    n: judge(
+                        design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust
                     )
-                    if st.chosen == name
-                    else st
-                    for st in steps
-                ]
-            dropped = True
+                    for n in again
+                }
+            )
+            last.update(judged)
+            passing = [j for j in judged.values() if j.verdict == "passes"]
+            if not passing:
+                # the pair's forms in turn (guide friction with or without its Stribeck rise): the first
+                # in which each passes beside the other
+                pairs = _pairs_restoring_thrust(design, current, cur_fit, pool, by_name, reference, settings)
+                found = next(
+                    (
+                        both
+                        for pair in pairs
+                        for both in ([judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])],)
+                        if all(j.verdict == "passes" for j in both)
+                    ),
+                    None,
+                )
+                if found is None:
+                    break
+                pair = tuple(j.name for j in found)
+                for j in found:  # confidence 1: no other candidate passed at this step
+                    last[j.name] = _accepted(j)
+                    steps.append(Step(j.name, 1.0, {**judged, j.name: last[j.name]}))
+                    current.append(j.name)
+                effects = {by_name[name].reported_name for name in pair}
+                pool = [n for n in pool if by_name[n].reported_name not in effects]
+                cur_fit = fit_subset(design, current)
+                continue
+            # parsimony: a candidate that only adds coefficients to a nested, simpler one (a spring
+            # with zero stiffness is a constant force) must beat it by more than the penalty
+            best = max(
+                passing, key=lambda j: j.gain - settings.parameter_penalty * _reported(by_name[j.name])
+            )
+            best = _form_of_effect(design, best, passing, by_name, held_out, counted, settings)
+            # confidence: among the candidates that pass at this step on the same side, the share of
+            # block-bootstrap resamples of the training data in which the same effect ranks first
+            contenders = [j.name for j in passing if j.side == best.side]
+            # the side's design, held-out Grams, residual and rows (the same blocks on both sides)
+            on, grams, around, moving = (
+                (thrust.design, thrust_side.held, thrust.around, np.array([THRUST]))
+                if best.side
+                else (design, held_out, around0, np.flatnonzero(design.moving))
+            )
+            votes = 0
+            # each resample's fits are near the full fits: their mean squares about those
+            near = (
+                {
+                    n: grams.around(fit_subset(on, [*current, n], covariance=False), counted)
+                    for n in contenders
+                }
+                if len(contenders) > 1
+                else {}
+            )
+            for blocks in resamples if len(contenders) > 1 else []:
+                fb = fit_subset(on, current, blocks=blocks, covariance=False)
+                mb = np.maximum(around.mean_squares(fb), 1e-30)
+                score = {}
+                for n in contenders:
+                    f = fit_subset(on, [*current, n], blocks=blocks, covariance=False)
+                    gain = float(np.mean(1 - near[n].mean_squares(f)[moving] / mb[moving]))
+                    score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
+                # the same effect in another of its forms is a vote for the effect
+                votes += by_name[max(score, key=score.get)].reported_name == by_name[best.name].reported_name
+            if len(contenders) == 1:
+                votes = len(resamples)
+            judged[best.name] = _accepted(best)
+            last[best.name] = judged[best.name]
+            steps.append(Step(best.name, votes / max(len(resamples), 1), judged))
+            current.append(best.name)
+            effect = by_name[best.name].reported_name  # the effect and its fallback leave the pool together
+            pool = [n for n in pool if by_name[n].reported_name != effect]
+            cur_fit = best.fit
+
+        # backward: an effect chosen early may be explained by later ones (a constant force by a
+        # commutation offset that also makes one); drop any that no longer passes given the others
+        # and judge the shapes that a generic rival's first terms span by that rival's further orders,
+        # given every other effect chosen (:func:`_beyond_its_span`), and a friction holding its axis
+        # beside a smooth function of the axis's state (:func:`_beyond_the_misfit`), even when it is
+        # the only one
+        dropped = True
+        while dropped and len(current) > (1 if judged_alone() else 2):
+            dropped = False
+            for name in current[1:]:
+                others = [c for c in current if c != name]
+                j = judged_beside(name, others)
+                if j.verdict == "passes":
+                    continue
+                # the same effect with a parameter at its bound, where the free fit now lies beyond it
+                # (as in the forward steps): swapped in when it passes
+                stand_in = next(
+                    (
+                        jf
+                        for c in by_name.values()
+                        if c.fallback_for == name and _stands_in(c, {name: j})
+                        for jf in (judged_beside(c.name, others),)
+                        if jf.verdict == "passes"
+                    ),
+                    None,
+                )
+                last[name] = dataclasses.replace(j, reason=f"dropped after the later choices: {j.reason}")
+                if stand_in is None:
+                    current = others
+                    steps = [st for st in steps if st.chosen != name]
+                else:
+                    current = [stand_in.name if c == name else c for c in current]
+                    last[stand_in.name] = _accepted(stand_in)
+                    steps = [
+                        dataclasses.replace(
+                            st,
+                            chosen=stand_in.name,
+                            judgements={**st.judgements, stand_in.name: last[stand_in.name]},
+                        )
+                        if st.chosen == name
+                        else st
+                        for st in steps
+                    ]
+                dropped = rounds_dropped = True
+                break
+
+        if not rounds_dropped or not pool or len(current) - 1 >= settings.max_effects:
             break
+        cur_fit = fit_subset(design, current)
+
     return Selection(steps, base, fit_subset(design, current), last)
 
 
