@@ -491,20 +491,47 @@ def test_a_spring_beside_tilted_guides_keeps_the_slope_a_long_waviness_could_sta
 
 
 @pytest.mark.slow
-def test_a_vertical_friction_that_only_holds_the_models_misfit_is_not_claimed(tmp_path):
+def test_a_vertical_friction_that_only_holds_the_models_misfit_is_not_claimed_and_what_it_hid_is_found(
+    tmp_path,
+):
     # random pair 10116 on the noisy rig (--drawn-pairs 24 --seed 10100 --rig obs2800): end effects
     # (a raised cosine over 61 mm from ends at +-50 mm, 11 % of the thrust and 4.5 % of the magnets'
     # attraction lost at them) and a 4.8 N/m cable carrier. A vertical friction of 0.083 +- 0.036 N
     # holding 1.30 of the force was claimed beside the carrier: holding the axis at standstill it
     # took up the model's misfit in the gap there (65 % of the held-out vertical error alone; -0.1 %
     # beside a smooth function of the gap). Such a friction is now judged beside that function
-    # (selection._beyond_the_misfit)
+    # (selection._beyond_the_misfit) and dropped. The end effects, judged beside the friction while
+    # it was chosen, are judged again without it once it is dropped (selection.select's forward
+    # steps after the backward pass): found, where before the misfit was reported nowhere
     effects, d, s = _drawn_pair(tmp_path, 10116, ("end_effect", "cable_carrier"), NOISY)
     assert effects[1].stiffness == pytest.approx(4.786, abs=1e-3)  # the bench's log
-    assert [e.name for e in d.effects] == ["cable_carrier_force"]
+    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "end_effects"]
     assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
-    # the carrier within 30 % (the issue's bound; measured 4.8 +- 0.09 N/m, +0.3 %)
-    assert d.effects[0].parameters["stiffness"].value == pytest.approx(effects[1].stiffness, rel=0.3)
+    # both within 30 % (the issue's bound, as the bench scores them): the carrier measured
+    # 4.8 +- 0.09 N/m (+0.3 %); the thrust lost at the logged ends relative to the centre 5.4 and
+    # 6.9 % against the generator's 5.7 and 6.2 %, the attraction 2.2 and 2.7 % against 2.3 and 2.5 %
+    assert s.size_right, s.notes
+    carrier = next(e for e in d.effects if e.name == "cable_carrier_force")
+    assert carrier.parameters["stiffness"].value == pytest.approx(effects[1].stiffness, rel=0.3)
+    assert not d.unexplained, d.unexplained
+
+
+@pytest.mark.slow
+def test_a_friction_holding_its_axis_is_kept_beside_the_misfit_it_leaves_in_that_axiss_state(generated):
+    # experiments_37 (soft gains; 2 N of vertical guide friction with pre-sliding, LuGre): the
+    # friction explains 99.99 % of the vertical error's square (0.45 m/s^2 RMS without it, 0.005
+    # with it), and beside it a smooth function of the gap explains 49 % of what is left (z 4.6
+    # pooled over the quarter and the cross-fitted parts, 1.8 on the quarter): the friction model's
+    # misfit where it holds the axis. Judged again beside that unexplained probe, as an effect is
+    # beside a dependence on another variable than its own, the friction was dropped as not
+    # specific; its axis's state is its own variable (pipeline._explained_by_unexplained), and it
+    # was judged beside such a function already (selection._beyond_the_misfit)
+    path, truth = generated("experiments", "experiments_37")
+    assert truth["name"] == "soft_gains_guide_friction_vertical"
+    d = diagnose_path(path)
+    assert [e.name for e in d.effects] == ["guide_friction_vertical"]
+    (u,) = [u for u in d.unexplained if u.axis == "vertical"]
+    assert u.depends_on == "gap"  # what is left is reported, not named
 
 
 @pytest.mark.slow
