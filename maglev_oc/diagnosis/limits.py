@@ -99,12 +99,14 @@ significant digits)."""
 class DetectionLimit:
     """The smallest size of one effect that this log would have shown.
 
-    ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
-    parameter); ``math.inf`` when no size shows it, ``reason`` then says why. ``binding``: the test
-    that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
-    candidate's plausibility). ``side``: "" when the accelerations would show it first,
-    :data:`~maglev_oc.diagnosis.selection.THRUST_SIDE` when the logged thrust current would
-    (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
+        ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
+        parameter); ``math.inf`` when no size shows it, NaN when the log shows one already at no size
+    added (the last judgement refused it on another test, or beside an effect dropped since), with
+    ``reason`` saying which. ``binding``: the test
+        that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
+        candidate's plausibility). ``side``: "" when the accelerations would show it first,
+        :data:`~maglev_oc.diagnosis.selection.THRUST_SIDE` when the logged thrust current would
+        (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
 
     name: str
     parameter: str
@@ -225,6 +227,10 @@ UNSEEN_VERDICTS = ("not significant", "too small")
 """The verdicts that say the log did not show an effect (the others say it showed something that
 was refused, with their own reasons)."""
 PHYSICS_RULES_OUT = "not seen at any size the physics allows"
+ALREADY_SHOWN = (
+    "no limit: before any is added, the log's residual passes the tests of what a log shows for an "
+    "effect of this shape; it was not claimed on another test"
+)
 NO_SIZE = (
     "not seen at any size tried: predicted from the logged signals, the effect does not improve the "
     "held-out error however large it is"
@@ -253,9 +259,15 @@ def _limit(
             cand.name, first, math.inf, unit_name, "", f"not seen at any size: {judged.reason}"
         )
     logged = _residuals(ctx, design, cand)
+    axes = judged_axes(design, cand, ctx.friction)[3] if rows is None else rows
+    if not _failing(ctx, logged, axes):
+        # the log shows one already by these tests: refused on another (or judged beside effects
+        # since dropped), it has no size below which the log would not show it
+        return DetectionLimit(
+            cand.name, first, math.nan, unit_name, "", f"{ALREADY_SHOWN} ({judged.reason})", side
+        )
     felt = np.tensordot(direction, ctx.felt.get(cand.name, design.columns[index]), axes=1)
     unit = _residuals(ctx, with_target(design, felt), cand)
-    axes = judged_axes(design, cand, ctx.friction)[3] if rows is None else rows
     # the sizes tried start at the naive standard error along the direction, or at half the size
     # whose own change of the held-out prediction reaches the size test's floor if that is larger
     # (no smaller size passes it: the search's first steps would all fail there)

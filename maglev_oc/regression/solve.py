@@ -159,8 +159,12 @@ def fit_subset(
 
     ``blocks``: indices of blocks to sum (with repetition, for a bootstrap); the covariance needs
     all blocks in order. With ``compensate`` the logged currents' errors are removed from the
-    normal equations; if that leaves them indefinite (an error estimate larger than the signal),
-    the fit falls back to ordinary least squares and says so in ``message``. ``noise_scale``
+    normal equations; if that leaves them indefinite (an error estimate larger than the signal in
+    some direction), the largest share of those errors that keeps them positive definite is removed
+    (bisected), ``compensation`` says which and ``message`` says so. Near that edge the equations
+    are nearly singular and the coefficients can be far off (1e6 and more): the selection reads a
+    compensation below the current model's as a candidate made of the currents' errors
+    (``selection.EIV_REASON``). ``noise_scale``
     multiplies the design's estimate of those errors (:mod:`~maglev_oc.regression.noise_scale`).
     """
     if not (np.isfinite(noise_scale) and noise_scale >= 0.0):
