@@ -369,13 +369,14 @@ def test_an_unexplained_dependence_that_explains_an_effect_as_well_makes_it_not_
     limiting case: a rival whose columns are the effect's own (the vertical cogging of this log,
     renamed), said to depend on the gap: the cogging becomes "not specific", the reason naming the
     gap; said to depend on the position (the cogging's own variable), nothing changes; and with no
-    unexplained dependence there is nothing to judge."""
+    unexplained dependence there is nothing to judge; nor for an effect judged on the thrust
+    current."""
     captured = {}
     original = pipeline._explained_by_unexplained
 
-    def recording(session, model, chosen, unexplained):
+    def recording(session, model, chosen, unexplained, on_thrust=frozenset()):
         captured.setdefault("args", (session, model, chosen))
-        return original(session, model, chosen, unexplained)
+        return original(session, model, chosen, unexplained, on_thrust)
 
     path, _ = generated("single", _stem("normal_cogging_large"))
     with pytest.MonkeyPatch.context() as mp:
@@ -390,6 +391,10 @@ def test_an_unexplained_dependence_that_explains_an_effect_as_well_makes_it_not_
     assert "explained as well by a dependence on the gap" in stale.reason
     assert original(session, model, chosen, [SimpleNamespace(term=copy, depends_on="position")]) == []
     assert original(session, model, chosen, []) == []
+    # an effect the selection judged on the logged thrust current is not judged again here: a
+    # dependence of the accelerations does not rival that evidence
+    gap = [SimpleNamespace(term=copy, depends_on="gap")]
+    assert original(session, model, chosen, gap, frozenset({cogging.name})) == []
 
 
 def test_the_end_effects_profile_is_scanned_when_the_data_show_them_although_not_chosen(monkeypatch):
