@@ -25,7 +25,10 @@ parameter (a ripple's amplitude, a lag's time constant beyond the hold, a fricti
 force); when that size is one the candidate's plausibility test refuses, or no size up to
 :data:`STEP` ** :data:`MAX_STEPS` standard errors shows it (a column made of the logged signals'
 errors more than of their signal predicts nothing however large the effect), the effect is not
-seen at any size. Every fit is linear in the target (the errors-in-variables correction depends
+seen at any size. Where the log shows one before any is added (its last judgement refused it on
+another test, or was made beside an effect dropped since), or leans so far towards one that the
+smallest size tried shows it, there is no limit: NaN, with the reason (a log holding 5-7 % of end
+effects was told "end effects below 0.039 %"). Every fit is linear in the target (the errors-in-variables correction depends
 only on the columns), so the residuals at size s are r + s r_unit: two pairs of fits per
 candidate, and the search over s is arithmetic on residuals.
 
@@ -231,6 +234,12 @@ ALREADY_SHOWN = (
     "no limit: before any is added, the log's residual passes the tests of what a log shows for an "
     "effect of this shape; it was not claimed on another test"
 )
+NEARLY_SHOWN = (
+    "no limit: the log's residual leans towards an effect of this shape already, so that the "
+    "smallest size tried shows one"
+)
+TEST_WORDS = {"gain": "held-out gain", "quarter": "held-out quarter", "z": "significance", "size": "size"}
+"""The visibility tests (:func:`_failing`'s names) in words."""
 NO_SIZE = (
     "not seen at any size tried: predicted from the logged signals, the effect does not improve the "
     "held-out error however large it is"
@@ -260,7 +269,7 @@ def _limit(
         )
     logged = _residuals(ctx, design, cand)
     axes = judged_axes(design, cand, ctx.friction)[3] if rows is None else rows
-    if not _failing(ctx, logged, axes):
+    if not (at_zero := _failing(ctx, logged, axes)):
         # the log shows one already by these tests: refused on another (or judged beside effects
         # since dropped), it has no size below which the log would not show it
         return DetectionLimit(
@@ -289,6 +298,10 @@ def _limit(
             return DetectionLimit(cand.name, first, math.inf, unit_name, "", why, side)
         sizes.append(found)
     s, binding = max(sizes, key=lambda t: abs(t[0]))
+    if not binding:  # no size tried failed: the log's residual leans towards one already
+        test = TEST_WORDS.get(at_zero, at_zero)
+        why = f"{NEARLY_SHOWN} (with none added, the {test} test fails: {judged.reason})"
+        return DetectionLimit(cand.name, first, math.nan, unit_name, "", why, side)
     value = abs(_physical(cand, s * direction, constants)[0])
     return DetectionLimit(cand.name, first, value, unit_name, binding, "", side)
 
@@ -394,7 +407,8 @@ def _smallest(
     physics: Callable[[float], str | None],
     refused: list[str],
 ) -> tuple[float, str] | None:
-    """(size, the test failing just below it) of the smallest size along ``sign`` times the
+    """(size, the test failing just below it: "" when none of the sizes tried failed) of the
+    smallest size along ``sign`` times the
     direction at which the log shows the effect and ``physics`` (its plausibility) allows it; None
     when no size tried is both (the last plausibility refusal appended to ``refused``). A lag
     seen at less than the loop's hold is claimed from the smallest lag beyond the hold that the
@@ -411,7 +425,7 @@ def _smallest(
     if _never_shown(ctx, unit, axes):
         return None
 
-    below, why = 0.0, "gain"
+    below, why = 0.0, ""  # "" while no size tried has failed
     s = start
     for _ in range(MAX_STEPS):
         fails = failing(s)
