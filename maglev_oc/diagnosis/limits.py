@@ -28,9 +28,9 @@ errors more than of their signal predicts nothing however large the effect), the
 seen at any size. Where the log shows one before any is added (its last judgement refused it on
 another test, or was made beside an effect dropped since), or leans so far towards one that the
 smallest size tried shows it, there is no limit: NaN, with the reason (a log holding 5-7 % of end
-effects was told "end effects below 0.039 %"). Every fit is linear in the target (the errors-in-variables correction depends
-only on the columns), so the residuals at size s are r + s r_unit: two pairs of fits per
-candidate, and the search over s is arithmetic on residuals.
+effects was told "end effects below 0.039 %"). Every fit is linear in the target (the
+errors-in-variables correction depends only on the columns), so the residuals at size s are
+r + s r_unit: two pairs of fits per candidate, and the search over s is arithmetic on residuals.
 
 **How close.** The limit is this log's, for an effect of the candidate's shape added to it. A real
 effect can differ: the tests of separability, plausibility and the rivals can refuse one above the
