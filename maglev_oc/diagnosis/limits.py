@@ -102,14 +102,15 @@ significant digits)."""
 class DetectionLimit:
     """The smallest size of one effect that this log would have shown.
 
-        ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
-        parameter); ``math.inf`` when no size shows it, NaN when the log shows one already at no size
-    added (the last judgement refused it on another test, or beside an effect dropped since), with
-    ``reason`` saying which. ``binding``: the test
-        that held it back just below the limit ("z", "gain", "size", "quarter" or "physics": the
-        candidate's plausibility). ``side``: "" when the accelerations would show it first,
-        :data:`~maglev_oc.diagnosis.selection.THRUST_SIDE` when the logged thrust current would
-        (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
+    ``value`` is in ``unit`` (SI; "1" for ratios), of ``parameter`` (the candidate's first physical
+    parameter); ``math.inf`` when no size shows it; NaN when the log shows one with none added
+    (:data:`ALREADY_SHOWN`: the last judgement refused it on another test, or was made beside an
+    effect dropped since) or leans so far towards one that the smallest size tried shows it
+    (:data:`NEARLY_SHOWN`); ``reason`` then says which and why. ``binding``: the test that held it
+    back just below the limit ("z", "gain", "size", "quarter" or "physics": the candidate's
+    plausibility). ``side``: "" when the accelerations would show it first,
+    :data:`~maglev_oc.diagnosis.selection.THRUST_SIDE` when the logged thrust current would
+    (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
 
     name: str
     parameter: str

@@ -8,17 +8,16 @@ gap rate, horizontal rate), and sinusoids of the position at the periods the res
 spatial spectrum points to that match no motor period — and the motor's forces varying smoothly
 along the travel (:func:`_force_probes`) — each judged as the selection judges a candidate (its
 test 1: the held-out gain and its long-run significance over the held-out quarter pooled with the
-cross-fitted parts of the training data; then its physical size), on top of the base model, the chosen
-effects and the candidates that were significant but not separable (so that nothing is reported
+cross-fitted parts of the training data; then its physical size), on top of the base model, the
+chosen effects and the candidates that were significant but not separable (so that nothing is reported
 twice). Judged on the held-out quarter alone, a residual where the stage goes now and then was
 not reported: drawn pair 10116 of the noisy rig (end effects the selection had judged beside a
 friction it dropped later) left 60 % of its vertical held-out error to the forces along the
 position, at z 2.5 on the quarter and 6.5 pooled. Polynomials of the currents are not probed:
 the logged currents' errors are as large as their slow part on such logs, and a polynomial of a
 noisy variable is biased in ways the errors-in-variables compensation (first order) does not
-remove. What passes is reported in
-``unexplained`` with the variable it depends on, its size
-and its spectrum.
+remove. What passes is reported in ``unexplained`` with the variable it depends on, its size and
+its spectrum.
 """
 
 from __future__ import annotations
@@ -275,13 +274,12 @@ def _best_probe(
     """(probe, its held-out test) that lowers the error of its axis the most, over the held-out
     quarter and the cross-fitted parts of the training data (``cross``) as the selection's test 1
     pools them."""
-    best = None
-    for entry in probes:
-        a = AXES.index(entry.term.axis)
-        seen = _held_out_test(design, [*current, entry.term.name], r0, counted, cross, np.array([a]))
-        if best is None or seen.pooled_axes[a] > best[1].pooled_axes[AXES.index(best[0].term.axis)]:
-            best = (entry, seen)
-    return best
+    tests = [
+        (entry, _held_out_test(design, [*current, entry.term.name], r0, counted, cross, np.array([a])))
+        for entry in probes
+        for a in (AXES.index(entry.term.axis),)
+    ]
+    return max(tests, key=lambda t: t[1].pooled_axes[AXES.index(t[0].term.axis)])
 
 
 def _unexplained(
