@@ -812,7 +812,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         log = read_log(path, params=model.params)
         _excited_axes(log, check_excitation)
         logs.append(log)
-    diag = diagnose(logs, model, holdout_fraction=args.holdout)
+    diag = diagnose(logs, model, holdout_fraction=args.holdout, limits=not args.no_limits)
     doc = diag.to_dict()
     geometry = StageFile.geometry_provenance(args.params)
     doc["stage"] = diagnosis_stage_file(diag, model, geometry).to_dict()
@@ -1083,6 +1083,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--params", type=Path, help="stage/constants JSON (geometry; constants refitted)")
     p.add_argument("--holdout", type=float, default=0.25, help="held-out fraction at each log's end")
     p.add_argument("--no-control", action="store_true", help="skip the closed-loop study in the report")
+    p.add_argument(
+        "--no-limits",
+        action="store_true",
+        help="skip the detection limits, what the log could not have shown (a fifth to a third of the time)",
+    )
     p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("identify", help="identify C1..C4 from logs: NLS (equation/output error) and NPFSI")

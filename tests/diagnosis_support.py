@@ -50,10 +50,16 @@ def generated(tmp_path_factory):
     return get
 
 
+EVERY_STEP = {("clean", "clean_01")}
+"""The logs :func:`diagnosed` runs through every step, detection limits included (a test counts
+the designs of every step, tests/test_diagnose.py)."""
+
+
 @pytest.fixture(scope="session")
 def diagnosed(generated):
     """The default diagnosis of a generated log by (set, stem), run once per session (the quick
-    clean tests and the twenty-seed test share theirs): (diagnosis, truth).
+    clean tests and the twenty-seed test share theirs): (diagnosis, truth). The detection limits are
+    worked out for the logs of :data:`EVERY_STEP` alone.
 
     ``get.weightings[(set, stem)]``: how many designs of that diagnosis chose their own axis
     weights (``regression.design._axis_weights``) instead of being handed the base fit's."""
@@ -71,7 +77,7 @@ def diagnosed(generated):
                 return own(*args, **kw)
 
             with mock.patch.object(regression_design, "_axis_weights", counted):
-                cache[key] = (diagnose_path(path), truth)
+                cache[key] = (diagnose_path(path, limits=key in EVERY_STEP), truth)
             get.weightings[key] = len(calls)
         return cache[key]
 
@@ -79,8 +85,11 @@ def diagnosed(generated):
     return get
 
 
-def diagnose_path(path: Path, **kw):
-    return diagnose([read_log(path)], **kw)
+def diagnose_path(path: Path, *, limits: bool = False, **kw):
+    """The diagnosis of the log at ``path``; its detection limits (a fifth to a third of its time)
+    only if asked for. Most tests check what is claimed, which the limits, worked out last, never
+    change (``diagnose(limits=...)``); the tests that read the limits ask for them."""
+    return diagnose([read_log(path)], limits=limits, **kw)
 
 
 def relative_errors(d, truth: dict) -> dict[str, float]:

@@ -76,7 +76,7 @@ def test_no_design_of_a_diagnosis_chooses_its_own_axis_weights(diagnosed):
     # pass of steps 2-6: a second when the currents' error was calibrated, a third when the
     # calibrated pass found something and the first was run again (pipeline.diagnose).
     d, _ = diagnosed("clean", "clean_01")
-    assert d.data.moving.all()
+    assert d.data.moving.all() and d.settings["detection_limits"]  # every step, the limits too
     scale = d.settings["current_noise_scale"]
     passes = 2 if scale["scale"] != 1.0 else 3 if "at the calibrated scale" in scale["message"] else 1
     assert diagnosed.weightings[("clean", "clean_01")] == passes

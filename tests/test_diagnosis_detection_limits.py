@@ -76,7 +76,7 @@ def clean(generated):
         return detection_limits(*args)
 
     with mock.patch.object(pipeline, "detection_limits", capture):
-        d = diagnose_path(path)
+        d = diagnose_path(path, limits=True)
     return d, truth, seen["args"]
 
 

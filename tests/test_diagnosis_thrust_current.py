@@ -145,7 +145,7 @@ def test_a_ripple_the_accelerations_cannot_show_is_seen_on_the_thrust_current(no
     # on the accelerations alone it would not have passed: the side is what showed it
     assert step.side == THRUST_SIDE
     assert abs(ripple.parameters["amplitude"].value - 0.05) <= 0.3 * 0.05
-    clean = diagnose_path(noisy_clean)
+    clean = diagnose_path(noisy_clean, limits=True)
     assert clean.effects == []
     # shown on neither side, a candidate of the thrust current keeps the accelerations' numbers and
     # says what the thrust current showed

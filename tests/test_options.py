@@ -103,6 +103,7 @@ OPTION_TESTS: dict[str, str] = {
     "diagnose --params": f"{HERE}::test_diagnose_params_is_the_stage",
     "diagnose --holdout": f"{HERE}::test_diagnose_holdout_holds_out_that_share",
     "diagnose --no-control": f"{HERE}::test_diagnose_no_control_leaves_out_the_closed_loop_study",
+    "diagnose --no-limits": f"{HERE}::test_diagnose_no_limits_leaves_out_what_the_log_could_not_have_shown",
     # identify
     "identify --json": "tests/test_identify_pipeline.py::test_cli_writes_json",
     "identify --report": f"{HERE}::test_identify_report_is_written_with_the_fit",
@@ -147,6 +148,9 @@ LIBRARY_OPTION_TESTS: dict[str, str] = {
     "maglev_oc.identification.pipeline.identify(terms)": f"{HERE}::test_identify_terms_are_fitted",
     "maglev_oc.diagnosis.pipeline.diagnose(holdout_fraction)": (
         f"{HERE}::test_diagnose_holdout_holds_out_that_share"
+    ),
+    "maglev_oc.diagnosis.pipeline.diagnose(limits)": (
+        f"{HERE}::test_diagnose_no_limits_leaves_out_what_the_log_could_not_have_shown"
     ),
     "maglev_oc.diagnosis.pipeline.diagnose(exclude)": (
         "tests/test_diagnose.py::test_an_effect_outside_the_library_goes_to_unexplained"
@@ -988,8 +992,8 @@ def twin_csv(tmp_path_factory, model) -> dict[str, Path]:
 
 @pytest.fixture(scope="module")
 def diagnosed(tmp_path_factory, twin_csv) -> dict[str, tuple[dict, object]]:
-    """``diagnose --report`` with the defaults, and with --holdout 0.4 --no-control: (JSON, what the
-    report says) each."""
+    """``diagnose --report`` with the defaults, and with --holdout 0.4 --no-control --no-limits: (JSON,
+    what the report says) each."""
     import maglev_oc.reporting.diagnosis_report as reporting
 
     folder = tmp_path_factory.mktemp("diagnose")
@@ -1003,7 +1007,8 @@ def diagnosed(tmp_path_factory, twin_csv) -> dict[str, tuple[dict, object]]:
     out = {}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(reporting, "write_diagnosis_report", keep)
-        for name, options in (("default", []), ("options", ["--holdout", "0.4", "--no-control"])):
+        other = ["--holdout", "0.4", "--no-control", "--no-limits"]
+        for name, options in (("default", []), ("options", other)):
             json_out, pdf = folder / f"{name}.json", folder / f"{name}.pdf"
             outputs = ["--json", str(json_out), "--report", str(pdf)]
             _ok(["diagnose", str(twin_csv["diagnose"]), *outputs, *options])
@@ -1059,6 +1064,17 @@ def test_diagnose_no_control_leaves_out_the_closed_loop_study(diagnosed):
     assert has_study(without) == (False, False)
     # (the pages are packed full, so leaving the study out need not save a page)
     assert _pdf_pages(without.path) == without.n_pages and without.sparse_pages() == []
+
+
+def test_diagnose_no_limits_leaves_out_what_the_log_could_not_have_shown(diagnosed):
+    (doc, with_limits), (doc_without, without) = diagnosed["default"], diagnosed["options"]
+    assert doc["settings"]["detection_limits"] is True and doc["detection_limits"]
+    assert doc_without["settings"]["detection_limits"] is False and doc_without["detection_limits"] == []
+    # the report says they were not worked out, rather than leaving the reader to think none exist
+    said = "could not have shown was not worked out (diagnose --no-limits)"
+    assert said in _words(without.text()) and said not in _words(with_limits.text())
+    # the claims do not depend on them: the same effects by name (the held-out share differs)
+    assert [e["name"] for e in doc["effects"]] == [e["name"] for e in doc_without["effects"]]
 
 
 def test_diagnose_params_is_the_stage(tmp_path, twin_csv, light_stage_file, diagnosed):

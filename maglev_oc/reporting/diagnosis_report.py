@@ -267,6 +267,11 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
             f"Not found does not mean absent: this log could not have shown {smallest} (each put into the "
             "log at that size and judged as the diagnosis judges; every limit is in the table below)."
         )
+    if not diag.settings.get("detection_limits", True):
+        out.append(
+            "What this log could not have shown was not worked out (diagnose --no-limits): an effect not "
+            "found may be there below a size this log cannot show."
+        )
     return out
 
 
