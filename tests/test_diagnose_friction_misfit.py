@@ -71,7 +71,7 @@ def logs(tmp_path_factory):
 
 def test_the_misfit_lives_at_the_slow_samples_and_is_not_claimed(logs):
     csv, truth = logs("friction_large")
-    d = diagnose([read_log(csv)])
+    d = diagnose([read_log(csv)], limits=False)
     s = score("friction_large", truth, d.to_dict()["effects"])
     assert s.claimed == ["guide_friction_horizontal"]
     assert s.size_right, s.notes  # Coulomb force within 30 % (the bound)
@@ -102,7 +102,7 @@ def test_the_misfit_lives_at_the_slow_samples_and_is_not_claimed(logs):
 def test_a_real_spring_or_constant_force_beside_the_friction_is_still_found(logs, name, other, kind):
     # an effect that is there acts at speed too: 4 N/m and 0.078 N (the generator's small sizes)
     csv, truth = logs(name, other)
-    d = diagnose([read_log(csv)])
+    d = diagnose([read_log(csv)], limits=False)
     s = score(name, truth, d.to_dict()["effects"])
     assert s.no_false_claim, s.claimed
     assert sorted(s.claimed) == sorted(
@@ -168,7 +168,7 @@ def test_a_negative_viscous_fit_falls_back_to_the_friction_without_it(logs):
     assert library[first.chosen].reported_name == "guide_friction_vertical"
     # the whole diagnosis: the references converge with the friction and the friction is found,
     # sized (2 N of Coulomb friction within 30 %, the bound), alone
-    d = diagnose([read_log(csv)])
+    d = diagnose([read_log(csv)], limits=False)
     s = score("vertical_large", truth, d.to_dict()["effects"])
     assert s.claimed == ["guide_friction_vertical"]
     assert s.size_right, s.notes
@@ -192,7 +192,7 @@ def test_a_force_beside_sticking_guides_is_sized_by_all_samples(logs):
         seed=VERTICAL_SEED,
         friction=GuideFriction.large("vertical"),
     )
-    d = diagnose([read_log(csv)])
+    d = diagnose([read_log(csv)], limits=False)
     s = score("vertical_with_cogging", truth, d.to_dict()["effects"])
     assert sorted(s.claimed) == ["cogging_vertical_19mm", "guide_friction_vertical"]
     assert s.size_right, s.notes  # both within 30 % (was 0.49 of the cogging's size)

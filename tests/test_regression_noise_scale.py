@@ -187,7 +187,7 @@ def test_on_the_noisy_rig_the_bands_give_c1_within_one_percent(noisy_clean, mode
 @pytest.mark.slow
 def test_the_diagnosis_starts_from_the_calibrated_constants(noisy_clean):
     path, truth = noisy_clean
-    d = diagnose([read_log(path)])
+    d = diagnose([read_log(path)], limits=False)
     scale = d.settings["current_noise_scale"]
     assert 0.5 < scale["scale"] < 0.95 and scale["parameters"] == ["C1", "C2", "C3", "C4"]
     assert d.data.settings["current_noise_scale"] == scale["scale"]
@@ -224,9 +224,9 @@ def test_with_an_effect_found_the_claims_are_the_floors_and_the_refit_is_calibra
     path, truth = write_log(run, tmp_path, stem="carrier")
     c1 = json.loads(truth.read_text())["plant"]["constants_true"]["C1"]
     log = read_log(path)
-    d = diagnose([log])
+    d = diagnose([log], limits=False)
     monkeypatch.setattr(P, "_band_scale", lambda stage, run: NS.NoiseScale.not_calibrated("held at 1"))
-    at_one = diagnose([log])
+    at_one = diagnose([log], limits=False)
     assert [e.name for e in d.effects] == [e.name for e in at_one.effects] == ["cable_carrier_force"]
     scale = d.settings["current_noise_scale"]
     assert 0.5 < scale["scale"] < 0.95 and scale["interval"][0] > 0

@@ -77,7 +77,7 @@ def clean_diagnosis(model, tmp_path_factory):
     from tests.independent.simulate import Scenario, simulate
 
     csv, _ = write_log(simulate(Scenario(name="stats", seed=21, duration=30.0)), tmp_path_factory.mktemp("s"))
-    return diagnose([read_log(csv)], model)
+    return diagnose([read_log(csv)], model, limits=False)
 
 
 def test_wald_threshold_is_the_upper_tail_of_chi_square(clean_diagnosis):
