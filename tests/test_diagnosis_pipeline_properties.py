@@ -207,7 +207,9 @@ def test_a_guide_waviness_at_a_period_no_motor_explains_is_found_at_that_period(
     l1 = float(model.coefficients(GAP)[0, 0])
     u = np.array(log.u)
     u[0] += 0.05 * np.sin(2 * np.pi * log.x[2] / 0.045) / l1
-    d = diagnose([Log(log.t, log.x, u, metadata=log.metadata, source=log.source)], min_duration=5.0, limits=False)
+    d = diagnose(
+        [Log(log.t, log.x, u, metadata=log.metadata, source=log.source)], min_duration=5.0, limits=False
+    )
     assert d.status == "effects_found" and len(d.effects) == 1, d.report()
     effect = d.effects[0]
     assert effect.name.startswith("guide_waviness")
