@@ -778,3 +778,46 @@ def test_spanned_columns_are_exact_combinations_of_the_ones_before_them(later):
     g = a.T @ a
     out = _spanned(g, np.diag(g) <= 0)
     np.testing.assert_array_equal(out, [False, False, False, False, True, False, False])
+
+
+def test_the_shortcut_for_columns_none_of_which_is_spanned_answers_as_the_column_by_column_solves():
+    """``_spanned`` returns at once when every squared pivot of the normalized Gram's Cholesky factor
+    is above 1e3 times SPANNED; otherwise it solves column by column. On Grams of random columns,
+    the last one left with a share of its variance of 10^k (k from -13 to -2) beyond the others,
+    placed anywhere among them, it gives the column-by-column answer; placed last, it is spanned
+    exactly when that share is below SPANNED (1e-9)."""
+    from maglev_oc.regression import solve
+
+    rng = np.random.default_rng(7)
+
+    def by_columns(g, dead):  # the rule itself, column by column (the function's slow path)
+        scale = np.sqrt(np.where(dead, 1.0, np.diag(g)))
+        g = g / np.outer(scale, scale)
+        out, kept = np.zeros(g.shape[0], dtype=bool), []
+        for j in np.flatnonzero(~dead):
+            if kept and 1.0 - g[kept, j] @ np.linalg.solve(g[np.ix_(kept, kept)], g[kept, j]) < solve.SPANNED:
+                out[j] = True
+            else:
+                kept.append(j)
+        return out
+
+    for k in range(-13, -1):
+        for where in (0, 3, 6):
+            x = rng.standard_normal((400, 6)) * rng.uniform(0.1, 10.0, 6)
+            combo = x @ rng.standard_normal(6)
+            other = rng.standard_normal(400)
+            other -= x @ np.linalg.lstsq(x, other, rcond=None)[0]
+            share = 10.0**k
+            near = (
+                combo + np.sqrt(share / (1 - share)) * np.linalg.norm(combo) / np.linalg.norm(other) * other
+            )
+            cols = [*x.T]
+            cols.insert(where, near)
+            a = np.column_stack(cols)
+            g = a.T @ a
+            dead = np.zeros(7, dtype=bool)
+            out = solve._spanned(g, dead)
+            np.testing.assert_array_equal(out, by_columns(g, dead), err_msg=f"share 1e{k}, at {where}")
+            if where == 6 and k != -9:  # last: its share beyond the others is the one planted (at
+                # 1e-9 itself, rounding decides either way)
+                assert out.sum() == (share < solve.SPANNED), k

@@ -98,6 +98,13 @@ projecting on them is below this: only exact duplicates (two constant forces on 
 alike, differ at 1e-16), never columns the data barely tell apart (a variance inflation of 1e9)."""
 
 
+_SURELY_NOT_SPANNED = 1e3 * SPANNED
+"""When every column's share left after projecting on all the columns before it (the squared pivots
+of the normalized Gram's Cholesky factor) is above this, none is spanned; the margin of 1e3 keeps
+the shortcut's answer that of the column-by-column solves that decide below it, whose share
+differs from the pivot's by rounding (about 1e-16 times the Gram's condition)."""
+
+
 def _spanned(gram: np.ndarray, dead: np.ndarray) -> np.ndarray:
     """(p,) bool: the live columns whose variance left after projecting on the live columns before
     them (in the fit's order) is below :data:`SPANNED` of their own. A duplicate left in the
@@ -107,6 +114,13 @@ def _spanned(gram: np.ndarray, dead: np.ndarray) -> np.ndarray:
     out = np.zeros(p, dtype=bool)
     scale = np.sqrt(np.where(dead, 1.0, np.diag(gram)))
     g = gram / np.outer(scale, scale)
+    live = np.flatnonzero(~dead)
+    try:  # the usual case, at once: the squared pivots of g's Cholesky factor are those shares
+        pivots = np.diag(np.linalg.cholesky(g[np.ix_(live, live)])) ** 2
+        if np.all(pivots >= _SURELY_NOT_SPANNED):
+            return out
+    except np.linalg.LinAlgError:
+        pass
     kept: list[int] = []
     for j in range(p):
         if dead[j]:
