@@ -254,6 +254,8 @@ def test_a_log_as_long_as_the_shortest_diagnosed_is_accepted(generated):
         pipeline._prepare([log], 0.25, 10.0, log.duration * (1 + 1e-9))
 
 
+@pytest.mark.slow
+@pytest.mark.extended  # every run checks a scanned width reported on eleven_01 (test_diagnose_effects.py)
 def test_the_end_effects_are_reported_at_the_width_the_scan_chose(generated, monkeypatch):
     """The end effects' fall-off width is scanned once they are chosen (or shown); the selection
     then judges them at that width, which the finding reports. The scan's answers are recorded as
