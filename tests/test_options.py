@@ -1073,6 +1073,8 @@ def test_diagnose_no_limits_leaves_out_what_the_log_could_not_have_shown(diagnos
     # the report says they were not worked out, rather than leaving the reader to think none exist
     said = "could not have shown was not worked out (diagnose --no-limits)"
     assert said in _words(without.text()) and said not in _words(with_limits.text())
+    rows = {_words(row[0]): _words(row[1]) for row in without.sections[0].rows}  # the scorecard
+    assert rows["not shown by this log"] == "not worked out (diagnose --no-limits)"
     # the claims do not depend on them: the same effects by name (the held-out share differs)
     assert [e["name"] for e in doc["effects"]] == [e["name"] for e in doc_without["effects"]]
 

@@ -181,6 +181,8 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
                 "may be there, too small for this log (every limit: page 2 on)",
             )
         )
+    elif not diag.settings.get("detection_limits", True):
+        rows.append(("not shown by this log", "not worked out (diagnose --no-limits)", "not known"))
     return rows
 
 
