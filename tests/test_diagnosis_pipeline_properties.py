@@ -460,3 +460,48 @@ def test_refitted_constants_no_rig_of_the_design_has_are_a_warning(model):
     assert "above the model's" in w and "vertical axis" in w
     # an axis that did not move has no constants (NaN): nothing to warn of
     assert pipeline.constant_warnings(constants(C1=(math.nan, math.nan)), model) == ()
+
+
+@pytest.mark.slow
+def test_the_kept_selections_design_goes_on_with_the_references_it_was_built_about(generated, monkeypatch):
+    """pairs_05 of the independent set (vertical friction and an amplifier lag): the first selection
+    chooses the friction, whose held shares change the library, so the selection is repeated; its
+    converged references move again (C3 by 4e-4 relative) and that second selection is kept.
+    ``_select`` returned the newer references beside the kept design, so the steps after it paired
+    that design with a model it was not built about: the thrust side (the design restated in
+    amperes, about 1.5 s) missed its cache and was computed again for the same design by the
+    line-shape re-selection and by the detection limits. The model returned is now the kept
+    design's own, and each design is restated once."""
+    from maglev_oc.diagnosis import thrust_current
+
+    built: dict[int, object] = {}
+    library_design = pipeline._Session.library_design
+
+    def recording_design(self, model, library):
+        design = library_design(self, model, library)
+        built[id(design)] = model
+        return design
+
+    kept = []
+    select = pipeline._select
+
+    def recording_select(session, fitted, exclude):
+        out = select(session, fitted, exclude)
+        kept.append((built.get(id(out[2])), out[4]))
+        return out
+
+    restated: list[int] = []
+    restate = thrust_current._restated
+
+    def counting(design, model, min_share):
+        restated.append(id(design))
+        return restate(design, model, min_share)
+
+    monkeypatch.setattr(pipeline._Session, "library_design", recording_design)
+    monkeypatch.setattr(pipeline, "_select", recording_select)
+    monkeypatch.setattr(thrust_current, "_restated", counting)
+    path, _ = generated("pairs", "pairs_05")
+    d = diagnose_path(path, limits=True)
+    assert [e.name for e in d.effects][:1] == ["guide_friction_vertical"]
+    assert kept and all(model is fitted for model, fitted in kept), kept
+    assert len(restated) == len(set(restated)), restated

@@ -587,9 +587,12 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
                 sel = session.select(design, library, fitted, early)
             break
+        if attempt == 2 or (attempt > 0 and not rewidthed):
+            # once repeated, a selection is kept (but for the end effects' first width), with the
+            # references its design was built about: the steps after it pair that design with
+            # this model (the thrust side, the limits' felt currents)
+            break
         fitted, held = converged, shares
-        if attempt > 0 and not rewidthed:
-            break  # once repeated, a selection is kept (but for the end effects' first width)
         if attempt < 2:  # (the third always stops above)
             del design, sel  # the next design replaces this one: never hold both (samples x columns)
     return session, library, design, sel, fitted
