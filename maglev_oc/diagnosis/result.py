@@ -111,6 +111,13 @@ class Diagnosis(Result):
     warnings: tuple[str, ...] = ()
 
     @property
+    def limits_worked_out(self) -> bool:
+        """Whether the detection limits were worked out (``diagnose(limits=...)``): an empty
+        ``detection_limits`` then means the log showed every effect it judged, not that none was
+        looked for."""
+        return bool(self.settings.get("detection_limits", True))
+
+    @property
     def ranking(self) -> list[tuple[str, float]]:
         return self.selection.ranking
 

@@ -181,7 +181,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
                 "may be there, too small for this log (every limit: page 2 on)",
             )
         )
-    elif not diag.settings.get("detection_limits", True):
+    elif not diag.limits_worked_out:
         rows.append(("not shown by this log", "not worked out (diagnose --no-limits)", "not known"))
     return rows
 
@@ -269,7 +269,7 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
             f"Not found does not mean absent: this log could not have shown {smallest} (each put into the "
             "log at that size and judged as the diagnosis judges; every limit is in the table below)."
         )
-    if not diag.settings.get("detection_limits", True):
+    if not diag.limits_worked_out:
         out.append(
             "What this log could not have shown was not worked out (diagnose --no-limits): an effect not "
             "found may be there below a size this log cannot show."
