@@ -350,7 +350,8 @@ def with_target(design: Design, target: np.ndarray) -> Design:
     rhs = np.asarray(members @ per_sample)
     yy = np.bincount(blocks, np.sum(target[:, inside] * weighted[:, inside], axis=0), n_blocks)
     hold = design.holdout
-    hold_rhs = np.stack([design.columns[:, a][:, hold] @ target[a, hold] for a in range(2)])
+    held = design.held_out_columns  # (P, 2, n_hold), copied once per design
+    hold_rhs = np.stack([held[:, a] @ target[a, hold] for a in range(2)])
     hold_yy = np.array([float(target[a, hold] @ target[a, hold]) for a in range(2)])
     return dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
 

@@ -107,13 +107,14 @@ class Design:
     @cached_property
     def held_out_columns(self) -> np.ndarray:
         """(P, 2, n_hold) the columns on the held-out samples, copied once (selection computes
-        held-out residuals of hundreds of subsets)."""
-        return self.columns[:, :, self.holdout]
+        held-out residuals of hundreds of subsets; contiguous: np.take, where a boolean index on
+        the last axis leaves a transposed layout that every later product copies again)."""
+        return np.take(self.columns, np.flatnonzero(self.holdout), axis=2)
 
     @cached_property
     def held_out_target(self) -> np.ndarray:
         """(2, n_hold) the target on the held-out samples."""
-        return self.target[:, self.holdout]
+        return np.take(self.target, np.flatnonzero(self.holdout), axis=1)
 
     @property
     def moving(self) -> np.ndarray:
@@ -659,10 +660,11 @@ def _velocity_kernel(prep: PreparedLogs) -> np.ndarray:
 def _axis_weights(columns: np.ndarray, target: np.ndarray, fit: np.ndarray, moving: np.ndarray) -> np.ndarray:
     """1 / RMS residual per axis of an unweighted fit on the fitted samples (1 if no columns)."""
     P = columns.shape[0]
-    y = target[:, fit]
+    at = np.flatnonzero(fit)
+    y = np.take(target, at, axis=1)
     if P:
-        xb = columns[:, :, fit].reshape(P, -1).T
-        coef, *_ = np.linalg.lstsq(xb, y.reshape(-1), rcond=None)
-        y = y - np.einsum("p,pan->an", coef, columns[:, :, fit])
+        x = np.take(columns, at, axis=2)  # contiguous (a boolean index leaves a transposed layout)
+        coef, *_ = np.linalg.lstsq(x.reshape(P, -1).T, y.reshape(-1), rcond=None)
+        y = y - np.einsum("p,pan->an", coef, x)
     rms = np.sqrt(np.mean(y**2, axis=1)) if y.shape[1] else np.ones(2)
     return np.where(moving & (rms > 0), 1.0 / np.maximum(rms, 1e-12), 0.0)

@@ -299,7 +299,7 @@ def _fitted_columns(design: Design, idx: np.ndarray) -> np.ndarray:
     at = np.flatnonzero(design.fit)
     if at.size and at[-1] - at[0] + 1 == at.size:
         return design.columns[idx, :, at[0] : at[-1] + 1]
-    return design.columns[idx][:, :, design.fit]
+    return np.take(design.columns[idx], at, axis=2)
 
 
 def predicted(design: Design, fit: SubsetFit, group: str | None = None) -> np.ndarray:
