@@ -99,7 +99,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
 from maglev_oc.model.hardware import STOPPER_POSITION
 from maglev_oc.model.stage import StageModel
-from maglev_oc.numerics import one_blas_thread
+from maglev_oc.numerics import one_blas_thread, without_hugepage_advice
 from maglev_oc.progress import progress
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
@@ -180,6 +180,7 @@ class _Session:
 
 
 @one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)
+@without_hugepage_advice  # hundreds of large arrays allocated and freed (numerics)
 def diagnose(
     logs: Sequence[Log],
     model: StageModel | None = None,
