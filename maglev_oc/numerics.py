@@ -86,7 +86,7 @@ def without_hugepage_advice(fn: Callable[..., Any]) -> Callable[..., Any]:
     diagnosis does (a design's columns, their held-out and cross-fitted copies), waits on the
     compaction at many first touches and gets no huge page (AnonHugePages stayed 0): a fresh
     copy of 23 MB of held-out columns took 120-170 ms against 3-6 ms into memory already
-    touched. Measured on 12 logs (2026-12-02): the same results to every digit, 158.5 -> 138.7 s
+    touched. Measured on 12 logs (2026-12-01): the same results to every digit, 158.5 -> 138.7 s
     of diagnosis in all. Where huge pages are granted cheaply the advice saves page faults, but
     a diagnosis spends little of its time on them."""
     switch = _hugepage_switch()

@@ -16,7 +16,7 @@ if not any(os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"
 # NumPy's huge-page advice off in every process, the same way (NumPy reads the variable when it
 # loads): this machine's kernel compacts memory on a fault in an advised region and grants no huge
 # page, so processes that allocate many large arrays wait (maglev_oc.numerics.without_hugepage_advice,
-# which the diagnosis applies itself: 12 % of its time). Measured 2026-12-02 on the microstepper's
+# which the diagnosis applies itself: 12 % of its time). Measured 2026-12-01 on the microstepper's
 # region and the NMPC tests, one process: 118 s with the advice, 106 s without. A setting the user
 # chose is kept.
 os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
