@@ -1248,3 +1248,30 @@ def test_a_parameter_with_no_variance_left_is_confounded_with_everything_it_meet
     monkeypatch.setattr(np.linalg, "inv", planted)
     _, partners = _separability(design, cand, fit, settings)
     assert set(partners) == {"C1", "C2", "C3", "C4"}, partners  # everything else in this fit
+
+
+def test_the_candidates_asked_for_by_name_are_the_librarys_own(plant):
+    """candidate_library(only=...) builds the families of the names asked for and no other: each
+    candidate of the whole library is claimed by one family's names alone, the one that built it
+    (a candidate added to a family under a name its family does not claim fails here), and the
+    candidates asked for are the library's, term for term (the same CasADi Function, the same
+    parameters), held as it holds them."""
+    from maglev_oc.diagnosis import library as lib
+
+    ctx = LibraryContext(StageModel(), plant.data)
+    for k, (_, build) in enumerate(lib._FAMILIES):
+        for c in build(ctx, END_PROFILES[0]):
+            owners = [j for j, (owns, _) in enumerate(lib._FAMILIES) if owns(c.name)]
+            assert owners == [k], (c.name, owners)
+    held = {"vertical": 0.6}
+    whole = {c.name: c for c in candidate_library(StageModel(), plant.data, held)}
+    asked = ["guide_friction_vertical", "cogging_horizontal_19mm", "end_effects", "current_amplifier_lag"]
+    some = candidate_library(StageModel(), plant.data, held, only=asked[::-1])
+    assert [c.name for c in some] == asked  # in the library's order
+    for c in some:
+        w = whole[c.name]
+        assert c.term.function.serialize() == w.term.function.serialize(), c.name
+        same = (c.term.parameter_names, c.term.axis, c.family)
+        assert same == (w.term.parameter_names, w.term.axis, w.family), c.name
+    with pytest.raises(ValueError, match="no candidate named"):
+        candidate_library(StageModel(), plant.data, only=["guide_friction_sideways"])

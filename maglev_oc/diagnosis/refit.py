@@ -96,7 +96,7 @@ def converged_references(
         current = (
             library
             if k == 0 and library is not None
-            else candidate_library(fitted, data, held, end_profile=end_profile)
+            else candidate_library(fitted, data, held, end_profile=end_profile, only=chosen)
         )
         by_name = {c.name: c for c in current}
         terms = [by_name[n].term for n in chosen]
