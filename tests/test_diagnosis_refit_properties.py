@@ -221,11 +221,13 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     first = candidate_library(start, data, None)
     built_for = []
     widths = []
+    asked = []
 
-    def spy(fitted, data, held=None, *, end_profile):
+    def spy(fitted, data, held=None, *, end_profile, only=None):
         built_for.append(fitted.constants.C1)
         widths.append(end_profile)
-        return candidate_library(fitted, data, held, end_profile=end_profile)
+        asked.append(only)
+        return candidate_library(fitted, data, held, end_profile=end_profile, only=only)
 
     monkeypatch.setattr(refit, "candidate_library", spy)
     args = (model, start, data, ["guide_friction_horizontal"], train, hold, np.array([0.0, 1.0]))
@@ -236,6 +238,8 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     handed = refit.converged_references(*args, library=first)
     assert len(built_for) == rounds - 1
     assert start.constants.C1 not in built_for
+    # a round builds the chosen candidates only (library.candidate_library's ``only``)
+    assert asked and all(list(a) == ["guide_friction_horizontal"] for a in asked)
     # the same fits of the same columns: rounding only
     np.testing.assert_allclose(handed.constants.as_array(), built.constants.as_array(), rtol=1e-12)
     # each rebuilt library has the end effects' fall-off handed in (the scanned one), not the default
