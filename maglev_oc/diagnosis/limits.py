@@ -353,7 +353,10 @@ def with_target(design: Design, target: np.ndarray) -> Design:
     held = design.held_out_columns  # (P, 2, n_hold), copied once per design
     hold_rhs = np.stack([held[:, a] @ target[a, hold] for a in range(2)])
     hold_yy = np.array([float(target[a, hold] @ target[a, hold]) for a in range(2)])
-    return dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
+    out = dataclasses.replace(design, target=target, rhs=rhs, yy=yy, hold_rhs=hold_rhs, hold_yy=hold_yy)
+    # the same columns: the held-out copy is shared, not made again for each size tried
+    out.__dict__["held_out_columns"] = held
+    return out
 
 
 def _residuals(ctx: _Context, design: Design, cand: Candidate) -> _Residuals:
