@@ -95,7 +95,7 @@ def _missed(diag: Diagnosis, prefix: str, variable: str | None = None, axis: str
         return "not in the diagnosis's library"
     if j.verdict == "implausible":
         text = "not claimed: its fit is not physical"
-    elif j.verdict == "not separable":
+    elif j.verdict == "not separable" or j.dominated_by_current_errors:
         text = f"not claimed: {j.reason}"
     elif j.gain <= 0:
         text = f"not claimed: it does not lower the held-out error ({-100 * j.gain:+.1f} %, z = {j.z:.1f})"

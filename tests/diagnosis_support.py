@@ -19,6 +19,7 @@ import pytest
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.diagnosis.result import Diagnosis
+from maglev_oc.diagnosis.selection import Ranked
 from maglev_oc.regression import design as regression_design
 from maglev_oc.results import Estimate, PerAxis
 from tests.independent import write_log
@@ -112,7 +113,7 @@ def stub_diagnosis(
     and one held out, settings {"holdout_fraction": 0.25}, timings {"total": 1.5}."""
     nan = PerAxis(math.nan, math.nan)
     est = {"C1": Estimate(14.7, 0.1, "N/A^2")}
-    selection = SimpleNamespace(ranking=list(ranking), steps=[], last={})
+    selection = SimpleNamespace(ranking=[Ranked(*r) for r in ranking], steps=[], last={})
     return Diagnosis(
         success,
         status,

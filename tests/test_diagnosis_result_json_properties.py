@@ -21,17 +21,21 @@ import numpy as np
 import pytest
 
 from maglev_oc.diagnosis.result import Diagnosis, NotSeparable
-from maglev_oc.diagnosis.selection import THRUST_SIDE
+from maglev_oc.diagnosis.selection import EIV_REASON, THRUST_SIDE, Judgement, Ranked, Selection
 from maglev_oc.results import Estimate, PerAxis, check_result
 from maglev_oc.validation import Validation
 from tests.diagnosis_support import stub_diagnosis
 
 
 # --- the result's JSON and text ------------------------------------------------------------------------
-def _judgement(name: str, gain: float, verdict: str = "passes"):
-    return SimpleNamespace(
-        name=name, verdict=verdict, reason="", gain=gain, z=3.0 * gain, wald=1.0, vif=1.0, side=""
+def _judgement(name: str, gain: float, verdict: str = "passes", reason: str = ""):
+    """A judgement's fields as the result reads them; its ``dominated_by_current_errors`` is the
+    real property's rule (:class:`Judgement`), applied to this verdict and reason."""
+    j = SimpleNamespace(
+        name=name, verdict=verdict, reason=reason, gain=gain, z=3.0 * gain, wald=1.0, vif=1.0, side=""
     )
+    j.dominated_by_current_errors = Judgement.dominated_by_current_errors.fget(j)
+    return j
 
 
 def _stub_diagnosis(**changes) -> Diagnosis:
@@ -48,7 +52,10 @@ def _stub_diagnosis(**changes) -> Diagnosis:
             judgements={n: _judgement(n, g) for n, g in (("a", 0.02), ("b", 0.31), ("c", 0.11))},
         )
     ]
-    selection = SimpleNamespace(steps=steps, ranking=[("b", 0.31), ("c", 0.11), ("a", 0.02)])
+    selection = SimpleNamespace(
+        steps=steps,
+        ranking=[Ranked("b", 0.31, "passes"), Ranked("c", 0.11, "passes"), Ranked("a", 0.02, "passes")],
+    )
     per = PerAxis.of
     fields = dict(
         success=True,
@@ -91,6 +98,40 @@ def test_the_json_counts_the_held_out_and_fitted_samples_and_keeps_each_numbers_
     assert out["error_before"] == {"vertical": 0.0123, "horizontal": None}
     assert out["error_after"] == {"vertical": 0.00456, "horizontal": None}
     json.dumps(out, allow_nan=False)
+
+
+def test_a_fit_dominated_by_the_currents_errors_has_no_gain_in_the_json_and_ranks_last():
+    """A candidate refused because its columns are the logged currents' errors (a nearly singular
+    fit: noisy single_20 of the independent generator gave gains of -4.7e15 to -3.7e18 for four
+    vertical candidates) has a null gain, z and Wald statistic in the ranking, the steps and the
+    refused list, and ranks after every candidate with a measured gain, however negative (-2.0
+    here: a fit that triples the error is a measurement); the others keep their numbers."""
+    eiv = _judgement("friction", -4.7e15, "not significant", f"{EIV_REASON} (not identifiable)")
+    worse = _judgement("offset", -2.0, "not significant", "held-out error rises")
+    good = _judgement("lag", 0.0073, "not significant", "z = 1.9")
+    first = {j.name: j for j in (eiv, worse, good)}
+    # the ranking is the real Selection's, over these judgements
+    selection = Selection(steps=[], base=None, final=None, last=first)
+    assert selection.ranking[-1].name == "friction" and math.isnan(selection.ranking[-1].gain)
+    steps = [SimpleNamespace(chosen="lag", confidence=0.5, judgements=first)]
+    d = _stub_diagnosis(
+        selection=SimpleNamespace(steps=steps, ranking=selection.ranking), rejected=[eiv, worse]
+    )
+    out = d.to_dict()
+    json.dumps(out, allow_nan=False)
+    assert out["candidate_ranking"] == [
+        {"name": "lag", "holdout_gain": 0.0073, "verdict": "not significant"},
+        {"name": "offset", "holdout_gain": -2.0, "verdict": "not significant"},
+        {"name": "friction", "holdout_gain": None, "verdict": "not significant"},
+    ]
+    listed = out["selection_steps"][0]["candidates"]
+    assert [c["name"] for c in listed] == ["lag", "offset", "friction"]
+    assert (listed[-1]["holdout_gain"], listed[-1]["z"], listed[-1]["wald"]) == (None, None, None)
+    assert listed[1]["holdout_gain"] == -2.0 and listed[1]["z"] == pytest.approx(-6.0)
+    refused = {r["name"]: r for r in out["rejected"]}
+    assert refused["friction"]["holdout_gain"] is None and refused["friction"]["z"] is None
+    assert refused["friction"]["reason"].startswith(EIV_REASON)
+    assert refused["offset"]["holdout_gain"] == -2.0
 
 
 def test_the_reports_errors_are_before_and_after_on_the_moving_axes():
@@ -172,7 +213,9 @@ def test_a_diagnosis_to_dict_carries_its_outcome_and_round_trips_through_json(su
     """The dict the CLI writes has the convention's success, status and message with the
     diagnosis's values (both outcomes, so a constant cannot pass), and the logs, holdout sizes,
     settings and timings; it is plain JSON (dumped and loaded, it is equal)."""
-    d = stub_diagnosis(success, status, message, sources=("a.csv", "b.csv"), ranking=[("cogging", 0.12)])
+    d = stub_diagnosis(
+        success, status, message, sources=("a.csv", "b.csv"), ranking=[("cogging", 0.12, "passes")]
+    )
     check_result(d)
     out = d.to_dict()
     assert out["success"] is success and out["status"] == status and out["message"] == message
@@ -180,7 +223,7 @@ def test_a_diagnosis_to_dict_carries_its_outcome_and_round_trips_through_json(su
     assert out["holdout"] == {"fraction": 0.25, "samples": 1, "fit_samples": 2}
     assert out["settings"] == {"holdout_fraction": 0.25} and out["timings"] == {"total": 1.5}
     assert out["error_before"] == {"vertical": 0.5, "horizontal": 0.25}
-    assert out["candidate_ranking"] == [{"name": "cogging", "holdout_gain": 0.12}]
+    assert out["candidate_ranking"] == [{"name": "cogging", "holdout_gain": 0.12, "verdict": "passes"}]
     assert out["warnings"] == []
     assert json.loads(json.dumps(out)) == out
     # a warning on the refitted constants is in the JSON and on the text report's second line
@@ -245,9 +288,8 @@ def test_every_judged_candidate_reports_its_gain_and_z_under_the_same_keys():
     # effects and rejected candidates are judged by the same numbers; the JSON gives them the
     # same names (a reader of the SPEC 3 contract looks up "holdout_gain" and "z" in both)
     # and what the held-out test predicted: the accelerations, or the logged thrust current
-    judged = SimpleNamespace(
-        name="thrust_ripple", verdict="not significant", reason="r", gain=0.004, z=1.3, side=THRUST_SIDE
-    )
+    judged = _judgement("thrust_ripple", 0.004, "not significant", "r")
+    judged.z, judged.side = 1.3, THRUST_SIDE
     d = dataclasses.replace(stub_diagnosis(), rejected=[judged])
     (entry,) = d.to_dict()["rejected"]
     assert entry == {

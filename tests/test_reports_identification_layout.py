@@ -288,6 +288,11 @@ def test_effect_names_are_plain_words():
     assert plain("cogging_horizontal_19mm") == "cogging along the travel (19 mm period)"
     assert plain("constant_vertical_force") == "constant vertical force"
     assert plain("guide_friction_horizontal") == "horizontal guide friction"
+    assert plain("guide_friction_vertical_with_stribeck") == "vertical guide friction with its Stribeck rise"
+    assert (
+        plain("guide_friction_horizontal_with_stribeck_without_viscous")
+        == "horizontal guide friction with its Stribeck rise, without its viscous part"
+    )
     assert plain("guide_waviness_22mm") == "guide waviness (22 mm period)"
     assert plain("something_new") == "something new"
 

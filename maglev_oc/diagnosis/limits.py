@@ -64,7 +64,6 @@ from scipy import sparse
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.selection import (
-    EIV_REASON,
     THRUST_SIDE,
     Judgement,
     Selection,
@@ -264,7 +263,7 @@ def _limit(
         direction = direction * (1.0 if grows * cand.physical_sign > 0 else -1.0)
         signs = (1.0,)
     side = "" if ctx.per_unit is None else THRUST_SIDE
-    if judged.reason.startswith(EIV_REASON) and not side:
+    if judged.dominated_by_current_errors and not side:
         return DetectionLimit(
             cand.name, first, math.inf, unit_name, "", f"not seen at any size: {judged.reason}"
         )

@@ -10,7 +10,7 @@ import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.limits import DetectionLimit
-from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Selection
+from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selection, best_first
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
@@ -29,6 +29,17 @@ ERROR_METRIC = (
 def _num(v) -> float | None:
     v = float(v)
     return v if math.isfinite(v) else None
+
+
+def _measured(j: Judgement, *, wald: bool = True) -> dict[str, float | None]:
+    """A judgement's held-out gain, z and (with ``wald``) Wald statistic; null where its fit means
+    nothing (its columns dominated by the logged currents' errors: a nearly singular fit, gains of
+    -1e15 and beyond, :attr:`~maglev_oc.diagnosis.selection.Judgement.dominated_by_current_errors`)."""
+    meaningless = j.dominated_by_current_errors
+    out = {"holdout_gain": None if meaningless else _num(j.gain), "z": None if meaningless else _num(j.z)}
+    if wald:
+        out["wald"] = None if meaningless else _num(j.wald)
+    return out
 
 
 @dataclass(frozen=True)
@@ -118,7 +129,7 @@ class Diagnosis(Result):
         return bool(self.settings.get("detection_limits", True))
 
     @property
-    def ranking(self) -> list[tuple[str, float]]:
+    def ranking(self) -> list[Ranked]:
         return self.selection.ranking
 
     def to_dict(self) -> dict:
@@ -173,14 +184,15 @@ class Diagnosis(Result):
                     "name": j.name,
                     "verdict": j.verdict,
                     "reason": j.reason,
-                    "holdout_gain": _num(j.gain),
-                    "z": _num(j.z),
+                    **_measured(j, wald=False),
                     "judged_on": j.side or "accelerations",
                 }
                 for j in self.rejected
             ],
             "detection_limits": [d.to_dict() for d in self.detection_limits],
-            "candidate_ranking": [{"name": n, "holdout_gain": _num(g)} for n, g in self.ranking],
+            "candidate_ranking": [
+                {"name": r.name, "holdout_gain": _num(r.gain), "verdict": r.verdict} for r in self.ranking
+            ],
             "selection_steps": [
                 {
                     "chosen": s.chosen,
@@ -189,13 +201,11 @@ class Diagnosis(Result):
                         {
                             "name": j.name,
                             "verdict": j.verdict,
-                            "holdout_gain": _num(j.gain),
-                            "z": _num(j.z),
-                            "wald": _num(j.wald),
+                            **_measured(j),
                             "vif": _num(j.vif),
                             "judged_on": j.side or "accelerations",
                         }
-                        for j in sorted(s.judgements.values(), key=lambda j: -j.gain)
+                        for j in sorted(s.judgements.values(), key=best_first)
                     ],
                 }
                 for s in self.selection.steps

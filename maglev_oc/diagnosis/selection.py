@@ -168,6 +168,7 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.stats import chi2
@@ -191,9 +192,11 @@ __all__ = [
     "SMOOTH_POSITION",
     "STATE_OF_AXIS",
     "Judgement",
+    "Ranked",
     "Selection",
     "SelectionSettings",
     "axis_loss_breaks",
+    "best_first",
     "evidence",
     "fitted_constants",
     "holds_its_axis",
@@ -290,6 +293,15 @@ class Judgement:
     travel_needed: float | None = None
 
     @property
+    def dominated_by_current_errors(self) -> bool:
+        """Refused because its columns are the logged currents' errors more than their signal
+        (:data:`EIV_REASON`): its fit sits at the edge of the errors-in-variables correction, nearly
+        singular, so its coefficients, held-out gain and z are numbers without meaning (noisy
+        single_20 of the independent generator: gains of -4.7e15 to -3.7e18, "held-out error
+        multiplied by 1e16", for four vertical candidates)."""
+        return self.verdict == "not significant" and self.reason.startswith(EIV_REASON)
+
+    @property
     def own_gain(self) -> float:
         """The relative drop of the held-out MSE on the axes it acts on (``gain`` averages over
         every moving axis, which ranks candidates by their total improvement)."""
@@ -312,6 +324,20 @@ def _own_gain(gain_axes: np.ndarray) -> float:
     return float(np.mean(finite)) if finite.size else 0.0
 
 
+def best_first(j: Judgement) -> tuple[bool, float]:
+    """Sort key of judgements, the largest held-out gain first and those whose fit means nothing
+    (:attr:`Judgement.dominated_by_current_errors`) last."""
+    return j.dominated_by_current_errors, -j.gain
+
+
+class Ranked(NamedTuple):
+    """One candidate of the first step's ranking (:attr:`Selection.ranking`)."""
+
+    name: str
+    gain: float  # :attr:`Judgement.gain`; NaN when the fit means nothing (dominated by the currents' errors)
+    verdict: str
+
+
 @dataclass(frozen=True)
 class Step:
     chosen: str
@@ -331,12 +357,16 @@ class Selection:
         return [s.chosen for s in self.steps]
 
     @property
-    def ranking(self) -> list[tuple[str, float]]:
-        """First-step gains of every candidate, best first."""
+    def ranking(self) -> list[Ranked]:
+        """Every candidate's first-step gain and verdict, best first; those whose fit the logged
+        currents' errors dominate last, their gain NaN (:attr:`Judgement.dominated_by_current_errors`)."""
         if not self.steps and not self.last:
             return []
         first = self.steps[0].judgements if self.steps else self.last
-        return sorted(((n, j.gain) for n, j in first.items()), key=lambda t: -t[1])
+        ordered = sorted(first.values(), key=best_first)
+        return [
+            Ranked(j.name, math.nan if j.dominated_by_current_errors else j.gain, j.verdict) for j in ordered
+        ]
 
 
 def _axes(candidate: Candidate, moving: np.ndarray) -> np.ndarray:

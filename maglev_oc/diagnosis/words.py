@@ -28,8 +28,8 @@ _WORDS = {
 
 def plain(name: str) -> str:
     """An effect's name in words: ``cogging_vertical_38mm`` -> ``normal cogging, 38 mm period``,
-    ``guide_friction_horizontal`` -> ``horizontal guide friction``; unknown names lose their
-    underscores."""
+    ``guide_friction_horizontal`` -> ``horizontal guide friction`` (its forms ``..._with_stribeck``
+    and ``..._without_viscous`` say so); unknown names lose their underscores."""
     if name in _WORDS:
         return _WORDS[name]
     if m := re.fullmatch(r"cogging_(vertical|horizontal)_(\d+)mm", name):
@@ -37,4 +37,9 @@ def plain(name: str) -> str:
         return f"{kind} ({m[2]} mm period)"
     if m := re.fullmatch(r"guide_waviness_(\d+)mm", name):
         return f"guide waviness ({m[1]} mm period)"
+    # a friction's other forms (diagnosis.guides)
+    if m := re.fullmatch(r"(.+)_without_viscous", name):
+        return f"{plain(m[1])}, without its viscous part"
+    if m := re.fullmatch(r"(.+)_with_stribeck", name):
+        return f"{plain(m[1])} with its Stribeck rise"
     return name.replace("_", " ")

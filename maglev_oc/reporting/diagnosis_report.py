@@ -21,6 +21,7 @@ import numpy as np
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
+from maglev_oc.diagnosis.selection import best_first
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting import validation_plots
@@ -391,10 +392,14 @@ def _verdict_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     """(candidate, verdict, first-step held-out gain [%], reason), largest first-step gain first."""
     first = diag.selection.steps[0].judgements if diag.selection.steps else diag.selection.last
     rows = []
-    for j in sorted(diag.selection.last.values(), key=lambda j: -first.get(j.name, j).gain):
+    for j in sorted(diag.selection.last.values(), key=lambda j: best_first(first.get(j.name, j))):
         reason = "\n".join(textwrap.wrap(j.reason or "—", 60))
-        gain = first.get(j.name, j).gain
-        rows.append((plain(j.name), j.verdict, f"{gain * 100:.1f}" if gain >= -1.0 else "< -100", reason))
+        at_first = first.get(j.name, j)
+        if at_first.dominated_by_current_errors:  # a nearly singular fit: its gain means nothing
+            gain = "—"
+        else:
+            gain = f"{at_first.gain * 100:.1f}" if at_first.gain >= -1.0 else "< -100"
+        rows.append((plain(j.name), j.verdict, gain, reason))
     return rows
 
 
