@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
+from maglev_oc.diagnosis import unexplained
 from maglev_oc.diagnosis.selection import SelectionSettings
-from maglev_oc.diagnosis.unexplained import find_unexplained
+from maglev_oc.diagnosis.unexplained import _probes, find_unexplained, rate_direction
 from maglev_oc.regression.data import prepare
 from tests.test_statistics_properties import RATE_FRICTION, _friction_candidate, _log
 
@@ -106,6 +110,67 @@ def test_the_options_bound_what_is_reported(model):
     for change in ({"min_effect": 1.01 * u.size}, {"min_gain": 1.01 * u.gain}, {"min_z": 1.01 * u.z}):
         kept = _found(model, acc, periods=periods, settings=dataclasses.replace(s, **change))[0]
         assert all(v.depends_on != u.depends_on for v in kept), change
+
+
+@pytest.mark.parametrize(("friction", "direction"), [(RATE_FRICTION, "against"), (-RATE_FRICTION, "along")])
+def test_a_force_of_the_velocity_is_reported_with_its_direction(model, friction, direction):
+    """Viscous friction -c v (c = 2 /s) in the plant and nothing passed as explained: reported on the
+    horizontal axis as a dependence on the velocity, against the motion; the same force reversed
+    (+2 v, as a lag gives) along the motion, with what gives that sign. The change it quotes across
+    the logged rates is the planted force's over the 1st-99th percentile of the speed (within 10 %:
+    the probe's refit of C1 takes a little of it; measured 1-3 %)."""
+    data = prepare([_log(model, friction=friction)], bandwidth=10.0)
+    fit, hold = data.masks(0.25)
+    found = find_unexplained(data, model, [], fit, hold, None, [], SelectionSettings())
+    u = found[0]
+    assert (u.axis, u.depends_on) == ("horizontal", "position_rate")
+    assert f"a force {direction} the motion" in u.description
+    assert ("a delay between the logged signals and the forces" in u.description) == (direction == "along")
+    lo, hi = np.percentile(data.x[3, data.valid], [1, 99])
+    quoted = float(re.search(r"\(([\d.e+-]+) m/s² across the logged rates\)", u.description)[1])
+    assert quoted == pytest.approx(abs(friction) * (hi - lo), rel=0.1)
+
+
+def test_beside_a_claimed_friction_the_velocitys_residual_is_read_against_it(model, monkeypatch):
+    """With guide friction claimed on the axis, a residual falling with the velocity is read as more
+    force against the motion at speed than that friction's fit, one rising as less (not as a lag:
+    measured beside six claimed vertical frictions without one); a residual whose even part
+    dominates has no direction. The probes of a log read their axis's velocity so where the
+    friction passed as explained acts, and only there."""
+    q = np.array([-0.01, 0.0, 0.0, 0.0])
+    seen = []
+
+    def spy(data, periods, friction_axes=frozenset()):
+        probes = _probes(data, periods, friction_axes)
+        seen.append({p.term.axis: p.detail(q) for p in probes if p.detail is not None})
+        return probes
+
+    monkeypatch.setattr(unexplained, "_probes", spy)
+    _found(model, None)  # the horizontal friction passed as explained
+    (said,) = seen
+    assert "beside the guide friction" in said["horizontal"]
+    assert all("beside" not in text for axis, text in said.items() if axis != "horizontal")
+    assert "more force against the motion at speed" in rate_direction(q, beside_friction=True)
+    assert "less force against the motion at speed" in rate_direction(-q, beside_friction=True)
+    assert "delay" not in rate_direction(-q, beside_friction=True)
+    assert rate_direction(np.array([0.001, 0.01, 0.0, 0.0])) == ""
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4))
+def test_the_direction_is_the_sign_of_the_probes_change_across_the_logged_rates(q):
+    """Cross-checked with numpy's Legendre series (the probe's basis, its means cancelling in every
+    difference): the change quoted is f(+1) - f(-1), its sign the direction, and a direction is
+    given only when that half-change outweighs the even part (f(+1) + f(-1)) / 2 - f(0)."""
+    f = np.polynomial.legendre.Legendre([0.0, *q])
+    odd, even = (f(1.0) - f(-1.0)) / 2, (f(1.0) + f(-1.0)) / 2 - f(0.0)
+    text = rate_direction(np.array(q))
+    assume(abs(abs(odd) - abs(even)) > 1e-12)  # a tie is decided by rounding
+    assert (text != "") == (abs(odd) > abs(even))
+    if text:
+        assert ("rises" in text) == (odd > 0)
+        quoted = float(text.split("(")[1].split(" m/s²")[0])
+        assert quoted == pytest.approx(2 * abs(odd), rel=0.05)  # printed to 2 significant digits
 
 
 def test_a_force_where_the_stage_goes_now_and_then_is_judged_over_the_whole_log(model):

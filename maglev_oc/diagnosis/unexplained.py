@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import NamedTuple
 
 import casadi as ca
@@ -50,7 +51,7 @@ from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
-__all__ = ["Unexplained", "find_unexplained"]
+__all__ = ["OWN_RATE", "Unexplained", "find_unexplained", "rate_direction"]
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,8 @@ def find_unexplained(
     """Probe the residual of (base + ``explained``) for structure nothing named explains: the
     best probe is added while it passes the selection's significance and size tests, at most
     ``max_per_axis`` per axis."""
-    probes = _probes(data, periods) + _force_probes(data, model)
+    friction = frozenset(c.term.axis for c in explained if c.family == "friction")
+    probes = _probes(data, periods, friction) + _force_probes(data, model)
     if not probes:
         return []
     terms = [c.term for c in explained] + [p.term for p in probes]
@@ -166,12 +168,66 @@ def find_unexplained(
     return out
 
 
-def _probes(data: PreparedLogs, periods: Sequence[tuple[str, float]]) -> list[_Probe]:
-    """The additive and periodic probes on the moving axes."""
+OWN_RATE = {"vertical": "gap_rate", "horizontal": "position_rate"}
+"""The velocity of each axis, as :data:`PROBE_VARIABLES` names it."""
+
+
+def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
+    """What a probe of an axis's own velocity (mean-free Legendre polynomials of orders 1-4 over the
+    logged rates, coefficients ``q``) says of the force's direction, when its odd part (the change
+    from the slowest to the fastest logged rate: P1 and P3 are odd) outweighs its even part (both
+    ends against the middle); "" otherwise. ``beside_friction``: guide friction is claimed on the
+    axis, and the residual is then read against it.
+
+    Against the motion is what damping or friction the model lacks gives. Along the motion no
+    passive force gives: a delay between the logged signals and the forces does on a regulated stage
+    (the force follows the commanded acceleration late, a residual of -tau da/dt, and over an
+    oscillation da/dt = -omega^2 v: +tau omega^2 v, a negative damping). Measured on logs of the
+    independent generator whose residual a probe of the gap rate explained (no limits, 14 logs):
+    along the motion on all four with an amplifier lag and no friction claimed on that axis (noisy
+    single_20, eleven_07 twice, pair 10015: 0.018-0.048 m/s^2 across the logged rates), but also on
+    two experiment logs with a detent or an end effect and no lag (0.014 and 0.009 m/s^2), so the
+    words name what gives that sign, not an effect; beside a claimed vertical friction, along the
+    motion on six logs without a lag (0.03-0.42 m/s^2), and against it (1.2 m/s^2) beside a claimed
+    horizontal friction and an unclaimed lag (pair 10074): there the words say only how the residual
+    stands to the friction found."""
+    q = np.asarray(q, dtype=float)
+    odd = q[0] + q[2]  # (f(+1) - f(-1)) / 2: P1 and P3 are 1 at +1 and -1 at -1
+    even = 1.5 * q[1] + 0.625 * q[3]  # (f(+1) + f(-1)) / 2 - f(0): P2(0) = -1/2, P4(0) = 3/8
+    if not abs(odd) > abs(even):
+        return ""
+    falls = odd < 0
+    change = f"{2 * abs(odd):.2g} m/s² across the logged rates"
+    said = f" It {'falls as the velocity grows' if falls else 'rises with the velocity'} ({change})"
+    if beside_friction:
+        return (
+            f"{said}, beside the guide friction found on this axis: {'more' if falls else 'less'} force "
+            "against the motion at speed than the fit of that friction gives."
+        )
+    if falls:
+        return f"{said}: a force against the motion, as damping or friction the model lacks gives."
+    return (
+        f"{said}: a force along the motion, which no friction or damping gives; a delay between the "
+        "logged signals and the forces does (an amplifier lag, a loop delay the log does not declare, "
+        "a timing skew between the logged currents and positions)."
+    )
+
+
+def _probes(
+    data: PreparedLogs, periods: Sequence[tuple[str, float]], friction_axes: frozenset[str] = frozenset()
+) -> list[_Probe]:
+    """The additive and periodic probes on the moving axes; a probe of an axis's own velocity says
+    which way the force it finds points (:func:`rate_direction`; ``friction_axes``: the axes with
+    guide friction claimed)."""
     probes: list[_Probe] = []
     for (axis, var), term in smooth_probes(data).items():
         if data.moving[AXES.index(axis)]:
-            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1]))
+            detail = (
+                partial(rate_direction, beside_friction=axis in friction_axes)
+                if OWN_RATE[axis] == var
+                else None
+            )
+            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail))
     for axis, period in periods:
         a = AXES.index(axis)
         if data.moving[a]:
