@@ -21,6 +21,7 @@ from maglev_oc.diagnosis.guides import level_candidates
 from maglev_oc.diagnosis.pipeline import _stands_for_residual
 from maglev_oc.diagnosis.result import NotSeparable
 from maglev_oc.diagnosis.selection import SMOOTH_POSITION, SelectionSettings
+from maglev_oc.diagnosis.unexplained import BOTH_ENDS, along_the_stator
 from maglev_oc.reporting.diagnosis_report import _finding_paragraphs
 from maglev_oc.results import Estimate
 from tests._diagnosis_cases import _ctx
@@ -73,6 +74,31 @@ def test_forces_falling_along_the_whole_travel_are_reported_as_unexplained(diagn
     fall = ONE_SIDED.loss(hi * 1e-3) - ONE_SIDED.loss(lo * 1e-3)
     assert a_hi - a_lo == pytest.approx(-100 * ONE_SIDED.attraction_loss * fall, rel=0.3)
     assert w_hi - w_lo == pytest.approx(-100 * ONE_SIDED.thrust_loss * fall, rel=0.3)
+    # and names what gives that shape: the generator's stator end is beyond the high logged end
+    assert f"Falling towards the high end ({hi:.0f} mm): what a stator end near that end" in u.description
+
+
+@pytest.mark.parametrize(
+    ("low", "high", "said"),
+    [
+        (-1.0, -3.0, "Lower at both ends"),  # the smaller a third of the larger: both ends fall
+        (-0.2, -3.0, "Falling towards the high end (40 mm)"),  # the low end's fall under BOTH_ENDS
+        (1.0, -3.0, "Falling towards the high end (40 mm)"),
+        (-3.0, 1.0, "Falling towards the low end (-40 mm)"),
+        (2.0, 3.0, "Higher at both ends"),
+        (3.0, -1.0, "Rising towards the low end (-40 mm)"),
+        (0.0, 0.0, ""),
+    ],
+)
+def test_forces_changing_along_the_travel_are_said_in_the_words_of_what_gives_that_shape(low, high, said):
+    """The forces' change at the logged ends (relative to the centre), in words: lower at both ends
+    is what end effects give; falling towards one end, a stator end beyond it or a field weaker
+    there; rising towards one, no end effect (they lower the forces)."""
+    text = along_the_stator(low, high, -0.04, 0.04)
+    assert text.startswith(f" {said}") if said else text == ""
+    assert ("end effect" in text) == (said != "")
+    assert ("magnets stronger" in text) == said.startswith(("Higher", "Rising"))
+    assert BOTH_ENDS == 0.25  # the threshold the first two rows straddle
 
 
 def test_a_candidate_not_separable_takes_part_of_the_residual_only_where_its_fit_is_physical(model):

@@ -51,7 +51,7 @@ from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
-__all__ = ["OWN_RATE", "Unexplained", "find_unexplained", "rate_direction"]
+__all__ = ["BOTH_ENDS", "OWN_RATE", "Unexplained", "along_the_stator", "find_unexplained", "rate_direction"]
 
 
 @dataclass(frozen=True)
@@ -247,6 +247,45 @@ FORCE_PROBE_ORDER = 2
 force's share (a constant share is a change of the constants)."""
 
 
+BOTH_ENDS = 0.25
+"""The smaller end's change, as a share of the larger's, above which forces lower (or higher) at
+both logged ends than at the centre are said to change at both ends, not towards one."""
+
+
+def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
+    """What a change of the motor's forces along the travel looks like, in the physical words of
+    what gives it (issue 19, item 5: end effects, a field not uniform along the stator): ``low``,
+    ``high`` [%] the forces' share at the logged ends ``lo``, ``hi`` [m] relative to the centre. The
+    forces fall where the mover overhangs a stator end, at both ends if both are near the travel and
+    towards one if one is (drawn pair 9813 of the independent generator: a stator end just beyond
+    +50 mm, the other far off, the forces falling over the whole travel towards +33 mm); forces
+    higher towards an end are no end effect but magnets stronger there. A sentence, or "" when
+    the forces do not change."""
+    larger = max(abs(low), abs(high))
+    if not larger > 0:
+        return ""
+    where = {True: f"the high end ({hi * M_TO_MM:.0f} mm)", False: f"the low end ({lo * M_TO_MM:.0f} mm)"}
+    if low * high > 0 and min(abs(low), abs(high)) >= BOTH_ENDS * larger:
+        if low < 0:
+            return (
+                " Lower at both ends: what the stator's ends give where the mover overhangs them "
+                "(end effects)."
+            )
+        return (
+            " Higher at both ends: magnets stronger towards the ends of the array, which no end effect gives."
+        )
+    towards = where[abs(high) >= abs(low)]
+    if (high if abs(high) >= abs(low) else low) < 0:
+        return (
+            f" Falling towards {towards}: what a stator end near that end of the travel gives (an end "
+            "effect), or magnets weaker towards it (a field not uniform along the stator)."
+        )
+    return (
+        f" Rising towards {towards}: magnets stronger towards it (a field not uniform along the stator); "
+        "an end effect lowers the forces."
+    )
+
+
 def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
     """The motor's forces varying smoothly along the travel, one
     probe per moving axis: the thrust (horizontally) and, vertically, the magnets' attraction and the
@@ -291,18 +330,27 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
         [float(e - m) for e, m in zip(legendre(end, orders), centre, strict=True)] for end in (-1.0, 1.0)
     ]
 
-    def ends(q) -> str:
+    def changes(q) -> tuple[float, float]:
+        """[%] the force's share at the low and the high logged end, relative to the centre."""
         low, high = (100.0 * sum(float(qi) * d for qi, d in zip(q, row, strict=True)) for row in at_end)
+        return low, high
+
+    def ends(q) -> str:
+        low, high = changes(q)
         return f"{low:+.1f} % at {lo * M_TO_MM:.0f} mm and {high:+.1f} % at {hi * M_TO_MM:.0f} mm"
 
     def vertical_detail(q) -> str:
+        both = np.add(changes(q[k:]), changes(q[:k]))
         return (
             f" Fitted so, relative to the centre of the travel, the magnets' attraction is {ends(q[k:])}, "
-            f"the currents' normal force {ends(q[:k])}."
+            f"the currents' normal force {ends(q[:k])}.{along_the_stator(*both, lo, hi)}"
         )
 
     def horizontal_detail(q) -> str:
-        return f" Fitted so, relative to the centre of the travel, the thrust is {ends(q)}."
+        return (
+            f" Fitted so, relative to the centre of the travel, the thrust is {ends(q)}."
+            f"{along_the_stator(*changes(q), lo, hi)}"
+        )
 
     out = []
     for a, (build, n, words, detail) in enumerate(
