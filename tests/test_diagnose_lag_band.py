@@ -15,6 +15,7 @@ from __future__ import annotations
 import pytest
 
 from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis.currents import LAG, LAG_VERTICAL
 from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.diagnosis.pipeline import RATE_TERM_BAND
 from maglev_oc.model.stage import StageModel
@@ -53,9 +54,9 @@ def test_the_lag_is_sized_right_where_the_loop_echoes_the_encoder_noise(generate
 def test_only_a_term_in_the_current_rates_is_sized_on_the_narrower_band(generated):
     """The narrower band is for the regressors that carry the noise's echo, the currents' rates: of
     the library only the lag depends on them (friction, cogging, ripple, the field's shape keep the
-    band their evidence was judged on)."""
+    band their evidence was judged on); the lag in both its forms (both axes, the vertical alone)."""
     path, _ = generated("experiments", "experiments_49")
     data = prepare([read_log(path)], bandwidth=10.0)
     library = candidate_library(StageModel(), data, {})
-    assert [c.name for c in library if c.term.depends_on_rates()] == ["current_amplifier_lag"]
+    assert [c.name for c in library if c.term.depends_on_rates()] == [LAG, LAG_VERTICAL]
     assert len(library) > 10

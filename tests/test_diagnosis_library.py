@@ -30,6 +30,7 @@ import pytest
 
 from maglev_oc.data.logs import read_log
 from maglev_oc.diagnosis.candidate import LibraryContext
+from maglev_oc.diagnosis.currents import LAG, LAG_VERTICAL
 from maglev_oc.diagnosis.guides import waviness_candidate
 from maglev_oc.diagnosis.library import candidate_library, end_effects_at
 from maglev_oc.diagnosis.magnetics import END_PROFILES, END_WIDTH, END_WIDTHS, EndProfile
@@ -1205,11 +1206,11 @@ def test_the_commutation_angle_is_the_minimum_variance_mean_of_the_two_axes(valu
 
 def test_only_the_effects_of_the_currents_rates_are_judged_off_the_axes_with_friction(plant):
     """``Candidate.beside_friction``: the amplifiers' lag (its column on an axis with friction is
-    that friction's viscous part, test_diagnosis_selection_properties) and nothing else; every other
-    candidate's evidence counts on every axis it acts on."""
+    that friction's viscous part, test_diagnosis_selection_properties), in both its forms, and
+    nothing else; every other candidate's evidence counts on every axis it acts on."""
     lib = candidate_library(plant.model, plant.data)
     hidden = {c.name for c in lib if not c.beside_friction}
-    assert hidden == {c.name for c in lib if c.variable == "current_rate"} == {"current_amplifier_lag"}
+    assert hidden == {c.name for c in lib if c.variable == "current_rate"} == {LAG, LAG_VERTICAL}
 
 
 def test_each_end_profile_says_its_width_in_whole_millimetres():

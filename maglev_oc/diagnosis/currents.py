@@ -3,6 +3,7 @@ saturated by the current."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -21,7 +22,15 @@ from maglev_oc.diagnosis.candidate import (
 from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import Estimate
 
-__all__ = ["commutation_candidate", "lag_candidate", "ripple_candidate", "saturation_candidate"]
+__all__ = [
+    "LAG",
+    "LAG_VERTICAL",
+    "commutation_candidate",
+    "lag_candidate",
+    "lag_candidates",
+    "ripple_candidate",
+    "saturation_candidate",
+]
 
 
 POLE_RIPPLE_PERIODS = 2.0
@@ -280,18 +289,62 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
     )
 
 
+LAG = "current_amplifier_lag"
+LAG_VERTICAL = f"{LAG}_vertical"
+"""The lag's form fitted on the vertical axis alone (:func:`lag_candidates`)."""
+
+
+def lag_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """The amplifier lag fitted on both axes, and the same lag fitted on the vertical axis alone (a
+    form of it, ``form_of``: the selection chooses between passing forms by their held-out gain and
+    reports either as the lag).
+
+    One time constant delays both axes' forces, but the axes do not show it alike: on a log whose
+    commanded currents are as noisy as ``../shared/logs/independent_clean.csv``'s, the horizontal
+    column (the thrust current's rate) is dominated by the logged current's errors, and fitted on
+    both axes the lag's coefficient is pulled towards zero by that axis. Noisy single_20 of the
+    independent generator (1.26 ms in all): fitted on both axes, +2.1 % of the vertical held-out
+    error and -0.7 % of the horizontal (z 1.9), not claimed, and the residual's dependence on the
+    gap rate reported unexplained; fitted on the vertical axis alone, claimed at 1.34 ms. On the
+    named sets of both rigs, 184 fresh drawn pairs and the experiment logs (bench/README (xxiv))
+    the form changed nothing else."""
+    full = lag_candidate(ctx)
+    c_ref = ctx.references
+
+    def vertical(x, u, du, q):
+        return ca.vertcat(_lag_rows(ctx, c_ref, x, u, du, q)[0], 0)
+
+    term = dataclasses.replace(
+        full.term, name=LAG_VERTICAL, axis="vertical", function=term_function("lagv", vertical, 1)
+    )
+    said = full.describe
+
+    def describe(e):
+        return (
+            f"{said(e)} Fitted on the vertical axis alone, where this log shows it best; the same time "
+            "constant delays the horizontal forces."
+        )
+
+    return [full, dataclasses.replace(full, term=term, describe=describe, form_of=LAG)]
+
+
+def _lag_rows(ctx: LibraryContext, c_ref, x, u, du, q):
+    """(vertical, horizontal) change of the accelerations when the forces lag the currents by q[0]."""
+    l = ctx.shapes(x)
+    # acc(u - T du) - acc(u) = -(d acc / d u) du T (first order in T)
+    dv_du2 = -c_ref.C3 * l[2] - 2 * c_ref.C4 * l[3] * u[1]
+    dv_du1 = -2 * c_ref.C4 * l[3] * u[0]
+    dh_du1 = -c_ref.C1 * l[0]
+    return -(dv_du2 * du[1] + dv_du1 * du[0]) * q[0], -dh_du1 * du[0] * q[0]
+
+
 def lag_candidate(ctx: LibraryContext) -> Candidate:
     """The forces following the commanded currents late by a time constant (first order)."""
     c_ref = ctx.references
     hold = ctx.hold_delay
 
     def lag(x, u, du, q):
-        l = ctx.shapes(x)
-        # acc(u - T du) - acc(u) = -(d acc / d u) du T (first order in T)
-        dv_du2 = -c_ref.C3 * l[2] - 2 * c_ref.C4 * l[3] * u[1]
-        dv_du1 = -2 * c_ref.C4 * l[3] * u[0]
-        dh_du1 = -c_ref.C1 * l[0]
-        return ca.vertcat(-(dv_du2 * du[1] + dv_du1 * du[0]) * q[0], -dh_du1 * du[0] * q[0])
+        return ca.vertcat(*_lag_rows(ctx, c_ref, x, u, du, q))
 
     def physical(q, cov, c):
         sd = math.sqrt(max(cov[0, 0], 0))
@@ -303,7 +356,7 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
 
     return Candidate(
         AccelerationTerm(
-            "current_amplifier_lag",
+            LAG,
             "The current amplifiers (or the real-time loop) deliver the commanded currents late, so the "
             "forces lag the commands by a small time constant.",
             "both",

@@ -31,8 +31,10 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 
 from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
 from maglev_oc.diagnosis.currents import (
+    LAG,
+    LAG_VERTICAL,
     commutation_candidate,
-    lag_candidate,
+    lag_candidates,
     ripple_candidate,
     saturation_candidate,
 )
@@ -166,7 +168,7 @@ _FAMILIES: tuple[
     (_named("magnet_field_gap_dependence"), lambda ctx, _: [field_shape_candidate(ctx)]),
     (_named("thrust_ripple"), lambda ctx, _: [ripple_candidate(ctx)]),
     (_named("commutation_offset"), lambda ctx, _: [commutation_candidate(ctx)]),
-    (_named("current_amplifier_lag"), lambda ctx, _: [lag_candidate(ctx)]),
+    (_named(LAG, LAG_VERTICAL), lambda ctx, _: lag_candidates(ctx)),
     (_named("current_saturation"), lambda ctx, _: [saturation_candidate(ctx)]),
     (_named("guide_misalignment"), lambda ctx, _: [misalignment_candidate(ctx)]),
     (_named("gap_sensor_offset"), lambda ctx, _: [gap_offset_candidate(ctx)]),

@@ -827,7 +827,10 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
         ),
         key=lambda n: -n.gain,
     )
-    rejected = sorted((j for j in sel.last.values() if j.verdict == "implausible"), key=lambda j: -j.gain)
+    rejected = sorted(
+        (j for j in sel.last.values() if j.verdict == "implausible" and not _a_form_beside(j, by_name, sel)),
+        key=lambda j: -j.gain,
+    )
     periods = unexplained_periods(tr)
     while True:
         chosen = [by_name[n] for n in sel.selected]
@@ -855,6 +858,16 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
             steps=[st for st in sel.steps if st.chosen in kept],
             final=fit_subset(design, ["base", *kept]),
         )
+
+
+def _a_form_beside(j: Judgement, by_name: dict[str, Candidate], sel: Selection) -> bool:
+    """Whether ``j`` is a form of an effect (``form_of``) whose own judgement is not implausible: the
+    effect's verdict is that one's, and the form's refusal is not listed beside it. The amplifier lag
+    fitted on the vertical axis alone comes out negative wherever vertical friction is not yet
+    modelled (the friction's damping, read as a lead), and was listed as "judged and not claimed"
+    on the closing-the-loop twin's log beside the lag's own verdict."""
+    parent = by_name[j.name].form_of
+    return parent is not None and parent in sel.last and sel.last[parent].verdict != "implausible"
 
 
 def _stands_for_residual(n: NotSeparable, cand: Candidate) -> bool:

@@ -868,6 +868,19 @@ def judged_axes(design: Design, cand: Candidate, friction_axes: frozenset[int]):
     return acts, hidden, left, (left if left.size else acts)
 
 
+def _hidden_form(design: Design, cand: Candidate, friction_axes: frozenset[int]) -> bool:
+    """Whether ``cand`` is a form of an effect (``form_of``) whose every axis has claimed friction
+    where its evidence does not count (``Candidate.beside_friction``): it could only be not
+    separable there, and the effect's other forms say all it could. The amplifier lag fitted on the
+    vertical axis alone beside vertical friction (drawn pair 10101 of the independent generator):
+    judged, it went to ``not_separable`` under its form's name, and the residual search fitted it
+    beside the friction and reported a dependence on the gap rate it had not found without it."""
+    if not cand.form_of:
+        return False
+    _, hidden, left, _ = judged_axes(design, cand, friction_axes)
+    return bool(hidden) and not left.size
+
+
 def judge(
     design: Design,
     cand: Candidate,
@@ -1721,7 +1734,7 @@ def select(
                     design, by_name[n], *context, friction_axes=friction, periodic=periodic, thrust=thrust
                 )
                 for n in pool
-                if by_name[n].fallback_for is None
+                if by_name[n].fallback_for is None and not _hidden_form(design, by_name[n], friction)
             }
             # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
             # is physically implausible because that parameter lies beyond the bound

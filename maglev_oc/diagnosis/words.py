@@ -21,6 +21,7 @@ _WORDS = {
     "commutation_offset": "commutation angle offset",
     "end_effects": "end effects",
     "current_amplifier_lag": "current amplifier lag",
+    "current_amplifier_lag_vertical": "current amplifier lag, fitted on the vertical axis",
     "current_saturation": "iron saturated by the current",
 }
 """The diagnosis library's effects in the words a control engineer uses."""
