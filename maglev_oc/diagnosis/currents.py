@@ -306,13 +306,12 @@ def lag_candidates(ctx: LibraryContext) -> list[Candidate]:
     independent generator (1.26 ms in all): fitted on both axes, +2.1 % of the vertical held-out
     error and -0.7 % of the horizontal (z 1.9), not claimed, and the residual's dependence on the
     gap rate reported unexplained; fitted on the vertical axis alone, claimed at 1.34 ms. On the
-    named sets of both rigs, 184 fresh drawn pairs and the experiment logs (bench/README (xxiv))
-    the form changed nothing else."""
+    named sets of both rigs, 144 drawn pairs, the experiment logs and the rigs bench (bench/README
+    (xxiv)) the form changed nothing else."""
     full = lag_candidate(ctx)
-    c_ref = ctx.references
 
     def vertical(x, u, du, q):
-        return ca.vertcat(_lag_rows(ctx, c_ref, x, u, du, q)[0], 0)
+        return ca.vertcat(_lag_rows(ctx, x, u, du, q)[0], 0)
 
     term = dataclasses.replace(
         full.term, name=LAG_VERTICAL, axis="vertical", function=term_function("lagv", vertical, 1)
@@ -328,9 +327,9 @@ def lag_candidates(ctx: LibraryContext) -> list[Candidate]:
     return [full, dataclasses.replace(full, term=term, describe=describe, form_of=LAG)]
 
 
-def _lag_rows(ctx: LibraryContext, c_ref, x, u, du, q):
+def _lag_rows(ctx: LibraryContext, x, u, du, q):
     """(vertical, horizontal) change of the accelerations when the forces lag the currents by q[0]."""
-    l = ctx.shapes(x)
+    c_ref, l = ctx.references, ctx.shapes(x)
     # acc(u - T du) - acc(u) = -(d acc / d u) du T (first order in T)
     dv_du2 = -c_ref.C3 * l[2] - 2 * c_ref.C4 * l[3] * u[1]
     dv_du1 = -2 * c_ref.C4 * l[3] * u[0]
@@ -340,11 +339,10 @@ def _lag_rows(ctx: LibraryContext, c_ref, x, u, du, q):
 
 def lag_candidate(ctx: LibraryContext) -> Candidate:
     """The forces following the commanded currents late by a time constant (first order)."""
-    c_ref = ctx.references
     hold = ctx.hold_delay
 
     def lag(x, u, du, q):
-        return ca.vertcat(*_lag_rows(ctx, c_ref, x, u, du, q))
+        return ca.vertcat(*_lag_rows(ctx, x, u, du, q))
 
     def physical(q, cov, c):
         sd = math.sqrt(max(cov[0, 0], 0))
