@@ -34,6 +34,7 @@ import numpy as np
 from maglev_oc.diagnosis.candidate import LibraryContext, legendre
 from maglev_oc.diagnosis.library import PROBE_VARIABLES, Candidate, smooth_probes
 from maglev_oc.diagnosis.selection import (
+    STATE_OF_AXIS,
     SelectionSettings,
     _CrossFit,
     _CrossParts,
@@ -51,7 +52,7 @@ from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
-__all__ = ["BOTH_ENDS", "OWN_RATE", "Unexplained", "along_the_stator", "find_unexplained", "rate_direction"]
+__all__ = ["BOTH_ENDS", "Unexplained", "along_the_stator", "find_unexplained", "rate_direction"]
 
 
 @dataclass(frozen=True)
@@ -168,10 +169,6 @@ def find_unexplained(
     return out
 
 
-OWN_RATE = {"vertical": "gap_rate", "horizontal": "position_rate"}
-"""The velocity of each axis, as :data:`PROBE_VARIABLES` names it."""
-
-
 def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
     """What a probe of an axis's own velocity (mean-free Legendre polynomials of orders 1-4 over the
     logged rates, coefficients ``q``) says of the force's direction, when its odd part (the change
@@ -222,11 +219,8 @@ def _probes(
     probes: list[_Probe] = []
     for (axis, var), term in smooth_probes(data).items():
         if data.moving[AXES.index(axis)]:
-            detail = (
-                partial(rate_direction, beside_friction=axis in friction_axes)
-                if OWN_RATE[axis] == var
-                else None
-            )
+            own_rate = var == f"{STATE_OF_AXIS[axis]}_rate"  # the axis's velocity (PROBE_VARIABLES)
+            detail = partial(rate_direction, beside_friction=axis in friction_axes) if own_rate else None
             probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail))
     for axis, period in periods:
         a = AXES.index(axis)
@@ -264,7 +258,6 @@ def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
     larger = max(abs(low), abs(high))
     if not larger > 0:
         return ""
-    where = {True: f"the high end ({hi * M_TO_MM:.0f} mm)", False: f"the low end ({lo * M_TO_MM:.0f} mm)"}
     if low * high > 0 and min(abs(low), abs(high)) >= BOTH_ENDS * larger:
         if low < 0:
             return (
@@ -274,8 +267,9 @@ def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
         return (
             " Higher at both ends: magnets stronger towards the ends of the array, which no end effect gives."
         )
-    towards = where[abs(high) >= abs(low)]
-    if (high if abs(high) >= abs(low) else low) < 0:
+    at_high = abs(high) >= abs(low)
+    towards = f"the high end ({hi * M_TO_MM:.0f} mm)" if at_high else f"the low end ({lo * M_TO_MM:.0f} mm)"
+    if (high if at_high else low) < 0:
         return (
             f" Falling towards {towards}: what a stator end near that end of the travel gives (an end "
             "effect), or magnets weaker towards it (a field not uniform along the stator)."
