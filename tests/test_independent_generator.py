@@ -510,6 +510,25 @@ def test_current_saturation_force_law():
     assert eff.factor(eff.saturation_current) == 0.5
 
 
+def test_a_gap_sensor_zero_puts_every_force_at_the_magnetic_gap():
+    # the plant with the zero off by d at reading y is the plant without it at y + d: the same
+    # arithmetic (y + 0 + d against (y + d) + 0), so equal to rounding (1e-12 relative)
+    rng = np.random.default_rng(5)
+    for d in (2e-4, -5e-4):
+        p1 = _params(E.GapSensorZero(offset=d))
+        for _ in range(20):
+            y, x3, iq, id_ = (
+                rng.uniform(0.014, 0.025),
+                rng.uniform(-0.05, 0.05),
+                rng.normal(0, 2),
+                rng.normal(1.5, 1),
+            )
+            shifted, _ = core.eval_rhs(_params(), np.array([y + d, 0.0, x3, 0.0, 0, 0]), iq, id_)
+            read, aux = core.eval_rhs(p1, np.array([y, 0.0, x3, 0.0, 0, 0]), iq, id_)
+            assert aux[0] == pytest.approx(y + d, rel=1e-12)
+            np.testing.assert_allclose(read[[1, 3]], shifted[[1, 3]], rtol=1e-12, atol=1e-12)
+
+
 # --- truth files, sets, command line ---------------------------------------------------------
 def test_every_effect_is_documented_and_round_trips():
     ctx = {"plant_step": 4e-5, "M_h": GEOMETRY.M_h, "M_v": GEOMETRY.M_v}
@@ -526,7 +545,7 @@ def test_every_effect_is_documented_and_round_trips():
             json.dumps(t)
             assert E.effect_from_truth(t) == eff
             assert ".. math::" in (cls.__doc__ or "")
-    assert len(kinds) == 12
+    assert len(kinds) == 14
 
 
 def test_named_sets_have_the_promised_contents():
@@ -540,9 +559,10 @@ def test_named_sets_have_the_promised_contents():
     assert all(sc.duration == 60.0 for _, sc in eleven)
     single = named_set("single")
     assert len(single) == 24 and all(len(sc.effects) == 1 for _, sc in single)
-    # every kind but the current saturation, which joined after the sets' baselines were scored
-    # (bench/diagnose_rigs.py --saturation runs it)
-    assert {sc.effects[0].kind for _, sc in single} == set(E.EFFECT_KINDS) - {"current_saturation"}
+    # every kind but those that joined after the sets' baselines were scored: the current
+    # saturation and the sensors read off zero (bench/diagnose_rigs.py --saturation, --sensors)
+    late = {"current_saturation", "current_sensor_offset", "gap_sensor_zero"}
+    assert {sc.effects[0].kind for _, sc in single} == set(E.EFFECT_KINDS) - late
     pairs = named_set("pairs")
     assert all(len(sc.effects) == 2 for _, sc in pairs)
     assert all(len(sc.effects) in (3, 4) for _, sc in named_set("triples"))

@@ -81,14 +81,24 @@ static double lugre(double Fc, double Fs, double vs, double s0, double s1, doubl
 static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double *ds, double *aux)
 {
     const double x1 = s[0], x2 = s[1], x3 = s[2], x4 = s[3];
-    const double iq = iq_c * p->com_cos + id_c * p->com_sin;
-    const double id = id_c * p->com_cos - iq_c * p->com_sin;
+    double iq = iq_c * p->com_cos + id_c * p->com_sin;
+    double id = id_c * p->com_cos - iq_c * p->com_sin;
     const double Ctrue[4] = {p->C1, p->C2, p->C3, p->C4};
     double L[4];
     double delta = 0.0, slope = 0.0;
     double fB = 1.0, fBt = 1.0, etaT = 1.0, etaA = 1.0, rho = 1.0, sat = 1.0;
     double Fx, Fn, Ffh = 0.0, Ffv = 0.0;
     int k;
+
+    /* offsets of the phase current sensors: each amplifier drives its sensor's reading, the
+       actual phase current plus o_k, to the command, so the actual current lacks o_k; in the
+       motor's dq frame (002's transform at theta = pi x3 / tau) a vector fixed to the stator */
+    if (p->cso_on) {
+        const double th = M_PI * x3 / p->tau, sh = 2.0 * M_PI / 3.0;
+        const double o0 = p->cso_offset[0], o1 = p->cso_offset[1], o2 = p->cso_offset[2];
+        id -= 2.0 / 3.0 * (cos(th) * o0 + cos(th - sh) * o1 + cos(th + sh) * o2);
+        iq += 2.0 / 3.0 * (sin(th) * o0 + sin(th - sh) * o1 + sin(th + sh) * o2);
+    }
 
     /* guide misalignment: magnetic gap differs from the encoder's reading */
     if (p->mis_on) {
@@ -100,7 +110,8 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
             slope += p->mis_amp * kw * cos(kw * x3 + p->mis_phase);
         }
     }
-    const double g = x1 + delta;
+    /* the gap sensor's zero: the magnetic gap is the reading plus gap_zero */
+    const double g = x1 + delta + p->gap_zero;
     model_L(p, Ctrue, g, L);
 
     /* magnets' field differing smoothly from the closed form */

@@ -67,6 +67,8 @@ FIELDS: list[tuple[str, object]] = [
     ("fs_on", _I), ("fs_k1", _D), ("fs_k2", _D), ("fs_gref", _D), ("fs_thrust", _I),
     # saturation of the iron by the stator current
     ("sat_on", _I), ("sat_current", _D),
+    # phase current sensors' offsets, gap sensor's zero
+    ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D),
 ]  # fmt: skip
 """The ``Params`` struct: (name, ctypes type) in declaration order."""
 

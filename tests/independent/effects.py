@@ -31,6 +31,8 @@ from .physics import GEOMETRY, G
 
 T1 = GEOMETRY.t1
 TAU = GEOMETRY.tau
+PHASE_SHIFTS = (0.0, -2 * math.pi / 3, 2 * math.pi / 3)
+"""The phases' shifts s_k in 002's transform (a, b, c)."""
 
 
 def _p(default: float, unit: str, doc: str) -> Any:
@@ -903,11 +905,120 @@ class CurrentSaturation(Effect):
         return {"factor_at_5_A": self.factor(5.0), "factor_at_9_A": self.factor(9.0)}
 
 
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CurrentSensorOffset(Effect):
+    r"""The amplifiers' phase current sensors read a little off zero.
+
+    Each phase amplifier drives its sensor's reading, the actual current plus its offset
+    ``o_k``, to the command, so the actual phase current lacks ``o_k``. With 002's transform at
+    the electrical angle ``theta = pi x3 / tau`` the missing currents are a vector fixed to the
+    stator, which in the motor's dq frame turns once per two pole pitches:
+
+    .. math::
+
+        i_d = i_d^* - rac{2}{3} \sum_k \cos(	heta + s_k) o_k,\quad
+        i_q = i_q^* + rac{2}{3} \sum_k \sin(	heta + s_k) o_k,\quad s = (0, -2\pi/3, 2\pi/3)
+
+    so the thrust and the attraction get a part that depends on the position along the stator
+    (period ``2 tau`` = 114.3 mm) and not on the commanded current: the classic force ripple at
+    the electrical frequency of a drive with current sensor offsets.
+    """
+
+    offset_a: float = _p(0.03, "A", "offset of phase a's current sensor")
+    offset_b: float = _p(-0.01, "A", "offset of phase b's current sensor")
+    offset_c: float = _p(0.0, "A", "offset of phase c's current sensor")
+
+    kind: ClassVar[str] = "current_sensor_offset"
+    axis: ClassVar[str] = "both"
+
+    @classmethod
+    def small(cls) -> CurrentSensorOffset:
+        """30 and -10 mA (0.3 % of the amplifiers' 9 A peak): 24 mA in dq, 0.26 N of thrust at 19.5 mm."""
+        return cls()
+
+    @classmethod
+    def large(cls) -> CurrentSensorOffset:
+        """80 and -50 mA on phases a and c: 76 mA in dq, 0.83 N of thrust at 19.5 mm."""
+        return cls(offset_a=0.08, offset_b=0.0, offset_c=-0.05)
+
+    def apply(self, p: Any, ctx: dict[str, float]) -> None:
+        p.cso_on = 1
+        p.cso_offset[0], p.cso_offset[1], p.cso_offset[2] = self.offset_a, self.offset_b, self.offset_c
+
+    def dq_amplitude(self) -> float:
+        """The missing current's magnitude in the dq frame [A] (the zero-sequence part has none)."""
+        pairs = tuple(zip(PHASE_SHIFTS, (self.offset_a, self.offset_b, self.offset_c), strict=True))
+        return (2 / 3) * math.hypot(
+            sum(math.cos(s) * o for s, o in pairs), sum(math.sin(s) * o for s, o in pairs)
+        )
+
+    def description(self) -> str:
+        return (
+            f"The phase current sensors read {self.offset_a * 1e3:g}, {self.offset_b * 1e3:g} and "
+            f"{self.offset_c * 1e3:g} mA off zero: the motor lacks a current of "
+            f"{self.dq_amplitude() * 1e3:.0f} mA fixed to the stator, a force ripple along the travel "
+            f"with a period of two pole pitches ({2 * TAU * 1e3:.1f} mm)."
+        )
+
+    def equation(self) -> str:
+        return (
+            "theta = pi x3 / tau; i_d -= 2/3 sum cos(theta + s_k) o_k; i_q += 2/3 sum sin(theta + s_k) o_k, "
+            "s = (0, -2 pi/3, 2 pi/3)"
+        )
+
+    def derived(self, ctx: dict[str, float]) -> dict[str, float]:
+        return {"dq_amplitude_A": self.dq_amplitude(), "period_m": 2 * TAU}
+
+
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class GapSensorZero(Effect):
+    """The gap encoder's zero is off: the magnetic gap is the reading plus ``offset``.
+
+    The vertical encoder is zeroed against a stopper whose height is known to a fraction of a
+    millimetre; every force of the gap is felt at the magnetic gap while the controller and the
+    log see ``x1``:
+
+    .. math::
+
+        g = x_1 + \\mathrm{offset}
+    """
+
+    offset: float = _p(2e-4, "m", "magnetic gap minus the encoder's reading")
+
+    kind: ClassVar[str] = "gap_sensor_zero"
+    axis: ClassVar[str] = "both"
+
+    @classmethod
+    def small(cls) -> GapSensorZero:
+        """0.2 mm."""
+        return cls()
+
+    @classmethod
+    def large(cls) -> GapSensorZero:
+        """-0.5 mm."""
+        return cls(offset=-5e-4)
+
+    def apply(self, p: Any, ctx: dict[str, float]) -> None:
+        p.gap_zero = self.offset
+
+    def description(self) -> str:
+        return (
+            f"The gap encoder's zero is {self.offset * 1e3:+.2f} mm off: the magnetic gap is the reading "
+            "plus that."
+        )
+
+    def equation(self) -> str:
+        return "g = x1 + offset in every gap-dependent force"
+
+
 EFFECT_KINDS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (
         GuideFriction, NormalCogging, DetentForce, EndEffect, GuideMisalignment, CableCarrier,
         ThrustRipple, CommutationOffset, AmplifierDynamics, FieldShape, TiltedBase, CurrentSaturation,
+        CurrentSensorOffset, GapSensorZero,
     )
 }  # fmt: skip
 """Every effect class by its ``kind``."""

@@ -33,6 +33,9 @@ field_shape         ``attraction_gap_dependence``          attraction change at 
                     or ``magnet_field_gap_dependence``
 tilted_base         ``horizontal_guides_not_level``        force along the track [N]
 current_saturation  ``current_saturation``                 loss of force per ampere at 5 A [1]
+current_sensor_     ``current_sensor_offset``              the missing current's dq magnitude [A]
+offset
+gap_sensor_zero     ``gap_sensor_offset``                  magnetic gap minus the reading [m]
 =================== ====================================== =========================================
 """
 
@@ -62,6 +65,7 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "amplifier_dynamics": ("current_amplifier_lag",),
         "field_shape": ("attraction_gap_dependence", "magnet_field_gap_dependence"),
         "tilted_base": ("horizontal_guides_not_level",),
+        "gap_sensor_zero": ("gap_sensor_offset",),
     }.get(kind, (kind,))
 
 
@@ -109,6 +113,10 @@ def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
             return true_effect.get("derived", {}).get("horizontal_force_N"), c["force"]
         if kind == "current_saturation":
             return 1 - 1 / (1 + (5.0 / t["saturation_current"]) ** 2), c["loss_at_5_A"]
+        if kind == "current_sensor_offset":
+            return true_effect.get("derived", {}).get("dq_amplitude_A"), c["offset"]
+        if kind == "gap_sensor_zero":
+            return t["offset"], c["offset"]
     except (KeyError, TypeError):
         return None
     return None
