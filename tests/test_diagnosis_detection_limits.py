@@ -216,6 +216,8 @@ def test_an_effect_put_into_the_log_lowers_its_limit_by_its_size_until_the_log_s
         (2.5e-3, "m", "2.5 mm"),
         (1.8e-6, "m", "1.8 µm"),  # a waviness amplitude: micrometres, not "1.8e-06 m"
         (0.3, "N/m", "0.3 N/m"),
+        (5.8e-4, "A", "0.58 mA"),  # a current sensor's offset
+        (1.5, "A", "1.5 A"),
         (math.inf, "N", "no size"),
     ],
 )

@@ -751,7 +751,14 @@ def _states(plant: Plant, n: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 @pytest.mark.parametrize(
-    "name", ["current_amplifier_lag", "commutation_offset", "gap_sensor_offset", "current_saturation"]
+    "name",
+    [
+        "current_amplifier_lag",
+        "commutation_offset",
+        "gap_sensor_offset",
+        "current_saturation",
+        "current_sensor_offset",
+    ],
 )
 def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, name):
     # each candidate is the derivative of an exact effect written with the model: currents late
@@ -765,6 +772,7 @@ def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, 
         "commutation_offset": 3e-4,
         "gap_sensor_offset": 2e-7,
         "current_saturation": 1e-6,  # [1/A^2]
+        "current_sensor_offset": 3e-4,  # [A], each of the stator frame's two components
     }[name]
     axes = (0, 1)
     if name == "current_saturation":
@@ -779,6 +787,12 @@ def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, 
         exact = model.dynamics(x, np.vstack([c * u[0] + s * u[1], c * u[1] - s * u[0]])) - model.dynamics(
             x, u
         )
+    elif name == "current_sensor_offset":
+        # the currents lack a vector (size, size) fixed to the stator, turned into the dq frame at
+        # the electrical angle pi x3 / tau
+        th = np.pi * x[2] / model.params.pole_pitch
+        dd, dq = -size * (np.cos(th) - np.sin(th)), size * (np.sin(th) + np.cos(th))
+        exact = model.dynamics(x, u + np.vstack([dq, dd])) - model.dynamics(x, u)
     else:
         shifted = x.copy()
         shifted[0] += size
@@ -981,10 +995,14 @@ PRINTED_UNITS = {
     "degrees": ("rad", math.pi / 180),
     "s": ("s", 1.0),
     "ms": ("s", 1e-3),
+    "A": ("A", 1.0),
+    "mA": ("A", 1e-3),
     "%": ("1", 1e-2),
 }
 """A unit a finding's sentence prints -> (the SI unit of the physical parameter, its factor)."""
-PRINTED = re.compile(r"(-?[\d.e+-]+) ± ([\d.e+-]+) (N s/m|N/m|N|mrad|mm|ms|um|m|rad|degrees|s|%)?(?![a-z])")
+PRINTED = re.compile(
+    r"(-?[\d.e+-]+) ± ([\d.e+-]+) (N s/m|N/m|N|mrad|mm|ms|um|mA|m|rad|degrees|s|A|%)?(?![a-zA-Z])"
+)
 
 
 def test_every_number_a_finding_prints_is_one_of_its_parameters_in_the_unit_printed(plant):
@@ -1106,7 +1124,7 @@ def test_every_candidate_gives_each_size_a_unit(plant):
     # the sentence a user reads: every "value ± error" is followed by its unit (%, N, mm, ...),
     # never by the bare "1" of a ratio that was not scaled to per cent, nor by the next word
     constants = {k: getattr(plant.model.constants, k) for k in ("C1", "C2", "C3", "C4")}
-    units = {"%", "N", "N/m", "N s/m", "mm", "um", "m", "rad", "degrees", "ms", "s", "A", "mrad"}
+    units = {"%", "N", "N/m", "N s/m", "mm", "um", "m", "rad", "degrees", "ms", "s", "A", "mA", "mrad"}
     for cand in candidate_library(StageModel(), plant.data):
         n = cand.term.n_parameters
         physical = cand.term.physical_parameters(np.full(n, 2e-3), 1e-10 * np.eye(n), constants)

@@ -122,6 +122,12 @@ class Candidate:
     thrust's dependence on the gap, saturation): where the logged thrust current is mostly its
     logging error it is judged on that current too
     (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
+    confounded_beside: tuple[str, str] | None = None
+    """(effect, why): a chosen effect beside which no log of this stage separates this one, and
+    why. Judged beside it, a candidate that would pass is not separable, confounded with it (a
+    current sensor offset beside guides tilted against the stator: what the offset does along the
+    travel is what a waviness of the guides does;
+    :func:`~maglev_oc.diagnosis.currents.sensor_offset_candidate`)."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen

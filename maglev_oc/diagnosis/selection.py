@@ -995,9 +995,15 @@ def judge(
             verdict, reason = "not specific", drift
     if hidden:
         verdict, reason = _beside_friction(verdict, reason, left, hidden)
+    rival = cand.confounded_beside
+    beside_its_rival = rival is not None and rival[0] in current and verdict == "passes"
+    if beside_its_rival:
+        verdict, reason = "not separable", rival[1]
     needed = None
-    if hidden and not left.size and verdict == "not separable":
-        confounded: tuple[str, ...] = tuple(f"guide_friction_{AXES[a]}" for a in hidden)
+    if beside_its_rival:
+        confounded: tuple[str, ...] = (rival[0],)
+    elif hidden and not left.size and verdict == "not separable":
+        confounded = tuple(f"guide_friction_{AXES[a]}" for a in hidden)
     elif verdict != "not separable":
         confounded = ()
     elif periods is not None and periods < settings.min_periods:

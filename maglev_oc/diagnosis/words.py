@@ -19,6 +19,7 @@ _WORDS = {
     "guide_misalignment": "guides tilted against the stator",
     "cable_carrier_force": "cable carrier force",
     "commutation_offset": "commutation angle offset",
+    "current_sensor_offset": "current sensor offset",
     "end_effects": "end effects",
     "current_amplifier_lag": "current amplifier lag",
     "current_amplifier_lag_vertical": "current amplifier lag, fitted on the vertical axis",

@@ -86,6 +86,7 @@ EFFECT_NAMES = (
     r"commutation_offset",
     r"current_amplifier_lag",
     r"current_saturation",
+    r"current_sensor_offset",
 )
 """The names of the diagnosis library's effects (:mod:`maglev_oc.diagnosis.library`), as patterns."""
 _MAX_BYTES = 20_000_000  # [bytes] a stage file is a few kB per effect; refuse anything huge

@@ -284,14 +284,19 @@ LIMITS_IN_WORDS = 4
 
 def limit_size(limit: DetectionLimit) -> str:
     """A detection limit's size in the units a control engineer reads: ratios in per cent, times in
-    milliseconds, angles in degrees, lengths in millimetres or micrometres; "no size" when none
-    shows it."""
+    milliseconds, angles in degrees, lengths in millimetres or micrometres, currents below an ampere
+    in milliamperes; "no size" when none shows it."""
     if not math.isfinite(limit.value):
         return "no size"
     lengths = (1e3, "mm") if limit.value >= 1e-3 else (1e6, "µm")
-    scale, unit = {"1": (100.0, "%"), "s": (1e3, "ms"), "rad": (180 / math.pi, "deg"), "m": lengths}.get(
-        limit.unit, (1.0, limit.unit)
-    )
+    currents = (1.0, "A") if limit.value >= 1.0 else (1e3, "mA")
+    scale, unit = {
+        "1": (100.0, "%"),
+        "s": (1e3, "ms"),
+        "rad": (180 / math.pi, "deg"),
+        "m": lengths,
+        "A": currents,
+    }.get(limit.unit, (1.0, limit.unit))
     return f"{limit.value * scale:.2g}{NBSP}{unit}"
 
 

@@ -1,0 +1,117 @@
+"""Current sensors that read off zero (``currents.sensor_offset_candidate``), an effect of real drives
+that neither the library nor the independent generator had:
+
+- the candidate's column is what the independent generator's C core (``tests/independent``, its own
+  implementation of 002's transform, with offsets per phase) does with such offsets, to first order;
+- on logs of the generator with the offsets in, it is found first and sized, and nothing else is
+  claimed. Before the candidate, the same logs were claimed as a 38 mm normal cogging, a guide
+  misalignment, or a guide waviness beside a cable carrier (bench/README, *A current sensor that
+  reads off zero*);
+- beside guides found tilted against the stator it is not separable from their waviness, which
+  does the same along the travel (``Candidate.confounded_beside``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from maglev_oc.data.reading import read_log
+from maglev_oc.diagnosis.candidate import LibraryContext
+from maglev_oc.diagnosis.currents import SENSOR_OFFSET_BOUND_A, sensor_offset_candidate
+from maglev_oc.regression.data import prepare
+from maglev_oc.results import Estimate
+from tests.diagnosis_support import diagnose_path
+from tests.independent import core
+from tests.independent import effects as E
+from tests.independent.logio import write_log
+from tests.independent.physics import model_functions
+from tests.independent.scoring import score
+from tests.independent.simulate import Rig, Scenario, build_params, simulate
+
+
+def _stator_frame(offsets: tuple[float, float, float]) -> tuple[float, float]:
+    """The candidate's coefficients (A, B) for phase offsets o_k: (2/3) sum (cos s_k, sin s_k) o_k."""
+    pairs = tuple(zip(E.PHASE_SHIFTS, offsets, strict=True))
+    return (2 / 3 * sum(math.cos(s) * o for s, o in pairs), 2 / 3 * sum(math.sin(s) * o for s, o in pairs))
+
+
+def test_the_column_is_what_the_generators_phase_offsets_do(model, generated):
+    """At the papers' constants in both codes, the generator's accelerations with the offsets of the
+    large size (80, 0, -50 mA) minus those without are the candidate's column at (A, B). The
+    candidate is first order in the offset: it leaves out L4 |di|^2 (at most 0.074 x 0.076^2 =
+    4.3e-4 m/s^2, against 0.4 m/s^2 of the first-order part), the tolerance on the vertical axis;
+    the horizontal force is linear in the current, so there it is exact to rounding."""
+    path, _ = generated("clean", "clean_01")
+    cand = sensor_offset_candidate(LibraryContext(model, prepare([read_log(path)], bandwidth=10.0)))
+    effect = E.CurrentSensorOffset.large()
+    q = _stator_frame((effect.offset_a, effect.offset_b, effect.offset_c))
+    assert math.hypot(*q) == pytest.approx(effect.dq_amplitude(), rel=1e-12)
+    c = tuple(getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4"))
+    with_offsets = build_params(Scenario(name="o", seed=0, effects=(effect,)), c)
+    without = build_params(Scenario(name="o", seed=0), c)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        gap, x3 = rng.uniform(0.014, 0.026), rng.uniform(-0.05, 0.05)
+        iq, id_ = rng.uniform(-3, 3), rng.uniform(-2, 5)
+        state = np.array([gap, 0.0, x3, 0.0, 0.0, 0.0])
+        d1, _ = core.eval_rhs(with_offsets, state, iq, id_)
+        d0, _ = core.eval_rhs(without, state, iq, id_)
+        column = np.asarray(cand.term.function([gap, 0.0, x3, 0.0], [iq, id_], [0.0, 0.0], q)).ravel()
+        l4 = model_functions(gap, c)[3]
+        assert column[0] == pytest.approx(d1[1] - d0[1], abs=1.01 * l4 * math.hypot(*q) ** 2)
+        assert column[1] == pytest.approx(d1[3] - d0[3], rel=1e-9, abs=1e-12)
+
+
+def test_an_offset_beyond_what_a_current_sensor_reads_at_zero_is_not_physical(model, generated):
+    path, _ = generated("clean", "clean_01")
+    cand = sensor_offset_candidate(LibraryContext(model, prepare([read_log(path)], bandwidth=10.0)))
+    angle = Estimate(0.2, 0.01, "rad")
+    for share, ok in ((0.9, True), (1.1, False)):
+        offset = Estimate(share * SENSOR_OFFSET_BOUND_A, 0.01, "A")
+        reason = cand.plausible({"offset": offset, "angle": angle})
+        assert (reason is None) is ok, reason
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("size", "rig", "seed"),
+    [
+        pytest.param("small", {"observer_bandwidth": 2800.0}, 7001, id="small-noisy"),
+        pytest.param("large", {}, 7002, id="large", marks=pytest.mark.extended),
+    ],
+)
+def test_offsets_of_the_current_sensors_are_found_first_and_sized(tmp_path, size, rig, seed):
+    """24 mA in the dq frame (30 and -10 mA on two phases) on the rig whose logged currents are as
+    noisy as ``../shared/logs/independent_clean.csv``'s, and 76 mA on the default rig: found first,
+    nothing else claimed, the offset within the issue's 30 % (measured: within 0.3 % on six logs of
+    both rigs, bench/README)."""
+    effect = getattr(E.CurrentSensorOffset, size)()
+    scenario = Scenario(name=f"offset_{size}", seed=seed, effects=(effect,))
+    scenario = dataclasses.replace(scenario, rig=dataclasses.replace(Rig(), **rig))
+    csv, truth_path = write_log(simulate(scenario), tmp_path, "offset")
+    truth = json.loads(truth_path.read_text())
+    effects = diagnose_path(csv).to_dict()["effects"]
+    s = score("offset", truth, effects)
+    assert s.true_first and s.no_false_claim, s.claimed
+    assert s.size_right, s.notes
+    assert effects[0]["name"] == "current_sensor_offset"
+
+
+@pytest.mark.slow
+def test_beside_tilted_guides_an_offset_is_not_separable_from_their_waviness(generated):
+    """experiments_06 of the independent set: 4 mrad guides with 8 um of waviness at 60 mm, set-point
+    steps. Judged beside the misalignment the offset's force, turning once over two pole pitches
+    on both axes a quarter period apart, fits what the misalignment's model leaves of the waviness:
+    0.5 mA at z 3.9 (0.4 % of the held-out error) was claimed before the rule. Now the
+    misalignment alone is claimed and the offset is listed as not separable from it."""
+    path, _ = generated("experiments", "experiments_06")
+    d = diagnose_path(path).to_dict()
+    assert [e["name"] for e in d["effects"]] == ["guide_misalignment"]
+    (entry,) = [n for n in d["not_separable"] if n["name"] == "current_sensor_offset"]
+    assert entry["confounded_with"] == ["guide_misalignment"]
+    assert "commands at zero" in entry["experiment"]
