@@ -545,7 +545,7 @@ def test_every_effect_is_documented_and_round_trips():
             json.dumps(t)
             assert E.effect_from_truth(t) == eff
             assert ".. math::" in (cls.__doc__ or "")
-    assert len(kinds) == 14
+    assert len(kinds) == 15
 
 
 def test_named_sets_have_the_promised_contents():
@@ -561,7 +561,7 @@ def test_named_sets_have_the_promised_contents():
     assert len(single) == 24 and all(len(sc.effects) == 1 for _, sc in single)
     # every kind but those that joined after the sets' baselines were scored: the current
     # saturation and the sensors read off zero (bench/diagnose_rigs.py --saturation, --sensors)
-    late = {"current_saturation", "current_sensor_offset", "gap_sensor_zero"}
+    late = {"current_saturation", "current_sensor_offset", "current_sensor_gain", "gap_sensor_zero"}
     assert {sc.effects[0].kind for _, sc in single} == set(E.EFFECT_KINDS) - late
     pairs = named_set("pairs")
     assert all(len(sc.effects) == 2 for _, sc in pairs)

@@ -93,6 +93,21 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     /* offsets of the phase current sensors: each amplifier drives its sensor's reading, the
        actual phase current plus o_k, to the command, so the actual current lacks o_k; in the
        motor's dq frame (002's transform at theta = pi x3 / tau) a vector fixed to the stator */
+    /* gain errors of the phase current sensors: amplifier k drives (1 + e_k) i_k to its command
+       i_k* = cos(theta + s_k) i_d* - sin(theta + s_k) i_q*, so the motor gets i_k* / (1 + e_k) */
+    if (p->csg_on) {
+        const double th = M_PI * x3 / p->tau, sh = 2.0 * M_PI / 3.0;
+        const double shift[3] = {0.0, -sh, sh};
+        double nd = 0.0, nq = 0.0;
+        for (k = 0; k < 3; k++) {
+            const double c = cos(th + shift[k]), sn = sin(th + shift[k]);
+            const double ik = (c * id - sn * iq) / (1.0 + p->csg_error[k]);
+            nd += c * ik;
+            nq -= sn * ik;
+        }
+        id = 2.0 / 3.0 * nd;
+        iq = 2.0 / 3.0 * nq;
+    }
     if (p->cso_on) {
         const double th = M_PI * x3 / p->tau, sh = 2.0 * M_PI / 3.0;
         const double o0 = p->cso_offset[0], o1 = p->cso_offset[1], o2 = p->cso_offset[2];

@@ -68,7 +68,7 @@ FIELDS: list[tuple[str, object]] = [
     # saturation of the iron by the stator current
     ("sat_on", _I), ("sat_current", _D),
     # phase current sensors' offsets, gap sensor's zero
-    ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D),
+    ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D), ("csg_on", _I), ("csg_error", _D * 3),
 ]  # fmt: skip
 """The ``Params`` struct: (name, ctypes type) in declaration order."""
 

@@ -973,6 +973,72 @@ class CurrentSensorOffset(Effect):
 
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
+class CurrentSensorGain(Effect):
+    r"""The amplifiers' phase current sensors differ in gain.
+
+    Amplifier k drives its reading ``(1 + e_k) i_k`` to the command ``i_k^* = cos(theta + s_k)
+    i_d^* - sin(theta + s_k) i_q^*`` (002's inverse transform at ``theta = pi x3 / tau``), so the
+    motor gets
+
+    .. math::
+
+        i_k = i_k^* / (1 + e_k),\quad i_d = \frac{2}{3} \sum_k \cos(\theta + s_k) i_k,\quad
+        i_q = -\frac{2}{3} \sum_k \sin(\theta + s_k) i_k
+
+    The common part of the errors scales both currents (the constants take it); their differences
+    mix i_d and i_q at twice the electrical angle, a force ripple over one pole pitch (57.15 mm)
+    that grows with the currents: the classic second-harmonic ripple of a drive with mismatched
+    current sensors. With the levitation current i_d of 1-3 A the normal force ripples most.
+    """
+
+    error_a: float = _p(0.01, "1", "relative gain error of phase a's current sensor")
+    error_b: float = _p(-0.01, "1", "relative gain error of phase b's current sensor")
+    error_c: float = _p(0.0, "1", "relative gain error of phase c's current sensor")
+
+    kind: ClassVar[str] = "current_sensor_gain"
+    axis: ClassVar[str] = "both"
+
+    @classmethod
+    def small(cls) -> CurrentSensorGain:
+        """+1 % and -1 % on two phases: a mismatch of 1.2 % at twice the electrical angle."""
+        return cls()
+
+    @classmethod
+    def large(cls) -> CurrentSensorGain:
+        """+3 % and -2 % on phases a and c: a mismatch of 2.9 %."""
+        return cls(error_a=0.03, error_b=0.0, error_c=-0.02)
+
+    def apply(self, p: Any, ctx: dict[str, float]) -> None:
+        p.csg_on = 1
+        p.csg_error[0], p.csg_error[1], p.csg_error[2] = self.error_a, self.error_b, self.error_c
+
+    def mismatch(self) -> float:
+        """The errors' part at twice the electrical angle: (2/3) |sum_k e_k exp(2 j s_k)| [1], to
+        first order (the part the constants cannot take)."""
+        pairs = tuple(zip(PHASE_SHIFTS, (self.error_a, self.error_b, self.error_c), strict=True))
+        return (2 / 3) * math.hypot(
+            sum(math.cos(2 * s) * e for s, e in pairs), sum(math.sin(2 * s) * e for s, e in pairs)
+        )
+
+    def description(self) -> str:
+        return (
+            f"The phase current sensors' gains are off by {100 * self.error_a:+g}, "
+            f"{100 * self.error_b:+g} and {100 * self.error_c:+g} %: a mismatch of "
+            f"{100 * self.mismatch():.1f} % mixes i_d and i_q over one pole pitch ({TAU * 1e3:.2f} mm)."
+        )
+
+    def equation(self) -> str:
+        return (
+            "i_k = (cos(theta + s_k) i_d* - sin(theta + s_k) i_q*) / (1 + e_k); "
+            "i_d = 2/3 sum cos(theta + s_k) i_k; i_q = -2/3 sum sin(theta + s_k) i_k"
+        )
+
+    def derived(self, ctx: dict[str, float]) -> dict[str, float]:
+        return {"mismatch": self.mismatch(), "period_m": TAU}
+
+
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
 class GapSensorZero(Effect):
     """The gap encoder's zero is off: the magnetic gap is the reading plus ``offset``.
 
@@ -1018,7 +1084,7 @@ EFFECT_KINDS: dict[str, type[Effect]] = {
     for cls in (
         GuideFriction, NormalCogging, DetentForce, EndEffect, GuideMisalignment, CableCarrier,
         ThrustRipple, CommutationOffset, AmplifierDynamics, FieldShape, TiltedBase, CurrentSaturation,
-        CurrentSensorOffset, GapSensorZero,
+        CurrentSensorOffset, CurrentSensorGain, GapSensorZero,
     )
 }  # fmt: skip
 """Every effect class by its ``kind``."""

@@ -35,6 +35,8 @@ tilted_base         ``horizontal_guides_not_level``        force along the track
 current_saturation  ``current_saturation``                 loss of force per ampere at 5 A [1]
 current_sensor_     ``current_sensor_offset``              the missing current's dq magnitude [A]
 offset
+current_sensor_gain ``current_sensor_gain_mismatch``       the gains' mismatch at twice the
+                                                           electrical angle [1]
 gap_sensor_zero     ``gap_sensor_offset``                  magnetic gap minus the reading [m]
 =================== ====================================== =========================================
 """
@@ -66,6 +68,7 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "field_shape": ("attraction_gap_dependence", "magnet_field_gap_dependence"),
         "tilted_base": ("horizontal_guides_not_level",),
         "gap_sensor_zero": ("gap_sensor_offset",),
+        "current_sensor_gain": ("current_sensor_gain_mismatch",),
     }.get(kind, (kind,))
 
 
@@ -115,6 +118,8 @@ def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
             return 1 - 1 / (1 + (5.0 / t["saturation_current"]) ** 2), c["loss_at_5_A"]
         if kind == "current_sensor_offset":
             return true_effect.get("derived", {}).get("dq_amplitude_A"), c["offset"]
+        if kind == "current_sensor_gain":
+            return true_effect.get("derived", {}).get("mismatch"), c["mismatch"]
         if kind == "gap_sensor_zero":
             return t["offset"], c["offset"]
     except (KeyError, TypeError):
