@@ -28,11 +28,13 @@ with a large Stribeck drop; a misalignment tilted the other way with a 40 mm wav
 on the default rig: a user's rig has the same effects in its own proportions, and a rule tuned to
 the sets' small and large sizes may not hold there.
 
-``--sensors``: sensors that read off zero, each at both sizes on three seeds: the phase current
-sensors (``tests.independent.effects.CurrentSensorOffset``, 24 and 76 mA in the dq frame), whose
-missing current is a force along the travel over two pole pitches on both axes, and the gap
-encoder (``GapSensorZero``, +0.2 and -0.5 mm), which the constants absorb. Neither was in the
-generator or the named sets when the diagnosis's rules were written.
+``--sensors``: sensors that read off zero or differ in gain, each at both sizes on three seeds: the
+phase current sensors' offsets (``tests.independent.effects.CurrentSensorOffset``, 24 and 76 mA in
+the dq frame), whose missing current is a force along the travel over two pole pitches on both
+axes, their gains (``CurrentSensorGain``, a mismatch of 1.2 and 2.9 %), which mix i_d and i_q over
+one pole pitch, and the gap encoder's zero (``GapSensorZero``, +0.2 and -0.5 mm), which the
+constants absorb. None was in the generator or the named sets when the diagnosis's rules were
+written.
 
 ``--saturation``: the iron saturated by the stator current
 (``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
@@ -151,7 +153,7 @@ def sensors() -> dict:
 
     return {
         f"{cls.kind}_{size}": getattr(cls, size)()
-        for cls in (E.CurrentSensorOffset, E.GapSensorZero)
+        for cls in (E.CurrentSensorOffset, E.CurrentSensorGain, E.GapSensorZero)
         for size in ("small", "large")
     }
 

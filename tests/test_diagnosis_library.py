@@ -758,6 +758,7 @@ def _states(plant: Plant, n: int = 400) -> tuple[np.ndarray, np.ndarray, np.ndar
         "gap_sensor_offset",
         "current_saturation",
         "current_sensor_offset",
+        "current_sensor_gain_mismatch",
     ],
 )
 def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, name):
@@ -773,6 +774,7 @@ def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, 
         "gap_sensor_offset": 2e-7,
         "current_saturation": 1e-6,  # [1/A^2]
         "current_sensor_offset": 3e-4,  # [A], each of the stator frame's two components
+        "current_sensor_gain_mismatch": 3e-4,  # [1], each of its two components
     }[name]
     axes = (0, 1)
     if name == "current_saturation":
@@ -792,6 +794,12 @@ def test_linearized_candidates_are_the_first_order_change_of_the_physics(plant, 
         # the electrical angle pi x3 / tau
         th = np.pi * x[2] / model.params.pole_pitch
         dd, dq = -size * (np.cos(th) - np.sin(th)), size * (np.sin(th) + np.cos(th))
+        exact = model.dynamics(x, u + np.vstack([dq, dd])) - model.dynamics(x, u)
+    elif name == "current_sensor_gain_mismatch":
+        # the currents mixed at twice the electrical angle by the mismatch (size, size)
+        th = 2 * np.pi * x[2] / model.params.pole_pitch
+        along, across = size * (np.cos(th) - np.sin(th)), size * (np.sin(th) + np.cos(th))
+        dd, dq = -(u[1] * along - u[0] * across) / 2, (u[1] * across + u[0] * along) / 2
         exact = model.dynamics(x, u + np.vstack([dq, dd])) - model.dynamics(x, u)
     else:
         shifted = x.copy()

@@ -30,6 +30,7 @@ __all__ = [
     "lag_candidates",
     "ripple_candidate",
     "saturation_candidate",
+    "sensor_gain_candidate",
     "sensor_offset_candidate",
 ]
 
@@ -223,6 +224,39 @@ times what an untrimmed Hall sensor of that range reads at zero (bench/README, *
 that reads off zero*); a larger fit is the stand-in for something else along the travel."""
 
 
+def _missing_current(ctx: LibraryContext, x, u, dd, dq):
+    """The accelerations (vertical, horizontal) of currents (di_q, di_d) the motor gets beside the
+    commanded ones, to first order: the thrust C1 l1 di_q, the attraction C3 l3 di_d +
+    2 C4 l4 (i_d di_d + i_q di_q) (the model's x2' = ... - L4 |i|^2 - L3 i_d, x4' = -L1 i_q)."""
+    c, l = ctx.references, ctx.shapes(x)
+    vertical = -(c.C3 * l[2] * dd + 2 * c.C4 * l[3] * (u[1] * dd + u[0] * dq))
+    return ca.vertcat(vertical, -c.C1 * l[0] * dq)
+
+
+def _in_the_stator_frame(ctx: LibraryContext, name: str, unit: str, scale: float = 1.0):
+    """physical(q, cov, constants) of a pair of coefficients in a frame turning with the position:
+    its magnitude ``name`` (times C1's reference ratio and ``scale``) and its electrical angle."""
+
+    def physical(q, cov, consts):
+        s = scale * ctx.reference_ratio("C1", consts)
+        return {
+            name: delta_method(lambda v: s * math.hypot(v[0], v[1]), q[:2], cov[:2, :2], unit),
+            "angle": delta_method(lambda v: math.atan2(v[1], v[0]), q[:2], cov[:2, :2], "rad"),
+        }
+
+    return physical
+
+
+_LIKE_A_WAVINESS = (
+    "guide_misalignment",
+    "beside the guides found tilted against the stator, a force on both axes that turns along the "
+    "travel at a period of the motor is what a waviness of those guides does (the gap it changes pulls "
+    "vertically, its slope pushes along the track, a quarter period apart, as the current sensors' "
+    "errors do): the log does not tell the two apart",
+)
+"""``Candidate.confounded_beside`` of the current sensors' errors."""
+
+
 def sensor_offset_candidate(ctx: LibraryContext) -> Candidate:
     """The phase current sensors reading off zero: a current fixed to the stator that the motor lacks.
 
@@ -230,30 +264,20 @@ def sensor_offset_candidate(ctx: LibraryContext) -> Candidate:
     to the command, so the actual currents lack the offsets. In the motor's dq frame (002's
     transform at theta = pi x3 / tau) the missing currents are a vector fixed to the stator,
     (A, B) in its frame: i_d' = i_d - (A cos(theta) - B sin(theta)), i_q' = i_q + A sin(theta) +
-    B cos(theta). To first order in the offset the thrust lacks C1 l1 di_q, the attraction
-    C3 l3 di_d + 2 C4 l4 (i_d di_d + i_q di_q): one pair of coefficients moves both axes, in a ratio
-    and a quadrature the physics fixes, and the force does not scale with the commanded current.
-    Over the electrical period (two pole pitches, 114.3 mm) it is a force along the travel that
-    periodic forces at the motor's pitches and smooth dependences on the position each take one
-    axis of (on logs of the independent generator with 24-76 mA of offset they were claimed as a
-    38 mm normal cogging, a guide misalignment, a guide waviness beside a cable carrier)."""
-    c = ctx.references
+    B cos(theta) (:func:`_missing_current` gives the forces, to first order): one pair of
+    coefficients moves both axes, in a ratio and a quadrature the physics fixes, and the force does
+    not scale with the commanded current. Over the electrical period (two pole pitches, 114.3 mm)
+    it is a force along the travel that periodic forces at the motor's pitches and smooth
+    dependences on the position each take one axis of (on logs of the independent generator with
+    24-76 mA of offset they were claimed as a 38 mm normal cogging, a guide misalignment, a guide
+    waviness beside a cable carrier)."""
     k = math.pi / ctx.params.pole_pitch
 
     def offset(x, u, du, q):
         th = k * x[2]
         dd = -(q[0] * ca.cos(th) - q[1] * ca.sin(th))
         dq = q[0] * ca.sin(th) + q[1] * ca.cos(th)
-        l = ctx.shapes(x)
-        vertical = -(c.C3 * l[2] * dd + 2 * c.C4 * l[3] * (u[1] * dd + u[0] * dq))
-        return ca.vertcat(vertical, -c.C1 * l[0] * dq)
-
-    def physical(q, cov, consts):
-        s = ctx.reference_ratio("C1", consts)
-        return {
-            "offset": delta_method(lambda v: s * math.hypot(v[0], v[1]), q[:2], cov[:2, :2], "A"),
-            "angle": delta_method(lambda v: math.atan2(v[1], v[0]), q[:2], cov[:2, :2], "rad"),
-        }
+        return _missing_current(ctx, x, u, dd, dq)
 
     return Candidate(
         AccelerationTerm(
@@ -264,7 +288,7 @@ def sensor_offset_candidate(ctx: LibraryContext) -> Candidate:
             "both",
             ("offset_alpha", "offset_beta"),
             function=term_function("sensor_offset", offset, 2),
-            physical=physical,
+            physical=_in_the_stator_frame(ctx, "offset", "A"),
             signature="forces on both axes periodic in x3 over two pole pitches, not scaled by a current",
         ),
         "current",
@@ -277,13 +301,58 @@ def sensor_offset_candidate(ctx: LibraryContext) -> Candidate:
             f"a current the motor lacks, fixed to the stator at {fmt(e['angle'], 180 / math.pi, 'degrees')} "
             "electrical from the position's zero."
         ),
-        confounded_beside=(
-            "guide_misalignment",
-            "beside the guides found tilted against the stator, a force on both axes that turns once "
-            "over two pole pitches is what a waviness of those guides does (the gap it changes pulls "
-            "vertically, its slope pushes along the track, a quarter period apart, as the offset's two "
-            "components are): the log does not tell the two apart",
+        confounded_beside=_LIKE_A_WAVINESS,
+    )
+
+
+SENSOR_MISMATCH_BOUND = 0.1
+"""The largest mismatch of the phase current sensors' gains taken as physical: 10 %, several times
+the 1-3 % tolerance of the Hall or shunt sensors of such amplifiers."""
+
+
+def sensor_gain_candidate(ctx: LibraryContext) -> Candidate:
+    """The phase current sensors' gains differing: i_d and i_q mix at twice the electrical angle.
+
+    Amplifier k drives its reading (1 + e_k) i_k to the command, so the motor gets i_k* (1 - e_k)
+    to first order. With 002's transform the errors' common part scales both currents (the
+    constants take it) and their differences, P + jQ = (2/3) sum_k e_k exp(2 j s_k), give
+    di_d = -(i_d (P c - Q s) - i_q (P s + Q c)) / 2 and di_q = (i_d (P s + Q c) + i_q (P c - Q s)) / 2,
+    c, s = cos, sin of 2 theta: a ripple over one pole pitch (57.15 mm) that grows with the currents,
+    the levitation current's most (:func:`_missing_current` gives the forces). Its thrust part in
+    i_q is a thrust ripple at the pole pitch, its part in i_d a force along the track and a normal
+    force at that pitch; the two axes move together, a quarter period apart."""
+    k = 2 * math.pi / ctx.params.pole_pitch
+
+    def mismatch(x, u, du, q):
+        c2, s2 = ca.cos(k * x[2]), ca.sin(k * x[2])
+        along, across = q[0] * c2 - q[1] * s2, q[0] * s2 + q[1] * c2
+        dd = -(u[1] * along - u[0] * across) / 2
+        dq = (u[1] * across + u[0] * along) / 2
+        return _missing_current(ctx, x, u, dd, dq)
+
+    return Candidate(
+        AccelerationTerm(
+            "current_sensor_gain_mismatch",
+            "The amplifiers' phase current sensors differ in gain, so the motor's currents mix i_d and "
+            "i_q over each pole pitch: forces on both axes that ripple along the travel and grow with "
+            "the currents, the levitation current's most.",
+            "both",
+            ("mismatch_cos", "mismatch_sin"),
+            function=term_function("sensor_gain", mismatch, 2),
+            physical=_in_the_stator_frame(ctx, "mismatch", "1"),
+            signature="forces on both axes periodic in x3 over one pole pitch, proportional to the currents",
         ),
+        "current",
+        "position",
+        "the amplifiers' current readings against a current probe on each phase at one command; runs at "
+        "two gaps (two levitation currents) over the same path tell it from a force of the position",
+        within("mismatch", SENSOR_MISMATCH_BOUND, "current sensor gain mismatch"),
+        lambda e: (
+            f"The phase current sensors' gains differ by {fmt(e['mismatch'], 100, '%')} (their part at twice "
+            f"the electrical angle, {fmt(e['angle'], 180 / math.pi, 'degrees')}): the motor's currents mix "
+            "over each pole pitch."
+        ),
+        confounded_beside=_LIKE_A_WAVINESS,
     )
 
 

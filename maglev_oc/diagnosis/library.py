@@ -37,6 +37,7 @@ from maglev_oc.diagnosis.currents import (
     lag_candidates,
     ripple_candidate,
     saturation_candidate,
+    sensor_gain_candidate,
     sensor_offset_candidate,
 )
 from maglev_oc.diagnosis.guides import (
@@ -172,6 +173,7 @@ _FAMILIES: tuple[
     (_named(LAG, LAG_VERTICAL), lambda ctx, _: lag_candidates(ctx)),
     (_named("current_saturation"), lambda ctx, _: [saturation_candidate(ctx)]),
     (_named("current_sensor_offset"), lambda ctx, _: [sensor_offset_candidate(ctx)]),
+    (_named("current_sensor_gain_mismatch"), lambda ctx, _: [sensor_gain_candidate(ctx)]),
     (_named("guide_misalignment"), lambda ctx, _: [misalignment_candidate(ctx)]),
     (_named("gap_sensor_offset"), lambda ctx, _: [gap_offset_candidate(ctx)]),
 )

@@ -20,6 +20,7 @@ _WORDS = {
     "cable_carrier_force": "cable carrier force",
     "commutation_offset": "commutation angle offset",
     "current_sensor_offset": "current sensor offset",
+    "current_sensor_gain_mismatch": "current sensors' gain mismatch",
     "end_effects": "end effects",
     "current_amplifier_lag": "current amplifier lag",
     "current_amplifier_lag_vertical": "current amplifier lag, fitted on the vertical axis",
