@@ -128,6 +128,11 @@ class Candidate:
     current sensor offset beside guides tilted against the stator: what the offset does along the
     travel is what a waviness of the guides does;
     :func:`~maglev_oc.diagnosis.currents.sensor_offset_candidate`)."""
+    two_axis_signature: bool = False
+    """Whether what tells it from a force of the position is the tie between the two axes' forces
+    (the current sensors' errors: on one axis alone a force periodic in the position at a motor
+    pitch). On a log where one axis does not move, a candidate that would pass is not separable
+    from a smooth dependence on the position, and its residual is still reported by its signature."""
     form_of: str | None = None
     """The candidate this one is a richer form of (the same effect with one more parameter, e.g.
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen

@@ -302,6 +302,7 @@ def sensor_offset_candidate(ctx: LibraryContext) -> Candidate:
             "electrical from the position's zero."
         ),
         confounded_beside=_LIKE_A_WAVINESS,
+        two_axis_signature=True,
     )
 
 
@@ -353,6 +354,7 @@ def sensor_gain_candidate(ctx: LibraryContext) -> Candidate:
             "over each pole pitch."
         ),
         confounded_beside=_LIKE_A_WAVINESS,
+        two_axis_signature=True,
     )
 
 

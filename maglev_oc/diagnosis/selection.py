@@ -66,7 +66,9 @@ effects already chosen (bias-compensated least squares on the training blocks,
    waviness in the pool at such a period, chosen or not, that explains as much of the held-out
    error on its axes in its place (:func:`_residual_periods`, :func:`_explains_as_much`): the
    residual showed that period beside the forces chosen before, so the log does not say which of
-   the two the force is.
+   the two the force is. Nor, last, is a candidate separable from a chosen effect that no log of
+   this stage tells it from (``Candidate.confounded_beside``: the current sensors' errors beside
+   tilted guides, whose waviness pulls and pushes along the travel as they do).
 5. **Physical plausibility.** Signs and sizes (:mod:`~maglev_oc.diagnosis.library`).
 6. **Specificity.** c must explain the held-out data about as well as or better than a generic
    smooth function of one state variable with as many coefficients, on its axes
@@ -995,13 +997,12 @@ def judge(
             verdict, reason = "not specific", drift
     if hidden:
         verdict, reason = _beside_friction(verdict, reason, left, hidden)
-    rival = cand.confounded_beside
-    beside_its_rival = rival is not None and rival[0] in current and verdict == "passes"
-    if beside_its_rival:
-        verdict, reason = "not separable", rival[1]
+    forced = _never_separable(design, cand, current) if verdict == "passes" else None
+    if forced is not None:
+        verdict, reason = "not separable", forced[1]
     needed = None
-    if beside_its_rival:
-        confounded: tuple[str, ...] = (rival[0],)
+    if forced is not None:
+        confounded: tuple[str, ...] = forced[0]
     elif hidden and not left.size and verdict == "not separable":
         confounded = tuple(f"guide_friction_{AXES[a]}" for a in hidden)
     elif verdict != "not separable":
@@ -1017,6 +1018,26 @@ def judge(
     return dataclasses.replace(
         measured, verdict=verdict, reason=reason, confounded_with=confounded, travel_needed=needed
     )
+
+
+def _never_separable(
+    design: Design, cand: Candidate, current: Sequence[str]
+) -> tuple[tuple[str, ...], str] | None:
+    """(confounded with, why) when no log like this one separates ``cand`` from what it would stand
+    for, else None: a chosen effect it cannot be told from (``Candidate.confounded_beside``), or,
+    for an effect told by the tie between the two axes' forces (``Candidate.two_axis_signature``),
+    a log on which one axis does not move. A synthetic log at a fixed gap with a horizontal force
+    periodic over 45 mm: the current sensors' offset and gain mismatch, periodic over 114 and 57 mm
+    there, were claimed together beside a waviness that the residual they changed put at 39 mm."""
+    if cand.confounded_beside is not None and cand.confounded_beside[0] in current:
+        return (cand.confounded_beside[0],), cand.confounded_beside[1]
+    still = [AXES[a] for a in range(design.moving.size) if not design.moving[a]]
+    if cand.two_axis_signature and still:
+        return (SMOOTH_POSITION,), (
+            f"what tells it from a force of the position is the tie between the two axes' forces, and the "
+            f"{' and '.join(still)} axis does not move on this log (a log where both axes move separates it)"
+        )
+    return None
 
 
 MIN_BEATING = 0.25
