@@ -5,6 +5,7 @@
     python bench/diagnose_rigs.py --variants [end_effect_narrow ...] [--out ...]
     python bench/diagnose_rigs.py --saturation [--out ...]
     python bench/diagnose_rigs.py --sensors [--rig obs2800] [--out ...]
+    python bench/diagnose_rigs.py --sensor-pairs [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
@@ -34,7 +35,8 @@ the dq frame), whose missing current is a force along the travel over two pole p
 axes, their gains (``CurrentSensorGain``, a mismatch of 1.2 and 2.9 %), which mix i_d and i_q over
 one pole pitch, and the gap encoder's zero (``GapSensorZero``, +0.2 and -0.5 mm), which the
 constants absorb. None was in the generator or the named sets when the diagnosis's rules were
-written.
+written. ``--sensor-pairs``: each current sensor error beside one large effect of another kind
+(:func:`sensor_pairs`, eight logs, seeds 7100-7107): a rig has more than one.
 
 ``--saturation``: the iron saturated by the stator current
 (``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
@@ -158,6 +160,25 @@ def sensors() -> dict:
     }
 
 
+def sensor_pairs() -> dict:
+    """The ``--sensor-pairs`` logs by name: a current sensor error beside another effect."""
+    from tests.independent import effects as E
+    from tests.independent.sets import SINGLE_EFFECTS
+
+    offset, gain = E.CurrentSensorOffset, E.CurrentSensorGain
+    pairs = (
+        (offset.small(), "guide_friction_horizontal"),
+        (offset.large(), "normal_cogging"),
+        (offset.small(), "cable_carrier"),
+        (offset.large(), "end_effect"),
+        (gain.small(), "guide_friction_vertical"),
+        (gain.large(), "detent_force"),
+        (gain.small(), "thrust_ripple"),
+        (gain.large(), "commutation_offset"),
+    )
+    return {f"{sensor.kind}+{other}": (sensor, SINGLE_EFFECTS[other]("large")) for sensor, other in pairs}
+
+
 def saturation() -> dict:
     """The saturations ``--saturation`` runs, by name."""
     from tests.independent import effects as E
@@ -181,6 +202,9 @@ def main() -> None:
         "--saturation", action="store_true", help="score the iron saturated by the current instead"
     )
     parser.add_argument("--sensors", action="store_true", help="score sensors that read off zero instead")
+    parser.add_argument(
+        "--sensor-pairs", action="store_true", help="score current sensor errors beside other effects instead"
+    )
     parser.add_argument(
         "--drawn", type=int, default=0, help="score N random draws of every effect kind instead"
     )
@@ -241,6 +265,10 @@ def main() -> None:
             for seed in SENSOR_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=(effect,), rig=rig)
                 groups.setdefault(name.rsplit("_", 1)[0], []).append((f"{name}_{seed}", scenario))
+    elif args.sensor_pairs:
+        for k, (name, effects) in enumerate(sensor_pairs().items()):
+            scenario = Scenario(name=name, seed=7100 + k, effects=effects, rig=rig)
+            groups.setdefault("sensor_pairs", []).append((f"sensor_pair_{7100 + k}", scenario))
     elif args.saturation:
         for name, effect in saturation().items():
             for seed in SATURATION_SEEDS:
