@@ -223,6 +223,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
+    from tests.independent.core import with_generic_libm
+
+    with_generic_libm()  # the logs the test suite generates, whatever the CPU
     from maglev_oc.data.reading import read_log
     from maglev_oc.diagnosis.pipeline import diagnose
     from tests.independent.logio import write_log

@@ -728,6 +728,9 @@ def _short(effects: list[dict], n: int = 3) -> str:
 
 
 def main() -> int:
+    from tests.independent.core import with_generic_libm
+
+    with_generic_libm()  # the logs the test suite generates, whatever the CPU
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", default="eleven", help="generator set: eleven, single, pairs, clean")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "peer_pysindy")

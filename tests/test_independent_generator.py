@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -508,6 +512,23 @@ def test_current_saturation_force_law():
         even = 0.5 * (attraction(p0, iq, id_) + attraction(p0, iq, -id_))
         assert attraction(p1, iq, id_) == pytest.approx(odd * s + even * s**2, rel=1e-9)
     assert eff.factor(eff.saturation_current) == 0.5
+
+
+@pytest.mark.parametrize(("given", "runs_under"), [(None, core.GENERIC_LIBM), ("glibc.malloc.check=0", None)])
+def test_a_command_starts_again_under_the_generic_libm_unless_the_user_set_the_tunables(given, runs_under):
+    # glibc reads GLIBC_TUNABLES when a process starts, so the generator's commands start again under
+    # it (core.with_generic_libm); a value the user set is kept as it is
+    env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+    if given is not None:
+        env["GLIBC_TUNABLES"] = given
+    code = (
+        "import os; from tests.independent.core import with_generic_libm; with_generic_libm(); "
+        "print(os.environ['GLIBC_TUNABLES'])"
+    )
+    root = Path(__file__).resolve().parents[1]
+    run = [sys.executable, "-c", code]
+    out = subprocess.run(run, env=env, cwd=root, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == (runs_under or given)
 
 
 def test_a_gap_sensor_zero_puts_every_force_at_the_magnetic_gap():

@@ -13,6 +13,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -31,6 +32,24 @@ REC_COLUMNS = (
     "F_fric_h", "F_fric_v", "v1", "v2", "xhat2", "xhat4",
 )  # fmt: skip
 """Names of the record columns (see ``simulate`` in core.c)."""
+
+GENERIC_LIBM = "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4"
+"""``GLIBC_TUNABLES`` under which glibc gives a process its generic ``exp``, ``sin``, ``cos``, ...: on
+x86-64 CPUs with FMA and AVX2 it otherwise picks variants that differ in the last bit now and then,
+which a loop that sticks and slips amplifies into another log (experiments_37 of the independent
+sets). glibc reads it when a process starts; ``tests/conftest.py`` sets it for the test workers."""
+
+
+def with_generic_libm() -> None:
+    """Start this command again under :data:`GENERIC_LIBM` unless it already runs under it (or the
+    user set ``GLIBC_TUNABLES`` to something else, which is kept): the logs a command generates are
+    then the test suite's. For command-line entry points, before any log is generated."""
+    if "GLIBC_TUNABLES" in os.environ or not sys.platform.startswith("linux"):
+        return
+    env = {**os.environ, "GLIBC_TUNABLES": GENERIC_LIBM}
+    sys.stdout.flush()
+    os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
+
 
 _D = ctypes.c_double
 _I = ctypes.c_int
