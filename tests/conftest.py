@@ -30,7 +30,9 @@ os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 # (measured 2026-12-02 on an FMA machine: experiments_37's log changes with the mask, and both
 # tests pass again). A run in one process (-n 0) starts before this line: set the variable in its
 # environment to get the same logs there.
-os.environ.setdefault("GLIBC_TUNABLES", "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4")  # core.GENERIC_LIBM
+from tests.independent.core import GENERIC_LIBM
+
+os.environ.setdefault("GLIBC_TUNABLES", GENERIC_LIBM)
 
 import matplotlib
 import pytest

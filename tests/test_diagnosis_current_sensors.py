@@ -40,78 +40,72 @@ from tests.independent.scoring import score
 from tests.independent.simulate import Rig, Scenario, build_params, simulate
 
 
-def _stator_frame(offsets: tuple[float, float, float]) -> tuple[float, float]:
-    """The candidate's coefficients (A, B) for phase offsets o_k: (2/3) sum (cos s_k, sin s_k) o_k."""
-    pairs = tuple(zip(E.PHASE_SHIFTS, offsets, strict=True))
-    return (2 / 3 * sum(math.cos(s) * o for s, o in pairs), 2 / 3 * sum(math.sin(s) * o for s, o in pairs))
-
-
-def test_the_column_is_what_the_generators_phase_offsets_do(model, generated):
-    """At the papers' constants in both codes, the generator's accelerations with the offsets of the
-    large size (80, 0, -50 mA) minus those without are the candidate's column at (A, B). The
-    candidate is first order in the offset: it leaves out L4 |di|^2 (at most 0.074 x 0.076^2 =
-    4.3e-4 m/s^2, against 0.4 m/s^2 of the first-order part), the tolerance on the vertical axis;
-    the horizontal force is linear in the current, so there it is exact to rounding."""
-    path, _ = generated("clean", "clean_01")
-    cand = sensor_offset_candidate(LibraryContext(model, prepare([read_log(path)], bandwidth=10.0)))
-    effect = E.CurrentSensorOffset.large()
-    q = _stator_frame((effect.offset_a, effect.offset_b, effect.offset_c))
-    assert math.hypot(*q) == pytest.approx(effect.dq_amplitude(), rel=1e-12)
+def _core_and_column(model, cand, effect, reference, q, seed: int):
+    """At 40 random gaps, positions and currents, with the papers' constants in both codes: the
+    independent C core's accelerations (vertical, horizontal) with ``effect`` minus those with
+    ``reference`` (40, 2), the candidate's column at coefficients ``q`` (40, 2) and the gaps."""
     c = tuple(getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4"))
-    with_offsets = build_params(Scenario(name="o", seed=0, effects=(effect,)), c)
-    without = build_params(Scenario(name="o", seed=0), c)
-    rng = np.random.default_rng(3)
+    with_it = build_params(Scenario(name="e", seed=0, effects=(effect,)), c)
+    without = build_params(Scenario(name="e", seed=0, effects=reference), c)
+    rng = np.random.default_rng(seed)
+    change, column, gaps = [], [], []
     for _ in range(40):
         gap, x3 = rng.uniform(0.014, 0.026), rng.uniform(-0.05, 0.05)
         iq, id_ = rng.uniform(-3, 3), rng.uniform(-2, 5)
         state = np.array([gap, 0.0, x3, 0.0, 0.0, 0.0])
-        d1, _ = core.eval_rhs(with_offsets, state, iq, id_)
+        d1, _ = core.eval_rhs(with_it, state, iq, id_)
         d0, _ = core.eval_rhs(without, state, iq, id_)
-        column = np.asarray(cand.term.function([gap, 0.0, x3, 0.0], [iq, id_], [0.0, 0.0], q)).ravel()
-        l4 = model_functions(gap, c)[3]
-        assert column[0] == pytest.approx(d1[1] - d0[1], abs=1.01 * l4 * math.hypot(*q) ** 2)
-        assert column[1] == pytest.approx(d1[3] - d0[3], rel=1e-9, abs=1e-12)
+        change.append((d1 - d0)[[1, 3]])
+        column.append(np.asarray(cand.term.function([gap, 0.0, x3, 0.0], [iq, id_], [0.0, 0.0], q)).ravel())
+        gaps.append(gap)
+    return np.array(change), np.array(column), np.array(gaps)
+
+
+def _context(model, generated) -> LibraryContext:
+    path, _ = generated("clean", "clean_01")
+    return LibraryContext(model, prepare([read_log(path)], bandwidth=10.0))
+
+
+def test_the_column_is_what_the_generators_phase_offsets_do(model, generated):
+    """At the papers' constants in both codes, the generator's accelerations with the offsets of the
+    large size (80, 0, -50 mA) minus those without are the candidate's column at (A, B), the
+    offsets' first harmonic in the dq frame (``phase_harmonic``, which this checks against the C
+    core's own transform). The candidate is first order in the offset: it leaves out L4 |di|^2 (at
+    most 0.074 x 0.076^2 = 4.3e-4 m/s^2, against 0.4 m/s^2 of the first-order part), the tolerance
+    on the vertical axis; the horizontal force is linear in the current, so there it is exact to
+    rounding."""
+    cand = sensor_offset_candidate(_context(model, generated))
+    effect = E.CurrentSensorOffset.large()
+    q = E.phase_harmonic((effect.offset_a, effect.offset_b, effect.offset_c), 1)
+    change, column, gaps = _core_and_column(model, cand, effect, (), q, seed=3)
+    c = tuple(getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4"))
+    l4 = np.array([model_functions(g, c)[3] for g in gaps])
+    assert np.all(np.abs(column[:, 0] - change[:, 0]) <= 1.01 * l4 * math.hypot(*q) ** 2)
+    np.testing.assert_allclose(column[:, 1], change[:, 1], rtol=1e-9, atol=1e-12)
 
 
 def test_the_column_is_what_the_generators_phase_gains_do(model, generated):
     """The same for gain errors of 3, 0 and -2 per mille: the generator's accelerations with them
     minus those with their common part alone (which scales both currents: the constants' share) are
-    the candidate's column at the errors' part at twice the electrical angle, (2/3) sum_k e_k
-    (cos 2 s_k, sin 2 s_k). First order in the errors: what is left is of the errors' size relative
-    to the change (3e-3), so 1 % of the largest change is the tolerance."""
-    path, _ = generated("clean", "clean_01")
-    cand = sensor_gain_candidate(LibraryContext(model, prepare([read_log(path)], bandwidth=10.0)))
+    the candidate's column at the errors' second harmonic in the dq frame. First order in the
+    errors: what is left is of the errors' size relative to the change (3e-3), so 1 % of the
+    largest change is the tolerance."""
+    cand = sensor_gain_candidate(_context(model, generated))
     errors = (3e-3, 0.0, -2e-3)
-    effect = E.CurrentSensorGain(*errors)
-    pairs = tuple(zip(E.PHASE_SHIFTS, errors, strict=True))
-    q = (
-        2 / 3 * sum(math.cos(2 * s) * e for s, e in pairs),
-        2 / 3 * sum(math.sin(2 * s) * e for s, e in pairs),
-    )
-    assert math.hypot(*q) == pytest.approx(effect.mismatch(), rel=1e-12)
     common = sum(errors) / 3
-    c = tuple(getattr(model.constants, k) for k in ("C1", "C2", "C3", "C4"))
-    mixed = build_params(Scenario(name="g", seed=0, effects=(effect,)), c)
-    scaled = build_params(
-        Scenario(name="g", seed=0, effects=(E.CurrentSensorGain(common, common, common),)), c
+    change, column, _ = _core_and_column(
+        model,
+        cand,
+        E.CurrentSensorGain(*errors),
+        (E.CurrentSensorGain(common, common, common),),
+        E.phase_harmonic(errors, 2),
+        seed=4,
     )
-    rng = np.random.default_rng(4)
-    change, column = [], []
-    for _ in range(40):
-        gap, x3 = rng.uniform(0.014, 0.026), rng.uniform(-0.05, 0.05)
-        iq, id_ = rng.uniform(-3, 3), rng.uniform(-2, 5)
-        state = np.array([gap, 0.0, x3, 0.0, 0.0, 0.0])
-        d1, _ = core.eval_rhs(mixed, state, iq, id_)
-        d0, _ = core.eval_rhs(scaled, state, iq, id_)
-        change.append((d1 - d0)[[1, 3]])
-        column.append(np.asarray(cand.term.function([gap, 0.0, x3, 0.0], [iq, id_], [0.0, 0.0], q)).ravel())
-    change, column = np.array(change), np.array(column)
     np.testing.assert_allclose(column, change, atol=0.01 * np.max(np.abs(change)))
 
 
 def test_an_offset_beyond_what_a_current_sensor_reads_at_zero_is_not_physical(model, generated):
-    path, _ = generated("clean", "clean_01")
-    cand = sensor_offset_candidate(LibraryContext(model, prepare([read_log(path)], bandwidth=10.0)))
+    cand = sensor_offset_candidate(_context(model, generated))
     angle = Estimate(0.2, 0.01, "rad")
     for share, ok in ((0.9, True), (1.1, False)):
         offset = Estimate(share * SENSOR_OFFSET_BOUND_A, 0.01, "A")

@@ -35,6 +35,17 @@ PHASE_SHIFTS = (0.0, -2 * math.pi / 3, 2 * math.pi / 3)
 """The phases' shifts s_k in 002's transform (a, b, c)."""
 
 
+def phase_harmonic(values: tuple[float, float, float], harmonic: int) -> tuple[float, float]:
+    """(2/3) sum_k v_k (cos, sin)(h s_k): what per-phase values (a, b, c) put into the dq frame at
+    ``harmonic`` h times the electrical angle (h = 1: a sensor offset's missing current fixed to
+    the stator; h = 2: a gain mismatch's mixing of i_d and i_q)."""
+    pairs = tuple(zip(PHASE_SHIFTS, values, strict=True))
+    return (
+        2 / 3 * sum(math.cos(harmonic * s) * v for s, v in pairs),
+        2 / 3 * sum(math.sin(harmonic * s) * v for s, v in pairs),
+    )
+
+
 def _p(default: float, unit: str, doc: str) -> Any:
     return field(default=default, metadata={"unit": unit, "doc": doc})
 
@@ -948,10 +959,7 @@ class CurrentSensorOffset(Effect):
 
     def dq_amplitude(self) -> float:
         """The missing current's magnitude in the dq frame [A] (the zero-sequence part has none)."""
-        pairs = tuple(zip(PHASE_SHIFTS, (self.offset_a, self.offset_b, self.offset_c), strict=True))
-        return (2 / 3) * math.hypot(
-            sum(math.cos(s) * o for s, o in pairs), sum(math.sin(s) * o for s, o in pairs)
-        )
+        return math.hypot(*phase_harmonic((self.offset_a, self.offset_b, self.offset_c), 1))
 
     def description(self) -> str:
         return (
@@ -1015,10 +1023,7 @@ class CurrentSensorGain(Effect):
     def mismatch(self) -> float:
         """The errors' part at twice the electrical angle: (2/3) |sum_k e_k exp(2 j s_k)| [1], to
         first order (the part the constants cannot take)."""
-        pairs = tuple(zip(PHASE_SHIFTS, (self.error_a, self.error_b, self.error_c), strict=True))
-        return (2 / 3) * math.hypot(
-            sum(math.cos(2 * s) * e for s, e in pairs), sum(math.sin(2 * s) * e for s, e in pairs)
-        )
+        return math.hypot(*phase_harmonic((self.error_a, self.error_b, self.error_c), 2))
 
     def description(self) -> str:
         return (
