@@ -6,6 +6,7 @@
     python bench/diagnose_rigs.py --saturation [--out ...]
     python bench/diagnose_rigs.py --sensors [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --sensor-pairs [--rig obs2800] [--out ...]
+    python bench/diagnose_rigs.py --friction-shapes [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
@@ -37,6 +38,13 @@ one pole pitch, and the gap encoder's zero (``GapSensorZero``, +0.2 and -0.5 mm)
 constants absorb. None was in the generator or the named sets when the diagnosis's rules were
 written. ``--sensor-pairs``: each current sensor error beside one large effect of another kind
 (:func:`sensor_pairs`, eight logs, seeds 7100-7107): a rig has more than one.
+
+``--friction-shapes``: guide friction in shapes the library's friction does not have, each at the
+generator's small and large friction on three seeds (:func:`friction_shapes`): horizontal guides
+whose friction changes along the track (``GuideFriction.level_slope``, +5 and -8 /m: 20-32 % over
+the logged travel), and guides on either axis whose friction differs between the directions
+(``direction_asymmetry``, +25 and -30 %). Friction larger one way is friction of the mean level plus
+a constant force while the platform slides, which guides not level give too.
 
 ``--saturation``: the iron saturated by the stator current
 (``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
@@ -160,6 +168,30 @@ def sensors() -> dict:
     }
 
 
+FRICTION_SHAPE_SEEDS = (7201, 7202, 7203)
+"""Seeds of the ``--friction-shapes`` logs (one log per seed, shape and size)."""
+
+
+def friction_shapes() -> dict:
+    """The ``--friction-shapes`` effects by name: guide friction whose level changes along the track
+    or differs between the directions, at the generator's small and large friction."""
+    import dataclasses as dc
+
+    from tests.independent import effects as E
+
+    f = E.GuideFriction
+    shapes = {
+        "friction_h_along": ("horizontal", {"level_slope": 5.0}, {"level_slope": -8.0}),
+        "friction_h_direction": ("horizontal", {"direction_asymmetry": 0.25}, {"direction_asymmetry": -0.3}),
+        "friction_v_direction": ("vertical", {"direction_asymmetry": 0.25}, {"direction_asymmetry": -0.3}),
+    }
+    return {
+        f"{name}_{size}": dc.replace(getattr(f, size)(axis), **shape)
+        for name, (axis, small, large) in shapes.items()
+        for size, shape in (("small", small), ("large", large))
+    }
+
+
 def sensor_pairs() -> dict:
     """The ``--sensor-pairs`` logs by name: a current sensor error beside another effect."""
     from tests.independent import effects as E
@@ -202,6 +234,11 @@ def main() -> None:
         "--saturation", action="store_true", help="score the iron saturated by the current instead"
     )
     parser.add_argument("--sensors", action="store_true", help="score sensors that read off zero instead")
+    parser.add_argument(
+        "--friction-shapes",
+        action="store_true",
+        help="score guide friction that changes along the track or with the direction instead",
+    )
     parser.add_argument(
         "--sensor-pairs", action="store_true", help="score current sensor errors beside other effects instead"
     )
@@ -266,6 +303,11 @@ def main() -> None:
     elif args.sensors:
         for name, effect in sensors().items():
             for seed in SENSOR_SEEDS:
+                scenario = Scenario(name=name, seed=seed, effects=(effect,), rig=rig)
+                groups.setdefault(name.rsplit("_", 1)[0], []).append((f"{name}_{seed}", scenario))
+    elif args.friction_shapes:
+        for name, effect in friction_shapes().items():
+            for seed in FRICTION_SHAPE_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=(effect,), rig=rig)
                 groups.setdefault(name.rsplit("_", 1)[0], []).append((f"{name}_{seed}", scenario))
     elif args.sensor_pairs:

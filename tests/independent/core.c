@@ -183,8 +183,18 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     /* guide friction (LuGre) */
     ds[4] = 0.0;
     ds[5] = 0.0;
-    if (p->fh_on) Ffh = lugre(p->fh_Fc, p->fh_Fs, p->fh_vs, p->fh_s0, p->fh_s1, p->fh_s2, x4, s[4], &ds[4]);
-    if (p->fv_on) Ffv = lugre(p->fv_Fc, p->fv_Fs, p->fv_vs, p->fv_s0, p->fv_s1, p->fv_s2, x2, s[5], &ds[5]);
+    /* the sliding forces scaled by the level along the track (horizontal guides: 1 + slope x3) and
+       by the direction (1 + asym when moving forward, 1 - asym backward); exactly 1 when off */
+    if (p->fh_on) {
+        double f = 1.0;
+        if (p->fh_slope != 0.0) f *= 1.0 + p->fh_slope * x3;
+        if (p->fh_asym != 0.0) f *= x4 > 0.0 ? 1.0 + p->fh_asym : 1.0 - p->fh_asym;
+        Ffh = lugre(f * p->fh_Fc, f * p->fh_Fs, p->fh_vs, p->fh_s0, p->fh_s1, p->fh_s2, x4, s[4], &ds[4]);
+    }
+    if (p->fv_on) {
+        const double f = p->fv_asym == 0.0 ? 1.0 : x2 > 0.0 ? 1.0 + p->fv_asym : 1.0 - p->fv_asym;
+        Ffv = lugre(f * p->fv_Fc, f * p->fv_Fs, p->fv_vs, p->fv_s0, p->fv_s1, p->fv_s2, x2, s[5], &ds[5]);
+    }
 
     ds[0] = x2;
     ds[1] = p->G - (Fn + Ffv) / p->Mv;

@@ -66,6 +66,8 @@ FIELDS: list[tuple[str, object]] = [
     # effects: guide friction (LuGre), horizontal and vertical
     ("fh_on", _I), ("fh_Fc", _D), ("fh_Fs", _D), ("fh_vs", _D), ("fh_s0", _D), ("fh_s1", _D), ("fh_s2", _D),
     ("fv_on", _I), ("fv_Fc", _D), ("fv_Fs", _D), ("fv_vs", _D), ("fv_s0", _D), ("fv_s1", _D), ("fv_s2", _D),
+    # the friction's level along the track (horizontal) and its difference between the directions
+    ("fh_slope", _D), ("fh_asym", _D), ("fv_asym", _D),
     # normal cogging, longitudinal cogging (detent)
     ("cn_on", _I), ("cn_amp", _D * 3), ("cn_period", _D * 3), ("cn_phase", _D * 3), ("cn_decay", _D * 3),
     ("cn_gref", _D),

@@ -143,6 +143,15 @@ class GuideFriction(Effect):
     bristle_damping: float = _p(
         340.0, "N s/m", "bristle damping sigma_1 (about 0.3 of critical with the axis mass)"
     )
+    level_slope: float = _p(
+        0.0,
+        "1/m",
+        "horizontal guides only: F_C and F_S times 1 + level_slope x3 (a rail whose preload or "
+        "lubrication changes along the track)",
+    )
+    direction_asymmetry: float = _p(
+        0.0, "1", "F_C and F_S times 1 + a moving forward (v > 0), 1 - a backward (seals, a rail's twist)"
+    )
 
     kind: ClassVar[str] = "guide_friction"
 
@@ -151,6 +160,10 @@ class GuideFriction(Effect):
             raise ValueError(f"GuideFriction.axis_ must be 'horizontal' or 'vertical', got {self.axis_!r}")
         if not (0 < self.coulomb_force <= self.static_force):
             raise ValueError("GuideFriction: need 0 < coulomb_force <= static_force [N]")
+        if self.level_slope and self.axis_ != "horizontal":
+            raise ValueError("GuideFriction.level_slope is along the track: horizontal guides only")
+        if not (abs(self.direction_asymmetry) < 1 and abs(self.level_slope) * 0.1 < 1):
+            raise ValueError("GuideFriction: the friction must stay positive (|a| < 1, |slope| x3 < 1)")
 
     def axis_name(self) -> str:
         return self.axis_
@@ -185,6 +198,9 @@ class GuideFriction(Effect):
             "s1": self.bristle_damping,
             "s2": self.viscous_coefficient,
         }
+        if self.axis_ == "horizontal":
+            values["slope"] = self.level_slope
+        values["asym"] = self.direction_asymmetry
         for name, val in values.items():
             setattr(p, f"{pre}_{name}", val)
 
@@ -196,13 +212,26 @@ class GuideFriction(Effect):
         )
         return (
             f"Friction of the {what}: Coulomb {self.coulomb_force:g} N, breakaway {self.static_force:g} N, "
-            f"viscous {self.viscous_coefficient:g} N s/m, with pre-sliding (LuGre model)."
+            f"viscous {self.viscous_coefficient:g} N s/m, with pre-sliding (LuGre model)"
+            + self._shape_words()
+            + "."
         )
+
+    def _shape_words(self) -> str:
+        words = []
+        if self.level_slope:
+            words.append(f"{self.level_slope * 4:+.0%} of its level per 40 mm along the track")
+        if self.direction_asymmetry:
+            words.append(
+                f"{self.direction_asymmetry:+.0%} moving forward, {-self.direction_asymmetry:+.0%} backward"
+            )
+        return "; " + ", ".join(words) if words else ""
 
     def equation(self) -> str:
         return (
             "dz/dt = v - s0 |v| z / g(v), g(v) = Fc + (Fs - Fc) exp(-(v/vs)^2); "
-            "F_f = s0 z + s1 exp(-(v/vs)^2) dz/dt + s2 v, opposing v"
+            "F_f = s0 z + s1 exp(-(v/vs)^2) dz/dt + s2 v, opposing v; Fc, Fs times "
+            "(1 + level_slope x3) (1 + direction_asymmetry sign(v))"
         )
 
     def derived(self, ctx: dict[str, float]) -> dict[str, float]:
