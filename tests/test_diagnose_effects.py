@@ -152,6 +152,7 @@ KNOWN_TRIPLE_FAILURES = {
             stem, marks=[KNOWN_TRIPLE_FAILURES[stem]] if stem in KNOWN_TRIPLE_FAILURES else [], id=stem
         )
         for stem, _ in named_set("triples")
+        if stem != "triples_07"  # below
     ],
 )
 def test_three_or_four_effects_together_are_all_found(generated, stem):
@@ -159,6 +160,23 @@ def test_three_or_four_effects_together_are_all_found(generated, stem):
     # beside 1 N of friction) and triples_04 (a misalignment beside vertical friction) passed
     # only once sticking guides held every force but the friction's and the gap dependences'.
     _all_found(generated, "triples", stem)
+
+
+@pytest.mark.slow
+@pytest.mark.extended
+def test_a_tilt_beside_friction_is_found_in_the_frictions_entry(generated):
+    # triples_07: 1 N of horizontal friction, guides tilted by 5 mrad (0.078 N along the track) and
+    # a thrust ripple. The tilt's force is what friction 8 % larger one way gives, and no run of the
+    # stage tells the two apart (pipeline._merged_friction_by_direction): it is found and sized in
+    # the friction's entry, and the tilt is not claimed but listed as not separable from it
+    path, truth = generated("triples", "triples_07")
+    out = diagnose_path(path).to_dict()
+    s = score("triples_07", truth, out["effects"])
+    assert s.claimed == ["guide_friction_horizontal", "thrust_ripple"]
+    assert s.notes == ["tilted_base not claimed"]  # friction and ripple sized within 30 %
+    force = next(e for e in truth["effects"] if e["kind"] == "tilted_base")["derived"]["horizontal_force_N"]
+    assert out["effects"][0]["parameters"]["force_along_track"] == pytest.approx(force, rel=0.3)
+    assert "horizontal_guides_not_level" in [n["name"] for n in out["not_separable"]]
 
 
 @pytest.mark.slow

@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from maglev_oc.control.fl_regulator import FeedbackLinearizingRegulator
+from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.model.parameters import LumpedConstants
 from maglev_oc.model.stage import StageModel
@@ -27,24 +28,22 @@ from maglev_oc.sim.twin import RigTwin
 __all__ = ["CompensationStudy", "compensation_study", "improvement"]
 
 
-def _compensable_coefficients(effect: Effect) -> np.ndarray:
-    """The effect's coefficients with its nuisance ones (a friction's share held while sticking)
+def _compensable_coefficients(cand: Candidate, coefficients: np.ndarray) -> np.ndarray:
+    """A chosen effect's coefficients with its nuisance ones (a friction's share held while sticking)
     set to zero: what a controller can feed forward."""
-    term = effect.candidate.term
-    return np.array(
-        [
-            0.0 if q in effect.candidate.nuisance else c
-            for q, c in zip(term.parameter_names, effect.coefficients, strict=True)
-        ]
-    )
+    names = cand.term.parameter_names
+    return np.array([0.0 if q in cand.nuisance else c for q, c in zip(names, coefficients, strict=True)])
 
 
 def _state_only(effect: Effect) -> bool:
-    """Whether an effect's compensable part depends on the state alone (not on the currents or
-    their rates)."""
+    """Whether an effect's compensable part (with its parts') depends on the state alone (not on the
+    currents or their rates)."""
     x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
-    out = effect.candidate.term.acceleration(_compensable_coefficients(effect))(x, u, du)
-    return not (ca.depends_on(out, u) or ca.depends_on(out, du))
+    for cand, coef in effect.terms():
+        out = cand.term.acceleration(_compensable_coefficients(cand, coef))(x, u, du)
+        if ca.depends_on(out, u) or ca.depends_on(out, du):
+            return False
+    return True
 
 
 def _effects_acceleration(effects: list[Effect], *, with_inputs: bool) -> ca.Function:
@@ -52,9 +51,9 @@ def _effects_acceleration(effects: list[Effect], *, with_inputs: bool) -> ca.Fun
     with ``with_inputs`` (the whole effects, current rates taken as zero: a twin of the plant)."""
     x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
     acc = ca.SX.zeros(2, 1)
-    for e in effects:
-        coef = e.coefficients if with_inputs else _compensable_coefficients(e)
-        acc += e.candidate.term.acceleration(coef)(x, u, ca.SX.zeros(2, 1))
+    for cand, coefficients in (t for e in effects for t in e.terms()):
+        coef = coefficients if with_inputs else _compensable_coefficients(cand, coefficients)
+        acc += cand.term.acceleration(coef)(x, u, ca.SX.zeros(2, 1))
     if with_inputs:
         return ca.Function("effects", [x, u], [acc], ["x", "i"], ["acc"])
     return ca.Function("effects", [x], [acc], ["x"], ["acc"])

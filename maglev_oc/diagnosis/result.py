@@ -63,6 +63,13 @@ class Effect:
     # what the held-out test predicted: "accelerations", or the logged thrust current where the
     # accelerations could not show an effect of it (:mod:`~maglev_oc.diagnosis.thrust_current`)
     judged_on: str = "accelerations"
+    # chosen effects reported as part of this one (a guide's waviness in its misalignment): their
+    # terms are in the fitted model all the same
+    parts: tuple[tuple[Candidate, np.ndarray], ...] = field(default=(), repr=False)
+
+    def terms(self) -> tuple[tuple[Candidate, np.ndarray], ...]:
+        """(candidate, coefficients) of every chosen effect this one reports: itself and its parts."""
+        return ((self.candidate, self.coefficients), *self.parts)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
-from maglev_oc.regression.terms import AccelerationTerm, term_function
+from maglev_oc.regression.terms import REVERSAL_SPEED, AccelerationTerm, term_function
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
@@ -129,7 +129,11 @@ def find_unexplained(
     best probe is added while it passes the selection's significance and size tests, at most
     ``max_per_axis`` per axis."""
     friction = frozenset(c.term.axis for c in explained if c.family == "friction")
-    probes = _probes(data, periods, friction) + _force_probes(data, model)
+    probes = (
+        _probes(data, periods, friction)
+        + _force_probes(data, model)
+        + _friction_along_track(data, model, friction)
+    )
     if not probes:
         return []
     terms = [c.term for c in explained] + [p.term for p in probes]
@@ -364,6 +368,58 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
                 )
             )
     return out
+
+
+def _friction_along_track(
+    data: PreparedLogs, model: StageModel, friction_axes: frozenset[str]
+) -> list[_Probe]:
+    """Beside friction claimed on the horizontal guides, that friction's level changing along the
+    track (a rail whose preload or lubrication changes): the smoothed sign of the velocity (the
+    friction term's, :data:`~maglev_oc.regression.terms.REVERSAL_SPEED`) times mean-free Legendre
+    polynomials of the position (orders 1 to :data:`FORCE_PROBE_ORDER` over its logged range).
+
+    On a regulated stage the thrust current follows the friction, so such a residual is also the
+    thrust changing along the travel: on six logs of the independent generator whose guides' friction
+    changed by 20-32 % over the logged travel (``bench/diagnose_rigs.py --friction-shapes``), the
+    thrust's probe took it and was read as magnets stronger towards one end. The friction's own
+    probe explains it better, and says what it is."""
+    if "horizontal" not in friction_axes or not data.moving[1]:
+        return []
+    x3 = data.x[2, data.valid]
+    lo, hi = (float(v) for v in np.percentile(x3, [1, 99]))
+    c, h = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-12)
+    orders = range(1, FORCE_PROBE_ORDER + 1)
+    means = [float(np.mean(b)) for b in legendre((x3 - c) / h, orders)]
+    mass = model.params.mass_horizontal
+
+    def build(x, u, du, q):  # q: the friction's change [N] per mean-free Legendre polynomial
+        shares = [b - m for b, m in zip(legendre((x[2] - c) / h, orders), means, strict=True)]
+        return (
+            -ca.tanh(x[3] / REVERSAL_SPEED) * sum((q[i] * p for i, p in enumerate(shares)), ca.SX(0)) / mass
+        )
+
+    centre = legendre(0.0, orders)
+    at_end = [
+        [float(e - m) for e, m in zip(legendre(end, orders), centre, strict=True)] for end in (-1.0, 1.0)
+    ]
+
+    def detail(q) -> str:
+        low, high = (sum(float(qi) * d for qi, d in zip(q, row, strict=True)) for row in at_end)
+        return (
+            f" Fitted so, relative to the centre of the travel, the friction of the horizontal guides is "
+            f"{low:+.2g} N at {lo * M_TO_MM:.0f} mm and {high:+.2g} N at {hi * M_TO_MM:.0f} mm: friction "
+            "that changes along the track (a rail whose preload or lubrication changes), which the "
+            "friction found does not model."
+        )
+
+    probe = _Probe(
+        _probe("probe_horizontal_friction_along_position", 1, build, len(orders)),
+        "position",
+        "the horizontal position against the direction of motion (as if the guides' friction changed "
+        "along the track)",
+        detail=detail,
+    )
+    return [probe]
 
 
 def _best_probe(
