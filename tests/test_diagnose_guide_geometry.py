@@ -29,7 +29,7 @@ def _effect(name: str, contribution: tuple[float, float], **parameters: float) -
         force_rms=PerAxis(*contribution),
         runner_up="",
         signature="",
-        coefficients=np.zeros(1),
+        coefficients=np.full(1, float(len(name))),
         candidate=None,
     )
 
@@ -56,6 +56,9 @@ def test_a_misalignment_and_a_waviness_become_one_effect(slope, wave, amplitude)
     for a in range(2):
         assert m.contribution_rms[a] == pytest.approx(math.hypot(slope[a], wave[a]), rel=1e-12, abs=1e-300)
     assert misalignment.parameters == {"slope": misalignment.parameters["slope"]}  # the input is left alone
+    # the waviness's term stays in the model the output error, the validation, the compensation and
+    # the stage file are built from (Effect.terms)
+    assert [c for _, c in m.terms()] == [misalignment.coefficients, waviness.coefficients]
 
 
 def test_either_alone_is_reported_as_found():
