@@ -12,7 +12,8 @@
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
 10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
-encoders, or run its loop at 2 or 10 kHz. Each rig below records a clean log and four single
+encoders, run its loop at 2 or 10 kHz, or log its current sensors instead of its commands
+(``measured``). Each rig below records a clean log and four single
 effects (large horizontal guide friction, normal cogging, a cable carrier, a commutation offset)
 with the independent generator (``tests/independent``, no code shared with ``maglev_oc.sim``), each
 is diagnosed with the defaults and scored as ``diagnose_score`` does: true effect first, no false
@@ -85,6 +86,9 @@ RIGS = {
     # and sample-to-sample jitter (41 and 77 mA) then match ../shared/logs/independent_clean.csv's
     # (1.7e-6 and 6.0e-6, 42 and 78 mA) within 3 %, against 20x lower at the default 1000 rad/s
     "obs2800": {"observer_bandwidth": 2800.0},
+    # the amplifiers' current sensors logged instead of the commands, with 10 mA of white noise (a
+    # Hall sensor of a 9 A amplifier through a 12-bit converter: 4.4 mA per count)
+    "measured": {"logged_currents": "measured", "current_sensor_noise": 0.01},
 }
 """Rig settings (fields of ``tests.independent.simulate.Rig``) by name."""
 

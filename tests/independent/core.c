@@ -29,7 +29,7 @@ typedef struct {
 int params_size(void) { return (int)sizeof(Params); }
 
 #define NSTATE 6
-#define NREC 17
+#define NREC 19
 #define NAUX 6
 
 /* L1..L4 of the model at gap y for lumped constants C[0..3] (physics.model_functions). */
@@ -251,7 +251,8 @@ int eval_control(const Params *p, double y1, double v1, double v2, double *u)
  * s0     (6): initial plant state.
  * rec    (n_rec x NREC) with n_rec = ceil(n_ctrl / record_every): rows at every record_every-th
  *        control instant: x1 x2 x3 x4 (true), y1 y3 (encoder), u1 u2 (commanded),
- *        iq id (actual), gap (true), F_fric_h F_fric_v [N], v1 v2, xhat2 xhat4.
+ *        iq id (actual), gap (true), F_fric_h F_fric_v [N], v1 v2, xhat2 xhat4, the amplifier's
+ *        output iq id in the commanded frame (what its current sensors read).
  * info   (5): status (0 ok, 1 left the stage's range, 2 not finite), control index of failure,
  *        samples with R clipped at 0, samples with a command clipped at i_max, substeps with the
  *        amplifier at its peak.
@@ -373,6 +374,8 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
                 r[14] = v2;
                 r[15] = ov[1];
                 r[16] = oh[1];
+                r[17] = iq0;
+                r[18] = id0;
             } else {
                 plant_rhs(p, s, iq0, id0, k1, NULL);
             }

@@ -24,12 +24,12 @@ SOURCE = _HERE / "core.c"
 CFLAGS = ("-O2", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 """No fused multiply-add and no fast-math: a seed must give bit-identical logs on re-run."""
 
-NREC = 17
+NREC = 19
 """Columns of the record array written by ``simulate`` in core.c."""
 
 REC_COLUMNS = (
     "x1", "x2", "x3", "x4", "y1", "y3", "u1", "u2", "iq", "id", "gap",
-    "F_fric_h", "F_fric_v", "v1", "v2", "xhat2", "xhat4",
+    "F_fric_h", "F_fric_v", "v1", "v2", "xhat2", "xhat4", "iq_amp", "id_amp",
 )  # fmt: skip
 """Names of the record columns (see ``simulate`` in core.c)."""
 

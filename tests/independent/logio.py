@@ -31,7 +31,7 @@ def csv_text(run: Run) -> str:
         + DESCRIPTION.format(loop=run.scenario.rig.control_rate / 1e3, log=run.scenario.rig.log_rate / 1e3),
         f"# sample_rate_hz: {run.scenario.rig.log_rate:g}",
         "# units: SI",
-        "# currents: commanded",
+        f"# currents: {run.scenario.rig.logged_currents}",
         "t,x1,x3,u1,u2",
     ]
     # + 0.0 turns -0.0 into 0.0; currents below 0.5 uA print as 0

@@ -67,6 +67,13 @@ class Rig:
         [m] the run is aborted (SimulationError) if the gap leaves this range (stoppers).
     x3_limit : float
         [m] ... or if |x3| exceeds this.
+    logged_currents : str
+        ``"commanded"`` (the controller's commands at the logging instants) or ``"measured"`` (what
+        the amplifiers' current sensors read there: their output current in the commanded frame,
+        after any lag, plus ``current_sensor_noise``; the log's metadata then say ``currents:
+        measured``).
+    current_sensor_noise : float
+        [A] standard deviation of the white noise on each measured current (``"measured"`` only).
     """
 
     control_rate: float = 5000.0
@@ -84,6 +91,20 @@ class Rig:
     controller_constants: tuple[float, float, float, float] = PAPERS_CONSTANTS
     gap_limits: tuple[float, float] = (0.006, 0.034)
     x3_limit: float = 0.08
+    logged_currents: str = "commanded"
+    current_sensor_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.logged_currents not in ("commanded", "measured"):
+            raise ValueError(
+                f"Rig.logged_currents must be 'commanded' or 'measured', got {self.logged_currents!r}"
+            )
+        if not self.current_sensor_noise >= 0 or (
+            self.current_sensor_noise and self.logged_currents != "measured"
+        ):
+            raise ValueError(
+                "Rig.current_sensor_noise: a standard deviation >= 0 [A], of measured currents only"
+            )
 
     @property
     def control_period(self) -> float:
@@ -105,8 +126,14 @@ class Rig:
         return {
             "control_rate_hz": self.control_rate,
             "log_rate_hz": self.log_rate,
-            "log_decimation": f"every {self.log_every}th control sample; currents are the commanded values "
-            "at the logging instants, not averages",
+            "log_decimation": f"every {self.log_every}th control sample; currents are the "
+            + (
+                "commanded values at the logging instants, not averages"
+                if self.logged_currents == "commanded"
+                else "amplifiers' measured output currents at the logging instants (commanded frame), "
+                f"with white sensor noise of {self.current_sensor_noise:g} A"
+            ),
+            "logged_currents": self.logged_currents,
             "plant_integrator": f"classical RK4, {self.plant_substeps} steps per control period "
             f"({self.control_rate * self.plant_substeps:g} Hz)",
             "encoder_resolution_m": self.encoder_resolution,
@@ -269,7 +296,8 @@ def simulate(scenario: Scenario) -> Run:
     if rig.plant_substeps < 1 or rig.log_every < 1:
         raise ValueError("plant_substeps and log_every must be >= 1")
     seq = np.random.SeedSequence(scenario.seed)
-    rng_c, rng_r, rng_n = (np.random.default_rng(s) for s in seq.spawn(3))
+    # the fourth stream (measured currents' noise) leaves the first three as they were
+    rng_c, rng_r, rng_n, rng_i = (np.random.default_rng(s) for s in seq.spawn(4))
     constants = (
         scenario.constants
         if scenario.constants is not None
@@ -348,8 +376,8 @@ def simulate(scenario: Scenario) -> Run:
                 "t": "s",
                 "x1": "m, vertical encoder reading (gap)",
                 "x3": "m, horizontal encoder reading",
-                "u1": "A, commanded i_q",
-                "u2": "A, commanded i_d",
+                "u1": f"A, {rig.logged_currents} i_q",
+                "u2": f"A, {rig.logged_currents} i_d",
             },
             "sample_rate_hz": rig.log_rate,
         },
@@ -371,13 +399,17 @@ def simulate(scenario: Scenario) -> Run:
             "true_gap_range_m": [float(np.min(cols["gap"])), float(np.max(cols["gap"]))],
         },
     }
+    logged = (cols["u1"], cols["u2"])
+    if rig.logged_currents == "measured":
+        noise_i = rng_i.standard_normal((2, n_rec)) * rig.current_sensor_noise
+        logged = (cols["iq_amp"] + noise_i[0], cols["id_amp"] + noise_i[1])
     return Run(
         scenario=scenario,
         t=t_log,
         x1=cols["y1"],
         x3=cols["y3"],
-        u1=cols["u1"],
-        u2=cols["u2"],
+        u1=logged[0],
+        u2=logged[1],
         states=cols,
         truth=truth,
         elapsed=elapsed,
