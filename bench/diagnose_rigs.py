@@ -7,6 +7,7 @@
     python bench/diagnose_rigs.py --sensors [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --sensor-pairs [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --friction-shapes [--rig obs2800] [--out ...]
+    python bench/diagnose_rigs.py --vibration [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
@@ -46,6 +47,12 @@ whose friction changes along the track (``GuideFriction.level_slope``, +5 and -8
 the logged travel), and guides on either axis whose friction differs between the directions
 (``direction_asymmetry``, +25 and -30 %). Friction larger one way is friction of the mean level plus
 a constant force while the platform slides, which guides not level give too.
+
+``--vibration``: the floor shaking the base, stator and encoders
+(``tests.independent.effects.BaseVibration``: 5 and 20 mm/s^2 RMS over 1-100 Hz), alone and beside
+large horizontal friction, normal cogging or an amplifier lag, on three seeds: a disturbance that
+no function of the state describes, where nothing should be claimed for it (the scoring leaves it
+out of the truth).
 
 ``--saturation``: the iron saturated by the stator current
 (``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
@@ -196,6 +203,24 @@ def friction_shapes() -> dict:
     }
 
 
+VIBRATION_SEEDS = (7301, 7302, 7303)
+"""Seeds of the ``--vibration`` logs (one log per seed and case)."""
+
+
+def vibration() -> dict:
+    """The ``--vibration`` logs' effects by name: the base shaking, alone and beside one effect."""
+    from tests.independent import effects as E
+
+    small, large = E.BaseVibration.small(), E.BaseVibration.large()
+    return {
+        "vibration_small": (small,),
+        "vibration_large": (large,),
+        "vibration_large+friction_h": (large, E.GuideFriction.large("horizontal")),
+        "vibration_large+cogging": (large, E.NormalCogging.large()),
+        "vibration_large+lag": (large, E.AmplifierDynamics.large()),
+    }
+
+
 def sensor_pairs() -> dict:
     """The ``--sensor-pairs`` logs by name: a current sensor error beside another effect."""
     from tests.independent import effects as E
@@ -242,6 +267,9 @@ def main() -> None:
         "--friction-shapes",
         action="store_true",
         help="score guide friction that changes along the track or with the direction instead",
+    )
+    parser.add_argument(
+        "--vibration", action="store_true", help="score logs of a vibrating base (alone and beside an effect)"
     )
     parser.add_argument(
         "--sensor-pairs", action="store_true", help="score current sensor errors beside other effects instead"
@@ -314,6 +342,11 @@ def main() -> None:
             for seed in FRICTION_SHAPE_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=(effect,), rig=rig)
                 groups.setdefault(name.rsplit("_", 1)[0], []).append((f"{name}_{seed}", scenario))
+    elif args.vibration:
+        for name, effects in vibration().items():
+            for seed in VIBRATION_SEEDS:
+                scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
+                groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
     elif args.sensor_pairs:
         for k, (name, effects) in enumerate(sensor_pairs().items()):
             scenario = Scenario(name=name, seed=7100 + k, effects=effects, rig=rig)

@@ -243,6 +243,15 @@ int eval_control(const Params *p, double y1, double v1, double v2, double *u)
     return control_law(p, y1, v1, v2, &u[0], &u[1]);
 }
 
+/* The base's acceleration over control period k felt by the stage's coordinates (relative to the
+   base, as the encoders measure them): the derivative ds of the velocities less it. */
+static void shaken(const Params *p, const double *base_acc, int k, double *ds)
+{
+    if (!p->vib_on) return;
+    ds[1] -= base_acc[2 * k];
+    ds[3] -= base_acc[2 * k + 1];
+}
+
 /*
  * One closed-loop run.
  *
@@ -257,9 +266,12 @@ int eval_control(const Params *p, double y1, double v1, double v2, double *u)
  *        samples with R clipped at 0, samples with a command clipped at i_max, substeps with the
  *        amplifier at its peak.
  * ucmd   (n_ctrl x 2) work space: the commanded (u1, u2) of every control sample.
+ * base_acc (n_ctrl x 2): the base's (and the encoders') acceleration, vertical (along +x1) and
+ *        horizontal [m/s^2], held over each control period; read only when p->vib_on. The stage's
+ *        coordinates are the encoders', relative to the base: they accelerate by minus it.
  */
 int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise, const double *s0,
-             double *rec, int *info, double *ucmd)
+             double *rec, int *info, double *ucmd, const double *base_acc)
 {
     const int ns = p->n_sub;
     const double h = p->Tc / ns;
@@ -379,12 +391,16 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
             } else {
                 plant_rhs(p, s, iq0, id0, k1, NULL);
             }
+            shaken(p, base_acc, k, k1);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k1[i];
             plant_rhs(p, st, iqh, idh, k2, NULL);
+            shaken(p, base_acc, k, k2);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k2[i];
             plant_rhs(p, st, iqh, idh, k3, NULL);
+            shaken(p, base_acc, k, k3);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + h * k3[i];
             plant_rhs(p, st, iq1, id1, k4, NULL);
+            shaken(p, base_acc, k, k4);
             for (i = 0; i < NSTATE; i++) s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             ia_q = iq1;
             ia_d = id1;

@@ -90,6 +90,8 @@ FIELDS: list[tuple[str, object]] = [
     ("sat_on", _I), ("sat_current", _D),
     # phase current sensors' offsets, gap sensor's zero
     ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D), ("csg_on", _I), ("csg_error", _D * 3),
+    # the base vibrating (its acceleration is an array of simulate's)
+    ("vib_on", _I),
 ]  # fmt: skip
 """The ``Params`` struct: (name, ctypes type) in declaration order."""
 
@@ -164,7 +166,7 @@ def load() -> ctypes.CDLL:
     dp = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
     ip = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
     pp = ctypes.POINTER(Params)
-    lib.simulate.argtypes = [pp, _I, dp, dp, dp, dp, ip, dp]
+    lib.simulate.argtypes = [pp, _I, dp, dp, dp, dp, ip, dp, dp]
     lib.simulate.restype = _I
     lib.eval_rhs.argtypes = [pp, dp, _D, _D, dp, dp]
     lib.eval_rhs.restype = None

@@ -1113,12 +1113,76 @@ class GapSensorZero(Effect):
         return "g = x1 + offset in every gap-dependent force"
 
 
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BaseVibration(Effect):
+    """The floor shakes the base, and with it the stator, the guides and the encoders' scales.
+
+    The encoders read the stage against the base, so the stage's coordinates feel the base's
+    acceleration a_b(t) with the opposite sign: x1'' and x3'' get -a_b on top of the forces. a_b is
+    Gaussian noise per axis through a second-order Butterworth band-pass over [band_low, band_high],
+    scaled to the RMS given, held over each control period; it is drawn from the scenario's seed
+    (:meth:`signal`). Not a function of the state: no model of the stage describes it, and a
+    diagnosis should claim nothing for it.
+
+    .. math::
+
+        \\ddot x_{1,3} = \\ldots - a_{b,v/h}(t)
+    """
+
+    rms_vertical: float = _p(5e-3, "m/s^2", "RMS of the base's vertical acceleration")
+    rms_horizontal: float = _p(5e-3, "m/s^2", "RMS of the base's horizontal acceleration")
+    band_low: float = _p(1.0, "Hz", "lower edge of the band-pass")
+    band_high: float = _p(100.0, "Hz", "upper edge of the band-pass")
+
+    kind: ClassVar[str] = "base_vibration"
+    axis: ClassVar[str] = "both"
+
+    def __post_init__(self) -> None:
+        if not (self.rms_vertical >= 0 and self.rms_horizontal >= 0 and 0 < self.band_low < self.band_high):
+            raise ValueError("BaseVibration: RMS >= 0 [m/s^2] and 0 < band_low < band_high [Hz]")
+
+    @classmethod
+    def small(cls) -> BaseVibration:
+        """5 mm/s^2 RMS over 1-100 Hz: a quiet laboratory floor (a few VC-A bands)."""
+        return cls()
+
+    @classmethod
+    def large(cls) -> BaseVibration:
+        """20 mm/s^2 RMS over 1-100 Hz: a workshop floor near running machines."""
+        return cls(rms_vertical=2e-2, rms_horizontal=2e-2)
+
+    def apply(self, p: Any, ctx: dict[str, float]) -> None:
+        p.vib_on = 1
+
+    def signal(self, rng: Any, n: int, rate: float) -> Any:
+        """(n, 2) base accelerations (vertical, horizontal) [m/s^2] at ``rate`` [Hz] from ``rng``."""
+        import numpy as np
+        from scipy import signal as sig
+
+        sos = sig.butter(2, [self.band_low, self.band_high], btype="bandpass", fs=rate, output="sos")
+        out = np.empty((n, 2))
+        for k, rms in enumerate((self.rms_vertical, self.rms_horizontal)):
+            x = sig.sosfilt(sos, rng.standard_normal(n))
+            out[:, k] = rms * x / max(float(np.sqrt(np.mean(x**2))), 1e-300)
+        return out
+
+    def description(self) -> str:
+        return (
+            f"The base vibrates: {self.rms_vertical * 1e3:g} mm/s^2 RMS vertically and "
+            f"{self.rms_horizontal * 1e3:g} mm/s^2 horizontally over {self.band_low:g}-{self.band_high:g} Hz."
+        )
+
+    def equation(self) -> str:
+        return "x1'' += -a_bv(t), x3'' += -a_bh(t); a_b band-passed Gaussian noise (2nd-order Butterworth)"
+
+
 EFFECT_KINDS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (
         GuideFriction, NormalCogging, DetentForce, EndEffect, GuideMisalignment, CableCarrier,
         ThrustRipple, CommutationOffset, AmplifierDynamics, FieldShape, TiltedBase, CurrentSaturation,
-        CurrentSensorOffset, CurrentSensorGain, GapSensorZero,
+        CurrentSensorOffset, CurrentSensorGain, GapSensorZero, BaseVibration,
     )
 }  # fmt: skip
 """Every effect class by its ``kind``."""

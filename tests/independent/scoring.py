@@ -39,6 +39,8 @@ current_sensor_gain ``current_sensor_gain_mismatch``       the gains' mismatch a
                                                            electrical angle [1]
 gap_sensor_zero     ``gap_sensor_offset``                  magnetic gap minus the reading [m]
 =================== ====================================== =========================================
+
+``base_vibration`` (:data:`NOT_A_FINDING`) is not scored: nothing should be claimed for it.
 """
 
 from __future__ import annotations
@@ -141,9 +143,15 @@ class Score:
     notes: list[str] = field(default_factory=list)
 
 
+NOT_A_FINDING = frozenset({"base_vibration"})
+"""Kinds in a log's truth that no diagnosis should name: a disturbance that is no function of the
+stage's state (the base shaking). They are left out of the truth scored, so that a log with only
+such a kind scores as a clean log does."""
+
+
 def score(log: str, truth: dict, effects: list[dict]) -> Score:
     """Score one diagnosis (``effects``: the ranked list of claimed effects) against ``truth``."""
-    true_effects = truth.get("effects", [])
+    true_effects = [e for e in truth.get("effects", []) if e["kind"] not in NOT_A_FINDING]
     claimed = [e["name"] for e in effects]
     matched: dict[int, int] = {}  # claimed index -> true index
     for ci, name in enumerate(claimed):

@@ -296,8 +296,8 @@ def simulate(scenario: Scenario) -> Run:
     if rig.plant_substeps < 1 or rig.log_every < 1:
         raise ValueError("plant_substeps and log_every must be >= 1")
     seq = np.random.SeedSequence(scenario.seed)
-    # the fourth stream (measured currents' noise) leaves the first three as they were
-    rng_c, rng_r, rng_n, rng_i = (np.random.default_rng(s) for s in seq.spawn(4))
+    # later streams (measured currents' noise, the base's vibration) leave the first three as they were
+    rng_c, rng_r, rng_n, rng_i, rng_b = (np.random.default_rng(s) for s in seq.spawn(5))
     constants = (
         scenario.constants
         if scenario.constants is not None
@@ -318,11 +318,15 @@ def simulate(scenario: Scenario) -> Run:
     rec = np.zeros((n_rec, core.NREC))
     info = np.zeros(5, dtype=np.int32)
     ucmd = np.zeros((n_ctrl, 2))
+    shaking = [e for e in scenario.effects if hasattr(e, "signal")]
+    base_acc = np.zeros((n_ctrl, 2))
+    if shaking:
+        base_acc = np.ascontiguousarray(shaking[0].signal(rng_b, n_ctrl, rig.control_rate))
 
     params = build_params(scenario, constants)
     lib = core.load()
     t0 = time.perf_counter()
-    status = lib.simulate(ctypes.byref(params), n_ctrl, ref, noise, s0, rec, info, ucmd)
+    status = lib.simulate(ctypes.byref(params), n_ctrl, ref, noise, s0, rec, info, ucmd, base_acc)
     elapsed = time.perf_counter() - t0
     if status != 0:
         k = int(info[1])
