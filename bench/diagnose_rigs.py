@@ -8,18 +8,19 @@
     python bench/diagnose_rigs.py --sensor-pairs [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --friction-shapes [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --vibration [--rig obs2800] [--out ...]
+    python bench/diagnose_rigs.py ... --shake small|large
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
-The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with
-10 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser
-encoders, run its loop at 2 or 10 kHz, or log its current sensors instead of its commands
-(``measured``). Each rig below records a clean log and four single
-effects (large horizontal guide friction, normal cogging, a cable carrier, a commutation offset)
-with the independent generator (``tests/independent``, no code shared with ``maglev_oc.sim``), each
-is diagnosed with the defaults and scored as ``diagnose_score`` does: true effect first, no false
-claim, size within 30 %. Prints one line per log and the totals per rig; writes
-``OUT/summary.json``. Not run in CI.
+The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with 10
+um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser encoders,
+run its loop at 2 or 10 kHz, log its current sensors instead of its commands (``measured``), or be
+run by the two PID loops the papers identify with (``pid``). Each rig below records a clean log and
+four single effects (large horizontal guide friction, normal cogging, a cable carrier, a commutation
+offset) with the independent generator (``tests/independent``, no code shared with
+``maglev_oc.sim``), each is diagnosed with the defaults and scored as ``diagnose_score`` does: true
+effect first, no false claim, size within 30 %. Prints one line per log and the totals per rig;
+writes ``OUT/summary.json``. Not run in CI.
 
 ``--experiments [NAME ...]``: the generator's ``experiments`` set instead (``tests/independent/sets.py``),
 on the default rig: a user's experiments unlike the other sets' (set-point steps, a small
@@ -53,6 +54,9 @@ a constant force while the platform slides, which guides not level give too.
 large horizontal friction, normal cogging or an amplifier lag, on three seeds: a disturbance that
 no function of the state describes, where nothing should be claimed for it (the scoring leaves it
 out of the truth).
+
+``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
+it out of the truth): the other benches on a floor that is not quiet.
 
 ``--saturation``: the iron saturated by the stator current
 (``tests.independent.effects.CurrentSaturation``, the force per ampere halved at 30 A or 15 A),
@@ -96,6 +100,8 @@ RIGS = {
     # the amplifiers' current sensors logged instead of the commands, with 10 mA of white noise (a
     # Hall sensor of a 9 A amplifier through a 12-bit converter: 4.4 mA per count)
     "measured": {"logged_currents": "measured", "current_sensor_noise": 0.01},
+    # the papers' identification runs: two independent PID loops instead of the FL regulator
+    "pid": {"controller": "pid"},
 }
 """Rig settings (fields of ``tests.independent.simulate.Rig``) by name."""
 
@@ -288,6 +294,12 @@ def main() -> None:
         help="the rig of the --drawn, --drawn-pairs, "
         "--variants, --saturation, --sensors and --experiments logs (default: the generator's own)",
     )
+    parser.add_argument(
+        "--shake",
+        choices=("small", "large"),
+        default=None,
+        help="add the base's vibration (BaseVibration.small/large) to every log run",
+    )
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
     args = parser.parse_args()
@@ -378,6 +390,14 @@ def main() -> None:
                 stem = f"{rig_name}_{effect or 'clean'}"
                 scenario = Scenario(name=stem, seed=args.seed + k, effects=effects, rig=Rig(**RIGS[rig_name]))
                 groups.setdefault(rig_name, []).append((stem, scenario))
+    if args.shake:
+        from tests.independent.effects import BaseVibration
+
+        shaking = getattr(BaseVibration, args.shake)()
+        groups = {
+            g: [(stem, dataclasses.replace(sc, effects=(*sc.effects, shaking))) for stem, sc in runs]
+            for g, runs in groups.items()
+        }
     summary: dict[str, dict] = {}
     totals = [0, 0, 0]
     skipped: list[str] = []

@@ -282,6 +282,7 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
     double xiv[3] = {0, 0, 0}, xih[3] = {0, 0, 0};
     double vprev1 = 0.0, vprev2 = 0.0, yprev1 = 0.0, yprev3 = 0.0;
     double ia_q = 0.0, ia_d = 0.0; /* amplifier output (dq, commanded frame) */
+    double piv = 0.0, pih = 0.0;   /* the PID loops' error integrals */
     double aux[NAUX];
     int k, j, i, nrec = 0;
 
@@ -317,7 +318,19 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
         de2 = oh[1] - drh;
         v2 = p->Kv[0] * e1 + p->Kv[1] * de1 + p->Kv[2] * xiv[0] + p->Kv[3] * xiv[1] + p->Kv[4] * xiv[2];
         v1 = p->Kh[0] * e2 + p->Kh[1] * de2 + p->Kh[2] * xih[0] + p->Kh[3] * xih[1] + p->Kh[4] * xih[2];
-        info[2] += control_law(p, y1, v1, v2, &u1, &u2);
+        if (p->pid_on) {
+            /* two independent PID loops (the papers' identification runs) on the same errors and
+               observer velocities; the integrals by the rectangle rule, this sample's error last.
+               v1, v2 (what the observers predict with) are the accelerations the loops ask for */
+            v2 = -(p->pid_v[0] * e1 + p->pid_v[1] * de1 + p->pid_v[2] * piv);
+            v1 = -(p->pid_h[0] * e2 + p->pid_h[1] * de2 + p->pid_h[2] * pih);
+            u2 = p->pid_ieq + v2 / p->pid_bv;
+            u1 = v1 / p->pid_bh;
+            piv += e1 * p->Tc;
+            pih += e2 * p->Tc;
+        } else {
+            info[2] += control_law(p, y1, v1, v2, &u1, &u2);
+        }
         if (fabs(u1) > p->i_max || fabs(u2) > p->i_max) info[3]++;
         u1 = clip(u1, p->i_max);
         u2 = clip(u2, p->i_max);

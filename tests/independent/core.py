@@ -92,6 +92,9 @@ FIELDS: list[tuple[str, object]] = [
     ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D), ("csg_on", _I), ("csg_error", _D * 3),
     # the base vibrating (its acceleration is an array of simulate's)
     ("vib_on", _I),
+    # the papers' two PID regulators instead of the FL regulator: gains (kp, kd, ki) per axis,
+    # the inputs' gains b and the equilibrium current they were designed at
+    ("pid_on", _I), ("pid_v", _D * 3), ("pid_h", _D * 3), ("pid_bv", _D), ("pid_bh", _D), ("pid_ieq", _D),
 ]  # fmt: skip
 """The ``Params`` struct: (name, ctypes type) in declaration order."""
 

@@ -23,7 +23,16 @@ from typing import Any
 import numpy as np
 
 from . import core
-from .controller import K_H, K_V, OBSERVER_BANDWIDTH, OMEGA0, internal_model_matrices, observer_matrices
+from .controller import (
+    K_H,
+    K_V,
+    OBSERVER_BANDWIDTH,
+    OMEGA0,
+    PID_POLES,
+    internal_model_matrices,
+    observer_matrices,
+    pid_design,
+)
 from .effects import Effect
 from .physics import GEOMETRY, PAPERS_CONSTANTS, G, StageGeometry, field_prefactor
 from .reference import ReferenceSpec
@@ -74,6 +83,11 @@ class Rig:
         measured``).
     current_sensor_noise : float
         [A] standard deviation of the white noise on each measured current (``"measured"`` only).
+    controller : str
+        ``"fl"`` (the papers' FL output regulator) or ``"pid"`` (the two independent PID regulators
+        of the papers' identification runs, :func:`~tests.independent.controller.pid_design`, with
+        triple poles at ``-pid_poles`` rad/s (vertical, horizontal) on the linearization at
+        ``operating_gap`` [m]).
     """
 
     control_rate: float = 5000.0
@@ -93,12 +107,17 @@ class Rig:
     x3_limit: float = 0.08
     logged_currents: str = "commanded"
     current_sensor_noise: float = 0.0
+    controller: str = "fl"
+    pid_poles: tuple[float, float] = PID_POLES
+    operating_gap: float = 0.0195
 
     def __post_init__(self) -> None:
         if self.logged_currents not in ("commanded", "measured"):
             raise ValueError(
                 f"Rig.logged_currents must be 'commanded' or 'measured', got {self.logged_currents!r}"
             )
+        if self.controller not in ("fl", "pid"):
+            raise ValueError(f"Rig.controller must be 'fl' or 'pid', got {self.controller!r}")
         if not self.current_sensor_noise >= 0 or (
             self.current_sensor_noise and self.logged_currents != "measured"
         ):
@@ -149,6 +168,23 @@ class Rig:
 
     def controller_dict(self) -> dict[str, Any]:
         """The controller's settings for the truth file."""
+        if self.controller == "pid":
+            design = pid_design(self.operating_gap, self.pid_poles, self.controller_constants)
+            return {
+                "law": "two independent PID regulators: u2 = i_eq - (kp e1 + kd e1' + ki int e1) / b_v, "
+                "u1 = -(kp e2 + kd e2' + ki int e2) / b_h, designed on the model linearized at the "
+                "operating gap (triple poles at -pid_poles)",
+                "constants": dict(zip(("C1", "C2", "C3", "C4"), self.controller_constants, strict=True)),
+                "operating_gap_m": self.operating_gap,
+                "pid_poles_rad_per_s": list(self.pid_poles),
+                "gains_vertical_kp_kd_ki": list(design["vertical"]),
+                "gains_horizontal_kp_kd_ki": list(design["horizontal"]),
+                "b_v": design["b_v"],
+                "b_h": design["b_h"],
+                "i_eq_a": design["i_eq"],
+                "observer": "high-gain observer per axis (as the FL regulator's)",
+                "observer_bandwidth_rad_per_s": self.observer_bandwidth,
+            }
         return {
             "law": "papers' FL output regulator: u1 = -v1/L1(y1), u2 = (-L3 - sqrt(R))/(2 L4), "
             "R = L3^2 - 4 L4 (L4 u1^2 + L2 - G + v2) clipped at 0; v = K (e, e', xi), xi' = phi xi + N e",
@@ -270,6 +306,12 @@ def build_params(
     p.x3_max = rig.x3_limit
     p.com_cos, p.com_sin = 1.0, 0.0
     p.amp_peak = rig.amplifier_peak
+    if rig.controller == "pid":
+        design = pid_design(rig.operating_gap, rig.pid_poles, rig.controller_constants)
+        p.pid_on = 1
+        p.pid_v[:] = list(design["vertical"])
+        p.pid_h[:] = list(design["horizontal"])
+        p.pid_bv, p.pid_bh, p.pid_ieq = design["b_v"], design["b_h"], design["i_eq"]
     ctx = effect_context(scenario)
     keys = [e.key() for e in scenario.effects]
     if len(set(keys)) != len(keys):
