@@ -235,7 +235,20 @@ def truth_rows(st: ClosingTheLoopStudy) -> list[tuple[str, str, str, str]]:
     if m is not None:
         level_force = model.params.mass_horizontal * model.params.gravity * m.level_tilt
         eff = _effect(diag, "horizontal_guides_not_level")
-        if eff is None:
+        friction = _effect(diag, "guide_friction_horizontal")
+        if eff is None and friction is not None and "force_along_track" in friction.parameters:
+            # beside the friction the force is read two ways (pipeline._merged_friction_by_direction)
+            force = friction.parameters["force_along_track"]
+            rows.append(
+                (
+                    "horizontal guides off level (force along the track)",
+                    f"{level_force:.3g} N ({m.level_tilt * 1e3:g} mrad)",
+                    f"{_fmt_estimate(force.value, force.stderr)} N (with the friction)",
+                    _size_verdict([("force", force.value, force.stderr, level_force)])
+                    + "; or friction larger one way",
+                )
+            )
+        elif eff is None:
             rows.append(
                 (
                     "horizontal guides off level",
@@ -252,6 +265,17 @@ def truth_rows(st: ClosingTheLoopStudy) -> list[tuple[str, str, str, str]]:
                     f"{level_force:.3g} N ({m.level_tilt * 1e3:g} mrad)",
                     f"{_fmt_estimate(force.value, force.stderr)} N",
                     _size_verdict([("force", force.value, force.stderr, level_force)]),
+                )
+            )
+        if m.binding:
+            # the twin's binding raises both axes' Coulomb level by binding |x3|
+            along = [u for u in diag.unexplained if "friction changed along the track" in u.description]
+            rows.append(
+                (
+                    "guide binding",
+                    f"friction + {m.binding:g} N/m |x3|",
+                    f"{along[0].force_rms:.2g} N RMS, changing along the track" if along else "—",
+                    "unexplained, not named" if along else "not in the diagnosis's library",
                 )
             )
         rows.append(

@@ -352,6 +352,12 @@ def test_closing_the_loop_report_pages_and_truth(closing_the_loop_report):
     assert _numbers(_row(scorecard.rows, "horizontal guides off level")[1])[0] == pytest.approx(
         level, abs=5.1e-5
     )  # printed to 3 significant digits
+    # beside the friction the tilt's force is found in the friction's entry (read two ways:
+    # pipeline._merged_friction_by_direction), 0.0159 N for 0.0156, within the 30 %
+    found_level = _numbers(_row(scorecard.rows, "horizontal guides off level")[2])[0]
+    assert found_level == pytest.approx(level, rel=0.3)
+    # the twin's binding (friction rising by 3 N/m |x3|) is reported by its signature, not named
+    assert "changing along the track" in _row(scorecard.rows, "guide binding")[2]
     row = _row(scorecard.rows, "horizontal guide friction")
     assert _numbers(row[1])[:2] == pytest.approx([effects.friction_horizontal.coulomb, 1.0])
     found = next(e for e in diag.effects if e.name == "guide_friction_horizontal")

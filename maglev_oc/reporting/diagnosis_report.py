@@ -230,6 +230,24 @@ def scorecard_table(
 
 
 # --- the pages after the scorecard -----------------------------------------------------------------------
+TEXT_BLOCK_CHARS = 1800
+"""Paragraphs are shared out over pages in blocks of about this many characters (a third of a page
+of text): one block of them all ran over a page on the closing-the-loop report once its twin's
+friction was found changing along the track beside a tilt read two ways."""
+
+
+def _text_blocks(paragraphs: Sequence[str], limit: int = TEXT_BLOCK_CHARS) -> list[Text]:
+    """``paragraphs`` in order, in blocks of whole paragraphs of at most ``limit`` characters (a
+    longer paragraph is a block of its own), for the page plan to place (:func:`_plan`)."""
+    blocks: list[list[str]] = []
+    for para in paragraphs:
+        if blocks and sum(map(len, blocks[-1])) + len(para) <= limit:
+            blocks[-1].append(para)
+        else:
+            blocks.append([para])
+    return [Text(b) for b in blocks]
+
+
 def _finding_paragraphs(diag: Diagnosis) -> list[str]:
     """What was found, in the diagnosis's own sentences."""
     out = [f"Warning: {w}." for w in diag.warnings]
@@ -503,7 +521,7 @@ def write_diagnosis_report(
             first_page=True,
         )
         words = [*preamble, *_finding_paragraphs(diag), *epilogue]
-        found: list[Text | Table | Plot] = [Text(words)]
+        found: list[Text | Table | Plot] = list(_text_blocks(words))
         if diag.effects:
             found.append(
                 Table(
