@@ -1,6 +1,7 @@
 """Benchmark: our ``diagnose`` against PySINDy on the same independent logs, scored the same way.
 
     python bench/peer_pysindy.py [--set eleven] [--out bench/out/peer_pysindy]
+    python bench/peer_pysindy.py --logs DIR [--out ...]   # the logs (and truth files) in DIR
 
 The logs come from the independent generator (``python -m tests.independent.generate``, run as a
 subprocess into ``OUT/logs/<set>``; skipped when the set is already there), with a truth file
@@ -735,6 +736,9 @@ def main() -> int:
     ap.add_argument("--set", default="eleven", help="generator set: eleven, single, pairs, clean")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "peer_pysindy")
     ap.add_argument("--only", nargs="*", help="these log stems only")
+    ap.add_argument(
+        "--logs", type=Path, default=None, help="the CSV logs (with truth files) in this folder, not a set"
+    )
     ap.add_argument("--window", type=int, default=DEFAULT_WINDOW, help="Savitzky-Golay window [samples]")
     ap.add_argument("--differentiator", choices=("sfd", "savgol"), default=DEFAULT_DIFFERENTIATOR)
     ap.add_argument("--rule", choices=("min", "sparse"), default=DEFAULT_RULE)
@@ -757,7 +761,7 @@ def main() -> int:
     import casadi
 
     out = args.out
-    paths = generate(args.set, out / "logs" / args.set)
+    paths = sorted(args.logs.glob("*.csv")) if args.logs else generate(args.set, out / "logs" / args.set)
     if args.only:
         paths = [p for p in paths if p.stem in args.only]
     (out / "ours").mkdir(parents=True, exist_ok=True)
