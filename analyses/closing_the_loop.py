@@ -16,6 +16,7 @@ from maglev_oc.control.pid import paper_pid
 from maglev_oc.data.logs import Log
 from maglev_oc.diagnosis.feedback import CompensationStudy, compensation_study
 from maglev_oc.diagnosis.pipeline import Diagnosis, diagnose
+from maglev_oc.diagnosis.unexplained import FRICTION_ALONG_PROBE
 from maglev_oc.model.stage import StageModel
 from maglev_oc.reporting.diagnosis_plots import plain
 from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
@@ -269,7 +270,7 @@ def truth_rows(st: ClosingTheLoopStudy) -> list[tuple[str, str, str, str]]:
             )
         if m.binding:
             # the twin's binding raises both axes' Coulomb level by binding |x3|
-            along = [u for u in diag.unexplained if "friction changed along the track" in u.description]
+            along = [u for u in diag.unexplained if u.term and u.term.name == FRICTION_ALONG_PROBE]
             rows.append(
                 (
                     "guide binding",

@@ -155,6 +155,19 @@ class _Session:
     probes: dict
     logs: tuple[Log, ...]  # as given: an effect in the currents' rates is sized on a narrower band
     holdout_fraction: float
+    # the logs prepared on a fraction of the band, by fraction (:meth:`on_band`)
+    banded: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    def on_band(self, fraction: float):
+        """(data, train, hold) of the logs prepared on ``fraction`` of the band, prepared once; None
+        when they are too short for that band's longer filter."""
+        if fraction not in self.banded:
+            band = self.data.settings["bandwidth_hz"] * fraction
+            try:
+                self.banded[fraction] = _prepare(list(self.logs), self.holdout_fraction, band, 0.0)
+            except (InputError, LogError):
+                self.banded[fraction] = None
+        return self.banded[fraction]
 
     def design(self, model: StageModel, terms: Sequence) -> Design:
         return build_design(
@@ -836,12 +849,7 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
     off_band = _not_on_a_narrower_band(session, fitted, library, design, sel)
     if off_band:
         rejected.extend(off_band)
-        kept = [n for n in sel.selected if n not in {j.name for j in off_band}]
-        sel = dataclasses.replace(
-            sel,
-            steps=[st for st in sel.steps if st.chosen in kept],
-            final=fit_subset(design, ["base", *kept]),
-        )
+        sel = _without(sel, design, off_band)
     periods = unexplained_periods(tr)
     while True:
         chosen = [by_name[n] for n in sel.selected]
@@ -863,12 +871,15 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
         if not stale:
             return sel, not_sep, rejected, unexplained
         rejected.extend(stale)
-        kept = [n for n in sel.selected if n not in {j.name for j in stale}]
-        sel = dataclasses.replace(
-            sel,
-            steps=[st for st in sel.steps if st.chosen in kept],
-            final=fit_subset(design, ["base", *kept]),
-        )
+        sel = _without(sel, design, stale)
+
+
+def _without(sel: Selection, design: Design, dropped: Sequence[Judgement]) -> Selection:
+    """``sel`` with the chosen effects of ``dropped`` taken out and the rest refitted."""
+    kept = [n for n in sel.selected if n not in {j.name for j in dropped}]
+    return dataclasses.replace(
+        sel, steps=[st for st in sel.steps if st.chosen in kept], final=fit_subset(design, ["base", *kept])
+    )
 
 
 LAG_CHECK_BAND = 0.25
@@ -1071,11 +1082,10 @@ def _sized_on_band(
 ) -> dict[str, Estimate] | None:
     """``cand``'s parameters from the joint fit of the chosen effects on ``fraction`` times the band,
     with their own standard errors; None when the log is too short for that band's filter."""
-    band = session.data.settings["bandwidth_hz"] * fraction
-    try:
-        data, train, hold = _prepare(list(session.logs), session.holdout_fraction, band, 0.0)
-    except (InputError, LogError):
+    prepared = session.on_band(fraction)
+    if prepared is None:
         return None
+    data, train, hold = prepared
     design = build_design(
         data, fitted, terms=[c.term for c in chosen], fit=train, holdout=hold, weights=session.weights
     )

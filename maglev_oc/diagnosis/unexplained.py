@@ -52,7 +52,14 @@ from maglev_oc.regression.terms import REVERSAL_SPEED, AccelerationTerm, term_fu
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
-__all__ = ["BOTH_ENDS", "Unexplained", "along_the_stator", "find_unexplained", "rate_direction"]
+__all__ = [
+    "BOTH_ENDS",
+    "FRICTION_ALONG_PROBE",
+    "Unexplained",
+    "along_the_stator",
+    "find_unexplained",
+    "rate_direction",
+]
 
 
 @dataclass(frozen=True)
@@ -284,6 +291,40 @@ def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
     )
 
 
+class _AlongTravel(NamedTuple):
+    """Mean-free Legendre polynomials of the position (orders 1 to :data:`FORCE_PROBE_ORDER`) over
+    its logged range [lo, hi] (1st-99th percentile), for probes of something changing along it."""
+
+    lo: float
+    hi: float
+    shares: Callable  # x -> the polynomials at x[2], less their means over the logged samples
+    changes: Callable[[np.ndarray], tuple[float, float]]  # q -> sum_i q_i (P_i(-+1) - P_i(0))
+
+
+def _along_travel(data: PreparedLogs) -> _AlongTravel:
+    """The position basis of the force and friction probes: a change at each logged end relative to
+    the centre is sum_i q_i (P_i(+-1) - P_i(0)); an odd order is a slope (one end up, the other
+    down), an even one a bow (both ends down or both up)."""
+    x3 = data.x[2, data.valid]
+    lo, hi = (float(v) for v in np.percentile(x3, [1, 99]))
+    c, h = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-12)
+    orders = range(1, FORCE_PROBE_ORDER + 1)
+    means = [float(np.mean(b)) for b in legendre((x3 - c) / h, orders)]
+    centre = legendre(0.0, orders)
+    at_end = [
+        [float(e - m) for e, m in zip(legendre(end, orders), centre, strict=True)] for end in (-1.0, 1.0)
+    ]
+
+    def shares(x):
+        return [b - m for b, m in zip(legendre((x[2] - c) / h, orders), means, strict=True)]
+
+    def changes(q) -> tuple[float, float]:
+        low, high = (sum(float(qi) * d for qi, d in zip(q, row, strict=True)) for row in at_end)
+        return low, high
+
+    return _AlongTravel(lo, hi, shares, changes)
+
+
 def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
     """The motor's forces varying smoothly along the travel, one
     probe per moving axis: the thrust (horizontally) and, vertically, the magnets' attraction and the
@@ -300,15 +341,9 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
     ends, fitted it only as a growth at one end and a fall at the other, which they refuse.
     """
     ctx = LibraryContext(model, data)
-    lo, hi = ctx.position_range
-    c, h = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-12)
-    orders = range(1, FORCE_PROBE_ORDER + 1)
-    x3 = data.x[2, data.valid]
-    means = [float(np.mean(b)) for b in legendre((x3 - c) / h, orders)]
-    k = len(orders)
-
-    def shares(x):
-        return [b - m for b, m in zip(legendre((x[2] - c) / h, orders), means, strict=True)]
+    along = _along_travel(data)
+    lo, hi, shares = along.lo, along.hi, along.shares
+    k = FORCE_PROBE_ORDER
 
     def vertical(x, u, du, q):
         _, winding, magnets = ctx.force_terms(x, u)
@@ -320,18 +355,12 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
         p = shares(x)
         return sum((p[i] * q[i] for i in range(k)), ca.SX(0)) * thrust
 
-    # each force's share at a logged end relative to the centre of the travel:
-    # sum_i q_i (P_i(+-1) - P_i(0)); an odd order is a slope (one end up, the other down), an even
-    # one a bow (both ends down: end effects; both up: a field stronger towards the ends)
-    centre = legendre(0.0, orders)
-    at_end = [
-        [float(e - m) for e, m in zip(legendre(end, orders), centre, strict=True)] for end in (-1.0, 1.0)
-    ]
-
+    # each force's share at a logged end relative to the centre of the travel (both ends down: end
+    # effects; both up: a field stronger towards the ends)
     def changes(q) -> tuple[float, float]:
         """[%] the force's share at the low and the high logged end, relative to the centre."""
-        low, high = (100.0 * sum(float(qi) * d for qi, d in zip(q, row, strict=True)) for row in at_end)
-        return low, high
+        low, high = along.changes(q)
+        return 100.0 * low, 100.0 * high
 
     def ends(q) -> str:
         low, high = changes(q)
@@ -370,6 +399,10 @@ def _force_probes(data: PreparedLogs, model: StageModel) -> list[_Probe]:
     return out
 
 
+FRICTION_ALONG_PROBE = "probe_horizontal_friction_along_position"
+"""The name of the probe of the horizontal guides' friction changing along the track."""
+
+
 def _friction_along_track(
     data: PreparedLogs, model: StageModel, friction_axes: frozenset[str]
 ) -> list[_Probe]:
@@ -385,26 +418,18 @@ def _friction_along_track(
     probe explains it better, and says what it is."""
     if "horizontal" not in friction_axes or not data.moving[1]:
         return []
-    x3 = data.x[2, data.valid]
-    lo, hi = (float(v) for v in np.percentile(x3, [1, 99]))
-    c, h = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-12)
-    orders = range(1, FORCE_PROBE_ORDER + 1)
-    means = [float(np.mean(b)) for b in legendre((x3 - c) / h, orders)]
+    along = _along_travel(data)
+    lo, hi = along.lo, along.hi
     mass = model.params.mass_horizontal
 
     def build(x, u, du, q):  # q: the friction's change [N] per mean-free Legendre polynomial
-        shares = [b - m for b, m in zip(legendre((x[2] - c) / h, orders), means, strict=True)]
+        shares = along.shares(x)
         return (
             -ca.tanh(x[3] / REVERSAL_SPEED) * sum((q[i] * p for i, p in enumerate(shares)), ca.SX(0)) / mass
         )
 
-    centre = legendre(0.0, orders)
-    at_end = [
-        [float(e - m) for e, m in zip(legendre(end, orders), centre, strict=True)] for end in (-1.0, 1.0)
-    ]
-
     def detail(q) -> str:
-        low, high = (sum(float(qi) * d for qi, d in zip(q, row, strict=True)) for row in at_end)
+        low, high = along.changes(q)
         return (
             f" Fitted so, relative to the centre of the travel, the friction of the horizontal guides is "
             f"{low:+.2g} N at {lo * M_TO_MM:.0f} mm and {high:+.2g} N at {hi * M_TO_MM:.0f} mm: friction "
@@ -413,7 +438,7 @@ def _friction_along_track(
         )
 
     probe = _Probe(
-        _probe("probe_horizontal_friction_along_position", 1, build, len(orders)),
+        _probe(FRICTION_ALONG_PROBE, 1, build, FORCE_PROBE_ORDER),
         "position",
         "the horizontal position against the direction of motion (as if the guides' friction changed "
         "along the track)",
