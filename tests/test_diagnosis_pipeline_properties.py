@@ -104,7 +104,17 @@ def test_a_lag_is_reported_from_the_narrower_band_with_half_the_bands_difference
     d = build_design(data, model, terms=[lag.term], fit=train, holdout=hold)
     fit = fit_subset(d, list(d.groups))
     wide = lag.term.physical_parameters(*fit.group(d, lag.name), fitted_constants(fit))
-    session = SimpleNamespace(data=data, logs=(twin_log,), holdout_fraction=0.25, weights=d.weights)
+    session = pipeline_module._Session(
+        data=data,
+        model=model,
+        train=train,
+        hold=hold,
+        weights=d.weights,
+        settings=SelectionSettings(),
+        probes={},
+        logs=(twin_log,),
+        holdout_fraction=0.25,
+    )
     out = pipeline_module._on_a_narrower_band(wide, session, model, [lag], lag)
     narrow_data = prepare([twin_log], bandwidth=10.0 * RATE_TERM_BAND)
     n_train, n_hold = narrow_data.masks(0.25)
