@@ -9,6 +9,8 @@
     python bench/diagnose_rigs.py --friction-shapes [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py --vibration [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py ... --shake small|large
+    python bench/diagnose_rigs.py --warming [--rig obs2800] [--out ...]
+    python bench/diagnose_rigs.py ... --warm small|large
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
@@ -54,6 +56,12 @@ a constant force while the platform slides, which guides not level give too.
 large horizontal friction, normal cogging or an amplifier lag, on three seeds: a disturbance that
 no function of the state describes, where nothing should be claimed for it (the scoring leaves it
 out of the truth).
+
+``--warming``: the magnets warming during the run (``tests.independent.effects.MagnetWarming``: the
+field 0.28 and 1.1 % lower after 60 s), alone and beside large horizontal friction, normal cogging or
+an amplifier lag, on three seeds: forces that drift over the log, which no function of the state
+describes. ``--warm small|large`` adds the warming to every log of whatever runs (scored as a true
+effect).
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
 it out of the truth): the other benches on a floor that is not quiet.
@@ -227,6 +235,24 @@ def vibration() -> dict:
     }
 
 
+WARMING_SEEDS = (7401, 7402, 7403)
+"""Seeds of the ``--warming`` logs (one log per seed and case)."""
+
+
+def warming() -> dict:
+    """The ``--warming`` logs' effects by name: the magnets warming, alone and beside one effect."""
+    from tests.independent import effects as E
+
+    small, large = E.MagnetWarming.small(), E.MagnetWarming.large()
+    return {
+        "warm_small": (small,),
+        "warm_large": (large,),
+        "warm_large+friction_h": (large, E.GuideFriction.large("horizontal")),
+        "warm_large+cogging": (large, E.NormalCogging.large()),
+        "warm_large+lag": (large, E.AmplifierDynamics.large()),
+    }
+
+
 def sensor_pairs() -> dict:
     """The ``--sensor-pairs`` logs by name: a current sensor error beside another effect."""
     from tests.independent import effects as E
@@ -278,6 +304,9 @@ def main() -> None:
         "--vibration", action="store_true", help="score logs of a vibrating base (alone and beside an effect)"
     )
     parser.add_argument(
+        "--warming", action="store_true", help="score logs of magnets warming (alone and beside an effect)"
+    )
+    parser.add_argument(
         "--sensor-pairs", action="store_true", help="score current sensor errors beside other effects instead"
     )
     parser.add_argument(
@@ -299,6 +328,12 @@ def main() -> None:
         choices=("small", "large"),
         default=None,
         help="add the base's vibration (BaseVibration.small/large) to every log run",
+    )
+    parser.add_argument(
+        "--warm",
+        choices=("small", "large"),
+        default=None,
+        help="add the magnets' warming (MagnetWarming.small/large) to every log run",
     )
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
@@ -359,6 +394,11 @@ def main() -> None:
             for seed in VIBRATION_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
                 groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
+    elif args.warming:
+        for name, effects in warming().items():
+            for seed in WARMING_SEEDS:
+                scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
+                groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
     elif args.sensor_pairs:
         for k, (name, effects) in enumerate(sensor_pairs().items()):
             scenario = Scenario(name=name, seed=7100 + k, effects=effects, rig=rig)
@@ -396,6 +436,14 @@ def main() -> None:
         shaking = getattr(BaseVibration, args.shake)()
         groups = {
             g: [(stem, dataclasses.replace(sc, effects=(*sc.effects, shaking))) for stem, sc in runs]
+            for g, runs in groups.items()
+        }
+    if args.warm:
+        from tests.independent.effects import MagnetWarming
+
+        warm = getattr(MagnetWarming, args.warm)()
+        groups = {
+            g: [(stem, dataclasses.replace(sc, effects=(*sc.effects, warm))) for stem, sc in runs]
             for g, runs in groups.items()
         }
     summary: dict[str, dict] = {}

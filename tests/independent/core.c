@@ -74,11 +74,13 @@ static double lugre(double Fc, double Fs, double vs, double s0, double s1, doubl
 
 /*
  * Right-hand side of the plant. (iq_c, id_c) are the amplifier's output currents in the
- * commanded dq frame; the commutation error rotates them into the motor's true frame.
+ * commanded dq frame; the commutation error rotates them into the motor's true frame. warm is
+ * the magnets' field relative to its value at t = 0 as they warm (1 when they do not).
  * aux (may be NULL): true gap, actual i_q, actual i_d, horizontal and vertical friction
  * forces [N], magnetic normal force [N].
  */
-static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double *ds, double *aux)
+static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double warm, double *ds,
+                      double *aux)
 {
     const double x1 = s[0], x2 = s[1], x3 = s[2], x4 = s[3];
     double iq = iq_c * p->com_cos + id_c * p->com_sin;
@@ -135,6 +137,10 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
         fB = exp(-p->fs_k1 * d - p->fs_k2 * d * d);
         fBt = p->fs_thrust ? fB : 1.0;
     }
+    /* the magnets warming: their field, and every force it makes (attraction ~ B^2, thrust and the
+       i_d term ~ B), falls with their temperature; the armature's own attraction (L4) does not */
+    fB *= warm;
+    fBt *= warm;
     /* end effects: smooth loss of thrust and attraction near the stator ends */
     if (p->ee_on) {
         double loss = p->ee_profile == 0 ? exp((x3 - p->ee_xp) / p->ee_w) + exp((p->ee_xm - x3) / p->ee_w)
@@ -233,9 +239,9 @@ static double clip(double u, double lim) { return u > lim ? lim : (u < -lim ? -l
 
 /* --- exported helpers for the tests ------------------------------------------------------- */
 
-void eval_rhs(const Params *p, const double *s, double iq_c, double id_c, double *ds, double *aux)
+void eval_rhs(const Params *p, const double *s, double iq_c, double id_c, double warm, double *ds, double *aux)
 {
-    plant_rhs(p, s, iq_c, id_c, ds, aux);
+    plant_rhs(p, s, iq_c, id_c, warm, ds, aux);
 }
 
 int eval_control(const Params *p, double y1, double v1, double v2, double *u)
@@ -291,6 +297,9 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
 
     for (k = 0; k < n_ctrl; k++) {
         const double rv = ref[4 * k], drv = ref[4 * k + 1], rh = ref[4 * k + 2], drh = ref[4 * k + 3];
+        /* the magnets' temperature rises first-order towards heat_rise over the run (held over each
+           control period): field factor 1 - heat_coef dT(t_k); exactly 1 when off */
+        const double warm = p->heat_on ? 1.0 - p->heat_coef * p->heat_rise * (1.0 - exp(-k * p->Tc / p->heat_tau)) : 1.0;
         /* encoders */
         const double y1 = quantize(s[0] + noise[2 * k], p->q);
         const double y3 = quantize(s[2] + noise[2 * k + 1], p->q);
@@ -381,7 +390,7 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
             }
             if (j == 0 && k % p->record_every == 0) {
                 double *r = rec + (size_t)NREC * nrec++;
-                plant_rhs(p, s, iq0, id0, k1, aux);
+                plant_rhs(p, s, iq0, id0, warm, k1, aux);
                 r[0] = s[0];
                 r[1] = s[1];
                 r[2] = s[2];
@@ -402,17 +411,17 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
                 r[17] = iq0;
                 r[18] = id0;
             } else {
-                plant_rhs(p, s, iq0, id0, k1, NULL);
+                plant_rhs(p, s, iq0, id0, warm, k1, NULL);
             }
             shaken(p, base_acc, k, k1);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k1[i];
-            plant_rhs(p, st, iqh, idh, k2, NULL);
+            plant_rhs(p, st, iqh, idh, warm, k2, NULL);
             shaken(p, base_acc, k, k2);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k2[i];
-            plant_rhs(p, st, iqh, idh, k3, NULL);
+            plant_rhs(p, st, iqh, idh, warm, k3, NULL);
             shaken(p, base_acc, k, k3);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + h * k3[i];
-            plant_rhs(p, st, iq1, id1, k4, NULL);
+            plant_rhs(p, st, iq1, id1, warm, k4, NULL);
             shaken(p, base_acc, k, k4);
             for (i = 0; i < NSTATE; i++) s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             ia_q = iq1;

@@ -92,6 +92,9 @@ FIELDS: list[tuple[str, object]] = [
     ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D), ("csg_on", _I), ("csg_error", _D * 3),
     # the base vibrating (its acceleration is an array of simulate's)
     ("vib_on", _I),
+    # the magnets warming over the run: temperature coefficient of the field [1/K], final rise [K],
+    # thermal time constant [s]
+    ("heat_on", _I), ("heat_coef", _D), ("heat_rise", _D), ("heat_tau", _D),
     # the papers' two PID regulators instead of the FL regulator: gains (kp, kd, ki) per axis,
     # the inputs' gains b and the equilibrium current they were designed at
     ("pid_on", _I), ("pid_v", _D * 3), ("pid_h", _D * 3), ("pid_bv", _D), ("pid_bh", _D), ("pid_ieq", _D),
@@ -171,7 +174,7 @@ def load() -> ctypes.CDLL:
     pp = ctypes.POINTER(Params)
     lib.simulate.argtypes = [pp, _I, dp, dp, dp, dp, ip, dp, dp]
     lib.simulate.restype = _I
-    lib.eval_rhs.argtypes = [pp, dp, _D, _D, dp, dp]
+    lib.eval_rhs.argtypes = [pp, dp, _D, _D, _D, dp, dp]
     lib.eval_rhs.restype = None
     lib.eval_control.argtypes = [pp, _D, _D, _D, dp]
     lib.eval_control.restype = _I
@@ -179,8 +182,11 @@ def load() -> ctypes.CDLL:
     return lib
 
 
-def eval_rhs(params: Params, state: np.ndarray, iq: float, id_: float) -> tuple[np.ndarray, np.ndarray]:
-    """Plant right-hand side at ``state`` (6,) for amplifier currents (i_q, i_d) [A].
+def eval_rhs(
+    params: Params, state: np.ndarray, iq: float, id_: float, warm: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plant right-hand side at ``state`` (6,) for amplifier currents (i_q, i_d) [A] and the magnets'
+    field ``warm`` relative to its value at the start (``MagnetWarming``; 1: as at the start).
 
     Returns the derivative (6,) and the auxiliary values (true gap [m], actual i_q, i_d [A],
     horizontal and vertical friction forces [N], magnetic normal force [N]).
@@ -188,7 +194,7 @@ def eval_rhs(params: Params, state: np.ndarray, iq: float, id_: float) -> tuple[
     lib = load()
     ds = np.zeros(6)
     aux = np.zeros(6)
-    lib.eval_rhs(ctypes.byref(params), np.ascontiguousarray(state, dtype=float), iq, id_, ds, aux)
+    lib.eval_rhs(ctypes.byref(params), np.ascontiguousarray(state, dtype=float), iq, id_, warm, ds, aux)
     return ds, aux
 
 

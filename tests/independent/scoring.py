@@ -38,6 +38,8 @@ offset
 current_sensor_gain ``current_sensor_gain_mismatch``       the gains' mismatch at twice the
                                                            electrical angle [1]
 gap_sensor_zero     ``gap_sensor_offset``                  magnetic gap minus the reading [m]
+magnet_warming      ``magnet_field_drift``                 the field's change from the log's first
+                                                           sample to its last [1]
 =================== ====================================== =========================================
 
 ``base_vibration`` (:data:`NOT_A_FINDING`) is not scored: nothing should be claimed for it.
@@ -48,7 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from tests.independent.effects import EndEffect
+from tests.independent.effects import EndEffect, MagnetWarming
 
 SIZE_TOLERANCE = 0.30
 """Relative size error allowed (the diagnosis issue: 'size within 30 % of the truth')."""
@@ -71,6 +73,7 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "tilted_base": ("horizontal_guides_not_level",),
         "gap_sensor_zero": ("gap_sensor_offset",),
         "current_sensor_gain": ("current_sensor_gain_mismatch",),
+        "magnet_warming": ("magnet_field_drift",),
     }.get(kind, (kind,))
 
 
@@ -79,8 +82,9 @@ def _profile(x: float, p: dict) -> float:
     return EndEffect(**p).loss(x)
 
 
-def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
-    """(true size, claimed size) in the units of the table above, or None if not comparable."""
+def sizes(true_effect: dict, claimed: dict, duration: float | None = None) -> tuple[float, float] | None:
+    """(true size, claimed size) in the units of the table above, or None if not comparable
+    (``duration`` [s]: the log's, for an effect that changes over it)."""
     kind = true_effect["kind"]
     t = true_effect["parameters"]
     c = claimed.get("parameters", {})
@@ -124,6 +128,8 @@ def sizes(true_effect: dict, claimed: dict) -> tuple[float, float] | None:
             return true_effect.get("derived", {}).get("mismatch"), c["mismatch"]
         if kind == "gap_sensor_zero":
             return t["offset"], c["offset"]
+        if kind == "magnet_warming" and duration:
+            return MagnetWarming(**t).field_factor(duration) - 1, c["field_change_over_log"]
     except (KeyError, TypeError):
         return None
     return None
@@ -175,7 +181,7 @@ def score(log: str, truth: dict, effects: list[dict]) -> Score:
             size_right = False
             notes.append(f"{te['kind']} not claimed")
             continue
-        pair = sizes(te, effects[ci])
+        pair = sizes(te, effects[ci], truth.get("duration_s"))
         if pair is None or pair[0] is None or pair[1] is None:
             size_right = False
             notes.append(f"{te['kind']}: size not comparable")
