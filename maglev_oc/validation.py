@@ -346,6 +346,7 @@ def simulate_windows(
     """
     ts = data.sample_time
     x, u, du, other = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("o", 2)
+    place = ca.SX.sym("s")  # the place in the log, for a term that changes over it
     if axis is None:
         xx = x
     else:
@@ -355,16 +356,18 @@ def simulate_windows(
         xx = ca.vertcat(*rows)
     acc = model.f(xx, u)[[1, 3]]
     for term, coef in terms:
-        acc = acc + term.acceleration(coef)(xx, u, du)
+        acc = acc + term.acceleration_in_time(coef)(xx, u, du, place)
     rhs = ca.vertcat(xx[1], acc[0], xx[3], acc[1])
     if axis is not None:
         keep = ca.SX.zeros(4)
         keep[own] = rhs[own]
         rhs = keep
-    f = ca.Function("f", [x, u, du, other], [rhs])
+    f = ca.Function("f", [x, u, du, other, place], [rhs])
     # common subexpressions merged: the four stages share the model's magnet field and
     # coefficients (a quarter to a third fewer instructions over every window; the same values)
-    step = ca.Function("rk4", [x, u, du, other], [rk4_step(f, x, ts, u, du, other)], {"cse": True})
+    step = ca.Function(
+        "rk4", [x, u, du, other, place], [rk4_step(f, x, ts, u, du, other, place)], {"cse": True}
+    )
     sim = step.mapaccum("window", horizon)
     starts = np.asarray(starts, dtype=int)
     w = starts.size
@@ -374,7 +377,9 @@ def simulate_windows(
     take = (starts[:, None] + np.arange(horizon)[None, :]).ravel()  # samples k..k+h-1, window-major
     x0 = data.x[:, starts]
     o = 2 * (1 - axis) if axis is not None else 0
-    traj = NumpyCall(sim.map(w))(x0, data.u[:, take], data.du[:, take], data.x[o : o + 2, take + 1])[0]
+    traj = NumpyCall(sim.map(w))(
+        x0, data.u[:, take], data.du[:, take], data.x[o : o + 2, take + 1], data.log_place[None, take]
+    )[0]
     traj = np.asarray(traj).reshape(4, w, horizon)
     measured = data.x[:, take + 1].reshape(4, w, horizon)
     if axis is not None:

@@ -42,8 +42,17 @@ __all__ = [
     "within",
 ]
 
-VARIABLES = ("gap", "gap_rate", "position", "position_rate", "current_rate", "current", "axis_current")
-FAMILIES = ("friction", "periodic", "profile", "current", "constant", "geometry")
+VARIABLES = (
+    "gap",
+    "gap_rate",
+    "position",
+    "position_rate",
+    "current_rate",
+    "current",
+    "axis_current",
+    "time",
+)
+FAMILIES = ("friction", "periodic", "profile", "current", "constant", "geometry", "drift")
 MAX_FORCE_SHARE = 0.25
 """An effect whose RMS force exceeds this share of its axis's weight (M g) is not plausible as an
 unmodelled detail of a working stage: the papers' model predicts the equilibrium currents to

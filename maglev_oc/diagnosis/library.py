@@ -54,6 +54,7 @@ from maglev_oc.diagnosis.magnetics import (
     EndProfile,
     cogging_candidates,
     end_effects_candidate,
+    field_drift_candidate,
     field_shape_candidate,
     gap_dependence_candidate,
 )
@@ -147,7 +148,7 @@ def held_by_sticking_guides(c: Candidate) -> bool:
     beside 1 N of horizontal guide friction, a commutation offset's force over the stuck samples
     left the friction at 60 % of its size and the end effects unclaimed; beside 0.6 N of vertical
     friction a misalignment came out at 62 % of its slope (independent generator, set ``triples``)."""
-    return c.family not in ("friction", "profile") and c.variable != "gap"
+    return c.family not in ("friction", "profile", "drift") and c.variable != "gap"
 
 
 def _named(*names: str) -> Callable[[str], bool]:
@@ -168,6 +169,7 @@ _FAMILIES: tuple[
     (_named("end_effects"), lambda ctx, profile: [end_effects_candidate(ctx, profile)]),
     (_named("attraction_gap_dependence"), lambda ctx, _: [gap_dependence_candidate(ctx)]),
     (_named("magnet_field_gap_dependence"), lambda ctx, _: [field_shape_candidate(ctx)]),
+    (_named("magnet_field_drift"), lambda ctx, _: [field_drift_candidate(ctx)]),
     (_named("thrust_ripple"), lambda ctx, _: [ripple_candidate(ctx)]),
     (_named("commutation_offset"), lambda ctx, _: [commutation_candidate(ctx)]),
     (_named(LAG, LAG_VERTICAL), lambda ctx, _: lag_candidates(ctx)),

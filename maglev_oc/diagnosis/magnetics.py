@@ -34,6 +34,7 @@ __all__ = [
     "EndProfile",
     "cogging_candidates",
     "end_effects_candidate",
+    "field_drift_candidate",
     "field_shape_candidate",
     "gap_dependence_candidate",
 ]
@@ -416,4 +417,88 @@ def _gap_candidate(ctx: LibraryContext, *, field: bool) -> Candidate:
         bounded,
         says,
         thrust_proportional=field,
+    )
+
+
+FIELD_DRIFT_BOUND = 0.05
+"""The largest change of the magnets' field over one log that is physical: 5 % is 40 K of warming
+for neodymium magnets (-0.12 %/K), more than a stage's magnets see in minutes of running."""
+
+REMANENCE_PER_KELVIN = 1.2e-3
+"""[1/K] The fall of a neodymium (NdFeB) magnet's remanence per kelvin (reversible; 1.1-1.2e-3 for
+the sintered grades), to say a drift of the field as a temperature."""
+
+
+def field_drift_candidate(ctx: LibraryContext) -> Candidate:
+    """The magnets' field drifting over the log, as it does when they warm up during the run.
+
+    The stator's coils dissipate i^2 R and the magnets warm with them; a neodymium magnet's field
+    falls by about 0.12 % per kelvin. Every force the magnets make follows: the attraction with the
+    field squared, the thrust and the i_d part of the normal force with the field; the armature's
+    own attraction (C4) does not. The field is taken to change smoothly over the log,
+    1 + q1 P1(s) + q2 P2(s) with s from -1 at its first sample to +1 at its last and P1, P2 the
+    Legendre polynomials (mean-free over the log, so that the constants fitted beside it are the
+    log's mean), the same for both axes: a change of the attraction alone, or of the thrust alone,
+    is not this effect. The bow (P2) is a warming's approach to its running temperature; with a
+    straight line alone, the line fitted on the first three quarters of a log warming with a time
+    constant of its length missed the held-out last quarter by 0.03-0.05 m/s^2, seven times what a
+    150 Hz amplifier lag leaves.
+
+    Without it, a warming of 9 K over a 60 s log of the independent generator left a vertical
+    residual drifting by 0.5 N that no candidate of the state describes: the constant vertical force,
+    the attraction's gap dependence and a gap sensor's offset each took half of its held-out error
+    and were not separable, and a 150 Hz amplifier lag beside it was not found on 3 of 3 logs."""
+    c = ctx.references
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+    q = ca.SX.sym("q", 2)
+    thrust, _, magnets = ctx.force_terms(x, u)
+    magnet_normal = -c.C3 * ctx.shapes(x)[2] * u[1]  # the i_d part of the normal force: ~ the field
+    change = q[0] * s + q[1] * (1.5 * s**2 - 0.5)  # Legendre P1, P2: mean-free over the log
+    acc = change * ca.vertcat(2 * magnets + magnet_normal, thrust)
+    fn = ca.Function("fielddrift", [x, u, du, s, q], [acc], ["x", "u", "du", "s", "p"], ["acc"])
+
+    def physical(p, cov, consts):
+        r = ctx.reference_ratio("C2", consts)
+        change = delta_method(lambda v: 2 * r * v[0], p, cov, "1")  # P1(1) - P1(-1); P2's is zero
+        return {
+            "field_change_over_log": change,
+            "attraction_change_over_log": Estimate(2 * change.value, 2 * change.stderr, "1"),
+            "magnet_warming_if_thermal": Estimate(
+                -change.value / REMANENCE_PER_KELVIN, change.stderr / REMANENCE_PER_KELVIN, "K"
+            ),
+        }
+
+    def says(e):
+        change = e["field_change_over_log"]
+        warming = e["magnet_warming_if_thermal"]
+        cause = (
+            f"the magnets warming by about {abs(warming.value):.2g} K (neodymium loses about 0.12 % of its "
+            "field per kelvin)"
+            if change.value < 0
+            else f"the magnets cooling by about {abs(warming.value):.2g} K (a rig run hot before the log)"
+        )
+        return (
+            f"The magnets' forces drift over the log: their field changes by {fmt(change, 100, '%')} from "
+            f"its first sample to its last, the attraction by twice that. What gives it: {cause}, or an "
+            "amplifier's gain drifting. The constants found are the log's mean."
+        )
+
+    return Candidate(
+        AccelerationTerm(
+            "magnet_field_drift",
+            "The magnets' field changes during the run (they warm or cool), and with it the attraction, "
+            "the thrust and the i_d part of the normal force.",
+            "both",
+            ("P1", "P2"),
+            function=fn,
+            physical=physical,
+            signature="attraction- and thrust-proportional residual drifting steadily over the log",
+            in_time=True,
+        ),
+        "drift",
+        "time",
+        "a second run of the same trajectory once the rig has reached its running temperature (or the "
+        "magnets' temperature logged beside the run) separates a drift from the constants",
+        within("field_change_over_log", FIELD_DRIFT_BOUND, "field change over the log"),
+        says,
     )

@@ -57,8 +57,12 @@ def diagnosis_stage_file(diagnosis: Diagnosis, model: StageModel, geometry: Prov
             function_to_data(_effects_acceleration([e], with_inputs=False)) if _state_only(e) else None,
         )
         for e in diagnosis.effects
+        if not _drifts(e)
     )
     method = "diagnose: equation-error refit of C1..C4 with the selected effects (held-out validated)"
+    drifts = [e.name for e in diagnosis.effects if _drifts(e)]
+    if drifts:
+        method += f"; the forces drifted over the logs ({', '.join(drifts)}): C1..C4 are the logs' mean"
     return StageFile(
         model.params,
         constants,
@@ -71,6 +75,12 @@ def diagnosis_stage_file(diagnosis: Diagnosis, model: StageModel, geometry: Prov
             "effects": Provenance.now(sources, "diagnose: forward selection from the candidate library"),
         },
     )
+
+
+def _drifts(effect) -> bool:
+    """Whether a found effect is a drift over the logs (its terms change with the time in a log): no
+    part of the stage at any one time, so not one of the stage file's effects."""
+    return all(cand.term.in_time for cand, _ in effect.terms())
 
 
 def _constants_covariance(diagnosis: Diagnosis) -> np.ndarray | None:

@@ -14,6 +14,7 @@ _WORDS = {
     "constant_vertical_force": "constant vertical force",
     "attraction_gap_dependence": "gap dependence of the attraction",
     "magnet_field_gap_dependence": "gap dependence of the magnets' field",
+    "magnet_field_drift": "magnets' field drifting (warming)",
     "gap_sensor_offset": "gap sensor offset",
     "thrust_ripple": "thrust ripple",
     "guide_misalignment": "guides tilted against the stator",

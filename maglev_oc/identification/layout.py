@@ -78,6 +78,11 @@ class ParameterLayout:
         for term in terms:
             if not isinstance(term, AccelerationTerm):
                 raise TypeError(f"terms must be AccelerationTerm, got {type(term).__name__}")
+            if term.in_time:
+                raise InputError(
+                    f"terms: {term.name} changes over the log (in_time); the output-error fit simulates "
+                    "without the logs' times, so it takes only terms of the state and the currents"
+                )
         term_names = [t.name for t in terms]
         if len(set(term_names)) != len(term_names):
             raise InputError(f"terms: duplicate names {term_names}")
@@ -133,8 +138,9 @@ class ParameterLayout:
             acc = ca.mtimes(phi, c_vec) + b
             k = len(self.names) - sum(t.n_parameters for t in self.terms)
             for term in self.terms:
-                # the simulation has no current rates: terms see du = 0
-                acc = acc + term.function(x_true, u, ca.DM.zeros(2), theta[k : k + term.n_parameters])
+                # the simulation has no current rates: terms see du = 0 (and one that changes over
+                # the log is refused where the terms are given, its place in a log unknown here)
+                acc = acc + term.evaluate(x_true, u, ca.DM.zeros(2), 0.0, theta[k : k + term.n_parameters])
                 k += term.n_parameters
             return acc
 

@@ -88,6 +88,7 @@ EFFECT_NAMES = (
     r"current_saturation",
     r"current_sensor_offset",
     r"current_sensor_gain_mismatch",
+    r"magnet_field_drift",
 )
 """The names of the diagnosis library's effects (:mod:`maglev_oc.diagnosis.library`), as patterns."""
 _MAX_BYTES = 20_000_000  # [bytes] a stage file is a few kB per effect; refuse anything huge

@@ -226,6 +226,19 @@ class PreparedLogs:
         return int(self.t.size)
 
     @property
+    def log_place(self) -> np.ndarray:
+        """(n,) each sample's place in its log, from -1 at its first sample to +1 at its last (linear
+        in time): what a term that changes over the log reads (a constant drifting as the rig warms,
+        :attr:`~maglev_oc.regression.terms.AccelerationTerm.in_time`)."""
+        out = np.zeros(self.n)
+        for k in np.unique(self.segment):
+            mine = self.segment == k
+            t = self.t[mine]
+            lo, hi = float(t.min()), float(t.max())
+            out[mine] = 2.0 * (t - lo) / (hi - lo) - 1.0 if hi > lo else 0.0
+        return out
+
+    @property
     def n_logs(self) -> int:
         return len(self.sources)
 

@@ -130,11 +130,12 @@ class Design:
         raise KeyError(name)
 
 
-def _linearized(term: AccelerationTerm, xs, u, du, p0: ca.DM):
-    """A term's acceleration at the parameters ``p0`` and its Jacobian in them there."""
-    acc = term.function(xs, u, du, p0)
+def _linearized(term: AccelerationTerm, xs, u, du, s, p0: ca.DM):
+    """A term's acceleration at the parameters ``p0`` and its Jacobian in them there (``s``: the
+    place in the log, for a term that changes over it)."""
+    acc = term.evaluate(xs, u, du, s, p0)
     p = ca.SX.sym("p", term.n_parameters)
-    jac = ca.substitute(ca.jacobian(term.function(xs, u, du, p), p), p, p0)
+    jac = ca.substitute(ca.jacobian(term.evaluate(xs, u, du, s, p), p), p, p0)
     return acc, jac
 
 
@@ -161,10 +162,10 @@ values are the same to the bit."""
 
 
 def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[AccelerationTerm], at: np.ndarray):
-    """CasADi Function (x, u, du) -> (columns (2, P), known (2,), sensitivities (m,)) and, for each of
+    """CasADi Function (x, u, du, s) -> (columns (2, P), known (2,), sensitivities (m,)) and, for each of
     the m sensitivities, (column, axis, input, kind): d column / d u_input (kind 0) or
     d column / d du_input (kind 1), the structural nonzeros only."""
-    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     consts = np.asarray(model.constants.as_array(), dtype=float)
     names = [c for c in CONSTANT_NAMES if c in estimate]
     k = len(names) + (GAP_OFFSET in estimate)
@@ -184,7 +185,7 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     term_acc = []
     for term in terms:
         p0 = ca.DM(at[k : k + term.n_parameters])
-        acc, jac = _linearized(term, xs, u, du, p0)
+        acc, jac = _linearized(term, xs, u, du, s, p0)
         cols.extend(jac[:, i] for i in range(term.n_parameters))
         known = known + acc - jac @ p0
         term_acc.append(acc)
@@ -201,9 +202,9 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     outs, where = _sensitivities(flat, u, du)
     fn = ca.Function(
         "design",
-        [x, u, du],
+        [x, u, du, s],
         [cols_m, known, ca.vertcat(*outs)],
-        ["x", "u", "du"],
+        ["x", "u", "du", "s"],
         ["cols", "known", "sensitivities"],
         _CSE,
     )
@@ -212,17 +213,17 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
 
 def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
     """The terms' part of :func:`_symbolic` (no gap offset), each term's expressions built as there:
-    Function (x, u, du) -> (columns (2, P), known parts (2, K), sensitivities (m,)), the sensitivities'
+    Function (x, u, du, s) -> (columns (2, P), known parts (2, K), sensitivities (m,)), the sensitivities'
     (column, axis, input, kind) and, per term, the positions in the known parts of its
     acceleration at the linearization point and of its columns times that point (-1 where
     structurally zero: a linear term linearized at zero has neither)."""
-    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     delta = ca.SX.sym("delta")
     xs = ca.vertcat(x[0] + delta, x[1], x[2], x[3])
     cols, parts, slots = [], [], []
     for term, p_at in zip(terms, at, strict=True):
         p0 = ca.DM(p_at)
-        acc, jac = _linearized(term, xs, u, du, p0)
+        acc, jac = _linearized(term, xs, u, du, s, p0)
         cols.extend(jac[:, i] for i in range(term.n_parameters))
         slot = []
         for part in (acc, jac @ p0):
@@ -239,9 +240,9 @@ def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
     known = ca.horzcat(*parts) if parts else ca.SX.zeros(2, 0)
     fn = ca.Function(
         "design_terms",
-        [x, u, du],
+        [x, u, du, s],
         [cols_m, known, ca.vertcat(*outs)],
-        ["x", "u", "du"],
+        ["x", "u", "du", "s"],
         ["cols", "known", "sensitivities"],
         _CSE,
     )
@@ -544,6 +545,7 @@ def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int, n_known: int 
     output (2, n_known)), sensitivities (m, n). (One map over all samples would hold its output and
     the rearranged copy, each of the size of the columns, at once.)"""
     n = prep.n
+    place = prep.log_place[None, :]
     parts = 1 if n_known is None else n_known
     cols, known, sens = np.empty((P, 2, n)), np.empty((parts, 2, n)), np.empty((m, n))
     mapped: dict[int, NumpyCall] = {}
@@ -551,7 +553,7 @@ def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int, n_known: int 
         b = min(a + _CHUNK, n)
         if b - a not in mapped:  # one mapped Function per chunk length (two at most)
             mapped[b - a] = NumpyCall(fn.map(b - a))
-        c, k, s = mapped[b - a](prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b])
+        c, k, s = mapped[b - a](prep.x[:, a:b], prep.u[:, a:b], prep.du[:, a:b], place[:, a:b])
         # mapped outputs are concatenated sample by sample: (2, k P) -> (P, 2, k)
         cols[:, :, a:b] = c.reshape(2, b - a, P).transpose(2, 0, 1)
         known[:, :, a:b] = k.reshape(2, b - a, parts).transpose(2, 0, 1)

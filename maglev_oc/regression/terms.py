@@ -78,13 +78,21 @@ def _casadi_name(name: str) -> str:
     return clean if clean[:1].isalpha() else f"t_{clean}" if clean else "t"
 
 
-def _as_four_inputs(fn: ca.Function, n_p: int, name: str) -> ca.Function:
-    """Accept (x, u, p) Functions too (no dependence on the current rates)."""
+def _as_four_inputs(fn: ca.Function, n_p: int, name: str, in_time: bool = False) -> ca.Function:
+    """Accept (x, u, p) Functions too (no dependence on the current rates); a term ``in_time`` takes
+    (x, u, du, s, p) (:attr:`AccelerationTerm.in_time`)."""
     shapes = [(fn.size1_in(k), fn.size2_in(k)) for k in range(fn.n_in())]
     if fn.n_out() != 1 or (fn.size1_out(0), fn.size2_out(0)) != (2, 1):
         raise InputError(
             f"AccelerationTerm {name}: function must return acc (2) = (x2', x4'); it returns "
             f"{fn.n_out()} output(s) of shape {(fn.size1_out(0), fn.size2_out(0)) if fn.n_out() else None}"
+        )
+    if in_time:
+        if shapes == [(4, 1), (2, 1), (2, 1), (1, 1), (n_p, 1)]:
+            return fn
+        raise InputError(
+            f"AccelerationTerm {name}: a term in time must map (x (4), u (2), du (2), s (1), p ({n_p})) "
+            f"-> acc (2); its inputs are {shapes}"
         )
     if shapes == [(4, 1), (2, 1), (n_p, 1)]:
         x, u, du, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("p", n_p)
@@ -125,6 +133,12 @@ class AccelerationTerm:
         term fixes (a friction reversal width, a gap exponent); their spread is a model-form
         uncertainty.
     variant_note : str
+    in_time : bool
+        The acceleration also changes over the log (a constant drifting as the rig warms): the
+        function takes (x, u, du, s, p), s in [-1, 1] the sample's place in its log from the first
+        sample to the last (:attr:`~maglev_oc.regression.data.PreparedLogs.log_place`). Where no
+        time is at hand (:meth:`acceleration`: a controller's feedforward, a stage file) it is taken
+        at s = 0, the middle of the log.
 
     Attributes
     ----------
@@ -149,6 +163,7 @@ class AccelerationTerm:
     signature: str = ""
     variants: tuple[ca.Function, ...] = field(default=(), repr=False, compare=False)
     variant_note: str = ""
+    in_time: bool = False
     linear: bool = field(init=False, compare=False)
     features: ca.Function = field(init=False, repr=False, compare=False)
     offset: ca.Function = field(init=False, repr=False, compare=False)
@@ -191,36 +206,39 @@ class AccelerationTerm:
                 )
         if not isinstance(self.function, ca.Function):
             raise InputError(f"AccelerationTerm {self.name}: function must be a casadi.Function")
-        fn = _as_four_inputs(self.function, n_p, self.name)
+        fn = _as_four_inputs(self.function, n_p, self.name, self.in_time)
         set_(self, "function", fn)
-        set_(self, "variants", tuple(_as_four_inputs(v, n_p, self.name) for v in self.variants))
+        set_(self, "variants", tuple(_as_four_inputs(v, n_p, self.name, self.in_time) for v in self.variants))
         x, u, du, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("p", n_p)
-        acc = fn(x, u, du, p)
+        s = ca.SX.sym("s")
+        acc = self.evaluate(x, u, du, s, p)
         jac = ca.jacobian(acc, p)
         p0 = ca.DM(self.initial)
         set_(self, "linear", not ca.depends_on(jac, p))
+        inputs, names = [x, u, du], ["x", "u", "du"]
+        if self.in_time:
+            inputs, names = [*inputs, s], [*names, "s"]
         set_(
             self,
             "features",
-            ca.Function(
-                f"{_casadi_name(self.name)}_F",
-                [x, u, du],
-                [ca.substitute(jac, p, p0)],
-                ["x", "u", "du"],
-                ["F"],
-            ),
+            ca.Function(f"{_casadi_name(self.name)}_F", inputs, [ca.substitute(jac, p, p0)], names, ["F"]),
         )
         set_(
             self,
             "offset",
             ca.Function(
                 f"{_casadi_name(self.name)}_0",
-                [x, u, du],
+                inputs,
                 [ca.substitute(acc, p, ca.DM.zeros(n_p))],
-                ["x", "u", "du"],
+                names,
                 ["acc"],
             ),
         )
+
+    def evaluate(self, x, u, du, s, p):
+        """The acceleration (2) at the state ``x``, currents ``u``, their rates ``du``, the place
+        ``s`` in the log (read only by a term :attr:`in_time`) and the parameters ``p``."""
+        return self.function(x, u, du, s, p) if self.in_time else self.function(x, u, du, p)
 
     @property
     def n_parameters(self) -> int:
@@ -246,19 +264,33 @@ class AccelerationTerm:
         return bool(ca.depends_on(acc, du))
 
     def _symbolic(self) -> tuple[ca.SX, ca.SX, ca.SX]:
-        """(acc, u, du): the term's accelerations in symbols (x, u, du, p)."""
+        """(acc, u, du): the term's accelerations in symbols (x, u, du, [s,] p)."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
-        return self.function(x, u, du, ca.SX.sym("p", self.n_parameters)), u, du
+        return self.evaluate(x, u, du, ca.SX.sym("s"), ca.SX.sym("p", self.n_parameters)), u, du
 
     def acceleration(self, parameters) -> ca.Function:
-        """(x, u, du) -> acc (2) with the parameters fixed."""
+        """(x, u, du) -> acc (2) with the parameters fixed (a term :attr:`in_time` at the middle of
+        the log, s = 0)."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
         p = ca.DM(np.asarray(parameters, dtype=float).ravel())
         return ca.Function(
             f"{_casadi_name(self.name)}_acc",
             [x, u, du],
-            [self.function(x, u, du, p)],
+            [self.evaluate(x, u, du, 0.0, p)],
             ["x", "u", "du"],
+            ["acc"],
+        )
+
+    def acceleration_in_time(self, parameters) -> ca.Function:
+        """(x, u, du, s) -> acc (2) with the parameters fixed, s the place in the log (see
+        :attr:`in_time`; a term not in time ignores it)."""
+        x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+        p = ca.DM(np.asarray(parameters, dtype=float).ravel())
+        return ca.Function(
+            f"{_casadi_name(self.name)}_acc_t",
+            [x, u, du, s],
+            [self.evaluate(x, u, du, s, p)],
+            ["x", "u", "du", "s"],
             ["acc"],
         )
 
@@ -354,6 +386,8 @@ def held_by_guides(term: AccelerationTerm, held: Mapping[str, float]) -> Acceler
     only the motor's: the term's acceleration on that axis is multiplied by 1 - h exp(-(v / v_s)^2),
     v the axis velocity and v_s :data:`REVERSAL_SPEED`, as the friction term holds the modelled one.
     """
+    if term.in_time:
+        raise InputError(f"held_by_guides: {term.name} changes over the log; its share held is not modelled")
     x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
     scale = ca.vertcat(
         *(

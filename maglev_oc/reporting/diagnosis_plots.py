@@ -53,6 +53,7 @@ _VARIABLE = {
     "current_rate": ("rate of the axis's own current [A/s]", None),
     "current": ("the other axis's current [A]", None),
     "axis_current": ("the axis's own current [A]", None),
+    "time": ("time in the log [s]", lambda d: d.t),
 }
 
 
@@ -74,8 +75,8 @@ def _variable(diag: Diagnosis, effect: Effect, axis: int) -> tuple[str, np.ndarr
 def effect_contribution(diag: Diagnosis, effect: Effect) -> np.ndarray:
     """(2, n) [m/s^2] The effect's acceleration along the log, through the diagnosis's filter."""
     d = diag.data
-    term = effect.candidate.term.acceleration(effect.coefficients)
-    return d.filter(np.asarray(term.map(d.n)(d.x, d.u, d.du)))
+    term = effect.candidate.term.acceleration_in_time(effect.coefficients)
+    return d.filter(np.asarray(term.map(d.n)(d.x, d.u, d.du, d.log_place[None, :])))
 
 
 def panels(diag: Diagnosis) -> list[tuple[Effect, int]]:

@@ -1,0 +1,162 @@
+"""Magnets that warm during the run: the forces drift over the log, and a term may change over it.
+
+A stage's coils dissipate i^2 R and the magnets warm with them; a neodymium magnet's field falls
+by about 0.12 % per kelvin, and every force the magnets make follows (``tests.independent.effects
+.MagnetWarming``). Before the diagnosis had a term that changes over the log, such a drift (9 K,
+1.1 % of the field, over 60 s) was no function of the state it could describe: the constant
+vertical force, the attraction's gap dependence and a gap sensor's offset each took half of the
+held-out error and were not separable, nothing was claimed, and a 150 Hz amplifier lag beside it
+was not found on 3 of 3 logs (the held-out last quarter's error was the drift's). Logs from
+``tests/independent`` (no code shared with ``maglev_oc.sim``).
+"""
+
+from __future__ import annotations
+
+import json
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from maglev_oc.data.reading import read_log
+from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.errors import InputError
+from maglev_oc.identification.layout import ParameterLayout
+from maglev_oc.regression.data import prepare
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.terms import AccelerationTerm, held_by_guides
+from maglev_oc.validation import simulate_windows
+from tests.independent import core
+from tests.independent.effects import AmplifierDynamics, MagnetWarming
+from tests.independent.logio import write_log
+from tests.independent.physics import PAPERS_CONSTANTS, G, model_functions
+from tests.independent.scoring import score
+from tests.independent.simulate import Scenario, build_params, simulate
+from tests.test_regression import _synthetic
+
+
+def _drift(axis: int = 1) -> AccelerationTerm:
+    """q s on one axis: the simplest term in time."""
+    x, u, du, s, q = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s"), ca.SX.sym("q")
+    acc = ca.vertcat(q * s, 0) if axis == 0 else ca.vertcat(0, q * s)
+    fn = ca.Function("drift", [x, u, du, s, q], [acc])
+    return AccelerationTerm(
+        "drift",
+        "a force growing over the log",
+        ("vertical", "horizontal")[axis],
+        ("q",),
+        function=fn,
+        in_time=True,
+    )
+
+
+# --- the generator ---------------------------------------------------------------------------
+def test_the_generators_warm_magnets_scale_the_attraction_by_the_field_squared_and_the_rest_by_it():
+    # every force the magnets make follows their field: L2 with its square, L1 and L3 with it, L4
+    # (the armature's own attraction) not at all; the C core against the NumPy model to rounding
+    p = build_params(Scenario(name="p", seed=0), PAPERS_CONSTANTS)
+    rng = np.random.default_rng(3)
+    for w in (1.0, 0.99, 0.97):
+        gap, iq, id_ = rng.uniform(0.012, 0.026), rng.uniform(-3, 3), rng.uniform(-2, 5)
+        ds, _ = core.eval_rhs(p, np.array([gap, 0.0, 0.01, 0.0, 0, 0]), iq, id_, w)
+        L1, L2, L3, L4 = model_functions(gap, PAPERS_CONSTANTS)
+        assert ds[1] == pytest.approx(G - L4 * (iq**2 + id_**2) - w * L3 * id_ - w**2 * L2, rel=1e-12)
+        assert ds[3] == pytest.approx(-w * L1 * iq, rel=1e-12)
+
+
+def test_the_warming_follows_its_first_order_law():
+    # dT(t) = rise (1 - exp(-t / T)); the field 1 - c dT: 1 at the start, 1 - c rise long after
+    w = MagnetWarming.large()
+    assert w.field_factor(0.0) == 1.0
+    assert w.field_factor(60.0) == pytest.approx(1 - 1.2e-3 * 15 * (1 - np.exp(-1)), rel=1e-12)
+    assert w.field_factor(1e6) == pytest.approx(1 - 1.2e-3 * 15, rel=1e-12)
+    with pytest.raises(ValueError, match="time constant"):
+        MagnetWarming(time_constant=0.0)
+
+
+# --- terms that change over the log ------------------------------------------------------------
+@pytest.fixture(scope="module")
+def two_logs(model):
+    return prepare(
+        [_synthetic(model, seconds=8.0, seed=1), _synthetic(model, seconds=6.0, seed=2)], bandwidth=10.0
+    )
+
+
+def test_the_place_in_the_log_runs_from_minus_one_to_one_in_each_log(two_logs):
+    s = two_logs.log_place
+    for k in range(two_logs.n_logs):
+        mine = two_logs.segment == k
+        assert s[mine][0] == -1.0 and s[mine][-1] == 1.0
+        assert np.all(np.diff(s[mine]) > 0)
+        # linear in time: the middle sample's place is the middle time's
+        t = two_logs.t[mine]
+        assert np.interp(0.5 * (t[0] + t[-1]), t, s[mine]) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_term_in_time_has_its_place_in_the_design_and_none_where_time_is_unknown(model, two_logs):
+    term = _drift()
+    design = build_design(two_logs, model, estimate=("C1",), terms=[term])
+    col = design.columns[design.groups["drift"][0]]
+    valid = two_logs.valid
+    # the filter is symmetric with unit gain at zero frequency: a straight line passes it unchanged
+    np.testing.assert_allclose(col[1, valid], two_logs.log_place[valid], atol=1e-9)
+    assert np.all(col[0] == 0.0)
+    # without a time (a feedforward, a stage file) the term is taken at the middle of the log
+    x, u, du = np.zeros(4), np.zeros(2), np.zeros(2)
+    assert float(term.acceleration([2.0])(x, u, du)[1]) == 0.0
+    assert float(term.acceleration_in_time([2.0])(x, u, du, 0.5)[1]) == pytest.approx(1.0)
+    assert term.linear and not term.depends_on_inputs()
+
+
+def test_a_term_in_time_moves_the_simulated_windows_by_its_place_in_the_log(model, two_logs):
+    # a force q s over a 50 ms window moves the position by about q s h^2 / 2: forward late in the
+    # log, backward early (s = +-1), the same everywhere without it
+    starts = np.array([200, two_logs.n // 2 - 100])  # early in the first log, late in the second
+    h = 50
+    base, _ = simulate_windows(two_logs, starts, h, model)
+    with_drift, _ = simulate_windows(two_logs, starts, h, model, [(_drift(), [0.4])])
+    moved = with_drift[2, :, -1] - base[2, :, -1]
+    s = two_logs.log_place[starts]
+    expected = 0.4 * s * (h * two_logs.sample_time) ** 2 / 2
+    np.testing.assert_allclose(moved, expected, rtol=0.05)  # s changes by 1 % over a window
+
+
+def test_terms_in_time_are_refused_where_no_time_is_known(model):
+    with pytest.raises(InputError, match="changes over the log"):
+        ParameterLayout(model, estimate=("C1",), terms=(_drift(),))
+    with pytest.raises(InputError, match="changes over the log"):
+        held_by_guides(_drift(), {"horizontal": 0.5})
+    x, u, du, q = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("q")
+    four = ca.Function("f", [x, u, du, q], [ca.vertcat(q, 0)])
+    with pytest.raises(InputError, match="a term in time must map"):
+        AccelerationTerm("d", "", "vertical", ("q",), function=four, in_time=True)
+
+
+# --- the diagnosis ---------------------------------------------------------------------------------
+def _diagnosed(tmp_path, name: str, seed: int, *effects):
+    run = simulate(Scenario(name=name, seed=seed, effects=effects))
+    csv, truth = write_log(run, tmp_path, name)
+    out = diagnose([read_log(csv)], limits=False)
+    return out, score(name, json.loads(truth.read_text()), out.to_dict()["effects"])
+
+
+def test_warming_magnets_are_found_and_sized_and_a_lag_beside_them_is_found_again(tmp_path):
+    # warm_large+lag_7401: the field 1.14 % lower after 60 s (found -1.11 %), the lag 1.26 ms in all
+    # (found 1.3 ms); before, nothing was claimed
+    d, s = _diagnosed(tmp_path, "warm_lag", 7401, MagnetWarming.large(), AmplifierDynamics.large())
+    assert sorted(s.claimed) == ["current_amplifier_lag", "magnet_field_drift"]
+    assert s.size_right, s.notes  # both within the issue's 30 %
+    [drift] = [e for e in d.effects if e.name == "magnet_field_drift"]
+    said = drift.finding
+    assert "warming by about" in said and "from its first sample to its last" in said
+    # nothing left over: the confounded stand-ins of the drift are gone with it
+    assert not d.unexplained
+    assert not {"constant_vertical_force", "gap_sensor_offset"} & {n.name for n in d.not_separable}
+
+
+@pytest.mark.extended
+def test_a_small_warming_alone_is_found_and_sized(tmp_path):
+    # warm_small_7401: 0.28 % of the field over 60 s (6 K at 120 s), found -0.28 %
+    _, s = _diagnosed(tmp_path, "warm_small", 7401, MagnetWarming.small())
+    assert s.claimed == ["magnet_field_drift"]
+    assert s.size_right, s.notes
