@@ -60,7 +60,9 @@ out of the truth).
 ``--warming``: the magnets warming during the run (``tests.independent.effects.MagnetWarming``: the
 field 0.28 and 1.1 % lower after 60 s), alone and beside large horizontal friction, normal cogging or
 an amplifier lag, on three seeds: forces that drift over the log, which no function of the state
-describes. ``--warm small|large`` adds the warming to every log of whatever runs (scored as a true
+describes; and, as a drift that is not the magnets', large guide friction on either axis whose level
+falls by 30 % (time constant 60 s) as the guides' lubricant warms (``GuideFriction.warming_change``).
+``--warm small|large`` adds the magnets' warming to every log of whatever runs (scored as a true
 effect).
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
@@ -244,7 +246,11 @@ def warming() -> dict:
     from tests.independent import effects as E
 
     small, large = E.MagnetWarming.small(), E.MagnetWarming.large()
+    thinning = {"warming_change": -0.3, "warming_time_constant": 60.0}
     return {
+        # guides whose lubricant thins as they warm: a drift that is not the magnets'
+        "friction_h_thinning": (dataclasses.replace(E.GuideFriction.large("horizontal"), **thinning),),
+        "friction_v_thinning": (dataclasses.replace(E.GuideFriction.large("vertical"), **thinning),),
         "warm_small": (small,),
         "warm_large": (large,),
         "warm_large+friction_h": (large, E.GuideFriction.large("horizontal")),

@@ -148,7 +148,7 @@ def held_by_sticking_guides(c: Candidate) -> bool:
     beside 1 N of horizontal guide friction, a commutation offset's force over the stuck samples
     left the friction at 60 % of its size and the end effects unclaimed; beside 0.6 N of vertical
     friction a misalignment came out at 62 % of its slope (independent generator, set ``triples``)."""
-    return c.family not in ("friction", "profile", "drift") and c.variable != "gap"
+    return c.family not in ("friction", "profile") and c.variable != "gap"
 
 
 def _named(*names: str) -> Callable[[str], bool]:

@@ -447,7 +447,10 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     Without it, a warming of 9 K over a 60 s log of the independent generator left a vertical
     residual drifting by 0.5 N that no candidate of the state describes: the constant vertical force,
     the attraction's gap dependence and a gap sensor's offset each took half of its held-out error
-    and were not separable, and a 150 Hz amplifier lag beside it was not found on 3 of 3 logs."""
+    and were not separable, and a 150 Hz amplifier lag beside it was not found on 3 of 3 logs.
+    Sticking guides hold its force as they hold the others' (:func:`~maglev_oc.diagnosis.library
+    .held_by_sticking_guides`): unheld, beside vertical friction, it came out 40 % small on 2 of 24
+    drawn pairs with a small warming added (the field -0.16 and -0.18 % against -0.28 %)."""
     c = ctx.references
     x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     q = ca.SX.sym("q", 2)

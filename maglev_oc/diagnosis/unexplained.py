@@ -55,6 +55,7 @@ from maglev_oc.units import M_TO_MM, M_TO_UM
 __all__ = [
     "BOTH_ENDS",
     "FRICTION_ALONG_PROBE",
+    "FRICTION_OVER_TIME_PROBE",
     "Unexplained",
     "along_the_stator",
     "find_unexplained",
@@ -140,6 +141,7 @@ def find_unexplained(
         _probes(data, periods, friction)
         + _force_probes(data, model)
         + _friction_along_track(data, model, friction)
+        + _friction_over_time(data, model, friction)
     )
     if not probes:
         return []
@@ -445,6 +447,60 @@ def _friction_along_track(
         detail=detail,
     )
     return [probe]
+
+
+FRICTION_OVER_TIME_PROBE = "probe_{axis}_friction_over_time"
+"""The name of the probe of an axis's guide friction changing over the log (``axis`` filled in)."""
+
+
+def _friction_over_time(data: PreparedLogs, model: StageModel, friction_axes: frozenset[str]) -> list[_Probe]:
+    """Beside friction claimed on an axis, that friction's level changing over the log (guides whose
+    lubricant thins as they warm, or that run in): the smoothed sign of the velocity (the friction
+    term's) times the Legendre polynomials P1, P2 of the place in the log (mean-free over it,
+    :attr:`~maglev_oc.regression.data.PreparedLogs.log_place`), so that the friction found stays the
+    log's mean.
+
+    On six logs of the independent generator whose large guide friction fell by 30 % with a time
+    constant of 60 s (``bench/diagnose_rigs.py --warming``) the friction was claimed at its mean
+    level and nothing else, neither the magnets' drift (whose force follows the thrust and the
+    attraction, not the direction of motion) nor anything unexplained: the change went unsaid."""
+    out = []
+    for a, axis in enumerate(AXES[:2]):
+        if axis not in friction_axes or not data.moving[a]:
+            continue
+        v = 1 if a == 0 else 3  # the axis's velocity in the state
+        p = model.params
+        mass = p.mass_vertical if a == 0 else p.mass_horizontal
+        name = FRICTION_OVER_TIME_PROBE.format(axis=axis)
+        x, u, du, s, q = (
+            ca.SX.sym("x", 4),
+            ca.SX.sym("u", 2),
+            ca.SX.sym("du", 2),
+            ca.SX.sym("s"),
+            ca.SX.sym("q", 2),
+        )
+        val = -ca.tanh(x[v] / REVERSAL_SPEED) * (q[0] * s + q[1] * (1.5 * s**2 - 0.5)) / mass
+        fn = ca.Function(name, [x, u, du, s, q], [ca.vertcat(val, 0) if a == 0 else ca.vertcat(0, val)])
+        term = AccelerationTerm(name, "probe", axis, ("q0", "q1"), function=fn, in_time=True)
+
+        def detail(q, axis=axis) -> str:
+            change = 2.0 * float(q[0])  # P1 from -1 to +1; P2 is the same at both ends
+            return (
+                f" Fitted so, the friction of the {axis} guides changes by {change:+.2g} N from the log's "
+                "first sample to its last: friction that changes as the guides warm (their lubricant "
+                "thinning) or run in, which the friction found, the log's mean, does not model."
+            )
+
+        out.append(
+            _Probe(
+                term,
+                "time",
+                f"the time in the log against the direction of motion (as if the {axis} guides' friction "
+                "changed over the log)",
+                detail=detail,
+            )
+        )
+    return out
 
 
 def _best_probe(

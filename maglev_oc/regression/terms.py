@@ -386,9 +386,7 @@ def held_by_guides(term: AccelerationTerm, held: Mapping[str, float]) -> Acceler
     only the motor's: the term's acceleration on that axis is multiplied by 1 - h exp(-(v / v_s)^2),
     v the axis velocity and v_s :data:`REVERSAL_SPEED`, as the friction term holds the modelled one.
     """
-    if term.in_time:
-        raise InputError(f"held_by_guides: {term.name} changes over the log; its share held is not modelled")
-    x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     scale = ca.vertcat(
         *(
             1 - min(max(held.get(axis, 0.0), 0.0), 1.0) * ca.exp(-((x[vi] / REVERSAL_SPEED) ** 2))
@@ -397,6 +395,11 @@ def held_by_guides(term: AccelerationTerm, held: Mapping[str, float]) -> Acceler
     )
 
     def wrap(fn: ca.Function) -> ca.Function:
+        if term.in_time:  # (x, u, du, s, p)
+            p = ca.SX.sym("p", fn.size1_in(4))
+            return ca.Function(
+                fn.name(), [x, u, du, s, p], [fn(x, u, du, s, p) * scale], ["x", "u", "du", "s", "p"], ["acc"]
+            )
         p = ca.SX.sym("p", fn.size1_in(3))
         return ca.Function(
             fn.name(), [x, u, du, p], [fn(x, u, du, p) * scale], ["x", "u", "du", "p"], ["acc"]

@@ -74,14 +74,21 @@ static double lugre(double Fc, double Fs, double vs, double s0, double s1, doubl
 
 /*
  * Right-hand side of the plant. (iq_c, id_c) are the amplifier's output currents in the
- * commanded dq frame; the commutation error rotates them into the motor's true frame. warm is
- * the magnets' field relative to its value at t = 0 as they warm (1 when they do not).
+ * commanded dq frame; the commutation error rotates them into the motor's true frame. t [s] is
+ * the time in the run, for what changes as the rig warms (the magnets' field, the guides'
+ * friction; held over each control period by the caller).
  * aux (may be NULL): true gap, actual i_q, actual i_d, horizontal and vertical friction
  * forces [N], magnetic normal force [N].
  */
-static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double warm, double *ds,
+static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c, double t, double *ds,
                       double *aux)
 {
+    /* the magnets' temperature rises first-order towards heat_rise: field factor 1 - heat_coef dT(t);
+       the guides' friction level changes first-order by the share fh/fv_warm over the run as their
+       lubricant warms (each exactly 1 when off) */
+    const double warm = p->heat_on ? 1.0 - p->heat_coef * p->heat_rise * (1.0 - exp(-t / p->heat_tau)) : 1.0;
+    const double warm_h = p->fh_warm != 0.0 ? 1.0 + p->fh_warm * (1.0 - exp(-t / p->fh_warm_tau)) : 1.0;
+    const double warm_v = p->fv_warm != 0.0 ? 1.0 + p->fv_warm * (1.0 - exp(-t / p->fv_warm_tau)) : 1.0;
     const double x1 = s[0], x2 = s[1], x3 = s[2], x4 = s[3];
     double iq = iq_c * p->com_cos + id_c * p->com_sin;
     double id = id_c * p->com_cos - iq_c * p->com_sin;
@@ -195,11 +202,12 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
         double f = 1.0;
         if (p->fh_slope != 0.0) f *= 1.0 + p->fh_slope * x3;
         if (p->fh_asym != 0.0) f *= x4 > 0.0 ? 1.0 + p->fh_asym : 1.0 - p->fh_asym;
-        Ffh = lugre(f * p->fh_Fc, f * p->fh_Fs, p->fh_vs, p->fh_s0, p->fh_s1, p->fh_s2, x4, s[4], &ds[4]);
+        f *= warm_h;
+        Ffh = lugre(f * p->fh_Fc, f * p->fh_Fs, p->fh_vs, p->fh_s0, p->fh_s1, warm_h * p->fh_s2, x4, s[4], &ds[4]);
     }
     if (p->fv_on) {
-        const double f = p->fv_asym == 0.0 ? 1.0 : x2 > 0.0 ? 1.0 + p->fv_asym : 1.0 - p->fv_asym;
-        Ffv = lugre(f * p->fv_Fc, f * p->fv_Fs, p->fv_vs, p->fv_s0, p->fv_s1, p->fv_s2, x2, s[5], &ds[5]);
+        const double f = (p->fv_asym == 0.0 ? 1.0 : x2 > 0.0 ? 1.0 + p->fv_asym : 1.0 - p->fv_asym) * warm_v;
+        Ffv = lugre(f * p->fv_Fc, f * p->fv_Fs, p->fv_vs, p->fv_s0, p->fv_s1, warm_v * p->fv_s2, x2, s[5], &ds[5]);
     }
 
     ds[0] = x2;
@@ -239,9 +247,9 @@ static double clip(double u, double lim) { return u > lim ? lim : (u < -lim ? -l
 
 /* --- exported helpers for the tests ------------------------------------------------------- */
 
-void eval_rhs(const Params *p, const double *s, double iq_c, double id_c, double warm, double *ds, double *aux)
+void eval_rhs(const Params *p, const double *s, double iq_c, double id_c, double t, double *ds, double *aux)
 {
-    plant_rhs(p, s, iq_c, id_c, warm, ds, aux);
+    plant_rhs(p, s, iq_c, id_c, t, ds, aux);
 }
 
 int eval_control(const Params *p, double y1, double v1, double v2, double *u)
@@ -297,9 +305,7 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
 
     for (k = 0; k < n_ctrl; k++) {
         const double rv = ref[4 * k], drv = ref[4 * k + 1], rh = ref[4 * k + 2], drh = ref[4 * k + 3];
-        /* the magnets' temperature rises first-order towards heat_rise over the run (held over each
-           control period): field factor 1 - heat_coef dT(t_k); exactly 1 when off */
-        const double warm = p->heat_on ? 1.0 - p->heat_coef * p->heat_rise * (1.0 - exp(-k * p->Tc / p->heat_tau)) : 1.0;
+        const double tk = k * p->Tc; /* what warms over the run is held over each control period */
         /* encoders */
         const double y1 = quantize(s[0] + noise[2 * k], p->q);
         const double y3 = quantize(s[2] + noise[2 * k + 1], p->q);
@@ -390,7 +396,7 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
             }
             if (j == 0 && k % p->record_every == 0) {
                 double *r = rec + (size_t)NREC * nrec++;
-                plant_rhs(p, s, iq0, id0, warm, k1, aux);
+                plant_rhs(p, s, iq0, id0, tk, k1, aux);
                 r[0] = s[0];
                 r[1] = s[1];
                 r[2] = s[2];
@@ -411,17 +417,17 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
                 r[17] = iq0;
                 r[18] = id0;
             } else {
-                plant_rhs(p, s, iq0, id0, warm, k1, NULL);
+                plant_rhs(p, s, iq0, id0, tk, k1, NULL);
             }
             shaken(p, base_acc, k, k1);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k1[i];
-            plant_rhs(p, st, iqh, idh, warm, k2, NULL);
+            plant_rhs(p, st, iqh, idh, tk, k2, NULL);
             shaken(p, base_acc, k, k2);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k2[i];
-            plant_rhs(p, st, iqh, idh, warm, k3, NULL);
+            plant_rhs(p, st, iqh, idh, tk, k3, NULL);
             shaken(p, base_acc, k, k3);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + h * k3[i];
-            plant_rhs(p, st, iq1, id1, warm, k4, NULL);
+            plant_rhs(p, st, iq1, id1, tk, k4, NULL);
             shaken(p, base_acc, k, k4);
             for (i = 0; i < NSTATE; i++) s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             ia_q = iq1;

@@ -68,6 +68,8 @@ FIELDS: list[tuple[str, object]] = [
     ("fv_on", _I), ("fv_Fc", _D), ("fv_Fs", _D), ("fv_vs", _D), ("fv_s0", _D), ("fv_s1", _D), ("fv_s2", _D),
     # the friction's level along the track (horizontal) and its difference between the directions
     ("fh_slope", _D), ("fh_asym", _D), ("fv_asym", _D),
+    # the friction's level changing first-order over the run as the guides warm: share, time constant
+    ("fh_warm", _D), ("fh_warm_tau", _D), ("fv_warm", _D), ("fv_warm_tau", _D),
     # normal cogging, longitudinal cogging (detent)
     ("cn_on", _I), ("cn_amp", _D * 3), ("cn_period", _D * 3), ("cn_phase", _D * 3), ("cn_decay", _D * 3),
     ("cn_gref", _D),
@@ -183,10 +185,10 @@ def load() -> ctypes.CDLL:
 
 
 def eval_rhs(
-    params: Params, state: np.ndarray, iq: float, id_: float, warm: float = 1.0
+    params: Params, state: np.ndarray, iq: float, id_: float, t: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Plant right-hand side at ``state`` (6,) for amplifier currents (i_q, i_d) [A] and the magnets'
-    field ``warm`` relative to its value at the start (``MagnetWarming``; 1: as at the start).
+    """Plant right-hand side at ``state`` (6,) for amplifier currents (i_q, i_d) [A] at time ``t`` [s]
+    into the run (what warms over it: ``MagnetWarming``, ``GuideFriction.warming_change``).
 
     Returns the derivative (6,) and the auxiliary values (true gap [m], actual i_q, i_d [A],
     horizontal and vertical friction forces [N], magnetic normal force [N]).
@@ -194,7 +196,7 @@ def eval_rhs(
     lib = load()
     ds = np.zeros(6)
     aux = np.zeros(6)
-    lib.eval_rhs(ctypes.byref(params), np.ascontiguousarray(state, dtype=float), iq, id_, warm, ds, aux)
+    lib.eval_rhs(ctypes.byref(params), np.ascontiguousarray(state, dtype=float), iq, id_, t, ds, aux)
     return ds, aux
 
 

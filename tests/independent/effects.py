@@ -152,6 +152,13 @@ class GuideFriction(Effect):
     direction_asymmetry: float = _p(
         0.0, "1", "F_C and F_S times 1 + a moving forward (v > 0), 1 - a backward (seals, a rail's twist)"
     )
+    warming_change: float = _p(
+        0.0,
+        "1",
+        "F_C, F_S and sigma_2 times 1 + c (1 - exp(-t / T)): the share the friction changes by as the "
+        "guides' lubricant warms over the run (< 0: it thins)",
+    )
+    warming_time_constant: float = _p(60.0, "s", "time constant T of the guides' warming")
 
     kind: ClassVar[str] = "guide_friction"
 
@@ -162,8 +169,14 @@ class GuideFriction(Effect):
             raise ValueError("GuideFriction: need 0 < coulomb_force <= static_force [N]")
         if self.level_slope and self.axis_ != "horizontal":
             raise ValueError("GuideFriction.level_slope is along the track: horizontal guides only")
-        if not (abs(self.direction_asymmetry) < 1 and abs(self.level_slope) * 0.1 < 1):
-            raise ValueError("GuideFriction: the friction must stay positive (|a| < 1, |slope| x3 < 1)")
+        if not (
+            abs(self.direction_asymmetry) < 1 and abs(self.level_slope) * 0.1 < 1 and self.warming_change > -1
+        ):
+            raise ValueError(
+                "GuideFriction: the friction must stay positive (|a| < 1, |slope| x3 < 1, change > -1)"
+            )
+        if not self.warming_time_constant > 0:
+            raise ValueError("GuideFriction.warming_time_constant must be > 0 [s]")
 
     def axis_name(self) -> str:
         return self.axis_
@@ -201,6 +214,8 @@ class GuideFriction(Effect):
         if self.axis_ == "horizontal":
             values["slope"] = self.level_slope
         values["asym"] = self.direction_asymmetry
+        values["warm"] = self.warming_change
+        values["warm_tau"] = self.warming_time_constant
         for name, val in values.items():
             setattr(p, f"{pre}_{name}", val)
 
@@ -225,13 +240,19 @@ class GuideFriction(Effect):
             words.append(
                 f"{self.direction_asymmetry:+.0%} moving forward, {-self.direction_asymmetry:+.0%} backward"
             )
+        if self.warming_change:
+            words.append(
+                f"{self.warming_change:+.0%} of its level as the guides warm (time constant "
+                f"{self.warming_time_constant:g} s)"
+            )
         return "; " + ", ".join(words) if words else ""
 
     def equation(self) -> str:
         return (
             "dz/dt = v - s0 |v| z / g(v), g(v) = Fc + (Fs - Fc) exp(-(v/vs)^2); "
             "F_f = s0 z + s1 exp(-(v/vs)^2) dz/dt + s2 v, opposing v; Fc, Fs times "
-            "(1 + level_slope x3) (1 + direction_asymmetry sign(v))"
+            "(1 + level_slope x3) (1 + direction_asymmetry sign(v)); Fc, Fs, s2 times "
+            "(1 + warming_change (1 - exp(-t / warming_time_constant)))"
         )
 
     def derived(self, ctx: dict[str, float]) -> dict[str, float]:
