@@ -482,8 +482,8 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
         )
         return (
             f"The magnets' forces drift over the log: their field changes by {fmt(change, 100, '%')} from "
-            f"its first sample to its last, the attraction by twice that. What gives it: {cause}, or an "
-            "amplifier's gain drifting. The constants found are the log's mean."
+            f"its first sample to its last, the attraction by twice that. What gives it: {cause}. The "
+            "constants found are the log's mean."
         )
 
     return Candidate(
