@@ -61,7 +61,9 @@ out of the truth).
 field 0.28 and 1.1 % lower after 60 s), alone and beside large horizontal friction, normal cogging or
 an amplifier lag, on three seeds: forces that drift over the log, which no function of the state
 describes; and, as a drift that is not the magnets', large guide friction on either axis whose level
-falls by 30 % (time constant 60 s) as the guides' lubricant warms (``GuideFriction.warming_change``).
+falls by 30 % (time constant 60 s) as the guides' lubricant warms (``GuideFriction.warming_change``);
+and a gap reading whose zero drifts by 20 or 50 um (time constant 60 s) as the frame warms
+(``GapSensorZero.drift``), which gives the forces of the magnets' drift.
 ``--warm small|large`` adds the magnets' warming to every log of whatever runs (scored as a true
 effect).
 
@@ -251,6 +253,9 @@ def warming() -> dict:
         # guides whose lubricant thins as they warm: a drift that is not the magnets'
         "friction_h_thinning": (dataclasses.replace(E.GuideFriction.large("horizontal"), **thinning),),
         "friction_v_thinning": (dataclasses.replace(E.GuideFriction.large("vertical"), **thinning),),
+        # a gap reading that drifts as the frame warms: the same forces as the magnets' drift
+        "gap_zero_drift_20um": (E.GapSensorZero(offset=0.0, drift=2e-5),),
+        "gap_zero_drift_50um": (E.GapSensorZero(offset=0.0, drift=5e-5),),
         "warm_small": (small,),
         "warm_large": (large,),
         "warm_large+friction_h": (large, E.GuideFriction.large("horizontal")),

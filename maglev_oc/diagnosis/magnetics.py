@@ -450,8 +450,23 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     and were not separable, and a 150 Hz amplifier lag beside it was not found on 3 of 3 logs.
     Sticking guides hold its force as they hold the others' (:func:`~maglev_oc.diagnosis.library
     .held_by_sticking_guides`): unheld, beside vertical friction, it came out 40 % small on 2 of 24
-    drawn pairs with a small warming added (the field -0.16 and -0.18 % against -0.28 %)."""
+    drawn pairs with a small warming added (the field -0.16 and -0.18 % against -0.28 %).
+
+    A gap reading that drifts (the frame or the gap sensor's mount expanding as the rig warms) gives
+    the same forces: the attraction falls with the gap about twice as fast as the thrust, as it does
+    with the field. On four logs of the independent generator whose gap zero drifted by 13 and
+    32 um over 60 s and nothing else, this effect was claimed at an attraction change of -0.15 and
+    -0.36 %, the model's own attraction's slope with the gap times those drifts. No log of the stage
+    tells the two apart, so the effect is named by what it is, the magnets' forces drifting, and
+    both readings are given: the magnets' warming in kelvin and the gap reading's drift in um."""
     c = ctx.references
+    lo, hi = ctx.gap_range
+    centre, h = 0.5 * (lo + hi), 1e-5
+    # [1/m] the model's log-slope of the attraction with the gap at the centre of the logged gaps
+    # (about -120 /m): a gap reading off by dg changes the attraction by that times dg
+    attraction_slope = (
+        math.log(float(ctx.shapes([centre + h])[1])) - math.log(float(ctx.shapes([centre - h])[1]))
+    ) / (2 * h)
     x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     q = ca.SX.sym("q", 2)
     thrust, _, magnets = ctx.force_terms(x, u)
@@ -469,11 +484,15 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
             "magnet_warming_if_thermal": Estimate(
                 -change.value / REMANENCE_PER_KELVIN, change.stderr / REMANENCE_PER_KELVIN, "K"
             ),
+            "gap_reading_drift_if_sensor": Estimate(
+                2 * change.value / attraction_slope, 2 * change.stderr / abs(attraction_slope), "m"
+            ),
         }
 
     def says(e):
         change = e["field_change_over_log"]
         warming = e["magnet_warming_if_thermal"]
+        gap = e["gap_reading_drift_if_sensor"]
         cause = (
             f"the magnets warming by about {abs(warming.value):.2g} K (neodymium loses about 0.12 % of its "
             "field per kelvin)"
@@ -482,8 +501,11 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
         )
         return (
             f"The magnets' forces drift over the log: their field changes by {fmt(change, 100, '%')} from "
-            f"its first sample to its last, the attraction by twice that. What gives it: {cause}. The "
-            "constants found are the log's mean."
+            f"its first sample to its last, the attraction by twice that. What gives it: {cause}, or the "
+            f"gap reading drifting by {fmt(gap, 1e6, 'um')} over the log (the frame or the gap sensor's "
+            "mount expanding as the rig warms), which gives the same forces; the magnets' temperature "
+            "logged, or the gap reading checked against a gauge before and after a run, tells them apart. "
+            "The constants found are the log's mean."
         )
 
     return Candidate(

@@ -135,7 +135,9 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
         }
     }
     /* the gap sensor's zero: the magnetic gap is the reading plus gap_zero */
-    const double g = x1 + delta + p->gap_zero;
+    /* ... and its drift as the frame and the sensor's mount warm (first-order; none when off) */
+    const double zero_drift = p->gz_drift != 0.0 ? p->gz_drift * (1.0 - exp(-t / p->gz_drift_tau)) : 0.0;
+    const double g = x1 + delta + p->gap_zero + zero_drift;
     model_L(p, Ctrue, g, L);
 
     /* magnets' field differing smoothly from the closed form */

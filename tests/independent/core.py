@@ -92,6 +92,8 @@ FIELDS: list[tuple[str, object]] = [
     ("sat_on", _I), ("sat_current", _D),
     # phase current sensors' offsets, gap sensor's zero
     ("cso_on", _I), ("cso_offset", _D * 3), ("gap_zero", _D), ("csg_on", _I), ("csg_error", _D * 3),
+    # the gap sensor's zero drifting as the frame warms: the drift [m] and its time constant [s]
+    ("gz_drift", _D), ("gz_drift_tau", _D),
     # the base vibrating (its acceleration is an array of simulate's)
     ("vib_on", _I),
     # the magnets warming over the run: temperature coefficient of the field [1/K], final rise [K],

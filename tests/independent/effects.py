@@ -1099,14 +1099,17 @@ class GapSensorZero(Effect):
 
     The vertical encoder is zeroed against a stopper whose height is known to a fraction of a
     millimetre; every force of the gap is felt at the magnetic gap while the controller and the
-    log see ``x1``:
+    log see ``x1``. Optionally the zero drifts during the run as the frame and the sensor's mount
+    warm and expand (first-order, ``drift`` in all):
 
     .. math::
 
-        g = x_1 + \\mathrm{offset}
+        g = x_1 + \\mathrm{offset} + \\mathrm{drift} (1 - e^{-t/T})
     """
 
     offset: float = _p(2e-4, "m", "magnetic gap minus the encoder's reading")
+    drift: float = _p(0.0, "m", "how far the zero moves as the rig warms (first-order, over the run)")
+    drift_time_constant: float = _p(60.0, "s", "time constant T of the zero's drift")
 
     kind: ClassVar[str] = "gap_sensor_zero"
     axis: ClassVar[str] = "both"
@@ -1121,17 +1124,28 @@ class GapSensorZero(Effect):
         """-0.5 mm."""
         return cls(offset=-5e-4)
 
+    def __post_init__(self) -> None:
+        if not self.drift_time_constant > 0:
+            raise ValueError("GapSensorZero.drift_time_constant must be > 0 [s]")
+
     def apply(self, p: Any, ctx: dict[str, float]) -> None:
         p.gap_zero = self.offset
+        p.gz_drift, p.gz_drift_tau = self.drift, self.drift_time_constant
 
     def description(self) -> str:
+        drift = (
+            f"; it drifts by {self.drift * 1e6:+.0f} um as the rig warms (time constant "
+            f"{self.drift_time_constant:g} s)"
+            if self.drift
+            else ""
+        )
         return (
             f"The gap encoder's zero is {self.offset * 1e3:+.2f} mm off: the magnetic gap is the reading "
-            "plus that."
+            f"plus that{drift}."
         )
 
     def equation(self) -> str:
-        return "g = x1 + offset in every gap-dependent force"
+        return "g = x1 + offset + drift (1 - exp(-t / T)) in every gap-dependent force"
 
 
 # --------------------------------------------------------------------------------------------

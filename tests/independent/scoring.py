@@ -38,6 +38,8 @@ offset
 current_sensor_gain ``current_sensor_gain_mismatch``       the gains' mismatch at twice the
                                                            electrical angle [1]
 gap_sensor_zero     ``gap_sensor_offset``                  magnetic gap minus the reading [m]
+                    or, for a zero that only drifts,       the zero's drift over the log [m]
+                    ``magnet_field_drift``                 (the same forces as the field's drift)
 magnet_warming      ``magnet_field_drift``                 the field's change from the log's first
                                                            sample to its last [1]
 =================== ====================================== =========================================
@@ -71,7 +73,11 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "amplifier_dynamics": ("current_amplifier_lag",),
         "field_shape": ("attraction_gap_dependence", "magnet_field_gap_dependence"),
         "tilted_base": ("horizontal_guides_not_level",),
-        "gap_sensor_zero": ("gap_sensor_offset",),
+        "gap_sensor_zero": (
+            ("magnet_field_drift",)
+            if effect["parameters"].get("drift") and not effect["parameters"].get("offset")
+            else ("gap_sensor_offset",)
+        ),
         "current_sensor_gain": ("current_sensor_gain_mismatch",),
         "magnet_warming": ("magnet_field_drift",),
     }.get(kind, (kind,))
@@ -126,6 +132,9 @@ def sizes(true_effect: dict, claimed: dict, duration: float | None = None) -> tu
             return true_effect.get("derived", {}).get("dq_amplitude_A"), c["offset"]
         if kind == "current_sensor_gain":
             return true_effect.get("derived", {}).get("mismatch"), c["mismatch"]
+        if kind == "gap_sensor_zero" and claimed.get("name") == "magnet_field_drift" and duration:
+            drifted = t["drift"] * (1 - math.exp(-duration / t["drift_time_constant"]))
+            return drifted, c["gap_reading_drift_if_sensor"]
         if kind == "gap_sensor_zero":
             return t["offset"], c["offset"]
         if kind == "magnet_warming" and duration:
