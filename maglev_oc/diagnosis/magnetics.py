@@ -285,6 +285,13 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
     )
 
 
+def _attraction_log_slope(ctx: LibraryContext, gap: float) -> float:
+    """[1/m] The model's log-slope of the attraction with the gap at ``gap`` (about -120 /m at 19.5 mm:
+    the field falls as exp(-pi y / tau), the attraction as its square)."""
+    h = 1e-5
+    return (math.log(float(ctx.shapes([gap + h])[1])) - math.log(float(ctx.shapes([gap - h])[1]))) / (2 * h)
+
+
 def gap_dependence_candidate(ctx: LibraryContext) -> Candidate:
     """The attraction's dependence on the gap differing smoothly from the field model (iron
     saturation or a permeance error that leaves the field under the teeth alone): C2's column times
@@ -362,12 +369,7 @@ def _gap_candidate(ctx: LibraryContext, *, field: bool) -> Candidate:
         out["largest_gap"] = Estimate(hi, 0.0, "m")
         return out
 
-    # the model's own log-slope of the attraction with the gap at the centre of the logged gaps
-    # (about -120 /m: the field falls as exp(-pi y / tau), the attraction as its square)
-    h = 1e-5
-    own_slope = abs(
-        math.log(float(ctx.shapes([centre + h])[1])) - math.log(float(ctx.shapes([centre - h])[1]))
-    ) / (2 * h)
+    own_slope = abs(_attraction_log_slope(ctx, centre))
 
     def bounded(e):
         small, large = (
@@ -460,13 +462,8 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     tells the two apart, so the effect is named by what it is, the magnets' forces drifting, and
     both readings are given: the magnets' warming in kelvin and the gap reading's drift in um."""
     c = ctx.references
-    lo, hi = ctx.gap_range
-    centre, h = 0.5 * (lo + hi), 1e-5
-    # [1/m] the model's log-slope of the attraction with the gap at the centre of the logged gaps
-    # (about -120 /m): a gap reading off by dg changes the attraction by that times dg
-    attraction_slope = (
-        math.log(float(ctx.shapes([centre + h])[1])) - math.log(float(ctx.shapes([centre - h])[1]))
-    ) / (2 * h)
+    # a gap reading off by dg changes the attraction by this times dg
+    attraction_slope = _attraction_log_slope(ctx, 0.5 * sum(ctx.gap_range))
     x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
     q = ca.SX.sym("q", 2)
     thrust, _, magnets = ctx.force_terms(x, u)
