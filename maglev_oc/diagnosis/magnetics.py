@@ -474,7 +474,8 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     q = ca.SX.sym("q", 2)
     thrust, _, magnets = ctx.force_terms(x, u)
     magnet_normal = -c.C3 * ctx.shapes(x)[2] * u[1]  # the i_d part of the normal force: ~ the field
-    change = q[0] * s + q[1] * (1.5 * s**2 - 0.5)  # Legendre P1, P2: mean-free over the log
+    p1, p2 = legendre(s, (1, 2))  # mean-free over the log
+    change = q[0] * p1 + q[1] * p2
     acc = change * ca.vertcat(2 * magnets + magnet_normal, thrust)
     fn = ca.Function("fielddrift", [x, u, du, s, q], [acc], ["x", "u", "du", "s", "p"], ["acc"])
 

@@ -479,7 +479,8 @@ def _friction_over_time(data: PreparedLogs, model: StageModel, friction_axes: fr
             ca.SX.sym("s"),
             ca.SX.sym("q", 2),
         )
-        val = -ca.tanh(x[v] / REVERSAL_SPEED) * (q[0] * s + q[1] * (1.5 * s**2 - 0.5)) / mass
+        p1, p2 = legendre(s, (1, 2))  # mean-free over the log
+        val = -ca.tanh(x[v] / REVERSAL_SPEED) * (q[0] * p1 + q[1] * p2) / mass
         fn = ca.Function(name, [x, u, du, s, q], [ca.vertcat(val, 0) if a == 0 else ca.vertcat(0, val)])
         term = AccelerationTerm(name, "probe", axis, ("q0", "q1"), function=fn, in_time=True)
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.signal import fftconvolve, savgol_coeffs, welch
@@ -225,11 +226,12 @@ class PreparedLogs:
     def n(self) -> int:
         return int(self.t.size)
 
-    @property
+    @cached_property
     def log_place(self) -> np.ndarray:
         """(n,) each sample's place in its log, from -1 at its first sample to +1 at its last (linear
         in time): what a term that changes over the log reads (a constant drifting as the rig warms,
-        :attr:`~maglev_oc.regression.terms.AccelerationTerm.in_time`)."""
+        :attr:`~maglev_oc.regression.terms.AccelerationTerm.in_time`). Computed once: every design
+        built on these logs passes it."""
         out = np.zeros(self.n)
         for k in np.unique(self.segment):
             mine = self.segment == k
