@@ -53,6 +53,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import NumpyCall, rk4_step
 from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.terms import when_symbol
 from maglev_oc.results import AXES, Result, jsonable
 
 __all__ = [
@@ -346,7 +347,7 @@ def simulate_windows(
     """
     ts = data.sample_time
     x, u, du, other = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("o", 2)
-    place = ca.SX.sym("s")  # the place in the log, for a term that changes over it
+    place = when_symbol()  # the place in the log and the log, for a term that changes over it
     if axis is None:
         xx = x
     else:
@@ -378,7 +379,7 @@ def simulate_windows(
     x0 = data.x[:, starts]
     o = 2 * (1 - axis) if axis is not None else 0
     traj = NumpyCall(sim.map(w))(
-        x0, data.u[:, take], data.du[:, take], data.x[o : o + 2, take + 1], data.log_place[None, take]
+        x0, data.u[:, take], data.du[:, take], data.x[o : o + 2, take + 1], data.log_time[:, take]
     )[0]
     traj = np.asarray(traj).reshape(4, w, horizon)
     measured = data.x[:, take + 1].reshape(4, w, horizon)

@@ -48,7 +48,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
-from maglev_oc.regression.terms import REVERSAL_SPEED, AccelerationTerm, term_function
+from maglev_oc.regression.terms import REVERSAL_SPEED, AccelerationTerm, term_function, when_symbol
 from maglev_oc.results import AXES
 from maglev_oc.units import M_TO_MM, M_TO_UM
 
@@ -476,10 +476,10 @@ def _friction_over_time(data: PreparedLogs, model: StageModel, friction_axes: fr
             ca.SX.sym("x", 4),
             ca.SX.sym("u", 2),
             ca.SX.sym("du", 2),
-            ca.SX.sym("s"),
+            when_symbol(),
             ca.SX.sym("q", 2),
         )
-        p1, p2 = legendre(s, (1, 2))  # mean-free over the log
+        p1, p2 = legendre(s[0], (1, 2))  # mean-free over the log
         val = -ca.tanh(x[v] / REVERSAL_SPEED) * (q[0] * p1 + q[1] * p2) / mass
         fn = ca.Function(name, [x, u, du, s, q], [ca.vertcat(val, 0) if a == 0 else ca.vertcat(0, val)])
         term = AccelerationTerm(name, "probe", axis, ("q0", "q1"), function=fn, in_time=True)

@@ -240,6 +240,13 @@ class PreparedLogs:
             out[mine] = 2.0 * (t - lo) / (hi - lo) - 1.0 if hi > lo else 0.0
         return out
 
+    @cached_property
+    def log_time(self) -> np.ndarray:
+        """(2, n) what a term that changes over the log reads of each sample
+        (:data:`~maglev_oc.regression.terms.WHEN_NAMES`): its place in its log (:attr:`log_place`)
+        and the index of that log among these (0, 1, ...)."""
+        return np.vstack([self.log_place, self.segment.astype(float)])
+
     @property
     def n_logs(self) -> int:
         return len(self.sources)

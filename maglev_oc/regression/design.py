@@ -39,7 +39,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import NumpyCall
 from maglev_oc.regression.base import CONSTANT_NAMES, ESTIMABLE, GAP_OFFSET
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.regression.terms import AccelerationTerm, when_symbol
 
 __all__ = [
     "COLUMN_CACHE_BYTES",
@@ -165,7 +165,7 @@ def _symbolic(model: StageModel, estimate: Sequence[str], terms: Sequence[Accele
     """CasADi Function (x, u, du, s) -> (columns (2, P), known (2,), sensitivities (m,)) and, for each of
     the m sensitivities, (column, axis, input, kind): d column / d u_input (kind 0) or
     d column / d du_input (kind 1), the structural nonzeros only."""
-    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
     consts = np.asarray(model.constants.as_array(), dtype=float)
     names = [c for c in CONSTANT_NAMES if c in estimate]
     k = len(names) + (GAP_OFFSET in estimate)
@@ -217,7 +217,7 @@ def _term_symbolic(terms: Sequence[AccelerationTerm], at: Sequence[np.ndarray]):
     (column, axis, input, kind) and, per term, the positions in the known parts of its
     acceleration at the linearization point and of its columns times that point (-1 where
     structurally zero: a linear term linearized at zero has neither)."""
-    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
     delta = ca.SX.sym("delta")
     xs = ca.vertcat(x[0] + delta, x[1], x[2], x[3])
     cols, parts, slots = [], [], []
@@ -545,7 +545,7 @@ def _evaluate(fn: ca.Function, prep: PreparedLogs, P: int, m: int, n_known: int 
     output (2, n_known)), sensitivities (m, n). (One map over all samples would hold its output and
     the rearranged copy, each of the size of the columns, at once.)"""
     n = prep.n
-    place = prep.log_place[None, :]
+    place = prep.log_time
     parts = 1 if n_known is None else n_known
     cols, known, sens = np.empty((P, 2, n)), np.empty((parts, 2, n)), np.empty((m, n))
     mapped: dict[int, NumpyCall] = {}

@@ -52,6 +52,7 @@ __all__ = [
     "periodic_force",
     "term_function",
     "viscous_friction",
+    "when_symbol",
 ]
 
 AXES = ("vertical", "horizontal", "both")
@@ -62,6 +63,17 @@ force becoming appreciable below it."""
 
 PhysicalMap = Callable[[np.ndarray, np.ndarray, Mapping[str, float]], dict[str, Estimate]]
 """(parameters, their covariance, fitted constants C1..C4 by name) -> physical quantities."""
+
+
+WHEN_NAMES = ("place", "log")
+"""What a term :attr:`~AccelerationTerm.in_time` reads of each sample's time, s (2): its place in
+its log, from -1 at the first sample to +1 at the last, and the index of that log (0, 1, ...) among
+the logs fitted together (:attr:`~maglev_oc.regression.data.PreparedLogs.log_time`)."""
+
+
+def when_symbol() -> ca.SX:
+    """The symbol s (2) of a term in time: (place in the log, the log's index) (:data:`WHEN_NAMES`)."""
+    return ca.SX.sym("s", len(WHEN_NAMES))
 
 
 def term_function(name: str, build: Callable, n_parameters: int) -> ca.Function:
@@ -80,7 +92,8 @@ def _casadi_name(name: str) -> str:
 
 def _as_four_inputs(fn: ca.Function, n_p: int, name: str, in_time: bool = False) -> ca.Function:
     """Accept (x, u, p) Functions too (no dependence on the current rates); a term ``in_time`` takes
-    (x, u, du, s, p) (:attr:`AccelerationTerm.in_time`)."""
+    (x, u, du, s, p) (:attr:`AccelerationTerm.in_time`), s (2) = (place in the log, the log's index)
+    or s (1), the place alone (the same in every log)."""
     shapes = [(fn.size1_in(k), fn.size2_in(k)) for k in range(fn.n_in())]
     if fn.n_out() != 1 or (fn.size1_out(0), fn.size2_out(0)) != (2, 1):
         raise InputError(
@@ -88,11 +101,17 @@ def _as_four_inputs(fn: ca.Function, n_p: int, name: str, in_time: bool = False)
             f"{fn.n_out()} output(s) of shape {(fn.size1_out(0), fn.size2_out(0)) if fn.n_out() else None}"
         )
     if in_time:
-        if shapes == [(4, 1), (2, 1), (2, 1), (1, 1), (n_p, 1)]:
+        if shapes == [(4, 1), (2, 1), (2, 1), (len(WHEN_NAMES), 1), (n_p, 1)]:
             return fn
+        if shapes == [(4, 1), (2, 1), (2, 1), (1, 1), (n_p, 1)]:  # the place alone
+            x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
+            p = ca.SX.sym("p", n_p)
+            return ca.Function(
+                fn.name(), [x, u, du, s, p], [fn(x, u, du, s[0], p)], ["x", "u", "du", "s", "p"], ["acc"]
+            )
         raise InputError(
-            f"AccelerationTerm {name}: a term in time must map (x (4), u (2), du (2), s (1), p ({n_p})) "
-            f"-> acc (2); its inputs are {shapes}"
+            f"AccelerationTerm {name}: a term in time must map (x (4), u (2), du (2), s (2: place in the "
+            f"log, the log's index) or s (1: the place), p ({n_p})) -> acc (2); its inputs are {shapes}"
         )
     if shapes == [(4, 1), (2, 1), (n_p, 1)]:
         x, u, du, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("p", n_p)
@@ -135,10 +154,11 @@ class AccelerationTerm:
     variant_note : str
     in_time : bool
         The acceleration also changes over the log (a constant drifting as the rig warms): the
-        function takes (x, u, du, s, p), s in [-1, 1] the sample's place in its log from the first
-        sample to the last (:attr:`~maglev_oc.regression.data.PreparedLogs.log_place`). Where no
-        time is at hand (:meth:`acceleration`: a controller's feedforward, a stage file) it is taken
-        at s = 0, the middle of the log.
+        function takes (x, u, du, s, p), s (2) = (the sample's place in its log, in [-1, 1] from
+        the first sample to the last, and the index of its log among those fitted together;
+        :data:`WHEN_NAMES`, :attr:`~maglev_oc.regression.data.PreparedLogs.log_time`), or s (1), the
+        place alone. Where no time is at hand (:meth:`acceleration`: a controller's feedforward, a
+        stage file) it is taken at s = (0, 0), the middle of the first log.
 
     Attributes
     ----------
@@ -210,7 +230,7 @@ class AccelerationTerm:
         set_(self, "function", fn)
         set_(self, "variants", tuple(_as_four_inputs(v, n_p, self.name, self.in_time) for v in self.variants))
         x, u, du, p = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("p", n_p)
-        s = ca.SX.sym("s")
+        s = when_symbol()
         acc = self.evaluate(x, u, du, s, p)
         jac = ca.jacobian(acc, p)
         p0 = ca.DM(self.initial)
@@ -236,8 +256,9 @@ class AccelerationTerm:
         )
 
     def evaluate(self, x, u, du, s, p):
-        """The acceleration (2) at the state ``x``, currents ``u``, their rates ``du``, the place
-        ``s`` in the log (read only by a term :attr:`in_time`) and the parameters ``p``."""
+        """The acceleration (2) at the state ``x``, currents ``u``, their rates ``du``, the time ``s``
+        (2: place in the log, the log's index; read only by a term :attr:`in_time`) and the
+        parameters ``p``."""
         return self.function(x, u, du, s, p) if self.in_time else self.function(x, u, du, p)
 
     @property
@@ -266,25 +287,25 @@ class AccelerationTerm:
     def _symbolic(self) -> tuple[ca.SX, ca.SX, ca.SX]:
         """(acc, u, du): the term's accelerations in symbols (x, u, du, [s,] p)."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
-        return self.evaluate(x, u, du, ca.SX.sym("s"), ca.SX.sym("p", self.n_parameters)), u, du
+        return self.evaluate(x, u, du, when_symbol(), ca.SX.sym("p", self.n_parameters)), u, du
 
     def acceleration(self, parameters) -> ca.Function:
         """(x, u, du) -> acc (2) with the parameters fixed (a term :attr:`in_time` at the middle of
-        the log, s = 0)."""
+        the first log, s = (0, 0))."""
         x, u, du = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2)
         p = ca.DM(np.asarray(parameters, dtype=float).ravel())
         return ca.Function(
             f"{_casadi_name(self.name)}_acc",
             [x, u, du],
-            [self.evaluate(x, u, du, 0.0, p)],
+            [self.evaluate(x, u, du, ca.DM.zeros(len(WHEN_NAMES)), p)],
             ["x", "u", "du"],
             ["acc"],
         )
 
     def acceleration_in_time(self, parameters) -> ca.Function:
-        """(x, u, du, s) -> acc (2) with the parameters fixed, s the place in the log (see
-        :attr:`in_time`; a term not in time ignores it)."""
-        x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+        """(x, u, du, s) -> acc (2) with the parameters fixed, s (2) the place in the log and the
+        log's index (see :attr:`in_time`; a term not in time ignores it)."""
+        x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
         p = ca.DM(np.asarray(parameters, dtype=float).ravel())
         return ca.Function(
             f"{_casadi_name(self.name)}_acc_t",
@@ -386,7 +407,7 @@ def held_by_guides(term: AccelerationTerm, held: Mapping[str, float]) -> Acceler
     only the motor's: the term's acceleration on that axis is multiplied by 1 - h exp(-(v / v_s)^2),
     v the axis velocity and v_s :data:`REVERSAL_SPEED`, as the friction term holds the modelled one.
     """
-    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("s")
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
     scale = ca.vertcat(
         *(
             1 - min(max(held.get(axis, 0.0), 0.0), 1.0) * ca.exp(-((x[vi] / REVERSAL_SPEED) ** 2))

@@ -76,7 +76,7 @@ def effect_contribution(diag: Diagnosis, effect: Effect) -> np.ndarray:
     """(2, n) [m/s^2] The effect's acceleration along the log, through the diagnosis's filter."""
     d = diag.data
     term = effect.candidate.term.acceleration_in_time(effect.coefficients)
-    return d.filter(np.asarray(term.map(d.n)(d.x, d.u, d.du, d.log_place[None, :])))
+    return d.filter(np.asarray(term.map(d.n)(d.x, d.u, d.du, d.log_time)))
 
 
 def panels(diag: Diagnosis) -> list[tuple[Effect, int]]:
