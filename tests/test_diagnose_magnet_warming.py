@@ -101,6 +101,26 @@ def test_the_warming_follows_its_first_order_law():
         MagnetWarming(time_constant=0.0)
 
 
+def test_a_later_log_of_a_session_starts_warmer_and_warms_less():
+    # a log begun 90 s after the rig was switched on is the cold log's continuation: its field at t
+    # is the cold log's at t + 90 s, in the C core too (to rounding), and it changes less over 60 s
+    cold, later = MagnetWarming.large(), MagnetWarming(rise=15.0, time_constant=60.0, start_time=90.0)
+    assert later.field_factor(10.0) == pytest.approx(cold.field_factor(100.0), rel=1e-15)
+    assert later.change_over_log(60.0) == pytest.approx(
+        cold.field_factor(150.0) / cold.field_factor(90.0) - 1.0, rel=1e-12
+    )
+    assert abs(later.change_over_log(60.0)) < 0.25 * abs(cold.change_over_log(60.0))
+    state = np.array([0.0195, 0.0, 0.01, 0.0, 0, 0])
+    for t in (0.0, 30.0):
+        ds_later, _ = core.eval_rhs(
+            build_params(Scenario("l", 0, effects=(later,)), PAPERS_CONSTANTS), state, 1.0, 2.0, t
+        )
+        ds_cold, _ = core.eval_rhs(
+            build_params(Scenario("c", 0, effects=(cold,)), PAPERS_CONSTANTS), state, 1.0, 2.0, t + 90.0
+        )
+        np.testing.assert_allclose(ds_later, ds_cold, rtol=1e-13)
+
+
 # --- terms that change over the log ------------------------------------------------------------
 @pytest.fixture(scope="module")
 def two_logs(model):

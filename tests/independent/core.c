@@ -86,7 +86,7 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     /* the magnets' temperature rises first-order towards heat_rise: field factor 1 - heat_coef dT(t);
        the guides' friction level changes first-order by the share fh/fv_warm over the run as their
        lubricant warms (each exactly 1 when off) */
-    const double warm = p->heat_on ? 1.0 - p->heat_coef * p->heat_rise * (1.0 - exp(-t / p->heat_tau)) : 1.0;
+    const double warm = p->heat_on ? 1.0 - p->heat_coef * p->heat_rise * (1.0 - exp(-(t + p->heat_t0) / p->heat_tau)) : 1.0;
     const double warm_h = p->fh_warm != 0.0 ? 1.0 + p->fh_warm * (1.0 - exp(-t / p->fh_warm_tau)) : 1.0;
     const double warm_v = p->fv_warm != 0.0 ? 1.0 + p->fv_warm * (1.0 - exp(-t / p->fv_warm_tau)) : 1.0;
     const double x1 = s[0], x2 = s[1], x3 = s[2], x4 = s[3];

@@ -97,8 +97,8 @@ FIELDS: list[tuple[str, object]] = [
     # the base vibrating (its acceleration is an array of simulate's)
     ("vib_on", _I),
     # the magnets warming over the run: temperature coefficient of the field [1/K], final rise [K],
-    # thermal time constant [s]
-    ("heat_on", _I), ("heat_coef", _D), ("heat_rise", _D), ("heat_tau", _D),
+    # thermal time constant [s], the time the warming had run when the log began [s]
+    ("heat_on", _I), ("heat_coef", _D), ("heat_rise", _D), ("heat_tau", _D), ("heat_t0", _D),
     # the papers' two PID regulators instead of the FL regulator: gains (kp, kd, ki) per axis,
     # the inputs' gains b and the equilibrium current they were designed at
     ("pid_on", _I), ("pid_v", _D * 3), ("pid_h", _D * 3), ("pid_bv", _D), ("pid_bh", _D), ("pid_ieq", _D),

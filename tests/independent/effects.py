@@ -1219,8 +1219,11 @@ class MagnetWarming(Effect):
 
     The stator's coils dissipate i^2 R; the heat reaches the magnets across the gap and through
     the frame, and a neodymium magnet's remanence falls by about 0.12 % per kelvin (reversible).
-    The magnets' temperature rises first-order from where it was at the start of the log,
-    dT(t) = rise (1 - exp(-t / time_constant)), and every force made by their field follows:
+    The magnets' temperature rises first-order from the rig's start (the ambient),
+    dT(t) = rise (1 - exp(-(t + start_time) / time_constant)), t the time in the log and
+    ``start_time`` how long the rig had run when the log began (0: a log from a cold start; a
+    later log of the same session starts warmer and warms less), and every force made by their
+    field follows:
     the attraction L2 with the square of the field, the thrust L1 and the i_d term L3 with the
     field. The armature's own attraction (L4) does not depend on the magnets. A constant that
     drifts in time, not a function of the state: the constants fitted over a log are its mean.
@@ -1233,13 +1236,22 @@ class MagnetWarming(Effect):
     temperature_coefficient: float = _p(1.2e-3, "1/K", "fall of the field per kelvin (NdFeB: 1.1-1.2e-3)")
     rise: float = _p(6.0, "K", "final rise of the magnets' temperature")
     time_constant: float = _p(120.0, "s", "thermal time constant of the magnets' warming")
+    start_time: float = _p(0.0, "s", "how long the rig had run (and warmed) when the log began")
 
     kind: ClassVar[str] = "magnet_warming"
     axis: ClassVar[str] = "both"
 
     def __post_init__(self) -> None:
-        if not (self.temperature_coefficient >= 0 and self.rise >= 0 and self.time_constant > 0):
-            raise ValueError("MagnetWarming: coefficient >= 0 [1/K], rise >= 0 [K], time constant > 0 [s]")
+        if not (
+            self.temperature_coefficient >= 0
+            and self.rise >= 0
+            and self.time_constant > 0
+            and self.start_time >= 0
+        ):
+            raise ValueError(
+                "MagnetWarming: coefficient >= 0 [1/K], rise >= 0 [K], time constant > 0 [s], "
+                "start time >= 0 [s]"
+            )
 
     @classmethod
     def small(cls) -> MagnetWarming:
@@ -1254,10 +1266,16 @@ class MagnetWarming(Effect):
     def apply(self, p: Any, ctx: dict[str, float]) -> None:
         p.heat_on = 1
         p.heat_coef, p.heat_rise, p.heat_tau = self.temperature_coefficient, self.rise, self.time_constant
+        p.heat_t0 = self.start_time
 
     def field_factor(self, t: float) -> float:
-        """The field relative to its value at t = 0, at time ``t`` [s]."""
-        return 1.0 - self.temperature_coefficient * self.rise * (1.0 - math.exp(-t / self.time_constant))
+        """The field relative to its value at the rig's start (the ambient), at time ``t`` [s] in the log."""
+        warmed = 1.0 - math.exp(-(t + self.start_time) / self.time_constant)
+        return 1.0 - self.temperature_coefficient * self.rise * warmed
+
+    def change_over_log(self, duration: float) -> float:
+        """The field's relative change from the log's first sample to its last (``duration`` [s])."""
+        return self.field_factor(duration) / self.field_factor(0.0) - 1.0
 
     def description(self) -> str:
         return (

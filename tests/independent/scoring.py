@@ -138,7 +138,7 @@ def sizes(true_effect: dict, claimed: dict, duration: float | None = None) -> tu
         if kind == "gap_sensor_zero":
             return t["offset"], c["offset"]
         if kind == "magnet_warming" and duration:
-            return MagnetWarming(**t).field_factor(duration) - 1, c["field_change_over_log"]
+            return MagnetWarming(**t).change_over_log(duration), c["field_change_over_log"]
     except (KeyError, TypeError):
         return None
     return None
