@@ -820,6 +820,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     print(diag.message)
     for w in diag.warnings:
         print(f"  WARNING: {w}")
+    for r in diag.data.resting:
+        print(f"  left out: {r.describe()}")
     for a, before in diag.error_before.items():
         if math.isfinite(before):
             print(f"  held-out error {a}: {before:.4g} -> {diag.error_after[a]:.4g} m/s^2")

@@ -164,7 +164,9 @@ class _Session:
         if fraction not in self.banded:
             band = self.data.settings["bandwidth_hz"] * fraction
             try:
-                self.banded[fraction] = _prepare(list(self.logs), self.holdout_fraction, band, 0.0)
+                self.banded[fraction] = _prepare(
+                    list(self.logs), self.holdout_fraction, band, 0.0, self.model
+                )
             except (InputError, LogError):
                 self.banded[fraction] = None
         return self.banded[fraction]
@@ -237,7 +239,9 @@ def diagnose(
     timings: dict[str, float] = {}
     clock = _Clock(timings)
     model = StageModel() if model is None else model
-    data, train, hold = clock("prepare", _prepare, list(logs), holdout_fraction, bandwidth, min_duration)
+    data, train, hold = clock(
+        "prepare", _prepare, list(logs), holdout_fraction, bandwidth, min_duration, model
+    )
     # the library's design is built two or three times (references moved, waviness added) and a
     # dozen designs of some of its terms beside it: each term's columns are evaluated once
     with reusing_columns(data):
@@ -497,8 +501,15 @@ def _per_axis(values, moving) -> PerAxis:
     return PerAxis.of(np.where(moving, values, np.nan))
 
 
-def _prepare(logs: list[Log], holdout_fraction: float, bandwidth: float, min_duration: float):
-    """Step 1: the shared data preparation and the held-out block."""
+def _prepare(
+    logs: list[Log],
+    holdout_fraction: float,
+    bandwidth: float,
+    min_duration: float,
+    model: StageModel | None = None,
+):
+    """Step 1: the shared data preparation and the held-out block (with ``model``, the stretches where
+    the platform rests on a stopper left out: :mod:`~maglev_oc.regression.stoppers`)."""
     if not 0.05 <= holdout_fraction <= 0.5:
         raise InputError(f"holdout_fraction must be in [0.05, 0.5], got {holdout_fraction!r}")
     for log in logs:
@@ -511,7 +522,9 @@ def _prepare(logs: list[Log], holdout_fraction: float, bandwidth: float, min_dur
     # memory grows as samples x candidate columns: a long run is diagnosed at a rate that keeps
     # MAX_SAMPLES (the band of the fit, 10 Hz, stays far below any such rate)
     total = sum(log.duration for log in logs)
-    data = prepare(logs, bandwidth=bandwidth, max_rate=min(DEFAULT_MAX_RATE, MAX_SAMPLES / total))
+    data = prepare(
+        logs, bandwidth=bandwidth, max_rate=min(DEFAULT_MAX_RATE, MAX_SAMPLES / total), model=model
+    )
     if not np.any(data.moving):
         raise LogError(
             ", ".join(data.sources),

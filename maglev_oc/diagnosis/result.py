@@ -14,6 +14,7 @@ from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selecti
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.stoppers import RESTING_WHY
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
 from maglev_oc.validation import Validation
 
@@ -218,6 +219,16 @@ class Diagnosis(Result):
                 for s in self.selection.steps
             ],
             "logs": list(self.sources),
+            "left_out": [
+                {
+                    "log": r.source,
+                    "from_s": r.start,
+                    "to_s": r.stop,
+                    "gap_m": r.gap,
+                    "why": RESTING_WHY,
+                }
+                for r in self.data.resting
+            ],
             "holdout": {
                 "fraction": self.settings.get("holdout_fraction"),
                 "samples": int(self.holdout.sum()),
@@ -235,6 +246,7 @@ class Diagnosis(Result):
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
         lines += [f"  WARNING: {w}" for w in self.warnings]
+        lines += [f"  left out: {r.describe()}" for r in self.data.resting]
         for e in self.effects:
             seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"
             lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")

@@ -177,7 +177,7 @@ class EquationError:
         kw = (
             {"bandwidth": DEFAULT_BANDWIDTH} if differentiator is None else {"differentiator": differentiator}
         )
-        self.prepared = prepare(shifted, logging_error=logging_error, **kw)
+        self.prepared = prepare(shifted, logging_error=logging_error, model=self.model, **kw)
         self._shifted = shifted
         self._narrow: PreparedLogs | None = None
         # a narrow band well below the fit's own, and an error to scale

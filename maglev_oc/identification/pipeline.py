@@ -35,7 +35,8 @@ from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.data import as_log_list, delayed_inputs, prepare
+from maglev_oc.regression.data import as_log_list, delayed_inputs, levitating_parts, prepare
+from maglev_oc.regression.stoppers import RESTING_WHY, RestingStretch
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Result
 from maglev_oc.validation import Validation, validate
@@ -180,6 +181,9 @@ class IdentificationOutcome(Result):
         Wall times of each method and ``total``.
     validation : Validation or None
         The best fit validated (held-out logs when given, else in-sample; see ``data``).
+    left_out : tuple of RestingStretch
+        Where a log's platform rests on its stopper (before lift-off, after landing): left out of
+        every fit (:func:`~maglev_oc.regression.data.levitating_parts`).
     success, status, message
         From the fits: ``"converged"`` when the best fit did, ``"npfsi_only"`` when only NPFSI
         ran (and stayed well posed), else ``"failed"`` with the solver's reason.
@@ -193,6 +197,7 @@ class IdentificationOutcome(Result):
     sources: tuple[str, ...]
     timings: dict[str, float] = field(default_factory=dict)
     validation: Validation | None = None
+    left_out: tuple[RestingStretch, ...] = ()
 
     @property
     def success(self) -> bool:
@@ -276,6 +281,7 @@ class IdentificationOutcome(Result):
             + ", ".join(f"{k} = {getattr(c, k):.6g}" for k in CONSTANT_NAMES)
             + f"  ({c.source})"
             + "".join(f"\n    WARNING: {w}" for w in self.warnings)
+            + "".join(f"\n    left out: {r.describe()}" for r in self.left_out)
         )
         return "\n\n".join(parts)
 
@@ -293,6 +299,10 @@ class IdentificationOutcome(Result):
             "status": self.status,
             "message": self.message,
             "warnings": list(self.warnings),
+            "left_out": [
+                {"log": r.source, "from_s": r.start, "to_s": r.stop, "gap_m": r.gap, "why": RESTING_WHY}
+                for r in self.left_out
+            ],
             "timings": dict(self.timings),
             "validation": None if self.validation is None else self.validation.to_dict(),
         }
@@ -356,6 +366,8 @@ def identify(
         raise InputError(f"methods: choose among {METHODS}, got {methods!r}")
     estimate = tuple(estimate)
     check_identifiable(logs, estimate, min_duration=min_duration)
+    # where the platform rests on its stopper (before lift-off, after landing) is no evidence
+    logs, resting = levitating_parts(logs, model)
     times: dict[str, float] = {}
     ee = oe = None
     if "equation_error" in methods or "output_error" in methods:
@@ -389,7 +401,14 @@ def identify(
             runs.append(npfsi(log0, model, estimate=constants, eps=eps, gamma=npfsi_gamma))
         times["npfsi"] = time.perf_counter() - t0
     outcome = IdentificationOutcome(
-        ee, oe, tuple(runs), model.constants, estimate, tuple(log.source for log in logs), times
+        ee,
+        oe,
+        tuple(runs),
+        model.constants,
+        estimate,
+        tuple(log.source for log in logs),
+        times,
+        left_out=resting,
     )
     t0 = time.perf_counter()
     held_out = as_log_list(validation_logs) if validation_logs else []
@@ -412,7 +431,7 @@ def _validation(
     use = held_out or logs
     if input_delay:
         use = [dataclasses.replace(log, u=delayed_inputs(log, input_delay)) for log in use]
-    data = prepare(use, bandwidth=VALIDATION_BANDWIDTH)
+    data = prepare(use, bandwidth=VALIDATION_BANDWIDTH, model=model)
     fit = outcome.best
     fitted = model.with_constants(outcome.constants())
     fitted_terms, offset = [], 0.0

@@ -24,7 +24,9 @@ One data preparation and one filter policy for every equation-error fit in the p
    (:func:`logging_error_share`), is the variance per sample of the current error
    (``current_noise``). :mod:`~maglev_oc.regression.design` removes its expected contribution
    from the normal equations (bias-compensated least squares, Söderström 2018, Ch. 7).
-5. **Masks.** Samples within the filters' memory of a log's ends are invalid; an optional
+5. **Masks.** Samples within the filters' memory of a log's ends are invalid, and so, given the
+   model the fits start from, are stretches where the platform rests on a stopper and their
+   filters' memory (:mod:`~maglev_oc.regression.stoppers`: before lift-off, after landing); an optional
    held-out block at the end of each log is separated from the fitted samples by guard bands as
    long as the filters' memory, so that no sample of one leaks into the other.
 """
@@ -35,6 +37,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.signal import fftconvolve, savgol_coeffs, welch
@@ -43,13 +46,20 @@ from maglev_oc.data.logs import Log, LogError
 from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+from maglev_oc.regression.stoppers import RestingStretch, resting_on_stoppers
+
+if TYPE_CHECKING:
+    from maglev_oc.model.stage import StageModel
 
 __all__ = [
     "DEFAULT_MAX_RATE",
+    "LEVITATION_MARGIN",
+    "RESTING_BANDWIDTH",
     "PreparedLogs",
     "as_log_list",
     "control_rate_of",
     "delayed_inputs",
+    "levitating_parts",
     "logging_error_share",
     "matching_kernel",
     "prepare",
@@ -196,7 +206,8 @@ class PreparedLogs:
     u : (2, n) currents (i_q, i_d) as logged [A]
     du : (2, n) their rates [A/s] (SG)
     acc : (2, n) measured accelerations (x2', x4') [m/s^2], = F[true] (see module doc)
-    valid : (n,) bool — outside the filters' memory of each log's ends
+    valid : (n,) bool — outside the filters' memory of each log's ends and of any stretch where
+        the platform rests on a stopper (``resting``)
     sample_time : float [s]
     differentiator : SavitzkyGolay
     kernel : (k,) the matching filter F
@@ -204,6 +215,8 @@ class PreparedLogs:
     moving : (2,) bool — (vertical, horizontal) axis moves in the logs
     sources : tuple of str
     notes : tuple of str
+    resting : tuple of RestingStretch
+        Where the platform rests on a stopper (found when :func:`prepare` is given a model).
     """
 
     t: np.ndarray
@@ -220,6 +233,7 @@ class PreparedLogs:
     moving: np.ndarray
     sources: tuple[str, ...]
     notes: tuple[str, ...] = ()
+    resting: tuple[RestingStretch, ...] = ()
     settings: dict = field(default_factory=dict)
 
     @property
@@ -330,6 +344,49 @@ class PreparedLogs:
         return fit, hold
 
 
+LEVITATION_MARGIN = 0.1
+"""[s] Kept off a resting stretch by :func:`levitating_parts` (the lift-off's first motion)."""
+
+
+def levitating_parts(
+    logs: Log | Sequence[Log], model: StageModel
+) -> tuple[list[Log], tuple[RestingStretch, ...]]:
+    """Each log without the stretches at its start or end where the platform rests on its stopper
+    (:mod:`~maglev_oc.regression.stoppers`, found as :func:`prepare` finds them) and
+    :data:`LEVITATION_MARGIN` beside them: for the fits that read a log's samples themselves (the
+    output-error fit, NPFSI), as :func:`prepare` leaves them out of the equation error. Returns the
+    logs and the stretches left out."""
+    out, found = [], []
+    for log in as_log_list(logs):
+        resting = prepare([log], bandwidth=RESTING_BANDWIDTH, model=model).resting
+        start, stop = float(log.t[0]), float(log.t[-1]) + log.sample_time
+        for r in resting:
+            if r.start <= 0.5 * (log.t[-1] - log.t[0]):
+                start = max(start, float(log.t[0]) + r.stop + LEVITATION_MARGIN)
+            else:
+                stop = min(stop, float(log.t[0]) + r.start - LEVITATION_MARGIN)
+        out.append(log.time_slice(start, stop) if resting else log)
+        found.extend(resting)
+    return out, tuple(found)
+
+
+RESTING_BANDWIDTH = 10.0
+"""[Hz] The band :func:`levitating_parts` prepares a log on to find where it rests (the fits')."""
+
+
+def _widened(mask: np.ndarray, segment: np.ndarray, width: int) -> np.ndarray:
+    """``mask`` with ``width`` samples more on each side of every run, within each log."""
+    out = mask.copy()
+    for k in np.unique(segment):
+        idx = np.flatnonzero(segment == k)
+        m = mask[idx]
+        if not m.any():
+            continue
+        grown = np.convolve(m.astype(float), np.ones(2 * width + 1), mode="same") > 0.5
+        out[idx] = grown
+    return out
+
+
 def _reduced(logs: list[Log], max_rate: float, control_rate: float | None, logging_error: bool):
     """The logs reduced to at most ``max_rate`` and each one's share of the white current floor
     that is logging error; refuses mixed rates. The share is the log's own: a mean of q samples
@@ -377,6 +434,7 @@ def prepare(
     max_rate: float = DEFAULT_MAX_RATE,
     control_rate: float | None = None,
     logging_error: bool = True,
+    model: StageModel | None = None,
 ) -> PreparedLogs:
     """Reduce, differentiate and concatenate ``logs`` (all at one sample rate).
 
@@ -393,6 +451,10 @@ def prepare(
         [Hz] Rate of the loop that produced the logged currents (see :func:`logging_error_share`).
     logging_error : bool
         Estimate the logged currents' error (item 4 of the module doc); False sets it to zero.
+    model : StageModel, optional
+        The model the fits start from: with it, stretches where the platform rests on a stopper
+        (before lift-off, after landing) are found and left out (item 5 of the module doc,
+        :mod:`~maglev_oc.regression.stoppers`), and said in ``notes``.
     """
     logs = as_log_list(logs)
     if (bandwidth is None) == (differentiator is None):
@@ -419,6 +481,14 @@ def prepare(
     cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
     notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
+    resting: tuple[RestingStretch, ...] = ()
+    if model is not None:
+        model_acc = model.dynamics(cat[2], cat[3])[1]
+        mask, resting = resting_on_stoppers(
+            cat[0], cat[1], cat[2], cat[5], model_acc, ts, tuple(log.source for log in logs)
+        )
+        cat[6] = cat[6] & ~_widened(mask, cat[1], edge)
+        notes += tuple(r.describe() for r in resting)
     rates = [control_rate_of(log, control_rate) for log in logs]
     declared = [
         control_rate is not None or log.currents_measured or "control_rate_hz" in log.metadata for log in logs
@@ -438,6 +508,7 @@ def prepare(
         moving=moving,
         sources=tuple(log.source for log in logs),
         notes=notes,
+        resting=resting,
         settings={
             "bandwidth_hz": bandwidth,
             "sg_windows": (sg.velocity_window, sg.acceleration_window),

@@ -432,6 +432,11 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
             plant_rhs(p, st, iq1, id1, tk, k4, NULL);
             shaken(p, base_acc, k, k4);
             for (i = 0; i < NSTATE; i++) s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            /* the stopper: a gap beyond it is held there, an opening rate stopped (inelastic) */
+            if (p->stop_gap > 0.0 && s[0] > p->stop_gap) {
+                s[0] = p->stop_gap;
+                if (s[1] > 0.0) s[1] = 0.0;
+            }
             ia_q = iq1;
             ia_d = id1;
         }

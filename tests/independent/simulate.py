@@ -73,7 +73,11 @@ class Rig:
     controller_constants : tuple of float
         (C1, C2, C3, C4) the controller's feedback transformation uses (the papers').
     gap_limits : (float, float)
-        [m] the run is aborted (SimulationError) if the gap leaves this range (stoppers).
+        [m] the run is aborted (SimulationError) if the gap leaves this range.
+    stopper_gap : float or None
+        [m] the stopper the platform rests on when the magnets do not hold it: the gap cannot open
+        beyond it (the plate stops there, inelastic). None: no stopper (the default). A run that
+        begins at the stopper's gap begins resting on it (a lift-off).
     x3_limit : float
         [m] ... or if |x3| exceeds this.
     logged_currents : str
@@ -105,6 +109,7 @@ class Rig:
     controller_constants: tuple[float, float, float, float] = PAPERS_CONSTANTS
     gap_limits: tuple[float, float] = (0.006, 0.034)
     x3_limit: float = 0.08
+    stopper_gap: float | None = None
     logged_currents: str = "commanded"
     current_sensor_noise: float = 0.0
     controller: str = "fl"
@@ -159,6 +164,7 @@ class Rig:
             "encoder_noise_std_m": self.encoder_noise,
             "encoder_model": "reading = q * round((x + n) / q), n ~ N(0, sigma^2): noise before quantization",
             "current_hold": "zero-order hold over each control period",
+            "stopper_gap_m": self.stopper_gap,
             "controller_current_clip_a": self.current_limit,
             "amplifier_peak_a": self.amplifier_peak,
             "amplifier_continuous_a": self.amplifier_continuous,
@@ -304,6 +310,7 @@ def build_params(
     p.q = rig.encoder_resolution
     p.gap_min, p.gap_max = rig.gap_limits
     p.x3_max = rig.x3_limit
+    p.stop_gap = rig.stopper_gap or 0.0
     p.com_cos, p.com_sin = 1.0, 0.0
     p.amp_peak = rig.amplifier_peak
     if rig.controller == "pid":
@@ -355,7 +362,8 @@ def simulate(scenario: Scenario) -> Run:
     rh, drh = ref_h.evaluate(tk)
     ref = np.ascontiguousarray(np.column_stack([rv, drv, rh, drh]))
     noise = np.ascontiguousarray(rng_n.standard_normal((n_ctrl, 2)) * rig.encoder_noise)
-    s0 = np.array([rv[0], 0.0, rh[0], 0.0, 0.0, 0.0])
+    gap0 = rv[0] if rig.stopper_gap is None else min(rv[0], rig.stopper_gap)
+    s0 = np.array([gap0, 0.0, rh[0], 0.0, 0.0, 0.0])
     n_rec = -(-n_ctrl // rig.log_every)
     rec = np.zeros((n_rec, core.NREC))
     info = np.zeros(5, dtype=np.int32)

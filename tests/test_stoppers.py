@@ -1,0 +1,144 @@
+"""A log whose platform rests on its stopper before lift-off or after landing.
+
+The stopper, not the magnets, holds the platform there, while the loop goes on commanding currents:
+those samples are wrong by the stopper's force in any fit. Before they were left out, a 60 s log of
+the independent generator that lifted off after 1.2 s gave C2 +2 %, C3 +7.6 % and C4 +125 % off the
+plant's in the diagnosis's base fit (and +2.3 / +8.5 / +134 % in identify's output error), without a
+word (bench/README, "A log that begins on the stopper"). Logs from ``tests/independent``
+(``Rig.stopper_gap``; no code shared with ``maglev_oc.sim``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_oc.data.reading import read_log
+from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.identification.pipeline import identify
+from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.data import levitating_parts, prepare
+from maglev_oc.regression.stoppers import RESTING_WHY
+from tests.independent.logio import write_log
+from tests.independent.reference import ReferenceSpec
+from tests.independent.sets import named_set
+from tests.independent.simulate import Rig, Scenario, simulate
+
+STOPPER = 0.030
+"""[m] The generator's stopper: the platform falls onto it at a 30 mm gap (gravity opens the gap)."""
+
+LIFT = ReferenceSpec(gap_center=STOPPER, steps_v=((1.0, -0.0105),), step_time=1.0, ramp_time=4.0)
+"""Resting at 30 mm, lifted to 19.5 mm from 1 s on, then the usual sines (fading in over 4 s)."""
+
+LIFT_AND_LAND = ReferenceSpec(
+    gap_center=STOPPER, steps_v=((1.0, -0.0105), (56.0, 0.0115)), step_time=1.0, ramp_time=4.0
+)
+"""... and set down again from 56 s on (a reference beyond the stopper: the loop presses it down)."""
+
+CONSTANTS = ("C1", "C2", "C3", "C4")
+
+
+def _truth_constants(run) -> np.ndarray:
+    return np.array([run.truth["plant"]["constants_true"][c] for c in CONSTANTS])
+
+
+def _at_stopper(run) -> np.ndarray:
+    """(n,) the logged samples whose true gap is the stopper's."""
+    return run.states["x1"] >= STOPPER - 1e-12
+
+
+def _lift_off(run) -> float:
+    """[s] The time in the log of the last sample on the stopper before 30 s."""
+    early = _at_stopper(run) & (run.t - run.t[0] < 30.0)
+    return float(run.t[np.flatnonzero(early)[-1]] - run.t[0])
+
+
+@pytest.fixture(scope="module")
+def lifted(tmp_path_factory):
+    run = simulate(Scenario(name="lift", seed=7601, reference=LIFT, rig=Rig(stopper_gap=STOPPER)))
+    return run, write_log(run, tmp_path_factory.mktemp("lift"))[0]
+
+
+# --- the generator -----------------------------------------------------------------------------
+def test_the_generators_stopper_holds_the_platform_until_the_magnets_lift_it(lifted):
+    # the true gap never opens beyond the stopper; the platform sits on it for the first second
+    # or so (the loop's first commands raise it by a few micrometres, then it winds up against the
+    # stopper), then leaves it for good
+    run, _ = lifted
+    assert run.states["x1"].max() <= STOPPER + 1e-12
+    resting = _at_stopper(run)
+    lift_off = _lift_off(run)
+    assert 0.8 < lift_off < 1.6 and resting.sum() * run.truth["rig"]["log_rate_hz"] ** -1 > 0.8
+    after = run.t - run.t[0] > lift_off
+    assert not resting[after].any()
+    held = resting & (run.t - run.t[0] > 0.5)
+    assert np.all(run.states["x2"][held] == 0.0)  # at rest on it
+
+
+# --- finding the stretches ---------------------------------------------------------------------------
+def test_the_stretch_before_lift_off_is_found_and_left_out(lifted):
+    # found where the true gap sits on the stopper, to within the filters' smoothing (0.15 s: the
+    # lift-off's first motion is within a count of the stopper for a few samples), and left out of
+    # the valid samples with one filter memory beyond it
+    run, path = lifted
+    data = prepare([read_log(path)], bandwidth=10.0, model=StageModel())
+    [stretch] = data.resting
+    lift_off = _lift_off(run)
+    assert stretch.start == pytest.approx(0.0, abs=0.15)
+    assert stretch.stop == pytest.approx(lift_off, abs=0.15)
+    assert stretch.gap == pytest.approx(STOPPER, abs=2e-5)  # the encoder's 10 um, and its noise
+    left = ~data.valid & (data.t > 0.5) & (data.t < 30.0)  # not the log's own end
+    assert data.t[left].max() == pytest.approx(stretch.stop + data.edge * data.sample_time, abs=2e-3)
+    assert any("rests on its stopper" in n for n in data.notes)
+
+
+def test_landing_at_the_end_and_its_bounce_are_one_stretch(tmp_path):
+    # set down from 56 s on: the platform lands, bounces within a quarter second and stays; the
+    # stretch runs from the landing to the log's last sample, and the lift-off's is found too
+    run = simulate(Scenario(name="land", seed=7602, reference=LIFT_AND_LAND, rig=Rig(stopper_gap=STOPPER)))
+    data = prepare([read_log(write_log(run, tmp_path)[0])], bandwidth=10.0, model=StageModel())
+    assert len(data.resting) == 2
+    landing = data.resting[1]
+    first_down = run.t[np.flatnonzero(_at_stopper(run) & (run.t - run.t[0] > 30.0))[0]] - run.t[0]
+    assert landing.start == pytest.approx(first_down, abs=0.15)
+    assert landing.stop == pytest.approx(run.t[-1] - run.t[0], abs=1e-9)
+
+
+def test_guides_that_stick_at_a_log_s_largest_gap_are_no_stopper(generated):
+    # single_04 (2 N of vertical friction): the platform sticks still at the log's largest gap for
+    # 0.31 s at 11.4 s while the model is off by up to 1.1 m/s^2, which a stopper anywhere in the log
+    # would be taken for; the friction's evidence stays in the fit. Nothing found on the clean log
+    # either
+    [stem] = [s for s, sc in named_set("single") if sc.name == "guide_friction_vertical_large"]
+    for set_name, name in (("single", stem), ("clean", "clean_01")):
+        path, _ = generated(set_name, name)
+        assert prepare([read_log(path)], bandwidth=10.0, model=StageModel()).resting == ()
+
+
+# --- the fits -------------------------------------------------------------------------------------
+def test_a_log_that_lifts_off_is_diagnosed_on_its_levitation(lifted):
+    # nothing claimed and the constants of a clean log (the issue's bounds: C1..C3 within 1 %, C4
+    # within 10 %; found within 0.1 % and 1.5 %); the stretch said in the result
+    run, path = lifted
+    d = diagnose([read_log(path)], limits=False)
+    assert not d.effects and not d.unexplained
+    found = np.array([d.constants_final[c].value for c in CONSTANTS])
+    error = found / _truth_constants(run) - 1.0
+    assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, error
+    [left] = d.to_dict()["left_out"]
+    assert left["why"] == RESTING_WHY and left["from_s"] < 0.15 < 0.9 < left["to_s"]
+
+
+@pytest.mark.slow
+def test_identify_leaves_the_resting_stretch_out_of_every_fit(lifted):
+    # the equation error, the output error (simulated from the log's samples) and NPFSI all read
+    # the log from its lift-off on: each within the issue's bounds of the true constants
+    run, path = lifted
+    out = identify([read_log(path)], StageModel(), methods=("equation_error", "output_error", "npfsi"))
+    truth = _truth_constants(run)
+    for fit in (out.equation_error, out.output_error):
+        error = np.array([fit.values[c] for c in CONSTANTS]) / truth - 1.0
+        assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, (fit.method, error)
+    assert [r.source for r in out.left_out] == [str(path)]
+    trimmed, _ = levitating_parts([read_log(path)], StageModel())
+    assert trimmed[0].t[0] - run.t[0] == pytest.approx(out.left_out[0].stop + 0.1, abs=2e-3)
