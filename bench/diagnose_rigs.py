@@ -11,6 +11,7 @@
     python bench/diagnose_rigs.py ... --shake small|large
     python bench/diagnose_rigs.py --warming [--rig obs2800] [--out ...]
     python bench/diagnose_rigs.py ... --warm small|large
+    python bench/diagnose_rigs.py --lift-off [--rig ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
 
@@ -66,6 +67,12 @@ and a gap reading whose zero drifts by 20 or 50 um (time constant 60 s) as the f
 (``GapSensorZero.drift``), which gives the forces of the magnets' drift.
 ``--warm small|large`` adds the magnets' warming to every log of whatever runs (scored as a true
 effect).
+
+``--lift-off``: logs that begin with the platform resting on its stopper at 30 mm and lift off
+after about a second (``Rig.stopper_gap``; the reference steps from 30 mm to 19.5 mm from 1 s on),
+clean, beside large horizontal friction or normal cogging, and one that lands again from 56 s on:
+samples where the stopper holds the platform, which no fit may read. Each line also gives the
+refitted constants' errors against the plant's (C1..C3 the largest, and C4).
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
 it out of the truth): the other benches on a floor that is not quiet.
@@ -283,6 +290,27 @@ def sensor_pairs() -> dict:
     return {f"{sensor.kind}+{other}": (sensor, SINGLE_EFFECTS[other]("large")) for sensor, other in pairs}
 
 
+STOPPER_GAP = 0.030
+"""[m] The ``--lift-off`` rig's stopper (the platform rests on it at the largest gap)."""
+
+
+def lift_off() -> dict:
+    """The ``--lift-off`` logs by name: (seed, reference, effects)."""
+    from tests.independent import effects as E
+    from tests.independent.reference import ReferenceSpec
+
+    lift = ReferenceSpec(gap_center=STOPPER_GAP, steps_v=((1.0, -0.0105),), step_time=1.0, ramp_time=4.0)
+    land = ReferenceSpec(
+        gap_center=STOPPER_GAP, steps_v=((1.0, -0.0105), (56.0, 0.0115)), step_time=1.0, ramp_time=4.0
+    )
+    return {
+        "lift_clean": (7601, lift, ()),
+        "lift_land_clean": (7602, land, ()),
+        "lift_friction_h": (7603, lift, (E.GuideFriction.large("horizontal"),)),
+        "lift_cogging": (7604, lift, (E.NormalCogging.large(),)),
+    }
+
+
 def saturation() -> dict:
     """The saturations ``--saturation`` runs, by name."""
     from tests.independent import effects as E
@@ -316,6 +344,9 @@ def main() -> None:
     )
     parser.add_argument(
         "--warming", action="store_true", help="score logs of magnets warming (alone and beside an effect)"
+    )
+    parser.add_argument(
+        "--lift-off", action="store_true", help="score logs that begin (or end) resting on the stopper"
     )
     parser.add_argument(
         "--sensor-pairs", action="store_true", help="score current sensor errors beside other effects instead"
@@ -410,6 +441,11 @@ def main() -> None:
             for seed in WARMING_SEEDS:
                 scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
                 groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
+    elif args.lift_off:
+        for name, (seed, reference, effects) in lift_off().items():
+            on_stopper = Rig(**RIGS[args.rig], stopper_gap=STOPPER_GAP)
+            scenario = Scenario(name=name, seed=seed, effects=effects, reference=reference, rig=on_stopper)
+            groups.setdefault("lift_off", []).append((name, scenario))
     elif args.sensor_pairs:
         for k, (name, effects) in enumerate(sensor_pairs().items()):
             scenario = Scenario(name=name, seed=7100 + k, effects=effects, rig=rig)
@@ -485,6 +521,11 @@ def main() -> None:
                 "warnings": result["warnings"],  # constants refitted beyond a rig of this design
                 "marks": [s.true_first, s.no_false_claim, s.size_right],
                 "notes": s.notes,
+                "constants_off": {
+                    c: result["constants_final"][c]["value"] / v - 1.0
+                    for c, v in run.truth["plant"]["constants_true"].items()
+                },
+                "left_out": [f"{r['from_s']:.2f}-{r['to_s']:.2f} s" for r in result["left_out"]],
                 "wall_s": time.perf_counter() - t0,
             }
             summary[stem] = row
@@ -494,6 +535,7 @@ def main() -> None:
                 f"{stem:16s} {scenario.name:38s} {flags}  claimed {s.claimed}  "
                 f"unexplained {row['unexplained']}  {'; '.join(s.notes)}"
                 + (f"  warnings {len(row['warnings'])}" if row["warnings"] else "")
+                + (_constants_words(row) if args.lift_off else "")
                 + f"  ({row['wall_s']:.1f} s)",
                 flush=True,
             )
@@ -508,6 +550,13 @@ def main() -> None:
         print(f"skipped (the generator's loop went unstable, no log): {', '.join(skipped)}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+
+
+def _constants_words(row: dict) -> str:
+    """The refitted constants' errors and the stretches left out, for a line of the output."""
+    off = row["constants_off"]
+    worst = max(abs(off[c]) for c in ("C1", "C2", "C3"))
+    return f"  C1..C3 within {100 * worst:.2f} %, C4 {100 * off['C4']:+.1f} %, left out {row['left_out']}"
 
 
 if __name__ == "__main__":

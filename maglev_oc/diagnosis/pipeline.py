@@ -164,9 +164,9 @@ class _Session:
         if fraction not in self.banded:
             band = self.data.settings["bandwidth_hz"] * fraction
             try:
-                self.banded[fraction] = _prepare(
-                    list(self.logs), self.holdout_fraction, band, 0.0, self.model
-                )
+                resting = self.data.resting  # as found on the band (:func:`prepare`)
+                logs = list(self.logs)
+                self.banded[fraction] = _prepare(logs, self.holdout_fraction, band, 0.0, resting=resting)
             except (InputError, LogError):
                 self.banded[fraction] = None
         return self.banded[fraction]
@@ -358,7 +358,8 @@ def _band_scale(stage: _Stage, run: _Run) -> NoiseScale:
     session, sel, design = stage.session, stage.sel, stage.design
     data = session.data
     try:
-        narrow = prepare(list(run.logs), bandwidth=LOW_BAND, max_rate=data.settings["max_rate_hz"])
+        rate = data.settings["max_rate_hz"]
+        narrow = prepare(list(run.logs), bandwidth=LOW_BAND, max_rate=rate, resting=data.resting)
     except (InputError, LogError) as err:  # a log too short for the narrow band's window
         return NoiseScale.not_calibrated(f"no {LOW_BAND:g} Hz fit to compare with: {err}")
     train, hold = narrow.masks(run.holdout_fraction)
@@ -507,9 +508,11 @@ def _prepare(
     bandwidth: float,
     min_duration: float,
     model: StageModel | None = None,
+    resting=None,
 ):
     """Step 1: the shared data preparation and the held-out block (with ``model``, the stretches where
-    the platform rests on a stopper left out: :mod:`~maglev_oc.regression.stoppers`)."""
+    the platform rests on a stopper found and left out, :mod:`~maglev_oc.regression.stoppers`; with
+    ``resting``, those found on another band)."""
     if not 0.05 <= holdout_fraction <= 0.5:
         raise InputError(f"holdout_fraction must be in [0.05, 0.5], got {holdout_fraction!r}")
     for log in logs:
@@ -522,9 +525,8 @@ def _prepare(
     # memory grows as samples x candidate columns: a long run is diagnosed at a rate that keeps
     # MAX_SAMPLES (the band of the fit, 10 Hz, stays far below any such rate)
     total = sum(log.duration for log in logs)
-    data = prepare(
-        logs, bandwidth=bandwidth, max_rate=min(DEFAULT_MAX_RATE, MAX_SAMPLES / total), model=model
-    )
+    rate = min(DEFAULT_MAX_RATE, MAX_SAMPLES / total)
+    data = prepare(logs, bandwidth=bandwidth, max_rate=rate, model=model, resting=resting)
     if not np.any(data.moving):
         raise LogError(
             ", ".join(data.sources),

@@ -435,6 +435,7 @@ def prepare(
     control_rate: float | None = None,
     logging_error: bool = True,
     model: StageModel | None = None,
+    resting: Sequence[RestingStretch] | None = None,
 ) -> PreparedLogs:
     """Reduce, differentiate and concatenate ``logs`` (all at one sample rate).
 
@@ -455,6 +456,10 @@ def prepare(
         The model the fits start from: with it, stretches where the platform rests on a stopper
         (before lift-off, after landing) are found and left out (item 5 of the module doc,
         :mod:`~maglev_oc.regression.stoppers`), and said in ``notes``.
+    resting : sequence of RestingStretch, optional
+        Instead of ``model``: the stretches to leave out, as found on another band of the same logs
+        (on a narrow band the smoothed gap and misfit no longer show them: a log that lifted off
+        after 1.2 s gave none at 2 Hz).
     """
     logs = as_log_list(logs)
     if (bandwidth is None) == (differentiator is None):
@@ -481,12 +486,19 @@ def prepare(
     cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
     notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
-    resting: tuple[RestingStretch, ...] = ()
-    if model is not None:
+    if resting is not None:  # found on another band: the same stretches, by their times
+        resting = tuple(resting)
+        mask = np.zeros(cat[0].size, dtype=bool)
+        for r in resting:
+            mask |= (cat[1] == r.log) & (cat[0] >= r.start) & (cat[0] <= r.stop)
+    elif model is not None:
         model_acc = model.dynamics(cat[2], cat[3])[1]
         mask, resting = resting_on_stoppers(
             cat[0], cat[1], cat[2], cat[5], model_acc, ts, tuple(log.source for log in logs)
         )
+    else:
+        mask, resting = np.zeros(cat[0].size, dtype=bool), ()
+    if resting:
         cat[6] = cat[6] & ~_widened(mask, cat[1], edge)
         notes += tuple(r.describe() for r in resting)
     rates = [control_rate_of(log, control_rate) for log in logs]
