@@ -3,7 +3,7 @@
 The stopper, not the magnets, holds the platform there, while the loop goes on commanding currents:
 those samples are wrong by the stopper's force in any fit. Before they were left out, a 60 s log of
 the independent generator that lifted off after 1.2 s gave C2 +2 %, C3 +7.6 % and C4 +125 % off the
-plant's in the diagnosis's base fit (and +2.3 / +8.5 / +134 % in identify's output error), without a
+plant's in the diagnosis's base fit (and +2.3 / +8.5 / +136 % in identify's output error), without a
 word (bench/README, "A log that begins on the stopper"). Logs from ``tests/independent``
 (``Rig.stopper_gap``; no code shared with ``maglev_oc.sim``).
 """
