@@ -28,6 +28,7 @@ binary, 2 MB, a directory                                         "JSON object",
 ``--json DIR`` / ``--report DIR``          diagnose, identify     "is a directory" (before any work)
 ``simulate --out DIR``                     simulate               "is a directory"
 ``report --out FILE``                      report                 "is a file"
+a log that never lifts off the stopper     diagnose               the log, "levitates for", "lift-off"
 a random edit anywhere (hypothesis: a      read_log               read, or a LogError naming the file;
 character inserted, deleted or replaced,                          never another exception
 truncation, a line doubled or swapped)
@@ -384,3 +385,20 @@ def test_a_log_in_which_neither_axis_moves_is_refused_by_diagnose_in_one_line(tm
     out.mkdir()
     argv = ["diagnose", str(log), "--json", str(out / "d.json")]
     _run_refused(argv, [log], out, capsys, ["still.csv", "neither axis moves", "nothing to diagnose"])
+
+
+def test_a_log_that_never_lifts_off_is_refused_by_diagnose_in_one_line(tmp_path, capsys):
+    # the independent generator's platform resting on its stopper for the whole 20 s (the reference
+    # asks for more gap than the stopper gives): every sample is left out as resting
+    # (regression.stoppers), so nothing levitates to fit; the line names the log and the stretch
+    from tests.independent.logio import write_log
+    from tests.independent.reference import ReferenceSpec
+    from tests.independent.simulate import Rig, Scenario, simulate
+
+    rest = ReferenceSpec(gap_center=0.0305, gap_peak_range=(0.0, 0.0))
+    run = simulate(Scenario("resting", 7611, reference=rest, rig=Rig(stopper_gap=0.030), duration=20.0))
+    log, _ = write_log(run, tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["diagnose", str(log), "--json", str(out / "d.json")]
+    _run_refused(argv, [log], out, capsys, ["resting.csv", "rests on its stopper", "levitates for 0.00 s"])

@@ -54,6 +54,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_MAX_RATE",
     "LEVITATION_MARGIN",
+    "MIN_LEVITATION",
     "RESTING_BANDWIDTH",
     "PreparedLogs",
     "as_log_list",
@@ -344,6 +345,9 @@ class PreparedLogs:
         return fit, hold
 
 
+MIN_LEVITATION = 2.0
+"""[s] The least a log must levitate, once its stretches on the stopper are left out, to be fitted."""
+
 LEVITATION_MARGIN = 0.1
 """[s] Kept off a resting stretch by :func:`levitating_parts` (the lift-off's first motion)."""
 
@@ -501,6 +505,15 @@ def prepare(
     if resting:
         cat[6] = cat[6] & ~_widened(mask, cat[1], edge)
         notes += tuple(r.describe() for r in resting)
+        for k, log in enumerate(logs):
+            left = int(np.count_nonzero(cat[6][cat[1] == k]))
+            if left < max(4 * edge, round(MIN_LEVITATION / ts)):
+                rests = "; ".join(r.what() for r in resting if r.log == k)
+                raise LogError(
+                    log.source,
+                    f"{rests}: the platform levitates for {left * ts:.2f} s of the log, too little to fit "
+                    f"(at least {max(4 * edge * ts, MIN_LEVITATION):g} s); record the run after lift-off",
+                )
     rates = [control_rate_of(log, control_rate) for log in logs]
     declared = [
         control_rate is not None or log.currents_measured or "control_rate_hz" in log.metadata for log in logs
