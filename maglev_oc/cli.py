@@ -820,7 +820,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     print(diag.message)
     for w in diag.warnings:
         print(f"  WARNING: {w}")
-    for r in diag.data.resting:
+    for r in diag.left_out:
         print(f"  left out: {r.describe()}")
     for a, before in diag.error_before.items():
         if math.isfinite(before):

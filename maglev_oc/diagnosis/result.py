@@ -14,7 +14,7 @@ from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selecti
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.regression.stoppers import RESTING_WHY
+from maglev_oc.regression.stoppers import RESTING_WHY, RestingStretch
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
 from maglev_oc.validation import Validation
 
@@ -137,6 +137,12 @@ class Diagnosis(Result):
         return bool(self.settings.get("detection_limits", True))
 
     @property
+    def left_out(self) -> tuple[RestingStretch, ...]:
+        """Where a log's platform rests on its stopper, left out of every fit
+        (:mod:`~maglev_oc.regression.stoppers`; none without prepared data)."""
+        return () if self.data is None else self.data.resting
+
+    @property
     def ranking(self) -> list[Ranked]:
         return self.selection.ranking
 
@@ -227,7 +233,7 @@ class Diagnosis(Result):
                     "gap_m": r.gap,
                     "why": RESTING_WHY,
                 }
-                for r in self.data.resting
+                for r in self.left_out
             ],
             "holdout": {
                 "fraction": self.settings.get("holdout_fraction"),
@@ -246,7 +252,7 @@ class Diagnosis(Result):
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
         lines += [f"  WARNING: {w}" for w in self.warnings]
-        lines += [f"  left out: {r.describe()}" for r in self.data.resting]
+        lines += [f"  left out: {r.describe()}" for r in self.left_out]
         for e in self.effects:
             seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"
             lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")

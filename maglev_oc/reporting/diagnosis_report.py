@@ -226,7 +226,7 @@ def scorecard_table(
         f"({int(diag.holdout.sum())} samples; {int(diag.train.sum())} fitted). Acceleration error: measured "
         "minus modelled acceleration, both through the same zero-phase filter."
     )
-    left_out = [f"Left out of the fit: {os.path.basename(r.source)}, {r.what()}." for r in diag.data.resting]
+    left_out = [f"Left out of the fit: {os.path.basename(r.source)}, {r.what()}." for r in diag.left_out]
     return Table("", columns, cells, notes=[holdout, *left_out], font_size=7.5)
 
 
