@@ -65,6 +65,7 @@ __all__ = [
     "matching_kernel",
     "prepare",
     "reduce_rate",
+    "without_resting",
 ]
 
 _FILTER_ROWS = 16
@@ -363,15 +364,25 @@ def levitating_parts(
     out, found = [], []
     for log in as_log_list(logs):
         resting = prepare([log], bandwidth=RESTING_BANDWIDTH, model=model).resting
-        start, stop = float(log.t[0]), float(log.t[-1]) + log.sample_time
-        for r in resting:
-            if r.start <= 0.5 * (log.t[-1] - log.t[0]):
-                start = max(start, float(log.t[0]) + r.stop + LEVITATION_MARGIN)
-            else:
-                stop = min(stop, float(log.t[0]) + r.start - LEVITATION_MARGIN)
-        out.append(log.time_slice(start, stop) if resting else log)
+        out.append(without_resting(log, resting))
         found.extend(resting)
     return out, tuple(found)
+
+
+def without_resting(log: Log, resting: Sequence[RestingStretch]) -> Log:
+    """``log`` without those of the stretches ``resting`` that are its own (by source) and
+    :data:`LEVITATION_MARGIN` beside them (the log itself when none is): how :func:`levitating_parts`
+    cut it, for what reads the fitted samples again (a report's residuals)."""
+    mine = [r for r in resting if r.source == log.source]
+    if not mine:
+        return log
+    start, stop = float(log.t[0]), float(log.t[-1]) + log.sample_time
+    for r in mine:
+        if r.start <= 0.5 * (log.t[-1] - log.t[0]):
+            start = max(start, float(log.t[0]) + r.stop + LEVITATION_MARGIN)
+        else:
+            stop = min(stop, float(log.t[0]) + r.start - LEVITATION_MARGIN)
+    return log.time_slice(start, stop)
 
 
 RESTING_BANDWIDTH = 10.0

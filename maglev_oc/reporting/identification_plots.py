@@ -20,6 +20,7 @@ from maglev_oc.data.logs import Log
 from maglev_oc.identification.layout import CONSTANT_NAMES, UNITS
 from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.identification.verification import EquilibriumComparison, ParabolaComparison, ParabolaFit
+from maglev_oc.regression.data import without_resting
 from maglev_oc.reporting.pdf import PdfReport, ReportContents, caption, grid, new_figure
 from maglev_oc.reporting.style import thin
 from maglev_oc.units import M_TO_MM, M_TO_UM
@@ -606,6 +607,7 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         + "): "
         + ", ".join(f"{k} = {getattr(c, k):.6g}" for k in CONSTANT_NAMES),
         *(f"Warning: {w}" for w in outcome.warnings),
+        *(f"Left out of every fit: {r.source}, {r.what()}." for r in outcome.left_out),
         "Equation error: the Savitzky-Golay acceleration (zero phase) against the model's, both filtered "
         "by the same kernel; output error: multiple shooting over 50 ms segments joined by continuity "
         "within 0.2 s windows. Standard errors are long-run (HAC) ones: residuals of both fits are "
@@ -627,7 +629,8 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         for fit in (ee, oe):
             if fit is not None and fit.success:
                 pdf.add_figure(text_figure(f"Fit report: {fit.method}", [fit.report()]))
-                pdf.add_figure(residuals_figure(fit, logs[0], window=(1.0, min(3.0, logs[0].duration))))
+                log = without_resting(logs[0], outcome.left_out)  # the samples the fit read
+                pdf.add_figure(residuals_figure(fit, log, window=(1.0, min(3.0, log.duration))))
         if outcome.npfsi:
             pdf.add_figure(npfsi_convergence_figure(outcome.npfsi, None))
     return pdf.contents
