@@ -520,7 +520,11 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     acc = change * ca.vertcat(2 * magnets + magnet_normal, thrust)
     fn = ca.Function("fielddrift", [x, u, du, s, q], [acc], ["x", "u", "du", "s", "p"], ["acc"])
     suffixes = [""] if one_log else [f"_in_log{k + 1}" for k in range(len(logs))]
-    change_name = "field_change_over_log" if one_log else "field_change"
+    change_name, attraction_name = (
+        ("field_change_over_log", "attraction_change_over_log")
+        if one_log
+        else ("field_change", "attraction_change")
+    )
 
     def physical(p, cov, consts):
         r = ctx.reference_ratio("C2", consts)
@@ -530,7 +534,7 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
             change = delta_method(lambda v, k=k: 2 * r * v[2 * k], p, cov, "1")
             out |= {
                 f"{change_name}{tag}": change,
-                f"attraction_{change_name[6:]}{tag}": Estimate(2 * change.value, 2 * change.stderr, "1"),
+                f"{attraction_name}{tag}": Estimate(2 * change.value, 2 * change.stderr, "1"),
                 f"magnet_warming_if_thermal{tag}": Estimate(
                     -change.value / REMANENCE_PER_KELVIN, change.stderr / REMANENCE_PER_KELVIN, "K"
                 ),
@@ -538,11 +542,12 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
                     2 * change.value / attraction_slope, 2 * change.stderr / abs(attraction_slope), "m"
                 ),
             }
-        L = len(logs)
-        for k in range(L if L > 1 else 0):  # the field's level in log k against the logs' mean
-            sign = np.where(np.arange(L - 1) == k, 1.0, 0.0) if k < L - 1 else -np.ones(L - 1)
-            level = delta_method(lambda v, sign=sign: r * float(sign @ v[2 * L :]), p, cov, "1")
-            out[f"field_level{suffixes[k]}"] = level
+        if not one_log:  # each log's level against the logs' mean: the last one's is minus the others'
+            L = len(logs)
+            for tag, sign in zip(suffixes, np.vstack([np.eye(L - 1), -np.ones(L - 1)]), strict=True):
+                out[f"field_level{tag}"] = delta_method(
+                    lambda v, s=sign: r * float(s @ v[2 * L :]), p, cov, "1"
+                )
         return out
 
     def says(e):
@@ -586,13 +591,14 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
             "and after a run, tells them apart. The constants found are the logs' mean."
         )
 
-    def bounded(est):
-        for tag, name in zip(suffixes, logs, strict=True):
-            what = "field change over the log" + ("" if one_log else f" {name}")
-            reason = within(f"{change_name}{tag}", FIELD_DRIFT_BOUND, what)(est)
-            if reason:
-                return reason
-        return None
+    bounded = all_of(
+        *(
+            within(
+                f"{change_name}{tag}", FIELD_DRIFT_BOUND, "field change over the log" + (tag and f" {name}")
+            )
+            for tag, name in zip(suffixes, logs, strict=True)
+        )
+    )
 
     return Candidate(
         AccelerationTerm(

@@ -106,6 +106,7 @@ from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
 from maglev_oc.regression.design import Design, build_design, reusing_columns
 from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
 from maglev_oc.regression.solve import SubsetFit, fit_subset, predicted, residuals
+from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.results import AXES, Estimate, PerAxis
 from maglev_oc.validation import Validation, validate
 
@@ -508,7 +509,7 @@ def _prepare(
     bandwidth: float,
     min_duration: float,
     model: StageModel | None = None,
-    resting=None,
+    resting: Sequence[RestingStretch] | None = None,
 ):
     """Step 1: the shared data preparation and the held-out block (with ``model``, the stretches where
     the platform rests on a stopper found and left out, :mod:`~maglev_oc.regression.stoppers`; with

@@ -14,7 +14,7 @@ from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selecti
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.regression.stoppers import RESTING_WHY, RestingStretch
+from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
 from maglev_oc.validation import Validation
 
@@ -225,16 +225,7 @@ class Diagnosis(Result):
                 for s in self.selection.steps
             ],
             "logs": list(self.sources),
-            "left_out": [
-                {
-                    "log": r.source,
-                    "from_s": r.start,
-                    "to_s": r.stop,
-                    "gap_m": r.gap,
-                    "why": RESTING_WHY,
-                }
-                for r in self.left_out
-            ],
+            "left_out": [r.to_dict() for r in self.left_out],
             "holdout": {
                 "fraction": self.settings.get("holdout_fraction"),
                 "samples": int(self.holdout.sum()),

@@ -36,7 +36,7 @@ from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import as_log_list, delayed_inputs, levitating_parts, prepare
-from maglev_oc.regression.stoppers import RESTING_WHY, RestingStretch
+from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Result
 from maglev_oc.validation import Validation, validate
@@ -299,10 +299,7 @@ class IdentificationOutcome(Result):
             "status": self.status,
             "message": self.message,
             "warnings": list(self.warnings),
-            "left_out": [
-                {"log": r.source, "from_s": r.start, "to_s": r.stop, "gap_m": r.gap, "why": RESTING_WHY}
-                for r in self.left_out
-            ],
+            "left_out": [r.to_dict() for r in self.left_out],
             "timings": dict(self.timings),
             "validation": None if self.validation is None else self.validation.to_dict(),
         }

@@ -362,8 +362,11 @@ def levitating_parts(
     output-error fit, NPFSI), as :func:`prepare` leaves them out of the equation error. Returns the
     logs and the stretches left out."""
     out, found = [], []
-    for log in as_log_list(logs):
-        resting = prepare([log], bandwidth=RESTING_BANDWIDTH, model=model).resting
+    for k, log in enumerate(as_log_list(logs)):
+        # each log prepared alone: its stretches renumbered as the k-th of the logs
+        resting = [
+            replace(r, log=k) for r in prepare([log], bandwidth=RESTING_BANDWIDTH, model=model).resting
+        ]
         out.append(without_resting(log, resting))
         found.extend(resting)
     return out, tuple(found)

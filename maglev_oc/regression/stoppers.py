@@ -2,7 +2,7 @@
 
 A log that begins before lift-off, or ends after the platform has landed, holds stretches where the
 vertical stopper, not the magnets, holds the platform: the gap reading sits at the log's largest
-(or smallest) gap and does not move, while the currents, which the loop keeps commanding, give
+gap and does not move, while the currents, which the loop keeps commanding, give
 forces the model turns into an acceleration the platform does not have. Those samples are no
 evidence about the magnets; in an equation-error fit they are wrong by the stopper's force.
 
@@ -110,6 +110,16 @@ class RestingStretch:
     def describe(self) -> str:
         """The stretch in words, with its log."""
         return f"{self.source}: {self.what()}: left out of the fit"
+
+    def to_dict(self) -> dict:
+        """A result's ``left_out`` entry."""
+        return {
+            "log": self.source,
+            "from_s": self.start,
+            "to_s": self.stop,
+            "gap_m": self.gap,
+            "why": RESTING_WHY,
+        }
 
 
 def resting_on_stoppers(
