@@ -70,8 +70,10 @@ effect).
 
 ``--lift-off``: logs that begin with the platform resting on its stopper at 30 mm and lift off
 after about a second (``Rig.stopper_gap``; the reference steps from 30 mm to 19.5 mm from 1 s on),
-clean, beside large horizontal friction or normal cogging, and one that lands again from 56 s on:
-samples where the stopper holds the platform, which no fit may read. Each line also gives the
+clean, beside large horizontal friction or normal cogging, and one that lands again from 56 s on;
+and three (clean, friction, cogging) whose reference steps 2 mm beyond a stopper at 26 mm from 25 s
+to 26.5 s, the loop pressing the platform against it: samples where the stopper holds the
+platform, which no fit may read. Each line also gives the
 refitted constants' errors against the plant's (C1..C3 the largest, and C4).
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
@@ -293,9 +295,12 @@ def sensor_pairs() -> dict:
 STOPPER_GAP = 0.030
 """[m] The ``--lift-off`` rig's stopper (the platform rests on it at the largest gap)."""
 
+TOUCHED_STOPPER_GAP = 0.026
+"""[m] The stopper of the ``--lift-off`` logs whose reference runs beyond it in the middle of the log."""
+
 
 def lift_off() -> dict:
-    """The ``--lift-off`` logs by name: (seed, reference, effects)."""
+    """The ``--lift-off`` logs by name: (seed, reference, effects, the stopper's gap)."""
     from tests.independent import effects as E
     from tests.independent.reference import ReferenceSpec
 
@@ -303,11 +308,16 @@ def lift_off() -> dict:
     land = ReferenceSpec(
         gap_center=STOPPER_GAP, steps_v=((1.0, -0.0105), (56.0, 0.0115)), step_time=1.0, ramp_time=4.0
     )
+    # from 25 s on, the reference steps 8 mm up for 1.5 s: 2 mm beyond the stopper at 26 mm
+    touch = ReferenceSpec(steps_v=((25.0, 0.008), (26.5, -0.008)), step_time=0.3)
     return {
-        "lift_clean": (7601, lift, ()),
-        "lift_land_clean": (7602, land, ()),
-        "lift_friction_h": (7603, lift, (E.GuideFriction.large("horizontal"),)),
-        "lift_cogging": (7604, lift, (E.NormalCogging.large(),)),
+        "lift_clean": (7601, lift, (), STOPPER_GAP),
+        "lift_land_clean": (7602, land, (), STOPPER_GAP),
+        "lift_friction_h": (7603, lift, (E.GuideFriction.large("horizontal"),), STOPPER_GAP),
+        "lift_cogging": (7604, lift, (E.NormalCogging.large(),), STOPPER_GAP),
+        "touch_clean": (7701, touch, (), TOUCHED_STOPPER_GAP),
+        "touch_friction_h": (7702, touch, (E.GuideFriction.large("horizontal"),), TOUCHED_STOPPER_GAP),
+        "touch_cogging": (7703, touch, (E.NormalCogging.large(),), TOUCHED_STOPPER_GAP),
     }
 
 
@@ -442,8 +452,8 @@ def main() -> None:
                 scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
                 groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
     elif args.lift_off:
-        for name, (seed, reference, effects) in lift_off().items():
-            on_stopper = Rig(**RIGS[args.rig], stopper_gap=STOPPER_GAP)
+        for name, (seed, reference, effects, stopper) in lift_off().items():
+            on_stopper = Rig(**RIGS[args.rig], stopper_gap=stopper)
             scenario = Scenario(name=name, seed=seed, effects=effects, reference=reference, rig=on_stopper)
             groups.setdefault("lift_off", []).append((name, scenario))
     elif args.sensor_pairs:

@@ -1,10 +1,13 @@
-"""A log whose platform rests on its stopper before lift-off or after landing.
+"""A log whose platform rests on its stopper before lift-off or after landing, or is pressed against
+it in between.
 
 The stopper, not the magnets, holds the platform there, while the loop goes on commanding currents:
 those samples are wrong by the stopper's force in any fit. Before they were left out, a 60 s log of
 the independent generator that lifted off after 1.2 s gave C2 +2 %, C3 +7.6 % and C4 +125 % off the
 plant's in the diagnosis's base fit (and +2.3 / +8.5 / +136 % in identify's output error), without a
-word (bench/README, "A log that begins on the stopper"). Logs from ``tests/independent``
+word (bench/README, "A log that begins on the stopper"); a reference 2 mm beyond a stopper at 26 mm
+for 1.5 s in the middle of a log gave C4 six times the plant's and lost a normal cogging. Logs from
+``tests/independent``
 (``Rig.stopper_gap``; no code shared with ``maglev_oc.sim``).
 """
 
@@ -18,7 +21,7 @@ from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.identification.pipeline import identify
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import levitating_parts, prepare
-from maglev_oc.regression.stoppers import RESTING_WHY
+from maglev_oc.regression.stoppers import RESTING_WHY, TOUCHING_WHY
 from tests.independent.logio import write_log
 from tests.independent.reference import ReferenceSpec
 from tests.independent.sets import named_set
@@ -35,6 +38,12 @@ LIFT_AND_LAND = ReferenceSpec(
 )
 """... and set down again from 56 s on (a reference beyond the stopper: the loop presses it down)."""
 
+TOUCHED = 0.026
+"""[m] A stopper the reference runs beyond in the middle of a log ..."""
+
+TOUCH = ReferenceSpec(steps_v=((25.0, 0.008), (26.5, -0.008)), step_time=0.3)
+"""... the usual sines around 19.5 mm, stepped 8 mm up from 25 s to 26.5 s: 2 mm beyond it."""
+
 CONSTANTS = ("C1", "C2", "C3", "C4")
 
 
@@ -42,9 +51,9 @@ def _truth_constants(run) -> np.ndarray:
     return np.array([run.truth["plant"]["constants_true"][c] for c in CONSTANTS])
 
 
-def _at_stopper(run) -> np.ndarray:
+def _at_stopper(run, stopper: float = STOPPER) -> np.ndarray:
     """(n,) the logged samples whose true gap is the stopper's."""
-    return run.states["x1"] >= STOPPER - 1e-12
+    return run.states["x1"] >= stopper - 1e-12
 
 
 def _lift_off(run) -> float:
@@ -57,6 +66,20 @@ def _lift_off(run) -> float:
 def lifted(tmp_path_factory):
     run = simulate(Scenario(name="lift", seed=7601, reference=LIFT, rig=Rig(stopper_gap=STOPPER)))
     return run, write_log(run, tmp_path_factory.mktemp("lift"))[0]
+
+
+@pytest.fixture(scope="module")
+def touched(tmp_path_factory):
+    run = simulate(Scenario(name="touch", seed=7701, reference=TOUCH, rig=Rig(stopper_gap=TOUCHED)))
+    return run, write_log(run, tmp_path_factory.mktemp("touch"))[0]
+
+
+def _contacts(run, stopper: float) -> list[tuple[float, float]]:
+    """[s] (first, last) time in the log of each run of samples on the stopper."""
+    on = _at_stopper(run, stopper).astype(np.int8)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on, [0]])))
+    t = run.t - run.t[0]
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 # --- the generator -----------------------------------------------------------------------------
@@ -104,6 +127,28 @@ def test_landing_at_the_end_and_its_bounce_are_one_stretch(tmp_path):
     assert landing.stop == pytest.approx(run.t[-1] - run.t[0], abs=1e-9)
 
 
+def test_a_touch_in_the_middle_of_a_log_and_its_bounce_are_found_and_left_out(touched):
+    # the loop presses the platform against the stopper for 2 s (25.16-27.14 s), then it bounces
+    # once (27.52-27.58 s, the misfit there only 1.1 m/s^2 above the levitating platform's: found
+    # as the stopper's gap, which the first stretch showed). Each stretch within the filters'
+    # smoothing of the true contact (0.15 s), said as a touch, and left out with one filter memory
+    run, path = touched
+    data = prepare([read_log(path)], bandwidth=10.0, model=StageModel())
+    contacts = _contacts(run, TOUCHED)
+    assert [round(a) for a, _ in contacts[:2]] == [25, 28] and len(data.resting) == 2
+    for stretch, (first, last) in zip(data.resting, contacts, strict=False):
+        assert stretch.during and stretch.to_dict()["why"] == TOUCHING_WHY
+        assert stretch.start == pytest.approx(first, abs=0.15) and stretch.stop == pytest.approx(
+            last, abs=0.15
+        )
+        assert stretch.gap == pytest.approx(TOUCHED, abs=2e-5)
+    assert data.resting[0].misfit > 20.0  # the loop wound up to the amplifiers' 9 A against it
+    left = ~data.valid & (data.t > 1.0) & (data.t < 59.0)
+    assert data.t[left].min() == pytest.approx(data.resting[0].start - data.edge * data.sample_time, abs=2e-3)
+    assert data.t[left].max() == pytest.approx(data.resting[1].stop + data.edge * data.sample_time, abs=2e-3)
+    assert any("pressed against its stopper" in n for n in data.notes)
+
+
 def test_guides_that_stick_at_a_log_s_largest_gap_are_no_stopper(generated):
     # single_04 (2 N of vertical friction): the platform sticks still at the log's largest gap for
     # 0.31 s at 11.4 s while the model is off by up to 1.1 m/s^2, which a stopper anywhere in the log
@@ -116,12 +161,13 @@ def test_guides_that_stick_at_a_log_s_largest_gap_are_no_stopper(generated):
 
 
 def test_a_narrow_band_leaves_out_the_stretches_found_on_the_fits_band(lifted):
-    # at 2 Hz (the band the logged currents' error is calibrated on) the smoothed gap and misfit no
-    # longer show the stretch: it is left out by its times, with the narrow band's longer memory
+    # at 2 Hz (the band the logged currents' error is calibrated on) the smoothed gap and misfit show
+    # the stretch otherwise (ending 0.03 s earlier; with the log's largest reading as the stopper's
+    # gap, not at all): it is left out by the fit band's times, with the narrow band's longer memory
     _, path = lifted
     log = read_log(path)
     fits = prepare([log], bandwidth=10.0, model=StageModel())
-    assert prepare([log], bandwidth=2.0, model=StageModel()).resting == ()
+    assert prepare([log], bandwidth=2.0, model=StageModel()).resting != fits.resting
     narrow = prepare([log], bandwidth=2.0, resting=fits.resting)
     assert narrow.resting == fits.resting
     [stretch] = fits.resting
@@ -141,6 +187,64 @@ def test_a_log_that_lifts_off_is_diagnosed_on_its_levitation(lifted):
     assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, error
     [left] = d.to_dict()["left_out"]
     assert left["why"] == RESTING_WHY and left["from_s"] < 0.15 < 0.9 < left["to_s"]
+
+
+def test_a_log_with_a_touch_is_diagnosed_on_its_levitation(touched):
+    # nothing claimed, the constants of a clean log (the issue's bounds); with the touch in the fit
+    # C4 came out at 0.45 (538 % above the papers' 0.07), with the touch out but its bounce in, 18 %
+    # high. Found within 0.3 % and 1 %
+    run, path = touched
+    d = diagnose([read_log(path)], limits=False)
+    assert not d.effects and not d.unexplained
+    error = np.array([d.constants_final[c].value for c in CONSTANTS]) / _truth_constants(run) - 1.0
+    assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, error
+    assert [r["why"] for r in d.to_dict()["left_out"]] == [TOUCHING_WHY] * 2
+
+
+@pytest.mark.slow
+def test_beside_a_touch_the_cogging_is_found_and_sized(tmp_path):
+    # 2 N normal cogging: with the touch in the fit it was not claimed (a residual "that varies with
+    # the gap" reported instead, C3 +33 %, C4 +589 %); now claimed first, alone, sized within the
+    # issue's 30 %
+    from tests.independent.effects import NormalCogging
+    from tests.independent.scoring import score
+
+    scenario = Scenario(
+        name="touch_cogging",
+        seed=7703,
+        effects=(NormalCogging.large(),),
+        reference=TOUCH,
+        rig=Rig(stopper_gap=TOUCHED),
+    )
+    run = simulate(scenario)
+    d = diagnose([read_log(write_log(run, tmp_path)[0])], limits=False)
+    s = score("touch_cogging", run.truth, d.to_dict()["effects"])
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert all(r.during for r in d.left_out)
+
+
+@pytest.mark.slow
+def test_identify_fits_the_levitation_either_side_of_a_touch(touched):
+    # the output error simulates the log's samples: the log is cut in two at the touch (and its
+    # bounce), each piece fitted; both fits within the issue's bounds
+    run, path = touched
+    pieces, resting = levitating_parts([read_log(path)], StageModel())
+    assert len(pieces) == 2 and len(resting) == 2
+    assert pieces[0].t[-1] - run.t[0] == pytest.approx(resting[0].start - 0.1, abs=2e-3)
+    assert pieces[1].t[0] - run.t[0] == pytest.approx(resting[1].stop + 0.1, abs=2e-3)
+    out = identify([read_log(path)], StageModel(), methods=("equation_error", "output_error"))
+    truth = _truth_constants(run)
+    for fit in (out.equation_error, out.output_error):
+        error = np.array([fit.values[c] for c in CONSTANTS]) / truth - 1.0
+        assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, (fit.method, error)
+        assert fit.sources == (str(path),)  # one log, not its two pieces
+    assert out.sources == (str(path),)
+    # the report plots the first residuals on the first piece (on the longest it failed: 25 070
+    # residuals against 32 298 samples)
+    from maglev_oc.reporting.identification_plots import write_outcome_report
+
+    write_outcome_report(path.with_suffix(".pdf"), out, [read_log(path)])
+    assert path.with_suffix(".pdf").stat().st_size > 10_000
 
 
 @pytest.mark.slow

@@ -320,7 +320,7 @@ class EquationError:
                 "covariance": 0.0,
                 "total": time.perf_counter() - t0 + self.prepare_time,
             },
-            sources=tuple(log.source for log in self.logs),
+            sources=tuple(dict.fromkeys(log.source for log in self.logs)),  # a log cut in pieces once
             settings={
                 **self._settings(hac_band, design.weights, sub.compensated),
                 "current_noise_scale": None if scale is None else scale.to_dict(),

@@ -288,7 +288,7 @@ class MultipleShooting:
                 "covariance": cov_t,
                 "total": time.perf_counter() - t0 + self.prepare_time,
             },
-            sources=tuple(sg.source for sg in self.segments),
+            sources=tuple(dict.fromkeys(sg.source for sg in self.segments)),  # a log cut in pieces once
             settings={
                 "segment_duration_s": self.segment_duration,
                 "window_duration_s": self.window_duration,

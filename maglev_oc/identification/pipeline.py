@@ -182,8 +182,9 @@ class IdentificationOutcome(Result):
     validation : Validation or None
         The best fit validated (held-out logs when given, else in-sample; see ``data``).
     left_out : tuple of RestingStretch
-        Where a log's platform rests on its stopper (before lift-off, after landing): left out of
-        every fit (:func:`~maglev_oc.regression.data.levitating_parts`).
+        Where a log's platform rests on its stopper (before lift-off, after landing, or pressed
+        against it in between): left out of every fit
+        (:func:`~maglev_oc.regression.data.levitating_parts`).
     success, status, message
         From the fits: ``"converged"`` when the best fit did, ``"npfsi_only"`` when only NPFSI
         ran (and stayed well posed), else ``"failed"`` with the solver's reason.
@@ -363,8 +364,9 @@ def identify(
         raise InputError(f"methods: choose among {METHODS}, got {methods!r}")
     estimate = tuple(estimate)
     check_identifiable(logs, estimate, min_duration=min_duration)
-    # where the platform rests on its stopper (before lift-off, after landing) is no evidence
-    logs, resting = levitating_parts(logs, model)
+    # where the platform rests on its stopper (before lift-off, after landing, a touch) is no evidence
+    sources = tuple(log.source for log in logs)
+    logs, resting = levitating_parts(logs, model)  # a touch mid-log cuts a log in two
     times: dict[str, float] = {}
     ee = oe = None
     if "equation_error" in methods or "output_error" in methods:
@@ -403,7 +405,7 @@ def identify(
         tuple(runs),
         model.constants,
         estimate,
-        tuple(log.source for log in logs),
+        sources,
         times,
         left_out=resting,
     )

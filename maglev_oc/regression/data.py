@@ -26,7 +26,8 @@ One data preparation and one filter policy for every equation-error fit in the p
    from the normal equations (bias-compensated least squares, Söderström 2018, Ch. 7).
 5. **Masks.** Samples within the filters' memory of a log's ends are invalid, and so, given the
    model the fits start from, are stretches where the platform rests on a stopper and their
-   filters' memory (:mod:`~maglev_oc.regression.stoppers`: before lift-off, after landing); an optional
+   filters' memory (:mod:`~maglev_oc.regression.stoppers`: before lift-off, after landing, pressed against it
+   in between); an optional
    held-out block at the end of each log is separated from the fitted samples by guard bands as
    long as the filters' memory, so that no sample of one leaks into the other.
 """
@@ -61,6 +62,7 @@ __all__ = [
     "control_rate_of",
     "delayed_inputs",
     "levitating_parts",
+    "levitating_pieces",
     "logging_error_share",
     "matching_kernel",
     "prepare",
@@ -350,42 +352,60 @@ MIN_LEVITATION = 2.0
 """[s] The least a log must levitate, once its stretches on the stopper are left out, to be fitted."""
 
 LEVITATION_MARGIN = 0.1
-"""[s] Kept off a resting stretch by :func:`levitating_parts` (the lift-off's first motion)."""
+"""[s] Kept off a resting stretch by :func:`levitating_parts` (the lift-off's first motion, an impact)."""
 
 
 def levitating_parts(
     logs: Log | Sequence[Log], model: StageModel
 ) -> tuple[list[Log], tuple[RestingStretch, ...]]:
-    """Each log without the stretches at its start or end where the platform rests on its stopper
-    (:mod:`~maglev_oc.regression.stoppers`, found as :func:`prepare` finds them) and
-    :data:`LEVITATION_MARGIN` beside them: for the fits that read a log's samples themselves (the
-    output-error fit, NPFSI), as :func:`prepare` leaves them out of the equation error. Returns the
-    logs and the stretches left out."""
+    """The logs' pieces where the platform levitates: without the stretches where it rests on (or
+    is pressed against) its stopper (:mod:`~maglev_oc.regression.stoppers`, found as
+    :func:`prepare` finds them), as :func:`levitating_pieces` cuts them: for the fits that read a
+    log's samples themselves (the output-error fit, NPFSI), as :func:`prepare` leaves them out of
+    the equation error. A touch in the middle of a log cuts it in two. Returns the pieces (in the
+    logs' order) and the stretches left out."""
     out, found = [], []
     for k, log in enumerate(as_log_list(logs)):
         # each log prepared alone: its stretches renumbered as the k-th of the logs
         resting = [
             replace(r, log=k) for r in prepare([log], bandwidth=RESTING_BANDWIDTH, model=model).resting
         ]
-        out.append(without_resting(log, resting))
+        out.extend(levitating_pieces(log, resting))
         found.extend(resting)
     return out, tuple(found)
 
 
-def without_resting(log: Log, resting: Sequence[RestingStretch]) -> Log:
-    """``log`` without those of the stretches ``resting`` that are its own (by source) and
-    :data:`LEVITATION_MARGIN` beside them (the log itself when none is): how :func:`levitating_parts`
-    cut it, for what reads the fitted samples again (a report's residuals)."""
-    mine = [r for r in resting if r.source == log.source]
+def levitating_pieces(log: Log, resting: Sequence[RestingStretch]) -> list[Log]:
+    """``log`` cut where those of the stretches ``resting`` that are its own (by source) lie, with
+    :data:`LEVITATION_MARGIN` more beside each (the lift-off's first motion, the impact): its pieces
+    of at least :data:`MIN_LEVITATION`, in time order (``[log]`` when no stretch is its own)."""
+    mine = sorted((r for r in resting if r.source == log.source), key=lambda r: r.start)
     if not mine:
-        return log
-    start, stop = float(log.t[0]), float(log.t[-1]) + log.sample_time
-    for r in mine:
-        if r.start <= 0.5 * (log.t[-1] - log.t[0]):
-            start = max(start, float(log.t[0]) + r.stop + LEVITATION_MARGIN)
-        else:
-            stop = min(stop, float(log.t[0]) + r.start - LEVITATION_MARGIN)
-    return log.time_slice(start, stop)
+        return [log]
+    t0 = float(log.t[0])
+    edges = [
+        t0,
+        *(e for r in mine for e in (t0 + r.start - LEVITATION_MARGIN, t0 + r.stop + LEVITATION_MARGIN)),
+    ]
+    edges.append(float(log.t[-1]) + log.sample_time)
+    pieces = [
+        log.time_slice(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= MIN_LEVITATION
+    ]
+    if not pieces:
+        raise LogError(
+            log.source,
+            f"{'; '.join(r.what() for r in mine)}: no stretch between them levitates for "
+            f"{MIN_LEVITATION:g} s; record the run after lift-off, with the reference inside the "
+            "stopper's gap",
+        )
+    return pieces
+
+
+def without_resting(log: Log, resting: Sequence[RestingStretch]) -> Log:
+    """The first of ``log``'s :func:`levitating_pieces` (the log itself when no stretch of
+    ``resting`` is its own): the samples of a fit's first residuals, for what reads them again (a
+    report's residuals)."""
+    return levitating_pieces(log, resting)[0]
 
 
 RESTING_BANDWIDTH = 10.0
@@ -472,8 +492,8 @@ def prepare(
         Estimate the logged currents' error (item 4 of the module doc); False sets it to zero.
     model : StageModel, optional
         The model the fits start from: with it, stretches where the platform rests on a stopper
-        (before lift-off, after landing) are found and left out (item 5 of the module doc,
-        :mod:`~maglev_oc.regression.stoppers`), and said in ``notes``.
+        (before lift-off, after landing, pressed against it in between) are found and left out
+        (item 5 of the module doc, :mod:`~maglev_oc.regression.stoppers`), and said in ``notes``.
     resting : sequence of RestingStretch, optional
         Instead of ``model``: the stretches to leave out, as found on another band of the same logs
         (on a narrow band the smoothed gap and misfit no longer show them: a log that lifted off
