@@ -72,8 +72,9 @@ effect).
 after about a second (``Rig.stopper_gap``; the reference steps from 30 mm to 19.5 mm from 1 s on),
 clean, beside large horizontal friction or normal cogging, and one that lands again from 56 s on;
 and three (clean, friction, cogging) whose reference steps 2 mm beyond a stopper at 26 mm from 25 s
-to 26.5 s, the loop pressing the platform against it: samples where the stopper holds the
-platform, which no fit may read. Each line also gives the
+to 26.5 s, the loop pressing the platform against it; two (clean, cogging) whose reference runs
+below a stop at a 15 mm gap and two (clean, friction) beyond an end stop of the travel at +45 mm
+over the same 1.5 s: samples where a stop holds the stage, which no fit may read. Each line also gives the
 refitted constants' errors against the plant's (C1..C3 the largest, and C4).
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
@@ -298,9 +299,15 @@ STOPPER_GAP = 0.030
 TOUCHED_STOPPER_GAP = 0.026
 """[m] The stopper of the ``--lift-off`` logs whose reference runs beyond it in the middle of the log."""
 
+TOP_STOP_GAP = 0.015
+"""[m] The stop at the smallest gap of the ``--lift-off`` logs whose reference runs below it ..."""
+
+END_STOPS = (-0.045, 0.045)
+"""[m] ... and the travel's end stops of those whose reference runs beyond one."""
+
 
 def lift_off() -> dict:
-    """The ``--lift-off`` logs by name: (seed, reference, effects, the stopper's gap)."""
+    """The ``--lift-off`` logs by name: (seed, reference, effects, the rig's stops as ``Rig`` fields)."""
     from tests.independent import effects as E
     from tests.independent.reference import ReferenceSpec
 
@@ -308,16 +315,28 @@ def lift_off() -> dict:
     land = ReferenceSpec(
         gap_center=STOPPER_GAP, steps_v=((1.0, -0.0105), (56.0, 0.0115)), step_time=1.0, ramp_time=4.0
     )
-    # from 25 s on, the reference steps 8 mm up for 1.5 s: 2 mm beyond the stopper at 26 mm
+    # from 25 s on, the reference steps 8 mm up for 1.5 s: 2 mm beyond the stopper at 26 mm; or 6 mm
+    # down, beyond a stop at a 15 mm gap; or 25 mm along the travel, beyond an end stop at +45 mm
     touch = ReferenceSpec(steps_v=((25.0, 0.008), (26.5, -0.008)), step_time=0.3)
+    top = ReferenceSpec(steps_v=((25.0, -0.006), (26.5, 0.006)), step_time=0.3)
+    end = ReferenceSpec(steps_h=((25.0, 0.025), (26.5, -0.025)), step_time=0.3)
+    rests = {"stopper_gap": STOPPER_GAP}
+    touches = {"stopper_gap": TOUCHED_STOPPER_GAP}
+    tops = {"top_stopper_gap": TOP_STOP_GAP}
+    ends = {"end_stops": END_STOPS}
+    friction, cogging = E.GuideFriction.large("horizontal"), E.NormalCogging.large()
     return {
-        "lift_clean": (7601, lift, (), STOPPER_GAP),
-        "lift_land_clean": (7602, land, (), STOPPER_GAP),
-        "lift_friction_h": (7603, lift, (E.GuideFriction.large("horizontal"),), STOPPER_GAP),
-        "lift_cogging": (7604, lift, (E.NormalCogging.large(),), STOPPER_GAP),
-        "touch_clean": (7701, touch, (), TOUCHED_STOPPER_GAP),
-        "touch_friction_h": (7702, touch, (E.GuideFriction.large("horizontal"),), TOUCHED_STOPPER_GAP),
-        "touch_cogging": (7703, touch, (E.NormalCogging.large(),), TOUCHED_STOPPER_GAP),
+        "lift_clean": (7601, lift, (), rests),
+        "lift_land_clean": (7602, land, (), rests),
+        "lift_friction_h": (7603, lift, (friction,), rests),
+        "lift_cogging": (7604, lift, (cogging,), rests),
+        "touch_clean": (7701, touch, (), touches),
+        "touch_friction_h": (7702, touch, (friction,), touches),
+        "touch_cogging": (7703, touch, (cogging,), touches),
+        "top_clean": (7711, top, (), tops),
+        "top_cogging": (7712, top, (cogging,), tops),
+        "end_clean": (7721, end, (), ends),
+        "end_friction_h": (7722, end, (friction,), ends),
     }
 
 
@@ -452,8 +471,8 @@ def main() -> None:
                 scenario = Scenario(name=name, seed=seed, effects=effects, rig=rig)
                 groups.setdefault(name, []).append((f"{name}_{seed}", scenario))
     elif args.lift_off:
-        for name, (seed, reference, effects, stopper) in lift_off().items():
-            on_stopper = Rig(**RIGS[args.rig], stopper_gap=stopper)
+        for name, (seed, reference, effects, stops) in lift_off().items():
+            on_stopper = Rig(**RIGS[args.rig], **stops)
             scenario = Scenario(name=name, seed=seed, effects=effects, reference=reference, rig=on_stopper)
             groups.setdefault("lift_off", []).append((name, scenario))
     elif args.sensor_pairs:

@@ -383,11 +383,14 @@ def levitating_pieces(log: Log, resting: Sequence[RestingStretch]) -> list[Log]:
     if not mine:
         return [log]
     t0 = float(log.t[0])
-    edges = [
-        t0,
-        *(e for r in mine for e in (t0 + r.start - LEVITATION_MARGIN, t0 + r.stop + LEVITATION_MARGIN)),
-    ]
-    edges.append(float(log.t[-1]) + log.sample_time)
+    held: list[list[float]] = []  # the stretches with their margins, overlapping ones merged
+    for r in mine:
+        a, b = t0 + r.start - LEVITATION_MARGIN, t0 + r.stop + LEVITATION_MARGIN
+        if held and a <= held[-1][1]:
+            held[-1][1] = max(held[-1][1], b)
+        else:
+            held.append([a, b])
+    edges = [t0, *(e for span in held for e in span), float(log.t[-1]) + log.sample_time]
     pieces = [
         log.time_slice(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= MIN_LEVITATION
     ]
@@ -395,8 +398,8 @@ def levitating_pieces(log: Log, resting: Sequence[RestingStretch]) -> list[Log]:
         raise LogError(
             log.source,
             f"{'; '.join(r.what() for r in mine)}: no stretch between them levitates for "
-            f"{MIN_LEVITATION:g} s; record the run after lift-off, with the reference inside the "
-            "stopper's gap",
+            f"{MIN_LEVITATION:g} s; record the run after lift-off, with the reference within the "
+            "stops",
         )
     return pieces
 
@@ -529,8 +532,8 @@ def prepare(
         mask = np.zeros(cat[0].size, dtype=bool)
         for r in resting:
             mask |= (cat[1] == r.log) & (cat[0] >= r.start) & (cat[0] <= r.stop)
-    elif model is not None:
-        model_acc = model.dynamics(cat[2], cat[3])[1]
+    elif model is not None and moving.any():  # (a log where nothing moves is refused as such)
+        model_acc = model.dynamics(cat[2], cat[3])[[1, 3]]
         mask, resting = resting_on_stoppers(
             cat[0], cat[1], cat[2], cat[5], model_acc, ts, tuple(log.source for log in logs)
         )

@@ -437,6 +437,21 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
                 s[0] = p->stop_gap;
                 if (s[1] > 0.0) s[1] = 0.0;
             }
+            /* ... the stop at the smallest gap (the platform against the stator), the end stops of
+               the horizontal travel: the same */
+            if (p->top_gap > 0.0 && s[0] < p->top_gap) {
+                s[0] = p->top_gap;
+                if (s[1] < 0.0) s[1] = 0.0;
+            }
+            if (p->x3_stop_on) {
+                if (s[2] > p->x3_stop_hi) {
+                    s[2] = p->x3_stop_hi;
+                    if (s[3] > 0.0) s[3] = 0.0;
+                } else if (s[2] < p->x3_stop_lo) {
+                    s[2] = p->x3_stop_lo;
+                    if (s[3] < 0.0) s[3] = 0.0;
+                }
+            }
             ia_q = iq1;
             ia_d = id1;
         }

@@ -65,6 +65,8 @@ FIELDS: list[tuple[str, object]] = [
     ("n_sub", _I), ("record_every", _I), ("q", _D), ("gap_min", _D), ("gap_max", _D), ("x3_max", _D),
     # the stopper the platform rests on when the magnets do not hold it (the largest gap) [m], 0: none
     ("stop_gap", _D),
+    # the stop at the smallest gap [m] (0: none), the horizontal travel's end stops [m] (when on)
+    ("top_gap", _D), ("x3_stop_on", _I), ("x3_stop_lo", _D), ("x3_stop_hi", _D),
     # effects: guide friction (LuGre), horizontal and vertical
     ("fh_on", _I), ("fh_Fc", _D), ("fh_Fs", _D), ("fh_vs", _D), ("fh_s0", _D), ("fh_s1", _D), ("fh_s2", _D),
     ("fv_on", _I), ("fv_Fc", _D), ("fv_Fs", _D), ("fv_vs", _D), ("fv_s0", _D), ("fv_s1", _D), ("fv_s2", _D),

@@ -78,6 +78,12 @@ class Rig:
         [m] the stopper the platform rests on when the magnets do not hold it: the gap cannot open
         beyond it (the plate stops there, inelastic). None: no stopper (the default). A run that
         begins at the stopper's gap begins resting on it (a lift-off).
+    top_stopper_gap : float or None
+        [m] the stop at the smallest gap (the platform against the stator's cover): the gap cannot
+        close below it (inelastic). None: none (the default).
+    end_stops : (float, float) or None
+        [m] the horizontal travel's end stops (low, high): x3 is held within them (inelastic).
+        None: none (the default).
     x3_limit : float
         [m] ... or if |x3| exceeds this.
     logged_currents : str
@@ -110,6 +116,8 @@ class Rig:
     gap_limits: tuple[float, float] = (0.006, 0.034)
     x3_limit: float = 0.08
     stopper_gap: float | None = None
+    top_stopper_gap: float | None = None
+    end_stops: tuple[float, float] | None = None
     logged_currents: str = "commanded"
     current_sensor_noise: float = 0.0
     controller: str = "fl"
@@ -165,6 +173,9 @@ class Rig:
             "encoder_model": "reading = q * round((x + n) / q), n ~ N(0, sigma^2): noise before quantization",
             "current_hold": "zero-order hold over each control period",
             "stopper_gap_m": self.stopper_gap,
+            # (said only when there: the truth of the logs without them stays as it was)
+            **({"top_stopper_gap_m": self.top_stopper_gap} if self.top_stopper_gap is not None else {}),
+            **({"end_stops_m": list(self.end_stops)} if self.end_stops is not None else {}),
             "controller_current_clip_a": self.current_limit,
             "amplifier_peak_a": self.amplifier_peak,
             "amplifier_continuous_a": self.amplifier_continuous,
@@ -311,6 +322,10 @@ def build_params(
     p.gap_min, p.gap_max = rig.gap_limits
     p.x3_max = rig.x3_limit
     p.stop_gap = rig.stopper_gap or 0.0
+    p.top_gap = rig.top_stopper_gap or 0.0
+    if rig.end_stops is not None:
+        p.x3_stop_on = 1
+        p.x3_stop_lo, p.x3_stop_hi = rig.end_stops
     p.com_cos, p.com_sin = 1.0, 0.0
     p.amp_peak = rig.amplifier_peak
     if rig.controller == "pid":
