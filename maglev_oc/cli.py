@@ -820,6 +820,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     print(diag.message)
     for w in diag.warnings:
         print(f"  WARNING: {w}")
+    if diag.moving_mass is not None:
+        print(f"  moving mass: {diag.moving_mass.says()}")
     for r in diag.left_out:
         print(f"  left out: {r.describe()}")
     for a, before in diag.error_before.items():

@@ -48,6 +48,7 @@ def test_shared_clean_log_claims_nothing():
     j = d.to_dict()
     assert j["effects"] == []
     assert j["not_separable"] == []
+    assert j["moving_mass"] is None  # C1 +4 %, C2 -2 %, C3 -4 %: no payload's pattern
     # the constants the diagnosis starts from: the errors-in-variables compensation lifts C1
     # from the plain fit's 14.35 to within 1 % of identify's output-error 14.70 (same log)
     assert abs(d.constants_final["C1"].value / 14.70 - 1) < 0.02

@@ -63,6 +63,7 @@ from maglev_oc.diagnosis.library import (
 )
 from maglev_oc.diagnosis.limits import detection_limits
 from maglev_oc.diagnosis.magnetics import END_PROFILE, EndProfile
+from maglev_oc.diagnosis.masses import MassChange, moving_mass_change
 from maglev_oc.diagnosis.prediction import output_error
 from maglev_oc.diagnosis.refit import (
     REFIT_TOLERANCE,
@@ -400,7 +401,8 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
     timings["total"] = sum(timings.values())
     constants_final = constants_of(design, sel.final, model)
-    warnings = constant_warnings(constants_final, model)
+    mass = moving_mass_change(constants_final, _constants(model), model.params)
+    warnings = constant_warnings(constants_final, model, mass)
     status, success, message = _outcome(effects, not_sep, unexplained, sel, data, warnings)
     return Diagnosis(
         success=success,
@@ -437,6 +439,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
         validation_before=val_before,
         validation_after=val_after,
         warnings=warnings,
+        moving_mass=mass,
     )
 
 
@@ -445,7 +448,9 @@ def _constants(model: StageModel) -> dict[str, float]:
     return dict(zip(CONSTANT_NAMES, model.constants.as_array(), strict=True))
 
 
-def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tuple[str, ...]:
+def constant_warnings(
+    constants: dict[str, Estimate], model: StageModel, mass: MassChange | None = None
+) -> tuple[str, ...]:
     """The refitted constants that moved from the model's by more than ``identify``'s plausible change
     (:func:`~maglev_oc.identification.pipeline.beyond_plausible`: 30 % and 5 standard errors),
     beside the effects found (an effect not claimed or not separable on this log takes their place):
@@ -455,11 +460,17 @@ def constant_warnings(constants: dict[str, Estimate], model: StageModel) -> tupl
     shown below 1.8 degrees"). A noisy-rig pair of the independent generator (a detent
     of 0.87 N at 15 mm decaying over 3 mm, judged at z 1.9 and not claimed, beside a cable carrier)
     was reported with the cable carrier at 1.9 N/m for the true 6.6 and C1 at 2.3 for the true 14.7,
-    and nothing said so."""
+    and nothing said so.
+
+    With ``mass`` (the constants moved together as a heavier stage moves them,
+    :mod:`~maglev_oc.diagnosis.masses`), each is judged against the model's moved by that mass: a
+    payload is no effect the model lacks."""
     out = []
     reference = _constants(model)
     for name in CONSTANT_NAMES:
         est, start = constants[name], float(reference[name])
+        if mass is not None:
+            start *= mass.factor(name)
         if not (math.isfinite(est.value) and start > 0):
             continue
         if not beyond_plausible(est.value, start, est.stderr):

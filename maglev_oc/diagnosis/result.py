@@ -10,6 +10,7 @@ import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.limits import DetectionLimit
+from maglev_oc.diagnosis.masses import MassChange
 from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selection, best_first
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
@@ -128,6 +129,8 @@ class Diagnosis(Result):
     detection_limits: list[DetectionLimit] = field(default_factory=list)
     # constants refitted beside the effects that no rig of this design has (pipeline.constant_warnings)
     warnings: tuple[str, ...] = ()
+    # the constants moved together as movers heavier than the model's move them (diagnosis.masses)
+    moving_mass: MassChange | None = None
 
     @property
     def limits_worked_out(self) -> bool:
@@ -236,6 +239,7 @@ class Diagnosis(Result):
             "status": self.status,
             "message": self.message,
             "warnings": list(self.warnings),
+            "moving_mass": None if self.moving_mass is None else self.moving_mass.to_dict(),
             "timings": {k: _num(v) for k, v in self.timings.items()},
         }
 
@@ -243,6 +247,7 @@ class Diagnosis(Result):
         """What was found, in plain words (the first page of the PDF report as text)."""
         lines = [f"Diagnosis ({self.status}): {self.message}"]
         lines += [f"  WARNING: {w}" for w in self.warnings]
+        lines += [f"  moving mass: {self.moving_mass.says()}"] if self.moving_mass is not None else []
         lines += [f"  left out: {r.describe()}" for r in self.left_out]
         for e in self.effects:
             seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"

@@ -165,6 +165,18 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         )
         for w in diag.warnings
     ]
+    if diag.moving_mass is not None:  # the constants moved as a payload moves them (diagnosis.masses)
+        mass = diag.moving_mass
+        rows.append(
+            (
+                "movers heavier than the model's"
+                if mass.added.value > 0
+                else "movers lighter than the model's",
+                f"{abs(mass.added.value):.2g} ± {mass.added.stderr:.1g}{NBSP}kg "
+                f"(C1 {mass.changes['C1']:+.0%}, C2 {mass.changes['C2']:+.0%})",
+                "a payload, not an effect: forces in N here use the model's masses (the note below)",
+            )
+        )
     rows += [
         (
             f"{u.axis} residual varying with the {u.depends_on.replace('_', ' ')}",
@@ -227,7 +239,8 @@ def scorecard_table(
         "minus modelled acceleration, both through the same zero-phase filter."
     )
     left_out = [f"Left out of the fit: {os.path.basename(r.source)}, {r.what()}." for r in diag.left_out]
-    return Table("", columns, cells, notes=[holdout, *left_out], font_size=7.5)
+    mass = [diag.moving_mass.says()] if diag.moving_mass is not None else []
+    return Table("", columns, cells, notes=[holdout, *left_out, *mass], font_size=7.5)
 
 
 # --- the pages after the scorecard -----------------------------------------------------------------------
