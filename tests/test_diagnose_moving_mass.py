@@ -1,4 +1,4 @@
-"""Constants that moved together as a payload moves them (``maglev_oc.diagnosis.masses``).
+"""Constants that moved together as a payload moves them (``maglev_oc.identification.masses``).
 
 The lumped constants are forces per moving mass: a payload of m kg lowers C1 by M_h / (M_h + m)
 and C2..C4 by M_v / (M_v + m). Before this was read, a log of the independent generator whose
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from maglev_oc.data.reading import read_log
-from maglev_oc.diagnosis.masses import MIN_MASS_CHANGE, moving_mass_change
 from maglev_oc.diagnosis.pipeline import diagnose
+from maglev_oc.identification.masses import MIN_MASS_CHANGE, moving_mass_change
 from maglev_oc.model.stage import StageModel
 from maglev_oc.results import Estimate
 from tests.independent.logio import write_log
@@ -78,16 +78,24 @@ def test_a_payload_is_read_as_such_not_as_something_the_model_lacks(tmp_path):
     # -19 %; the plant itself 1-4 % off the papers', seed 7801): nothing claimed, no warning of a
     # constant no stage has (there was: "C1 ... 41 % below the model's ... guide friction, a detent,
     # a cable carrier ... take current"), the mass read within 0.15 kg (2.5 of its standard errors:
-    # the plant's own few per cent), in the JSON and the result's words
+    # the plant's own few per cent), in the JSON and the result's words; and by identify (which
+    # warned "C1 = 8.457 is 40 % below its starting value ...")
     m = 1.0
     base = draw_constants(np.random.default_rng(7801), (0.01, 0.04))
     h, v = GEOMETRY.M_h / (GEOMETRY.M_h + m), GEOMETRY.M_v / (GEOMETRY.M_v + m)
     run = simulate(
         Scenario(name="payload", seed=7801, constants=(base[0] * h, base[1] * v, base[2] * v, base[3] * v))
     )
-    d = diagnose([read_log(write_log(run, tmp_path)[0])], limits=False)
+    path = write_log(run, tmp_path)[0]
+    d = diagnose([read_log(path)], limits=False)
     assert not d.effects and not d.warnings
     assert d.moving_mass is not None and abs(d.moving_mass.added.value - m) < 0.15
     j = d.to_dict()["moving_mass"]
     assert j["added_kg"] == pytest.approx(d.moving_mass.added.value) and "payload" in j["reading"]
     assert "moving mass:" in d.report()
+    # identify reads it from its own fit, and warns of nothing either
+    from maglev_oc.identification.pipeline import identify
+
+    out = identify([read_log(path)], MODEL, methods=("equation_error",))
+    assert not out.warnings and abs(out.moving_mass.added.value - m) < 0.15
+    assert out.to_dict()["moving_mass"]["added_kg"] == pytest.approx(out.moving_mass.added.value)

@@ -72,6 +72,7 @@ OUTCOME_KEYS = {
     "timings",
     "warnings",  # constants a stage of this geometry cannot have (IdentificationOutcome.warnings)
     "left_out",  # where a log's platform rests on its stopper (regression.stoppers)
+    "moving_mass",  # the constants moved as a payload moves them (identification.masses), or null
     "validation",  # residual whiteness and fit % of the best fit (maglev_oc.validation)
 }
 CLI_KEYS = OUTCOME_KEYS | {"stage"}  # the file also holds the stage file it amounts to
@@ -227,6 +228,7 @@ def test_identify_json_has_the_schema_a_script_reads(cli_json):
     assert cli_json["success"] is True and cli_json["status"] == "converged"
     assert cli_json["warnings"] == []  # the twin's constants are within a few per cent of the papers'
     assert cli_json["left_out"] == []  # the twin's runs levitate from their first sample
+    assert cli_json["moving_mass"] is None  # the twin carries no payload
     for method in ("equation_error", "output_error"):
         fit = cli_json[method]
         assert set(fit) == FIT_KEYS, method

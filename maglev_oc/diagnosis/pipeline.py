@@ -63,7 +63,6 @@ from maglev_oc.diagnosis.library import (
 )
 from maglev_oc.diagnosis.limits import detection_limits
 from maglev_oc.diagnosis.magnetics import END_PROFILE, EndProfile
-from maglev_oc.diagnosis.masses import MassChange, moving_mass_change
 from maglev_oc.diagnosis.prediction import output_error
 from maglev_oc.diagnosis.refit import (
     REFIT_TOLERANCE,
@@ -97,6 +96,7 @@ from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.errors import InputError
+from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
 from maglev_oc.model.hardware import STOPPER_POSITION
 from maglev_oc.model.stage import StageModel
@@ -463,7 +463,7 @@ def constant_warnings(
     and nothing said so.
 
     With ``mass`` (the constants moved together as a heavier stage moves them,
-    :mod:`~maglev_oc.diagnosis.masses`), each is judged against the model's moved by that mass: a
+    :mod:`~maglev_oc.identification.masses`), each is judged against the model's moved by that mass: a
     payload is no effect the model lacks."""
     out = []
     reference = _constants(model)

@@ -10,10 +10,10 @@ import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.limits import DetectionLimit
-from maglev_oc.diagnosis.masses import MassChange
 from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selection, best_first
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
+from maglev_oc.identification.masses import MassChange
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
@@ -129,7 +129,7 @@ class Diagnosis(Result):
     detection_limits: list[DetectionLimit] = field(default_factory=list)
     # constants refitted beside the effects that no rig of this design has (pipeline.constant_warnings)
     warnings: tuple[str, ...] = ()
-    # the constants moved together as movers heavier than the model's move them (diagnosis.masses)
+    # the constants moved together as movers heavier than the model's move them (identification.masses)
     moving_mass: MassChange | None = None
 
     @property

@@ -29,6 +29,7 @@ from maglev_oc.data.logs import CURRENT_RESOLUTION, Log, LogError, read_log
 from maglev_oc.errors import InputError
 from maglev_oc.identification.equation_error import EquationError
 from maglev_oc.identification.layout import CONSTANT_NAMES, GAP_OFFSET
+from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
 from maglev_oc.identification.output_error import DEFAULT_SEGMENT, DEFAULT_WINDOW, MultipleShooting
 from maglev_oc.identification.result import FitResult, NpfsiResult
@@ -38,7 +39,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import as_log_list, delayed_inputs, levitating_parts, prepare
 from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.regression.terms import AccelerationTerm
-from maglev_oc.results import Result
+from maglev_oc.results import Estimate, Result
 from maglev_oc.validation import Validation, validate
 
 __all__ = [
@@ -185,6 +186,10 @@ class IdentificationOutcome(Result):
         Where a log's platform rests on its stopper (before lift-off, after landing, or pressed
         against it in between): left out of every fit
         (:func:`~maglev_oc.regression.data.levitating_parts`).
+    moving_mass : MassChange or None
+        The best fit's constants moved together as movers heavier (or lighter) than the model's
+        move them (a payload, :mod:`~maglev_oc.identification.masses`); the warnings judge them
+        against the model's moved by that mass.
     success, status, message
         From the fits: ``"converged"`` when the best fit did, ``"npfsi_only"`` when only NPFSI
         ran (and stayed well posed), else ``"failed"`` with the solver's reason.
@@ -199,6 +204,7 @@ class IdentificationOutcome(Result):
     timings: dict[str, float] = field(default_factory=dict)
     validation: Validation | None = None
     left_out: tuple[RestingStretch, ...] = ()
+    moving_mass: MassChange | None = None
 
     @property
     def success(self) -> bool:
@@ -247,6 +253,8 @@ class IdentificationOutcome(Result):
             if k not in fit.values:
                 continue
             start, value, se = fit.initial[k], fit.values[k], fit.stderr[k]
+            if self.moving_mass is not None:  # a payload is no effect the model lacks
+                start *= self.moving_mass.factor(k)
             if not beyond_plausible(value, start, se):
                 continue
             change = value / start - 1 if start else math.inf
@@ -282,6 +290,7 @@ class IdentificationOutcome(Result):
             + ", ".join(f"{k} = {getattr(c, k):.6g}" for k in CONSTANT_NAMES)
             + f"  ({c.source})"
             + "".join(f"\n    WARNING: {w}" for w in self.warnings)
+            + (f"\n    moving mass: {self.moving_mass.says()}" if self.moving_mass is not None else "")
             + "".join(f"\n    left out: {r.describe()}" for r in self.left_out)
         )
         return "\n\n".join(parts)
@@ -301,6 +310,7 @@ class IdentificationOutcome(Result):
             "message": self.message,
             "warnings": list(self.warnings),
             "left_out": [r.to_dict() for r in self.left_out],
+            "moving_mass": None if self.moving_mass is None else self.moving_mass.to_dict(),
             "timings": dict(self.timings),
             "validation": None if self.validation is None else self.validation.to_dict(),
         }
@@ -414,7 +424,19 @@ def identify(
     checked = _validation(outcome, model, logs, held_out, tuple(terms), input_delay)
     times["validation"] = time.perf_counter() - t0
     times["total"] = sum(v for k, v in times.items() if k != "total")
-    return dataclasses.replace(outcome, timings=times, validation=checked)
+    return dataclasses.replace(
+        outcome, timings=times, validation=checked, moving_mass=_moving_mass(outcome, model)
+    )
+
+
+def _moving_mass(outcome: IdentificationOutcome, model: StageModel) -> MassChange | None:
+    """The best fit's constants read as a payload's (:func:`~maglev_oc.identification.masses
+    .moving_mass_change`), when it estimated C1..C3."""
+    fit = outcome.best
+    if fit is None or not fit.success or not all(k in fit.values for k in ("C1", "C2", "C3")):
+        return None
+    estimates = {k: Estimate(fit.values[k], fit.stderr[k], "") for k in CONSTANT_NAMES if k in fit.values}
+    return moving_mass_change(estimates, {k: fit.initial[k] for k in estimates}, model.params)
 
 
 def _validation(

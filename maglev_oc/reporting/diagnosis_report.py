@@ -165,7 +165,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         )
         for w in diag.warnings
     ]
-    if diag.moving_mass is not None:  # the constants moved as a payload moves them (diagnosis.masses)
+    if diag.moving_mass is not None:  # the constants moved as a payload moves them (identification.masses)
         mass = diag.moving_mass
         rows.append(
             (
