@@ -5,7 +5,6 @@ of a finite stator are known for)."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import NamedTuple
 
 import casadi as ca
@@ -22,6 +21,7 @@ from maglev_oc.diagnosis.candidate import (
     with_physical,
     within,
 )
+from maglev_oc.diagnosis.words import listed, log_names
 from maglev_oc.regression.terms import (
     REFERENCE_GAP,
     AccelerationTerm,
@@ -438,17 +438,6 @@ REMANENCE_PER_KELVIN = 1.2e-3
 the sintered grades), to say a drift of the field as a temperature."""
 
 
-def _listed(items: list[str]) -> str:
-    """ "a", "a and b", "a, b and c"."""
-    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
-
-
-def _log_names(sources: tuple[str, ...]) -> list[str]:
-    """The logs' file names as a report names them ("log 2" where two share a name)."""
-    names = [Path(s).name for s in sources]
-    return names if len(set(names)) == len(names) else [f"log {k + 1}" for k in range(len(names))]
-
-
 def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     """The magnets' field drifting over the log, as it does when they warm up during the run.
 
@@ -498,7 +487,7 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
     c = ctx.references
     # a gap reading off by dg changes the attraction by this times dg
     attraction_slope = _attraction_log_slope(ctx, 0.5 * sum(ctx.gap_range))
-    logs = _log_names(ctx.data.sources)
+    logs = log_names(ctx.data.sources)
     one_log = len(logs) == 1
     x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
     q = ca.SX.sym("q", 3 * len(logs) - 1)
@@ -571,10 +560,10 @@ def field_drift_candidate(ctx: LibraryContext) -> Candidate:
         per_log = list(zip(suffixes, logs, strict=True))
 
         def each(key, scale, unit):
-            return _listed([f"{fmt(e[key + tag], scale, unit)} in {name}" for tag, name in per_log])
+            return listed([f"{fmt(e[key + tag], scale, unit)} in {name}" for tag, name in per_log])
 
         def kelvin(key):  # a field lower by 0.12 % is a kelvin warmer
-            return _listed(
+            return listed(
                 [f"{-e[key + tag].value / REMANENCE_PER_KELVIN:+.2g} K in {name}" for tag, name in per_log]
             )
 

@@ -44,6 +44,7 @@ from maglev_oc.diagnosis.selection import (
     evidence,
     stands_in_for_the_constants,
 )
+from maglev_oc.diagnosis.words import listed, log_names
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
 from maglev_oc.regression.design import build_design
@@ -463,7 +464,14 @@ def _friction_over_time(data: PreparedLogs, model: StageModel, friction_axes: fr
     On six logs of the independent generator whose large guide friction fell by 30 % with a time
     constant of 60 s (``bench/diagnose_rigs.py --warming``) the friction was claimed at its mean
     level and nothing else, neither the magnets' drift (whose force follows the thrust and the
-    attraction, not the direction of motion) nor anything unexplained: the change went unsaid."""
+    attraction, not the direction of motion) nor anything unexplained: the change went unsaid.
+
+    Several logs of one rig: each log has its own change and its own level (against the logs'
+    mean, the levels summing to zero), as logs recorded one after another while the guides warm
+    have, as the magnets' drift has (:func:`~maglev_oc.diagnosis.magnetics.field_drift_candidate`)."""
+    logs = log_names(data.sources)
+    n_logs = len(logs)
+    n_q = 2 if n_logs == 1 else 3 * n_logs - 1
     out = []
     for a, axis in enumerate(AXES[:2]):
         if axis not in friction_axes or not data.moving[a]:
@@ -477,19 +485,39 @@ def _friction_over_time(data: PreparedLogs, model: StageModel, friction_axes: fr
             ca.SX.sym("u", 2),
             ca.SX.sym("du", 2),
             when_symbol(),
-            ca.SX.sym("q", 2),
+            ca.SX.sym("q", n_q),
         )
-        p1, p2 = legendre(s[0], (1, 2))  # mean-free over the log
-        val = -ca.tanh(x[v] / REVERSAL_SPEED) * (q[0] * p1 + q[1] * p2) / mass
+        p1, p2 = legendre(s[0], (1, 2))  # mean-free over each log
+        if n_logs == 1:
+            level = q[0] * p1 + q[1] * p2
+        else:  # each log's own change, and its own level (the last one's minus the others')
+            level = sum((s[1] == k) * (q[2 * k] * p1 + q[2 * k + 1] * p2) for k in range(n_logs))
+            level += sum(((s[1] == k) - (s[1] == n_logs - 1)) * q[2 * n_logs + k] for k in range(n_logs - 1))
+        val = -ca.tanh(x[v] / REVERSAL_SPEED) * level / mass
         fn = ca.Function(name, [x, u, du, s, q], [ca.vertcat(val, 0) if a == 0 else ca.vertcat(0, val)])
-        term = AccelerationTerm(name, "probe", axis, ("q0", "q1"), function=fn, in_time=True)
+        term = AccelerationTerm(
+            name, "probe", axis, tuple(f"q{i}" for i in range(n_q)), function=fn, in_time=True
+        )
 
         def detail(q, axis=axis) -> str:
-            change = 2.0 * float(q[0])  # P1 from -1 to +1; P2 is the same at both ends
+            q = np.asarray(q, dtype=float).ravel()
+            if n_logs == 1:
+                change = 2.0 * float(q[0])  # P1 from -1 to +1; P2 is the same at both ends
+                return (
+                    f" Fitted so, the friction of the {axis} guides changes by {change:+.2g} N from the "
+                    "log's first sample to its last: friction that changes as the guides warm (their "
+                    "lubricant thinning) or run in, which the friction found, the log's mean, does not model."
+                )
+            changes = listed([f"{2.0 * q[2 * k]:+.2g} N in {name}" for k, name in enumerate(logs)])
+            rest = q[2 * n_logs :]
+            levels = listed(
+                [f"{v:+.2g} N in {name}" for v, name in zip([*rest, -rest.sum()], logs, strict=True)]
+            )
             return (
-                f" Fitted so, the friction of the {axis} guides changes by {change:+.2g} N from the log's "
-                "first sample to its last: friction that changes as the guides warm (their lubricant "
-                "thinning) or run in, which the friction found, the log's mean, does not model."
+                f" Fitted so, the friction of the {axis} guides changes by {changes} from a log's first "
+                f"sample to its last, and its level over a log is {levels} against the logs' mean: friction "
+                "that changes as the guides warm (their lubricant thinning) or run in, which the friction "
+                "found, the logs' mean, does not model."
             )
 
         out.append(

@@ -4,8 +4,9 @@ the sentences the diagnosis itself writes (the experiment that would separate an
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
-__all__ = ["plain"]
+__all__ = ["listed", "log_names", "plain"]
 
 _WORDS = {
     "guide_friction_horizontal": "horizontal guide friction",
@@ -47,3 +48,14 @@ def plain(name: str) -> str:
     if m := re.fullmatch(r"(.+)_with_stribeck", name):
         return f"{plain(m[1])} with its Stribeck rise"
     return name.replace("_", " ")
+
+
+def listed(items: list[str]) -> str:
+    """ "a", "a and b", "a, b and c"."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def log_names(sources: tuple[str, ...]) -> list[str]:
+    """The logs' file names as a report names them ("log 2" where two share a name)."""
+    names = [Path(s).name for s in sources]
+    return names if len(set(names)) == len(names) else [f"log {k + 1}" for k in range(len(names))]
