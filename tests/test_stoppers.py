@@ -120,7 +120,7 @@ def test_the_stretch_before_lift_off_is_found_and_left_out(lifted):
     lift_off = _lift_off(run)
     assert stretch.start == pytest.approx(0.0, abs=0.15)
     assert stretch.stop == pytest.approx(lift_off, abs=0.15)
-    assert stretch.gap == pytest.approx(STOPPER, abs=2e-5)  # the encoder's 10 um, and its noise
+    assert stretch.position == pytest.approx(STOPPER, abs=2e-5)  # the encoder's 10 um, and its noise
     left = ~data.valid & (data.t > 0.5) & (data.t < 30.0)  # not the log's own end
     assert data.t[left].max() == pytest.approx(stretch.stop + data.edge * data.sample_time, abs=2e-3)
     assert any("rests on its stopper" in n for n in data.notes)
@@ -152,7 +152,7 @@ def test_a_touch_in_the_middle_of_a_log_and_its_bounce_are_found_and_left_out(to
         assert stretch.start == pytest.approx(first, abs=0.15) and stretch.stop == pytest.approx(
             last, abs=0.15
         )
-        assert stretch.gap == pytest.approx(TOUCHED, abs=2e-5)
+        assert stretch.position == pytest.approx(TOUCHED, abs=2e-5)
     assert data.resting[0].misfit > 20.0  # the loop wound up to the amplifiers' 9 A against it
     left = ~data.valid & (data.t > 1.0) & (data.t < 59.0)
     assert data.t[left].min() == pytest.approx(data.resting[0].start - data.edge * data.sample_time, abs=2e-3)
@@ -181,7 +181,7 @@ def test_the_stop_at_the_smallest_gap_and_the_end_stops_are_found(other_stops, l
     contacts = _contacts(run, np.abs(run.states[state] - at) < 1e-12)
     assert len(data.resting) == len(contacts) >= 1
     for stretch, (first, last) in zip(data.resting, contacts, strict=True):
-        assert stretch.limit == limit and stretch.gap == pytest.approx(at, abs=2e-5)
+        assert stretch.limit == limit and stretch.position == pytest.approx(at, abs=2e-5)
         assert stretch.start == pytest.approx(first, abs=0.15) and stretch.stop == pytest.approx(
             last, abs=0.15
         )

@@ -25,11 +25,11 @@ One data preparation and one filter policy for every equation-error fit in the p
    (``current_noise``). :mod:`~maglev_oc.regression.design` removes its expected contribution
    from the normal equations (bias-compensated least squares, Söderström 2018, Ch. 7).
 5. **Masks.** Samples within the filters' memory of a log's ends are invalid, and so, given the
-   model the fits start from, are stretches where the platform rests on a stopper and their
-   filters' memory (:mod:`~maglev_oc.regression.stoppers`: before lift-off, after landing, pressed against it
-   in between); an optional
-   held-out block at the end of each log is separated from the fitted samples by guard bands as
-   long as the filters' memory, so that no sample of one leaks into the other.
+   model the fits start from, are stretches where a stopper holds the stage and their filters'
+   memory (:mod:`~maglev_oc.regression.stoppers`: before lift-off, after landing, pressed against
+   a stop in between); an optional held-out block at the end of each log is separated from the
+   fitted samples by guard bands as long as the filters' memory, so that no sample of one leaks
+   into the other.
 """
 
 from __future__ import annotations

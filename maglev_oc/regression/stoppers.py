@@ -164,7 +164,7 @@ class RestingStretch:
     source: str
     start: float  # [s] from the log's first sample
     stop: float  # [s]
-    gap: float  # [m] the position reading there (the gap, or x3 at an end of the travel)
+    position: float  # [m] the position reading there (the gap, or x3 at an end of the travel)
     misfit: float  # [m/s^2] the largest model acceleration beyond the measured one, into the stopper
     during: bool = False  # in the middle of the log (a touch), not at its start or end
     limit: str = "largest_gap"  # which of STOPS
@@ -174,7 +174,8 @@ class RestingStretch:
         stop = _STOP[self.limit]
         how = "is pressed against" if self.during or not stop.lift_off else "rests on"
         beside = " beyond the levitating platform's beside it" if self.during else ""
-        where = f"{self.gap * M_TO_MM:.2f} mm" if stop.row == 0 else f"x3 = {self.gap * M_TO_MM:+.2f} mm"
+        mm = self.position * M_TO_MM
+        where = f"{mm:.2f} mm" if stop.row == 0 else f"x3 = {mm:+.2f} mm"
         return (
             f"{self.start:.2f}-{self.stop:.2f} s the platform {how} {stop.what} ({where}, {stop.extreme}; "
             f"the model's {stop.axis} acceleration there is up to {abs(self.misfit):.1f} m/s^2 off the "
@@ -192,7 +193,7 @@ class RestingStretch:
             "log": self.source,
             "from_s": self.start,
             "to_s": self.stop,
-            "gap_m" if stop.row == 0 else "position_m": self.gap,
+            "gap_m" if stop.row == 0 else "position_m": self.position,
             "stop": self.limit,
             "why": RESTING_WHY if stop.lift_off and not self.during else TOUCHING_WHY,
         }
