@@ -53,6 +53,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import NumpyCall, rk4_step
 from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.payload import loaded
 from maglev_oc.regression.terms import when_symbol
 from maglev_oc.results import AXES, Result, jsonable
 
@@ -348,6 +349,7 @@ def simulate_windows(
     ts = data.sample_time
     x, u, du, other = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), ca.SX.sym("o", 2)
     place = when_symbol()  # the place in the log and the log, for a term that changes over it
+    load = ca.SX.sym("load", 2)  # M / (M + m) of a log that declares a payload m (ones otherwise)
     if axis is None:
         xx = x
     else:
@@ -358,16 +360,21 @@ def simulate_windows(
     acc = model.f(xx, u)[[1, 3]]
     for term, coef in terms:
         acc = acc + term.acceleration_in_time(coef)(xx, u, du, place)
+    if data.load_factor is not None:  # (without a payload, the model's arithmetic untouched)
+        acc = loaded(acc, load, model.params.gravity)
     rhs = ca.vertcat(xx[1], acc[0], xx[3], acc[1])
     if axis is not None:
         keep = ca.SX.zeros(4)
         keep[own] = rhs[own]
         rhs = keep
-    f = ca.Function("f", [x, u, du, other, place], [rhs])
+    f = ca.Function("f", [x, u, du, other, place, load], [rhs])
     # common subexpressions merged: the four stages share the model's magnet field and
     # coefficients (a quarter to a third fewer instructions over every window; the same values)
     step = ca.Function(
-        "rk4", [x, u, du, other, place], [rk4_step(f, x, ts, u, du, other, place)], {"cse": True}
+        "rk4",
+        [x, u, du, other, place, load],
+        [rk4_step(f, x, ts, u, du, other, place, load)],
+        {"cse": True},
     )
     sim = step.mapaccum("window", horizon)
     starts = np.asarray(starts, dtype=int)
@@ -379,7 +386,12 @@ def simulate_windows(
     x0 = data.x[:, starts]
     o = 2 * (1 - axis) if axis is not None else 0
     traj = NumpyCall(sim.map(w))(
-        x0, data.u[:, take], data.du[:, take], data.x[o : o + 2, take + 1], data.log_time[:, take]
+        x0,
+        data.u[:, take],
+        data.du[:, take],
+        data.x[o : o + 2, take + 1],
+        data.log_time[:, take],
+        data.load_factors[:, take],
     )[0]
     traj = np.asarray(traj).reshape(4, w, horizon)
     measured = data.x[:, take + 1].reshape(4, w, horizon)

@@ -230,7 +230,7 @@ def test_a_shooting_segment_is_the_response_to_linearly_interpolated_currents(tr
     segment = STEPS * twin_log.sample_time
     ms = MultipleShooting(twin_log, truth_model, estimate=("C1",), segment_duration=segment)
     assert ms.M == STEPS
-    Y, s_end, _, _ = ms._segment(x0, u, [truth_model.constants.C1])
+    Y, s_end, _, _ = ms._segment(x0, u, [truth_model.constants.C1], [1.0, 1.0])  # (no payload)
     Y = np.asarray(Y).reshape(STEPS, 2).T  # time-major (gap, horizontal)
     np.testing.assert_allclose(Y, ref[[0, 2], :STEPS], rtol=0, atol=RK4_TOL)
     s_end = np.asarray(s_end).ravel()

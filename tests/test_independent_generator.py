@@ -574,7 +574,7 @@ def test_every_effect_is_documented_and_round_trips():
             json.dumps(t)
             assert E.effect_from_truth(t) == eff
             assert ".. math::" in (cls.__doc__ or "")
-    assert len(kinds) == 17
+    assert len(kinds) == 18
 
 
 def test_the_base_vibration_accelerates_the_stage_against_the_base():
@@ -651,9 +651,10 @@ def test_named_sets_have_the_promised_contents():
     single = named_set("single")
     assert len(single) == 24 and all(len(sc.effects) == 1 for _, sc in single)
     # every kind but those that joined after the sets' baselines were scored: the current
-    # saturation, the sensors read off zero, the shaking base and the warming magnets
-    # (bench/diagnose_rigs.py --saturation, --sensors, --vibration, --warming)
+    # saturation, the sensors read off zero, the shaking base, the warming magnets and the vertical
+    # force (bench/diagnose_rigs.py --saturation, --sensors, --vibration, --warming; test_payload.py)
     late = {
+        "vertical_force",
         "current_saturation",
         "current_sensor_offset",
         "current_sensor_gain",

@@ -24,10 +24,13 @@ from maglev_oc.errors import InputError
 __all__ = [
     "INPUT_COLUMNS",
     "KNOWN_COLUMNS",
+    "MAX_PAYLOAD",
+    "PAYLOAD_KEY",
     "PHASE_COLUMNS",
     "REQUIRED_COLUMNS",
     "STATE_COLUMNS",
     "Log",
+    "payload_problem",
 ]
 
 REQUIRED_COLUMNS = ("t", "x1", "x3", "u1", "u2")
@@ -36,6 +39,27 @@ STATE_COLUMNS = ("x1", "x2", "x3", "x4")
 INPUT_COLUMNS = ("u1", "u2")
 PHASE_COLUMNS = ("ia", "ib", "ic")
 KNOWN_COLUMNS = ("t", *STATE_COLUMNS, *INPUT_COLUMNS, *PHASE_COLUMNS)
+PAYLOAD_KEY = "payload_kg"
+"""Metadata key of the mass [kg] the platform carried during the run beyond the model's movers
+(``# payload_kg: 0.5``): a log of a load change, the experiment that separates a constant vertical
+force from the magnets' scale (:mod:`maglev_oc.regression.payload`)."""
+MAX_PAYLOAD = 20.0
+"""[kg] The largest payload read: the magnets lift the 4.35 kg mover with a few amperes, and a
+number beyond this is more likely grams than kilograms."""
+
+
+def payload_problem(text: str) -> str | None:
+    """None if ``text`` (a ``payload_kg`` value) is a mass in [0, MAX_PAYLOAD] kg; else what is wrong."""
+    try:
+        value = float(text)
+    except ValueError:
+        return f"{text!r} is not a number (the payload's mass in kg)"
+    if not (value >= 0.0 and value <= MAX_PAYLOAD):
+        return (
+            f"{text!r} is not a mass in [0, {MAX_PAYLOAD:g}] kg (the payload carried beyond the "
+            "model's movers; a number this large may be in grams)"
+        )
+    return None
 
 
 def _readonly(value: object, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -71,6 +95,9 @@ class Log:
     currents_measured : bool
         True when the currents were measured (metadata ``currents: measured``); otherwise they
         are the commanded values (SPEC 2).
+
+    A metadata entry ``payload_kg`` (:data:`PAYLOAD_KEY`) declares a mass carried on the platform
+    (:attr:`payload`).
 
     The arrays are copies and read-only. Invalid values raise ``ValueError`` naming the field.
     """
@@ -119,6 +146,8 @@ class Log:
         for key, value in metadata.items():
             if not isinstance(key, str) or not isinstance(value, str):
                 raise InputError(f"Log.metadata: keys and values must be str, got {key!r}: {value!r}")
+        if PAYLOAD_KEY in metadata and (problem := payload_problem(metadata[PAYLOAD_KEY])):
+            raise InputError(f"Log.metadata[{PAYLOAD_KEY!r}]: {problem}")
         notes = tuple(self.notes)
         if not all(isinstance(note, str) for note in notes):
             raise InputError(f"Log.notes: expected a tuple of str, got {self.notes!r}")
@@ -136,6 +165,12 @@ class Log:
     def n(self) -> int:
         """Number of samples."""
         return int(self.t.size)
+
+    @property
+    def payload(self) -> float:
+        """[kg] Mass carried on the platform beyond the model's movers during the run (metadata
+        ``payload_kg``; 0 when the log does not say)."""
+        return float(self.metadata.get(PAYLOAD_KEY, 0.0))
 
     @property
     def sample_time(self) -> float:

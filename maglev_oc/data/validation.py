@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maglev_oc.data.log import INPUT_COLUMNS, PHASE_COLUMNS, STATE_COLUMNS, Log
+from maglev_oc.data.log import INPUT_COLUMNS, PAYLOAD_KEY, PHASE_COLUMNS, STATE_COLUMNS, Log, payload_problem
 from maglev_oc.data.phase_currents import phase_currents_to_inputs
 from maglev_oc.errors import LogError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
@@ -300,6 +300,8 @@ def _check_metadata(raw: RawLog, median: float) -> str:
         problem = _units_problem(meta["units"])
         if problem:
             raise raw.metadata_error("units", f"units {meta['units']!r}: {problem}")
+    if PAYLOAD_KEY in meta and (problem := payload_problem(meta[PAYLOAD_KEY])):
+        raise raw.metadata_error(PAYLOAD_KEY, f"{PAYLOAD_KEY} {problem}")
     currents = meta.get("currents", "commanded").strip().lower()
     if currents not in ("measured", "commanded"):
         raise raw.metadata_error(

@@ -99,6 +99,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
 from maglev_oc.model.hardware import STOPPER_POSITION
+from maglev_oc.model.parameters import StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread, without_hugepage_advice
 from maglev_oc.progress import progress
@@ -168,7 +169,9 @@ class _Session:
             try:
                 resting = self.data.resting  # as found on the band (:func:`prepare`)
                 logs = list(self.logs)
-                self.banded[fraction] = _prepare(logs, self.holdout_fraction, band, 0.0, resting=resting)
+                self.banded[fraction] = _prepare(
+                    logs, self.holdout_fraction, band, 0.0, resting=resting, params=self.model.params
+                )
             except (InputError, LogError):
                 self.banded[fraction] = None
         return self.banded[fraction]
@@ -361,7 +364,13 @@ def _band_scale(stage: _Stage, run: _Run) -> NoiseScale:
     data = session.data
     try:
         rate = data.settings["max_rate_hz"]
-        narrow = prepare(list(run.logs), bandwidth=LOW_BAND, max_rate=rate, resting=data.resting)
+        narrow = prepare(
+            list(run.logs),
+            bandwidth=LOW_BAND,
+            max_rate=rate,
+            resting=data.resting,
+            params=session.model.params,
+        )
     except (InputError, LogError) as err:  # a log too short for the narrow band's window
         return NoiseScale.not_calibrated(f"no {LOW_BAND:g} Hz fit to compare with: {err}")
     train, hold = narrow.masks(run.holdout_fraction)
@@ -521,6 +530,7 @@ def _prepare(
     min_duration: float,
     model: StageModel | None = None,
     resting: Sequence[RestingStretch] | None = None,
+    params: StageParameters | None = None,
 ):
     """Step 1: the shared data preparation and the held-out block (with ``model``, the stretches where
     the platform rests on a stopper found and left out, :mod:`~maglev_oc.regression.stoppers`; with
@@ -538,7 +548,7 @@ def _prepare(
     # MAX_SAMPLES (the band of the fit, 10 Hz, stays far below any such rate)
     total = sum(log.duration for log in logs)
     rate = min(DEFAULT_MAX_RATE, MAX_SAMPLES / total)
-    data = prepare(logs, bandwidth=bandwidth, max_rate=rate, model=model, resting=resting)
+    data = prepare(logs, bandwidth=bandwidth, max_rate=rate, model=model, resting=resting, params=params)
     if not np.any(data.moving):
         raise LogError(
             ", ".join(data.sources),

@@ -333,7 +333,9 @@ class EquationError:
         :data:`~maglev_oc.regression.noise_scale.LOW_BAND` agree on the constants."""
         if self._narrow is None:
             try:
-                self._narrow = prepare(self._shifted, bandwidth=LOW_BAND, resting=self.prepared.resting)
+                self._narrow = prepare(
+                    self._shifted, bandwidth=LOW_BAND, resting=self.prepared.resting, params=self.model.params
+                )
             except (InputError, LogError) as err:  # a log too short for the narrow band's window
                 return NoiseScale.not_calibrated(f"no {LOW_BAND:g} Hz fit to compare with: {err}")
         narrow = self._narrow

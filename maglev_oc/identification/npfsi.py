@@ -51,6 +51,7 @@ from maglev_oc.identification.layout import CONSTANT_NAMES
 from maglev_oc.identification.result import NpfsiResult
 from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import NumpyCall
+from maglev_oc.regression.payload import factors
 
 __all__ = [
     "CHUNK",
@@ -294,6 +295,11 @@ def stage_regression(
     fixed = [k for k in range(4) if k not in idx]
     consts = np.array(model.constants.as_array())
     b += np.einsum("nij,j->ni", phi[:, :, fixed], consts[fixed])
+    if log.payload:  # the forces move the platform and its payload (regression.payload)
+        s = factors(model.params, log.payload)
+        g = model.params.gravity
+        phi = phi * s[None, :, None]
+        b = np.column_stack([g + s[0] * (b[:, 0] - g), s[1] * b[:, 1]])
     return phi[:, :, idx], b, der.velocity.T.copy(), der.method
 
 

@@ -61,6 +61,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import rk4_step
 from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from, long_run_covariance
 from maglev_oc.regression.data import as_log_list, delayed_inputs
+from maglev_oc.regression.payload import factors, loaded
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES
 
@@ -96,6 +97,7 @@ class _Segments:
     u: np.ndarray  # (2, J*(M+1)) currents at each segment's M+1 points
     nodes0: np.ndarray  # (4, J) initial node states (true gap)
     links: np.ndarray  # indices j whose end is joined to segment j + 1 (same window)
+    load: np.ndarray  # (2, 1) M / (M + m) of the log's payload m (ones: none declared)
 
 
 class MultipleShooting:
@@ -172,7 +174,8 @@ class MultipleShooting:
         per_window = max(1, round(self.window_duration / (M * log.sample_time)))
         j = np.arange(J - 1)
         links = j[(j + 1) % per_window != 0]
-        return _Segments(log.source, log.n, M, J, y, u[:, idx], nodes, links)
+        load = factors(self.model.params, log.payload).reshape(2, 1)
+        return _Segments(log.source, log.n, M, J, y, u[:, idx], nodes, links, load)
 
     def _build(self) -> None:
         layout, M, h = self.layout, self.M, self.sample_time
@@ -180,11 +183,15 @@ class MultipleShooting:
         s0 = ca.SX.sym("s", 4)
         U = ca.SX.sym("U", 2, M + 1)
         theta = ca.SX.sym("theta", q)
+        load = ca.SX.sym("load", 2)  # M / (M + m) of a log's payload m
         acc = layout.acceleration_true
         offset = theta[layout.names.index(GAP_OFFSET)] if GAP_OFFSET in layout.names else 0
+        payload = any(log.payload for log in self.logs)  # (without one, the arithmetic untouched)
 
         def f(x, u):
             a = acc(x, u, theta)
+            if payload:
+                a = loaded(a, load, self.model.params.gravity)
             return ca.vertcat(x[1], a[0], x[3], a[1])
 
         x = s0
@@ -198,7 +205,11 @@ class MultipleShooting:
         jy = ca.jacobian(Y, z)
         jx = ca.jacobian(x, z)
         seg = ca.Function(
-            "segment", [s0, U, theta], [Y, x, jy, jx], ["s", "U", "theta"], ["Y", "s_end", "dY", "ds"]
+            "segment",
+            [s0, U, theta, load],
+            [Y, x, jy, jx],
+            ["s", "U", "theta", "load"],
+            ["Y", "s_end", "dY", "ds"],
         )
         self._segment = seg
         self._maps = {sg.J: seg.map(sg.J, "thread", 2) for sg in self.segments}
@@ -207,7 +218,7 @@ class MultipleShooting:
     def _evaluate(self, theta: np.ndarray, nodes: list[np.ndarray]):
         out = []
         for sg, S in zip(self.segments, nodes, strict=True):
-            Y, s_end, dY, ds = self._maps[sg.J](S, sg.u, theta)
+            Y, s_end, dY, ds = self._maps[sg.J](S, sg.u, theta, sg.load)
             out.append((np.asarray(Y), np.asarray(s_end), np.asarray(dY), np.asarray(ds)))
         return out
 
@@ -486,8 +497,14 @@ def simulate_open_loop(
         der = differentiate_log(log, SavitzkyGolay(log.sample_time))
         x0 = np.array([der.position[0, 0], der.velocity[0, 0], der.position[1, 0], der.velocity[1, 0]])
 
+    s_v, s_h = factors(model.params, log.payload)
+    g = model.params.gravity
+
     def rhs(x, u):
-        return np.asarray(model.f(x, u)).ravel()
+        d = np.asarray(model.f(x, u)).ravel()
+        if log.payload:  # the model's forces move the platform and its payload
+            d[1], d[3] = g + s_v * (d[1] - g), s_h * d[3]
+        return d
 
     h = log.sample_time
     u = np.asarray(log.u, dtype=float)

@@ -30,6 +30,9 @@ One data preparation and one filter policy for every equation-error fit in the p
    a stop in between); an optional held-out block at the end of each log is separated from the
    fitted samples by guard bands as long as the filters' memory, so that no sample of one leaks
    into the other.
+6. **Payload.** A log that declares a payload (``payload_kg``) is read as the unloaded stage's
+   (:mod:`~maglev_oc.regression.payload`): its accelerations' force parts are scaled back by
+   (M + m) / M, so that the constants and terms fitted over logs of several loads are the stage's.
 """
 
 from __future__ import annotations
@@ -47,9 +50,11 @@ from maglev_oc.data.logs import Log, LogError
 from maglev_oc.errors import InputError
 from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
+from maglev_oc.regression.payload import load_factors, payload_note, unloaded
 from maglev_oc.regression.stoppers import RestingStretch, resting_on_stoppers
 
 if TYPE_CHECKING:
+    from maglev_oc.model.parameters import StageParameters
     from maglev_oc.model.stage import StageModel
 
 __all__ = [
@@ -209,7 +214,9 @@ class PreparedLogs:
     x : (4, n) gap [m], gap rate [m/s], position [m], its rate [m/s] (SG estimates)
     u : (2, n) currents (i_q, i_d) as logged [A]
     du : (2, n) their rates [A/s] (SG)
-    acc : (2, n) measured accelerations (x2', x4') [m/s^2], = F[true] (see module doc)
+    acc : (2, n) measured accelerations (x2', x4') [m/s^2], = F[true] (see module doc); of a log
+        that declares a payload, as the unloaded stage would have had them
+        (:func:`~maglev_oc.regression.payload.unloaded`)
     valid : (n,) bool — outside the filters' memory of each log's ends and of any stretch where
         the platform rests on a stopper (``resting``)
     sample_time : float [s]
@@ -221,6 +228,10 @@ class PreparedLogs:
     notes : tuple of str
     resting : tuple of RestingStretch
         Where the platform rests on a stopper (found when :func:`prepare` is given a model).
+    load_factor : (2, n) or None
+        M / (M + m) per sample (vertical, horizontal) of logs that declare a payload m; None when
+        none does. A simulation of these samples scales the model's forces by it
+        (:func:`~maglev_oc.regression.payload.loaded`).
     """
 
     t: np.ndarray
@@ -239,6 +250,7 @@ class PreparedLogs:
     notes: tuple[str, ...] = ()
     resting: tuple[RestingStretch, ...] = ()
     settings: dict = field(default_factory=dict)
+    load_factor: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -257,6 +269,11 @@ class PreparedLogs:
             lo, hi = float(t.min()), float(t.max())
             out[mine] = 2.0 * (t - lo) / (hi - lo) - 1.0 if hi > lo else 0.0
         return out
+
+    @cached_property
+    def load_factors(self) -> np.ndarray:
+        """(2, n) :attr:`load_factor`, ones where no payload is declared (what a simulation reads)."""
+        return np.ones((2, self.n)) if self.load_factor is None else self.load_factor
 
     @cached_property
     def log_time(self) -> np.ndarray:
@@ -477,6 +494,7 @@ def prepare(
     logging_error: bool = True,
     model: StageModel | None = None,
     resting: Sequence[RestingStretch] | None = None,
+    params: StageParameters | None = None,
 ) -> PreparedLogs:
     """Reduce, differentiate and concatenate ``logs`` (all at one sample rate).
 
@@ -501,6 +519,9 @@ def prepare(
         Instead of ``model``: the stretches to leave out, as found on another band of the same logs
         (on a narrow band the smoothed gap and misfit no longer show them: a log that lifted off
         after 1.2 s gave none at 2 Hz).
+    params : StageParameters, optional
+        Instead of ``model``: the stage whose masses read a log that declares a payload
+        (:mod:`~maglev_oc.regression.payload`; the model's when it is given).
     """
     logs = as_log_list(logs)
     if (bandwidth is None) == (differentiator is None):
@@ -525,8 +546,13 @@ def prepare(
         for log, share in zip(reduced, shares, strict=True)
     )
     cat = [np.concatenate([p[i] for p in parts], axis=-1) for i in range(7)]
+    stage = model.params if model is not None else params
+    load = load_factors(reduced, cat[1], stage)
+    if load is not None:  # the forces of a log with a payload read as the unloaded stage's
+        cat[5] = unloaded(cat[5], load, stage.gravity)
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
     notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
+    notes += tuple(payload_note(log, stage) for log in logs if log.payload)
     if resting is not None:  # found on another band: the same stretches, by their times
         resting = tuple(resting)
         mask = np.zeros(cat[0].size, dtype=bool)
@@ -571,6 +597,7 @@ def prepare(
         sources=tuple(log.source for log in logs),
         notes=notes,
         resting=resting,
+        load_factor=load,
         settings={
             "bandwidth_hz": bandwidth,
             "sg_windows": (sg.velocity_window, sg.acceleration_window),
@@ -583,5 +610,7 @@ def prepare(
                 r == min(rates) and not d for r, d in zip(rates, declared, strict=True)
             ),
             "max_rate_hz": max_rate,
+            # each log's declared payload [kg], when any log declares one (regression.payload)
+            **({"payload_kg": [log.payload for log in logs]} if load is not None else {}),
         },
     )

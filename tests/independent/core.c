@@ -96,7 +96,7 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     double L[4];
     double delta = 0.0, slope = 0.0;
     double fB = 1.0, fBt = 1.0, etaT = 1.0, etaA = 1.0, rho = 1.0, sat = 1.0;
-    double Fx, Fn, Ffh = 0.0, Ffv = 0.0;
+    double Fx, Fn, Ffh = 0.0, Ffv = 0.0, Fv = 0.0;
     int k;
 
     /* offsets of the phase current sensors: each amplifier drives its sensor's reading, the
@@ -193,7 +193,10 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     /* cable carrier, base not level, tilted guide */
     if (p->cab_on) Fx += -p->cab_k * (x3 - p->cab_x0) + p->cab_F0;
     Fx += p->tilt_F;
-    if (p->mis_on) Fx += slope * (p->Mh * p->G - Fn);
+    if (p->mis_on) Fx += slope * ((p->Mh + p->load) * p->G - Fn);
+    /* a force on the vertical axis the magnets must carry besides the weight (a hanging cable's
+       weight, a spring between frame and platform): along +x1 (opening the gap) */
+    if (p->vf_on) Fv = p->vf_F - p->vf_k * (x1 - p->vf_x0);
 
     /* guide friction (LuGre) */
     ds[4] = 0.0;
@@ -213,9 +216,11 @@ static void plant_rhs(const Params *p, const double *s, double iq_c, double id_c
     }
 
     ds[0] = x2;
-    ds[1] = p->G - (Fn + Ffv) / p->Mv;
+    /* the forces move the stage and its payload (p->load [kg] on the platform moves with both
+       axes); the constants' forces are per the unloaded masses Mh, Mv */
+    ds[1] = p->G - (Fn + Ffv - Fv) / (p->Mv + p->load);
     ds[2] = x4;
-    ds[3] = (Fx - Ffh) / p->Mh;
+    ds[3] = (Fx - Ffh) / (p->Mh + p->load);
     if (aux) {
         aux[0] = g;
         aux[1] = iq;

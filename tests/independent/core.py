@@ -86,6 +86,8 @@ FIELDS: list[tuple[str, object]] = [
     ("mis_on", _I), ("mis_slope", _D), ("mis_amp", _D), ("mis_len", _D), ("mis_phase", _D),
     # cable carrier, tilted base
     ("cab_on", _I), ("cab_k", _D), ("cab_x0", _D), ("cab_F0", _D), ("tilt_F", _D),
+    # a payload on the platform [kg]; a vertical force along +x1: constant [N], spring [N/m] about x1 [m]
+    ("load", _D), ("vf_on", _I), ("vf_F", _D), ("vf_k", _D), ("vf_x0", _D),
     # thrust ripple
     ("tr_on", _I), ("tr_amp", _D * 2), ("tr_period", _D * 2), ("tr_phase", _D * 2),
     # commutation error, amplifier

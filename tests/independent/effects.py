@@ -914,6 +914,59 @@ class TiltedBase(Effect):
 
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
+class VerticalForce(Effect):
+    """A force on the vertical axis that the magnets carry besides the platform's weight.
+
+    A bundle of cables (the motor's phases, the encoder) hanging from the platform to the frame
+    adds part of its weight, and bent between them it acts as a soft spring along the gap; a
+    preloaded seal or a counterweight string does the same with the other sign:
+
+    .. math::
+
+        F_v = F_0 - k_v (x_1 - x_{1,0})
+
+    along +x1 (opening the gap, as the weight does), so that ``M_v x1'' = M_v G - F_n + F_v``.
+    """
+
+    force: float = _p(2.0, "N", "force along +x1 (downwards, opening the gap) at x1 = neutral_gap")
+    stiffness: float = _p(0.0, "N/m", "spring along the gap: F_v falls by k per metre the gap opens")
+    neutral_gap: float = _p(0.0195, "m", "x1 where the force is F_0")
+
+    kind: ClassVar[str] = "vertical_force"
+    axis: ClassVar[str] = "vertical"
+
+    @classmethod
+    def small(cls) -> VerticalForce:
+        """1 N downwards (2.3 % of the weight; a 100 g share of a cable bundle)."""
+        return cls(force=1.0)
+
+    @classmethod
+    def large(cls) -> VerticalForce:
+        """3 N downwards (7 % of the weight) plus a 100 N/m spring along the gap."""
+        return cls(force=3.0, stiffness=100.0)
+
+    def apply(self, p: Any, ctx: dict[str, float]) -> None:
+        p.vf_on = 1
+        p.vf_F, p.vf_k, p.vf_x0 = self.force, self.stiffness, self.neutral_gap
+
+    def description(self) -> str:
+        return (
+            f"A force of {self.force:g} N on the vertical axis along +x1 (a hanging cable's weight), "
+            f"less {self.stiffness:g} N/m times the gap's opening beyond {self.neutral_gap * 1e3:g} mm."
+        )
+
+    def equation(self) -> str:
+        return "M_v x1'' += F_0 - k_v (x1 - x1_0)"
+
+    def derived(self, ctx: dict[str, float]) -> dict[str, float]:
+        return {
+            "force_towards_stator_N": -self.force,
+            "share_of_weight": self.force / (ctx["M_v"] * G),
+        }
+
+
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
 class CurrentSaturation(Effect):
     r"""The iron saturates under the stator current: the force per ampere falls at large currents.
 
@@ -1297,7 +1350,7 @@ EFFECT_KINDS: dict[str, type[Effect]] = {
     for cls in (
         GuideFriction, NormalCogging, DetentForce, EndEffect, GuideMisalignment, CableCarrier,
         ThrustRipple, CommutationOffset, AmplifierDynamics, FieldShape, TiltedBase, CurrentSaturation,
-        CurrentSensorOffset, CurrentSensorGain, GapSensorZero, BaseVibration, MagnetWarming,
+        CurrentSensorOffset, CurrentSensorGain, GapSensorZero, BaseVibration, MagnetWarming, VerticalForce,
     )
 }  # fmt: skip
 """Every effect class by its ``kind``."""

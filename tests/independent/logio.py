@@ -32,6 +32,7 @@ def csv_text(run: Run) -> str:
         f"# sample_rate_hz: {run.scenario.rig.log_rate:g}",
         "# units: SI",
         f"# currents: {run.scenario.rig.logged_currents}",
+        *([f"# payload_kg: {run.scenario.payload:g}"] if run.scenario.declare_payload else []),
         "t,x1,x3,u1,u2",
     ]
     # + 0.0 turns -0.0 into 0.0; currents below 0.5 uA print as 0

@@ -32,6 +32,8 @@ amplifier_dynamics  ``current_amplifier_lag``              first-order time cons
 field_shape         ``attraction_gap_dependence``          attraction change at the smallest gap [1]
                     or ``magnet_field_gap_dependence``
 tilted_base         ``horizontal_guides_not_level``        force along the track [N]
+vertical_force      ``constant_vertical_force``            force towards the stator [N] (at the
+                                                           truth's neutral gap)
 current_saturation  ``current_saturation``                 loss of force per ampere at 5 A [1]
 current_sensor_     ``current_sensor_offset``              the missing current's dq magnitude [A]
 offset
@@ -73,6 +75,7 @@ def _name_for(effect: dict) -> tuple[str, ...]:
         "amplifier_dynamics": ("current_amplifier_lag",),
         "field_shape": ("attraction_gap_dependence", "magnet_field_gap_dependence"),
         "tilted_base": ("horizontal_guides_not_level",),
+        "vertical_force": ("constant_vertical_force",),
         "gap_sensor_zero": (
             ("magnet_field_drift",)
             if effect["parameters"].get("drift") and not effect["parameters"].get("offset")
@@ -126,6 +129,8 @@ def sizes(true_effect: dict, claimed: dict, duration: float | None = None) -> tu
             return f2 - 1, c["attraction_change_at_smallest_gap"]
         if kind == "tilted_base":
             return true_effect.get("derived", {}).get("horizontal_force_N"), c["force"]
+        if kind == "vertical_force":  # claimed positive towards the stator, true along +x1
+            return -t["force"], c["force"]
         if kind == "current_saturation":
             return 1 - 1 / (1 + (5.0 / t["saturation_current"]) ** 2), c["loss_at_5_A"]
         if kind == "current_sensor_offset":

@@ -241,6 +241,12 @@ class Scenario:
         Loop, sensor and amplifier settings.
     description : str
         Free text for the truth file.
+    payload : float
+        [kg] A mass carried on the platform: it moves with both axes, so every force the stage
+        feels accelerates M_h + payload and M_v + payload (gravity still G). 0: none.
+    declare_payload : bool
+        Write the payload into the log's metadata (``# payload_kg: ...``), as a user who weighed
+        it would; False leaves the log silent about it (the truth file always says it).
     """
 
     name: str
@@ -252,6 +258,12 @@ class Scenario:
     reference: ReferenceSpec = field(default_factory=ReferenceSpec)
     rig: Rig = field(default_factory=Rig)
     description: str = ""
+    payload: float = 0.0
+    declare_payload: bool = False
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.payload) and self.payload >= 0.0):
+            raise ValueError(f"Scenario.payload must be a mass >= 0 [kg], got {self.payload!r}")
 
 
 @dataclass
@@ -304,6 +316,7 @@ def build_params(
     p = core.Params()
     p.C1, p.C2, p.C3, p.C4 = constants
     p.Mh, p.Mv, p.G = geo.M_h, geo.M_v, G
+    p.load = scenario.payload
     p.b0, p.t1, p.hm, p.tau, p.mu_rec = geo.b0, geo.t1, geo.hm, geo.tau, geo.mu_rec
     p.Bpre = field_prefactor(geo)
     p.Cn1, p.Cn2, p.Cn3, p.Cn4 = rig.controller_constants
@@ -344,8 +357,9 @@ def build_params(
 
 
 def effect_context(scenario: Scenario, geo: StageGeometry = GEOMETRY) -> dict[str, float]:
-    """Rig values the effects need: plant step [s], masses [kg]."""
-    return {"plant_step": scenario.rig.plant_step, "M_h": geo.M_h, "M_v": geo.M_v}
+    """Rig values the effects need: plant step [s], the masses moved [kg] (with the payload)."""
+    m = scenario.payload
+    return {"plant_step": scenario.rig.plant_step, "M_h": geo.M_h + m, "M_v": geo.M_v + m}
 
 
 def simulate(scenario: Scenario) -> Run:
@@ -429,6 +443,8 @@ def simulate(scenario: Scenario) -> Run:
             },
             "G_m_per_s2": G,
             "geometry": GEOMETRY.as_dict(),
+            "payload_kg": scenario.payload,
+            "payload_declared": scenario.declare_payload,
             "sign_conventions": "x1 gap as the vertical encoder reads it (gravity opens it); x3 horizontal; "
             "F_x along +x3 on M_h; F_n attraction towards the stator on M_v",
         },
