@@ -14,6 +14,8 @@
     python bench/diagnose_rigs.py --lift-off [--rig ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
+    python bench/diagnose_rigs.py --vertical-force [--load-change 2] [--rig ...]
+    python bench/diagnose_rigs.py ... --payload 1.5 | --load-change 2
 
 The sets of ``bench/diagnose_score.py`` all come from one rig: a 5 kHz loop logged at 1 kHz with 10
 um encoders. A user's rig differs: it may log at 500 Hz or 2.5 kHz, have finer or coarser encoders,
@@ -76,6 +78,15 @@ to 26.5 s, the loop pressing the platform against it; two (clean, cogging) whose
 below a stop at a 15 mm gap and two (clean, friction) beyond an end stop of the travel at +45 mm
 over the same 1.5 s: samples where a stop holds the stage, which no fit may read. Each line also gives the
 refitted constants' errors against the plant's (C1..C3 the largest, and C4).
+
+``--vertical-force``: a force on the vertical axis besides the weight (a hanging cable's,
+``tests.independent.effects.VerticalForce``: 1 N, and 3 N with a 100 N/m spring along the gap),
+alone and beside large vertical guide friction or a large field shape, on three seeds (8100-8102).
+One log cannot tell it from the magnets' scale; ``--load-change KG`` records every log of whatever
+runs a second time on the same plant (its true constants, seed + 50000) with a payload of KG kg
+declared (``# payload_kg``) and diagnoses the two together, the experiment the diagnosis proposes
+for it. ``--payload KG`` declares a payload of KG kg on every log run instead (each diagnosed
+alone): every effect's size must come out the unloaded stage's.
 
 ``--shake small|large`` adds the base's vibration to every log of whatever runs (the scoring leaves
 it out of the truth): the other benches on a floor that is not quiet.
@@ -406,6 +417,20 @@ def main() -> None:
         default=None,
         help="add the magnets' warming (MagnetWarming.small/large) to every log run",
     )
+    parser.add_argument(
+        "--vertical-force",
+        action="store_true",
+        help="score a vertical force besides the weight (a hanging cable's), alone and beside an effect",
+    )
+    parser.add_argument(
+        "--payload", type=float, default=0.0, help="declare a payload of this many kg on every log run"
+    )
+    parser.add_argument(
+        "--load-change",
+        type=float,
+        default=0.0,
+        help="record every log again on the same plant with this payload [kg] declared; diagnose both",
+    )
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
     args = parser.parse_args()
@@ -475,6 +500,17 @@ def main() -> None:
             on_stopper = Rig(**RIGS[args.rig], **stops)
             scenario = Scenario(name=name, seed=seed, effects=effects, reference=reference, rig=on_stopper)
             groups.setdefault("lift_off", []).append((name, scenario))
+    elif args.vertical_force:
+        from tests.independent.effects import FieldShape, GuideFriction, VerticalForce
+
+        beside = {"": (), "friction": (GuideFriction.large("vertical"),), "shape": (FieldShape.large(),)}
+        for k in range(3):
+            for size in ("small", "large"):
+                for label, others in beside.items():
+                    stem = f"force_{size}{'_' + label if label else ''}_{8100 + k}"
+                    effects = (getattr(VerticalForce, size)(), *others)
+                    scenario = Scenario(name=stem, seed=8100 + k, effects=effects, rig=rig)
+                    groups.setdefault("vertical_force", []).append((stem, scenario))
     elif args.sensor_pairs:
         for k, (name, effects) in enumerate(sensor_pairs().items()):
             scenario = Scenario(name=name, seed=7100 + k, effects=effects, rig=rig)
@@ -522,6 +558,14 @@ def main() -> None:
             g: [(stem, dataclasses.replace(sc, effects=(*sc.effects, warm))) for stem, sc in runs]
             for g, runs in groups.items()
         }
+    if args.payload:
+        groups = {
+            g: [
+                (stem, dataclasses.replace(sc, payload=args.payload, declare_payload=True))
+                for stem, sc in runs
+            ]
+            for g, runs in groups.items()
+        }
     summary: dict[str, dict] = {}
     totals = [0, 0, 0]
     skipped: list[str] = []
@@ -537,8 +581,25 @@ def main() -> None:
                 continue
             ran += 1
             csv, truth_path = write_log(run, args.out / "logs", stem)
+            logs = [read_log(csv)]
+            if args.load_change:  # the same plant again, carrying a declared payload
+                constants = tuple(run.truth["plant"]["constants_true"][c] for c in ("C1", "C2", "C3", "C4"))
+                loaded = dataclasses.replace(
+                    scenario,
+                    seed=scenario.seed + 50_000,
+                    constants=constants,
+                    payload=args.load_change,
+                    declare_payload=True,
+                )
+                try:
+                    logs.append(read_log(write_log(simulate(loaded), args.out / "logs", f"{stem}_loaded")[0]))
+                except SimulationError as exc:
+                    skipped.append(stem)
+                    ran -= 1
+                    print(f"{stem:16s} {scenario.name:38s} skipped (loaded): {exc}", flush=True)
+                    continue
             t0 = time.perf_counter()
-            result = diagnose([read_log(csv)]).to_dict()
+            result = diagnose(logs).to_dict()
             s = score(stem, json.loads(truth_path.read_text()), result["effects"])
             row = {
                 "scenario": scenario.name,
@@ -564,7 +625,7 @@ def main() -> None:
                 f"{stem:16s} {scenario.name:38s} {flags}  claimed {s.claimed}  "
                 f"unexplained {row['unexplained']}  {'; '.join(s.notes)}"
                 + (f"  warnings {len(row['warnings'])}" if row["warnings"] else "")
-                + (_constants_words(row) if args.lift_off else "")
+                + (_constants_words(row) if args.lift_off or args.vertical_force else "")
                 + f"  ({row['wall_s']:.1f} s)",
                 flush=True,
             )

@@ -236,7 +236,9 @@ def level_candidates(ctx: LibraryContext) -> list[Candidate]:
             vertical,
             "constant",
             "gap",
-            "a run with a known mass added to the platform (a load change) or over a wider gap range "
+            "a run with a known mass added to the platform (a load change, declared in that log as "
+            "'# payload_kg: m' and diagnosed beside this one; a mass near half the mover's, 2 kg, "
+            "separated a 3 N force on independent logs, 1 kg did not) or over a wider gap range "
             "separates a constant force from the scale of the magnetic force, which near equilibrium "
             "always carries the weight",
             within("force", MAX_FORCE_SHARE * ctx.weight("vertical"), "vertical force"),

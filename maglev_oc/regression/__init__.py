@@ -10,6 +10,10 @@ base        names, units and axes of the base model's parameters (C1..C4, gap of
 design      columns, target and their Gram matrices per block of samples (:func:`build_design`)
 solve       subset fits, the long-run covariance, Gauss-Newton for nonlinear parameters
 covariance  the long-run (HAC) covariance of an estimate from autocorrelated residuals
+noise_scale the scale of the logged currents' errors at which two bands agree on the constants
+payload     a payload a log declares: its forces read as the unloaded stage's, and simulated
+            moving the loaded one
+stoppers    stretches where a stop, not the magnets, holds the stage
 """
 
 from maglev_oc.regression.data import PreparedLogs, prepare
