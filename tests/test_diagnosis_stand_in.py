@@ -1,0 +1,71 @@
+"""The collinearity :func:`maglev_oc.diagnosis.selection._beside_a_stand_in` judges a candidate by
+when its fit beside a stand-in for the constants runs off: ``_partial_inflation``, from the summed
+block Grams of a design, against the same number computed another way, by regressing both
+candidates' columns on the rest and correlating what is left (numpy's least squares on the samples
+themselves). Synthetic columns; milliseconds."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from maglev_oc.diagnosis.selection import _partial_inflation
+
+
+def _design(x: np.ndarray, blocks: int, groups: dict[str, list[int]]):
+    """A design of the columns ``x`` (n, p) in ``blocks`` blocks of samples: their Grams and the
+    column groups, as :class:`maglev_oc.regression.design.Design` carries them."""
+    parts = np.array_split(x, blocks)
+    gram = np.stack([p.T @ p for p in parts])
+    return SimpleNamespace(gram=gram, groups={k: np.asarray(v) for k, v in groups.items()})
+
+
+def _by_samples(x: np.ndarray, a: list[int], b: list[int], rest: list[int]) -> float:
+    """1 / (1 - rho^2), rho the largest canonical correlation of the columns a and b once the
+    columns ``rest`` are regressed out of both."""
+
+    def left(cols):
+        y = x[:, cols]
+        if not rest:
+            return y
+        coef, *_ = np.linalg.lstsq(x[:, rest], y, rcond=None)
+        return y - x[:, rest] @ coef
+
+    qa, _ = np.linalg.qr(left(a))
+    qb, _ = np.linalg.qr(left(b))
+    rho = np.linalg.svd(qa.T @ qb, compute_uv=False).max()
+    return 1.0 / (1.0 - rho**2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    mix=st.floats(0.0, 0.98),
+    n_rest=st.integers(0, 3),
+    n_a=st.integers(1, 2),
+)
+def test_the_partial_inflation_is_that_of_the_columns_left_by_the_rest(seed, mix, n_rest, n_a):
+    rng = np.random.default_rng(seed)
+    n = 400
+    rest = rng.standard_normal((n, n_rest))
+    a = rng.standard_normal((n, n_a))
+    # b leans on a's first column by ``mix`` and on the rest, which the projection removes
+    b = mix * a[:, :1] + np.sqrt(1 - mix**2) * rng.standard_normal((n, 1))
+    if n_rest:
+        b = b + rest @ rng.standard_normal((n_rest, 1))
+    x = np.hstack([rest, a, b])
+    cols = list(range(x.shape[1]))
+    groups = {"base": cols[:n_rest], "a": cols[n_rest : n_rest + n_a], "b": cols[-1:]}
+    design = _design(x, 3, groups)
+    fit = SimpleNamespace(index=np.arange(x.shape[1]))
+    got = _partial_inflation(design, fit, "a", "b")
+    # the same quantity from the samples (rounding of normal equations against QR: 1e-7 relative)
+    want = _by_samples(x, groups["a"], groups["b"], groups["base"])
+    assert got == pytest.approx(want, rel=1e-7)
+    # a b that is a's column plus the rest's: the two are one direction once the rest is gone
+    y = np.hstack([rest, a, a[:, :1] + (rest.sum(axis=1, keepdims=True) if n_rest else 0.0)])
+    assert _partial_inflation(_design(y, 3, groups), fit, "a", "b") > 1e6
