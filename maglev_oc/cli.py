@@ -822,6 +822,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  WARNING: {w}")
     if diag.moving_mass is not None:
         print(f"  moving mass: {diag.moving_mass.says()}")
+    for w in diag.payloads:
+        print(f"  payload: {w}")
     for r in diag.left_out:
         print(f"  left out: {r.describe()}")
     for a, before in diag.error_before.items():

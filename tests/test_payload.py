@@ -11,6 +11,8 @@ loaded masses, checked here against the Python formula).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -134,6 +136,12 @@ def test_a_declared_payload_gives_the_stages_own_constants_and_no_moving_mass(lo
     error = found / _truth_constants(truth) - 1
     assert np.all(np.abs(error[:3]) < 0.01) and abs(error[3]) < 0.10, error
     assert d.to_dict()["settings"]["payload_kg"] == [1.0]
+    # said to the user: in the text, the report's first page and the command's summary
+    assert d.payloads == (
+        f"{os.path.basename(log.source)}: a payload of 1 kg declared (payload_kg), "
+        "its forces read as the unloaded stage's",
+    )
+    assert "payload: " in d.report()
     silent = diagnose([logs["clean_1kg_silent"][0]], limits=False)
     assert silent.moving_mass is not None and abs(silent.moving_mass.added.value - 1.0) < 0.15
 

@@ -4,6 +4,7 @@ errors before and after (SPEC 3: ``Diagnosis.to_dict()`` is the JSON ``maglev-oc
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -146,6 +147,18 @@ class Diagnosis(Result):
         return () if self.data is None else self.data.resting
 
     @property
+    def payloads(self) -> tuple[str, ...]:
+        """One sentence per log that declares a payload (``# payload_kg``): its forces were read as the
+        unloaded stage's (:mod:`~maglev_oc.regression.payload`)."""
+        masses = self.settings.get("payload_kg") or ()
+        return tuple(
+            f"{os.path.basename(src)}: a payload of {m:g} kg declared (payload_kg), its forces read as "
+            "the unloaded stage's"
+            for src, m in zip(self.sources, masses, strict=False)
+            if m
+        )
+
+    @property
     def ranking(self) -> list[Ranked]:
         return self.selection.ranking
 
@@ -249,6 +262,7 @@ class Diagnosis(Result):
         lines += [f"  WARNING: {w}" for w in self.warnings]
         lines += [f"  moving mass: {self.moving_mass.says()}"] if self.moving_mass is not None else []
         lines += [f"  left out: {r.describe()}" for r in self.left_out]
+        lines += [f"  payload: {w}" for w in self.payloads]
         for e in self.effects:
             seen = "" if e.judged_on == "accelerations" else f"; seen predicting {SIDE_WORDS[e.judged_on]}"
             lines.append(f"  {e.name} [{e.axis}, confidence {e.confidence:.2f}{seen}]: {e.finding}")

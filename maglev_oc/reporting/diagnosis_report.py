@@ -240,7 +240,8 @@ def scorecard_table(
     )
     left_out = [f"Left out of the fit: {os.path.basename(r.source)}, {r.what()}." for r in diag.left_out]
     mass = [diag.moving_mass.says()] if diag.moving_mass is not None else []
-    return Table("", columns, cells, notes=[holdout, *left_out, *mass], font_size=7.5)
+    payloads = [f"Payload: {w}." for w in diag.payloads]
+    return Table("", columns, cells, notes=[holdout, *left_out, *payloads, *mass], font_size=7.5)
 
 
 # --- the pages after the scorecard -----------------------------------------------------------------------
