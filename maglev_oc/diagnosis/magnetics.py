@@ -339,7 +339,11 @@ _GAP_TEXTS = {
         "attraction_gap_dependence",
         "vertical",
         "The magnets' attraction changes with the gap differently from the field model (iron "
-        "saturation, permeance), leaving a smooth error that varies with the gap; the thrust does not.",
+        "saturation, permeance), leaving a smooth error that varies with the gap; the thrust does not. "
+        "Near equilibrium the attraction carries the weight, so a force that changes with the gap by "
+        "itself (a cable bundle bent between the platform and the frame is a spring along the gap) "
+        "looks much the same, and the diagnosis has no candidate of its own for such a force: rule one "
+        "out before reading this as the magnets'.",
         "residual proportional to the attraction varying smoothly with the gap",
         "equilibrium currents over a wide range of gaps (000 Sec. V-B, 10-25 mm) separate the field's "
         "gap dependence from C2..C4",
