@@ -73,6 +73,7 @@ OUTCOME_KEYS = {
     "warnings",  # constants a stage of this geometry cannot have (IdentificationOutcome.warnings)
     "left_out",  # where a log's platform rests on its stopper (regression.stoppers)
     "moving_mass",  # the constants moved as a payload moves them (identification.masses), or null
+    "payload_kg",  # the payload each log declares (# payload_kg; 0 for none), read as the unloaded stage's
     "validation",  # residual whiteness and fit % of the best fit (maglev_oc.validation)
 }
 CLI_KEYS = OUTCOME_KEYS | {"stage"}  # the file also holds the stage file it amounts to
@@ -229,6 +230,7 @@ def test_identify_json_has_the_schema_a_script_reads(cli_json):
     assert cli_json["warnings"] == []  # the twin's constants are within a few per cent of the papers'
     assert cli_json["left_out"] == []  # the twin's runs levitate from their first sample
     assert cli_json["moving_mass"] is None  # the twin carries no payload
+    assert cli_json["payload_kg"] == [0.0] * len(cli_json["sources"])  # and declares none
     for method in ("equation_error", "output_error"):
         fit = cli_json[method]
         assert set(fit) == FIT_KEYS, method

@@ -155,6 +155,7 @@ def test_identify_reads_a_declared_payload_in_every_fit(logs):
     log, truth = logs["clean_1kg"]
     methods = ("equation_error", "output_error", "npfsi")
     out = identify([log], StageModel(), methods=methods)
+    assert out.to_dict()["payload_kg"] == [1.0] and "payload: " in out.report()  # said to the user
     true = _truth_constants(truth)
     for fit in (out.equation_error, out.output_error):
         c = np.array([fit.values[n] for n in ("C1", "C2", "C3")])

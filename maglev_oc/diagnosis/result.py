@@ -4,7 +4,6 @@ errors before and after (SPEC 3: ``Diagnosis.to_dict()`` is the JSON ``maglev-oc
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +15,7 @@ from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.identification.masses import MassChange
 from maglev_oc.regression.data import PreparedLogs
+from maglev_oc.regression.payload import declared
 from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.results import Estimate, PerAxis, Result, jsonable
 from maglev_oc.validation import Validation
@@ -150,13 +150,8 @@ class Diagnosis(Result):
     def payloads(self) -> tuple[str, ...]:
         """One sentence per log that declares a payload (``# payload_kg``): its forces were read as the
         unloaded stage's (:mod:`~maglev_oc.regression.payload`)."""
-        masses = self.settings.get("payload_kg") or ()
-        return tuple(
-            f"{os.path.basename(src)}: a payload of {m:g} kg declared (payload_kg), its forces read as "
-            "the unloaded stage's"
-            for src, m in zip(self.sources, masses, strict=False)
-            if m
-        )
+        masses = self.settings.get("payload_kg")
+        return declared(self.sources, masses) if masses else ()
 
     @property
     def ranking(self) -> list[Ranked]:

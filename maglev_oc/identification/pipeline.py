@@ -37,6 +37,7 @@ from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import as_log_list, delayed_inputs, levitating_parts, prepare
+from maglev_oc.regression.payload import declared
 from maglev_oc.regression.stoppers import RestingStretch
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import Estimate, Result
@@ -186,6 +187,9 @@ class IdentificationOutcome(Result):
         Where a log's platform rests on its stopper (before lift-off, after landing, or pressed
         against it in between): left out of every fit
         (:func:`~maglev_oc.regression.data.levitating_parts`).
+    payload_kg : tuple of float
+        The payload each log of ``sources`` declares (``# payload_kg``; 0 for none): every fit read
+        its forces as the unloaded stage's (:mod:`~maglev_oc.regression.payload`).
     moving_mass : MassChange or None
         The best fit's constants moved together as movers heavier (or lighter) than the model's
         move them (a payload, :mod:`~maglev_oc.identification.masses`); the warnings judge them
@@ -205,6 +209,12 @@ class IdentificationOutcome(Result):
     validation: Validation | None = None
     left_out: tuple[RestingStretch, ...] = ()
     moving_mass: MassChange | None = None
+    payload_kg: tuple[float, ...] = ()
+
+    @property
+    def payloads(self) -> tuple[str, ...]:
+        """One sentence per log that declares a payload."""
+        return declared(self.sources, self.payload_kg) if self.payload_kg else ()
 
     @property
     def success(self) -> bool:
@@ -292,6 +302,7 @@ class IdentificationOutcome(Result):
             + "".join(f"\n    WARNING: {w}" for w in self.warnings)
             + (f"\n    moving mass: {self.moving_mass.says()}" if self.moving_mass is not None else "")
             + "".join(f"\n    left out: {r.describe()}" for r in self.left_out)
+            + "".join(f"\n    payload: {w}" for w in self.payloads)
         )
         return "\n\n".join(parts)
 
@@ -310,6 +321,7 @@ class IdentificationOutcome(Result):
             "message": self.message,
             "warnings": list(self.warnings),
             "left_out": [r.to_dict() for r in self.left_out],
+            "payload_kg": list(self.payload_kg),
             "moving_mass": None if self.moving_mass is None else self.moving_mass.to_dict(),
             "timings": dict(self.timings),
             "validation": None if self.validation is None else self.validation.to_dict(),
@@ -376,6 +388,7 @@ def identify(
     check_identifiable(logs, estimate, min_duration=min_duration)
     # where the platform rests on its stopper (before lift-off, after landing, a touch) is no evidence
     sources = tuple(log.source for log in logs)
+    payload_kg = tuple(float(log.payload) for log in logs)
     logs, resting = levitating_parts(logs, model)  # a touch mid-log cuts a log in two
     times: dict[str, float] = {}
     ee = oe = None
@@ -418,6 +431,7 @@ def identify(
         sources,
         times,
         left_out=resting,
+        payload_kg=payload_kg,
     )
     t0 = time.perf_counter()
     held_out = as_log_list(validation_logs) if validation_logs else []

@@ -21,6 +21,7 @@ magnets' scale absorbs it on one log (a 3 N force of the independent generator m
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 
 import casadi as ca
@@ -30,7 +31,7 @@ from maglev_oc.data.logs import Log
 from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import StageParameters
 
-__all__ = ["factors", "load_factors", "loaded", "payload_note", "unloaded"]
+__all__ = ["declared", "factors", "load_factors", "loaded", "payload_note", "unloaded"]
 
 
 def factors(params: StageParameters, payload: float) -> np.ndarray:
@@ -85,4 +86,15 @@ def payload_note(log: Log, params: StageParameters) -> str:
         f"{log.source}: a payload of {log.payload:g} kg declared (payload_kg): its forces move "
         f"{moved[0]:.3g} kg vertically and {moved[1]:.3g} kg horizontally, read as the unloaded "
         f"stage's (accelerations x {1 / s[0]:.3f} and x {1 / s[1]:.3f})"
+    )
+
+
+def declared(sources: Sequence[str], masses: Sequence[float]) -> tuple[str, ...]:
+    """One sentence per log of ``sources`` whose payload in ``masses`` (kg, in the same order) is
+    not 0: what ``identify`` and ``diagnose`` tell their user of it."""
+    return tuple(
+        f"{os.path.basename(src)}: a payload of {m:g} kg declared (payload_kg), its forces read as the "
+        "unloaded stage's"
+        for src, m in zip(sources, masses, strict=True)
+        if m
     )

@@ -609,6 +609,7 @@ def write_outcome_report(path: str | os.PathLike, outcome, logs: Sequence[Log]) 
         *(f"Warning: {w}" for w in outcome.warnings),
         *([f"Moving mass: {outcome.moving_mass.says()}"] if outcome.moving_mass is not None else []),
         *(f"Left out of every fit: {r.source}, {r.what()}." for r in outcome.left_out),
+        *(f"Payload: {w}." for w in outcome.payloads),
         "Equation error: the Savitzky-Golay acceleration (zero phase) against the model's, both filtered "
         "by the same kernel; output error: multiple shooting over 50 ms segments joined by continuity "
         "within 0.2 s windows. Standard errors are long-run (HAC) ones: residuals of both fits are "
