@@ -1096,8 +1096,7 @@ def _beside_a_stand_in(
             continue
         why = f"beside it this explains {beyond:.1%} more, under {settings.min_gain:.1%}"
         if beyond < -settings.max_stand_in_loss:
-            joint = fit_subset(design, [*current, rival.name, j.name], covariance=False)
-            inflation = _partial_inflation(design, joint, j.name, rival.name)
+            inflation = _partial_inflation(design, [*current, rival.name, j.name], j.name, rival.name)
             if inflation <= settings.max_vif:
                 kept.append(j)
                 continue
@@ -1115,12 +1114,12 @@ def _beside_a_stand_in(
     return kept
 
 
-def _partial_inflation(design: Design, fit: SubsetFit, a_name: str, b_name: str) -> float:
-    """1 / (1 - rho^2), rho the largest canonical correlation between candidate ``a_name``'s
-    columns and ``b_name``'s in ``fit`` once every other column of the fit (the base constants, the
-    effects chosen) is projected out of both: the columns' geometry, from their Gram without the
-    compensation of the logged currents' errors (:func:`_beside_a_stand_in`)."""
-    idx = fit.index
+def _partial_inflation(design: Design, groups: Sequence[str], a_name: str, b_name: str) -> float:
+    """1 / (1 - rho^2), rho the largest canonical correlation between the columns of group
+    ``a_name`` and those of ``b_name`` once every other column of ``groups`` (the base constants,
+    the effects chosen) is projected out of both: the columns' geometry, from their Gram over every
+    block without the compensation of the logged currents' errors (:func:`_beside_a_stand_in`)."""
+    idx = design.indices(groups)
     g = _blocks_of(design.gram, slice(None), idx).sum(axis=0)
     live = (np.diag(g) > 0) & ~_spanned(g, np.diag(g) <= 0)
     a = np.isin(idx, design.groups[a_name]) & live
