@@ -105,6 +105,16 @@ class Design:
         return len(self.names)
 
     @cached_property
+    def optional(self) -> np.ndarray:
+        """(P,) bool: the columns of the terms' optional parameters (``AccelerationTerm.optional``)."""
+        out = np.zeros(len(self.names), dtype=bool)
+        for t in self.terms:
+            if t.optional and t.name in self.groups:
+                cols = self.groups[t.name]
+                out[[cols[t.parameter_names.index(q)] for q in t.optional]] = True
+        return out
+
+    @cached_property
     def held_out_columns(self) -> np.ndarray:
         """(P, 2, n_hold) the columns on the held-out samples, copied once (selection computes
         held-out residuals of hundreds of subsets; contiguous: np.take, where a boolean index on

@@ -32,7 +32,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.regression.covariance import DEFAULT_BAND, per_log_long_run
 from maglev_oc.regression.design import Design
 
-__all__ = ["SubsetFit", "fit_nonlinear", "fit_subset", "predicted", "residuals"]
+__all__ = ["OPTIONAL_NOISE_SHARE", "SubsetFit", "fit_nonlinear", "fit_subset", "predicted", "residuals"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,6 +97,13 @@ SPANNED = 1e-9
 projecting on them is below this: only exact duplicates (two constant forces on one axis, filtered
 alike, differ at 1e-16), never columns the data barely tell apart (a variance inflation of 1e9)."""
 
+
+OPTIONAL_NOISE_SHARE = 0.5
+"""A term's optional parameter (``AccelerationTerm.optional``) is held at zero in a compensated fit
+when the logged currents' errors, as estimated, are at least this share of its column's variance:
+its coefficient would be mostly the errors' correction. Half, so that the scales the diagnosis
+calibrates the errors at (0.5-1 times the floor's estimate on the independent generator's noisy
+rig) agree on it: a holding share 1.2 times its variance at 1 was 0.83 at 0.68."""
 
 _SURELY_NOT_SPANNED = 1e3 * SPANNED
 """When every column's share left after projecting on all the columns before it (the squared pivots
@@ -193,6 +200,8 @@ def fit_subset(
     # columns that vanish on the fitted rows (they act only on a locked axis), or that the columns
     # before them span (a generic probe's constant beside a constant force): coefficient 0
     dead = np.diag(gram_raw) <= 1e-12 * max(float(np.max(np.diag(gram_raw), initial=0.0)), 1e-300)
+    if compensate:  # an optional parameter whose column is mostly the currents' errors: held at 0
+        dead |= design.optional[idx] & (np.diag(noise) >= OPTIONAL_NOISE_SHARE * np.diag(gram_raw))
     dead |= _spanned(gram_raw, dead)
     rhs = np.where(dead, 0.0, rhs)
 

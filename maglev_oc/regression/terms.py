@@ -159,6 +159,11 @@ class AccelerationTerm:
         :data:`WHEN_NAMES`, :attr:`~maglev_oc.regression.data.PreparedLogs.log_time`), or s (1), the
         place alone. Where no time is at hand (:meth:`acceleration`: a controller's feedforward, a
         stage file) it is taken at s = (0, 0), the middle of the first log.
+    optional : tuple of str
+        Parameters a fit holds at zero when the logged currents' errors are most of their column
+        (:data:`~maglev_oc.regression.solve.OPTIONAL_NOISE_SHARE`): nuisance parts that only matter
+        where the data carry them (the share of the motor's force the guides hold while an axis
+        sticks, on an axis that barely sticks).
 
     Attributes
     ----------
@@ -184,6 +189,7 @@ class AccelerationTerm:
     variants: tuple[ca.Function, ...] = field(default=(), repr=False, compare=False)
     variant_note: str = ""
     in_time: bool = False
+    optional: tuple[str, ...] = ()
     linear: bool = field(init=False, compare=False)
     features: ca.Function = field(init=False, repr=False, compare=False)
     offset: ca.Function = field(init=False, repr=False, compare=False)
@@ -204,6 +210,12 @@ class AccelerationTerm:
                 f"got {names!r}"
             )
         set_(self, "parameter_names", names)
+        set_(self, "optional", tuple(self.optional))
+        if not set(self.optional) <= set(names):
+            raise InputError(
+                f"AccelerationTerm {self.name}: optional {self.optional!r} are not all among its "
+                f"parameters {names!r}"
+            )
         defaults = {"initial": 0.0, "scale": 1.0, "lower": -math.inf, "upper": math.inf}
         for field_name, default in defaults.items():
             values = tuple(float(v) for v in getattr(self, field_name)) or (default,) * n_p
@@ -510,6 +522,12 @@ def guide_friction(
 
     physical = [(n, units[n], 1.0) for n in names]
     return AccelerationTerm(
+        # the holding share is left out of a fit where the logged currents' errors are most of its
+        # column: an axis that barely sticks (a viscous damping of 20 N s/m beside 0.1 N of Coulomb
+        # friction on a noisy independent log, 1.2 times its variance) gives it no signal, and fitted
+        # it stopped the errors' compensation where the equations are nearly singular (the damping
+        # refused as made of those errors; at 0.68 of them a holding share of -0.8 and -25 N s/m)
+        optional=("holding",) if holding is not None else (),
         name=name or f"guide_friction_{axis}",
         explanation=explanation
         or (
