@@ -374,6 +374,25 @@ def _drawn_pair_finds(tmp_path, seed: int, kinds: tuple[str, str], names: list[s
 
 
 @pytest.mark.slow
+def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_errors(tmp_path):
+    # A random pair on the papers' PID loops (bench/diagnose_rigs.py --drawn-pairs --rig pid, seed
+    # 15307): guides that change the gap by -2.4 um/mm along the track (4.2 um of waviness at 49 mm)
+    # and a cable carrier's 8.8 N/m spring, over 66 mm of travel. A current sensor offset moves both
+    # axes with one pair of coefficients and explained 63 % of the held-out error at the first step
+    # against 55 and 49 % for each true effect alone: a 30 mA offset and a 0.9 % gain mismatch were
+    # claimed, 64 % of the horizontal residual left unexplained. Without the sensors' errors the
+    # other candidates explain 94.8 % against 79.6 % (pipeline._tie_shown): the two true effects,
+    # sized within 30 % (the issue's bound; measured slope -2.3 for -2.36 mrad, 8.7 for 8.78 N/m).
+    from tests.independent.simulate import Rig
+
+    _, d, s = _drawn_pair(tmp_path, 15307, ("guide_misalignment", "cable_carrier"), Rig(controller="pid"))
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
+    refused = {j.name: j.verdict for j in d.rejected}
+    assert refused.get("current_sensor_offset") == "not specific", refused
+
+
+@pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
     # 15 mm) and a -2.5 degree commutation offset. With 1.7 A of levitation current the offset's
