@@ -207,7 +207,9 @@ def test_vertical_damping_on_an_axis_that_barely_sticks_is_claimed_on_a_noisy_ri
     assert not out["unexplained"]
     assert out["error_after"]["vertical"] < out["error_before"]["vertical"]
     p = out["effects"][0]["parameters"]
-    assert p["holding"] == 0.0  # the share held at zero
+    assert p["holding"] == 0.0  # the share held at zero, and the finding says why
+    finding = out["effects"][0]["finding"]
+    assert "hardly sticks" in finding and "hold the axis while it sticks" not in finding
     # the force it found at the speeds the axis moves at (nine samples in ten below 4.6 mm/s; above
     # the sign's smoothing width), against the LuGre model's steady sliding friction there
     for v in (REVERSAL_SPEED, 2 * REVERSAL_SPEED):

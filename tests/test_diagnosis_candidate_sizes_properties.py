@@ -443,6 +443,27 @@ def test_a_viscous_part_within_two_standard_errors_of_zero_is_reported_as_not_re
         )
 
 
+@pytest.mark.parametrize("form", ["full", "without_viscous", "stribeck", "stribeck_without_viscous"])
+def test_a_holding_share_held_at_zero_is_not_said_to_hold_the_axis(form):
+    """A share held while sticking that the fit held at zero (its column mostly the logged currents'
+    errors: ``AccelerationTerm.optional``) is said to be so; one fitted keeps the sentence."""
+    from maglev_oc.diagnosis.guides import _friction_words
+    from maglev_oc.results import Estimate
+
+    est = {
+        "coulomb": Estimate(0.18, 0.2, "N"),
+        "breakaway": Estimate(0.3, 0.2, "N"),
+        "viscous": Estimate(1.4, 20.0, "N s/m"),
+        "holding": Estimate(0.0, 0.0, "1"),
+    }
+    words = _friction_words("vertical", form, 0.05)(est)
+    assert "hold the axis while it sticks" not in words
+    assert "The axis hardly sticks on this log" in words
+    est["holding"] = Estimate(0.6, 0.1, "1")
+    words = _friction_words("vertical", form, 0.05)(est)
+    assert "hold the axis while it sticks" in words and "hardly sticks" not in words
+
+
 def test_a_negative_parameter_is_refused_with_how_many_standard_errors_below_zero_it_is():
     """not_below's reason gives value / standard error (seed-45 survivor: value times it)."""
     from maglev_oc.diagnosis.candidate import not_below

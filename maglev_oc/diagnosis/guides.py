@@ -172,7 +172,23 @@ def _friction_words(axis: str, form: str, speed_p90: float):
             return f"{rising}, and hold the axis while it sticks; {_VISCOUS_HELD}"
         return f"{coulomb} (and hold the axis while it sticks); {_VISCOUS_HELD}"
 
-    return lambda e: sentence(e) + slow
+    def said(e):
+        text = sentence(e)
+        h = e.get("holding")
+        if h is not None and h.value == 0.0 and h.stderr == 0.0:  # held at zero: AccelerationTerm.optional
+            text = text.replace(" (and hold the axis while it sticks)", "").replace(
+                ", and hold the axis while it sticks", ""
+            )
+            text += _BARELY_STICKS
+        return text + slow
+
+    return said
+
+
+_BARELY_STICKS = (
+    " The axis hardly sticks on this log: what the guides would hold while it is stopped is mostly the "
+    "logged currents' errors there, so it is not fitted."
+)
 
 
 def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
