@@ -388,8 +388,10 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
     _, d, s = _drawn_pair(tmp_path, 15307, ("guide_misalignment", "cable_carrier"), Rig(controller="pid"))
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
-    refused = {j.name: j.verdict for j in d.rejected}
-    assert refused.get("current_sensor_offset") == "not specific", refused
+    refused = {j.name: j for j in d.rejected}
+    assert refused["current_sensor_offset"].verdict == "not specific", refused
+    # the reason names what explains the log in its place, in words
+    assert "cable carrier force" in refused["current_sensor_offset"].reason
 
 
 @pytest.mark.slow

@@ -94,7 +94,7 @@ from maglev_oc.diagnosis.selection import (
 from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
 from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
-from maglev_oc.diagnosis.words import plain
+from maglev_oc.diagnosis.words import listed, plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
@@ -368,9 +368,9 @@ def _tie_shown(stage: _Stage, run: _Run, data: PreparedLogs) -> _Stage:
     own, without = gain(stage), gain(other)
     if not without > own + stage.session.settings.rival_margin:
         return stage
-    chosen = [n for n in other.sel.selected] or ["nothing"]
+    chosen = listed([plain(n) for n in other.sel.selected]) if other.sel.selected else "nothing"
     reason = (
-        f"without it the other candidates ({', '.join(c.replace('_', ' ') for c in chosen)}) explain "
+        f"without it the other candidates ({chosen}) explain "
         f"{without:.1%} of the held-out error against {own:.1%} with it: the forces it moves together on "
         "both axes are forces of each axis"
     )
