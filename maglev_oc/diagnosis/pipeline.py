@@ -251,7 +251,7 @@ def diagnose(
     # dozen designs of some of its terms beside it: each term's columns are evaluated once
     with reusing_columns(data):
         run = _Run(tuple(logs), train, hold, model, clock, holdout_fraction, settings, tuple(exclude), limits)
-        stage = _tie_shown(run.selected(data), run, data)
+        stage = run.selected(data)
         if stage.sel.selected and not stage.unexplained:
             # the claims are made (on the floor's estimate): their sizes and the constants are
             # refitted where the bands agree with the chosen effects in the model
@@ -307,7 +307,8 @@ class _Stage:
 
 
 def _selected(run: _Run, data: PreparedLogs) -> _Stage:
-    """Steps 2-6 on ``data`` (see the module doc)."""
+    """Steps 2-6 on ``data`` (see the module doc), with the current sensors' errors kept only where
+    the log shows them (:func:`_tie_shown`)."""
     clock, train, hold = run.clock, run.train, run.hold
     design0 = build_design(data, run.model, fit=train, holdout=hold)
     session = _Session(
@@ -332,7 +333,8 @@ def _selected(run: _Run, data: PreparedLogs) -> _Stage:
     sel, not_sep, rejected, unexplained = clock(
         "unexplained", _separate_unexplained, session, fitted, library, design, sel, tr
     )
-    return _Stage(session, design0, base0, fitted, library, design, sel, tr, not_sep, rejected, unexplained)
+    stage = _Stage(session, design0, base0, fitted, library, design, sel, tr, not_sep, rejected, unexplained)
+    return _tie_shown(stage, run, data)
 
 
 def _tie_shown(stage: _Stage, run: _Run, data: PreparedLogs) -> _Stage:
