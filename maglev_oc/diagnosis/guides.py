@@ -118,18 +118,19 @@ _VISCOUS_HELD = (
 )
 
 
-def _viscous_words(viscous: Estimate, before: str, joiner: str) -> str:
+_HOLDS = " (and hold the axis while it sticks)"
+
+
+def _viscous_words(viscous: Estimate, before: str, joiner: str, holds: str = _HOLDS) -> str:
     """The end of a friction's finding from its viscous part: found, when it is 2 standard errors
     from zero, else not resolved, the estimate beside it (a gap axis moves slowly: on the
     independent generator's logs the vertical coefficient came out 48 ± 81 N s/m for a true 10,
     and a bare "48 N s/m" reads as a finding). ``before``: the finding up to its last clause,
-    ``joiner`` what joins the viscous part to it."""
+    ``joiner`` what joins the viscous part to it, ``holds`` the clause on sticking ("" where the
+    share held was not fitted)."""
     if viscous.value > 2.0 * viscous.stderr:
-        return f"{before}{joiner} {fmt(viscous)} of viscous friction (and hold the axis while it sticks)."
-    return (
-        f"{before} (and hold the axis while it sticks); their viscous friction is not resolved on this "
-        f"log ({fmt(viscous)})."
-    )
+        return f"{before}{joiner} {fmt(viscous)} of viscous friction{holds}."
+    return f"{before}{holds}; their viscous friction is not resolved on this log ({fmt(viscous)})."
 
 
 def _speed_p90(ctx: LibraryContext, axis: str) -> float:
@@ -160,29 +161,26 @@ def _friction_words(axis: str, form: str, speed_p90: float):
     slow = "" if form.startswith("stribeck") else _slow_axis_words(axis, speed_p90)
 
     def sentence(e):
+        h = e.get("holding")
+        # the share held while sticking held at zero (AccelerationTerm.optional): no sticking said
+        unheld = h is not None and h.value == 0.0 and h.stderr == 0.0
+        holds = "" if unheld else _HOLDS
         coulomb = f"The {axis} linear guides resist motion with {fmt(e['coulomb'])} of Coulomb friction"
         if form == "full":
-            return _viscous_words(e["viscous"], coulomb, " and")
-        if form.startswith("stribeck"):
+            text = _viscous_words(e["viscous"], coulomb, " and", holds)
+        elif form.startswith("stribeck"):
             rising = (
                 f"{coulomb}, rising to a breakaway force of {fmt(e['breakaway'])} at low speed (Stribeck)"
             )
             if form == "stribeck":
-                return _viscous_words(e["viscous"], rising, ", and")
-            return f"{rising}, and hold the axis while it sticks; {_VISCOUS_HELD}"
-        return f"{coulomb} (and hold the axis while it sticks); {_VISCOUS_HELD}"
+                text = _viscous_words(e["viscous"], rising, ", and", holds)
+            else:
+                text = f"{rising}{'' if unheld else ', and hold the axis while it sticks'}; {_VISCOUS_HELD}"
+        else:
+            text = f"{coulomb}{holds}; {_VISCOUS_HELD}"
+        return text + (_BARELY_STICKS if unheld else "") + slow
 
-    def said(e):
-        text = sentence(e)
-        h = e.get("holding")
-        if h is not None and h.value == 0.0 and h.stderr == 0.0:  # held at zero: AccelerationTerm.optional
-            text = text.replace(" (and hold the axis while it sticks)", "").replace(
-                ", and hold the axis while it sticks", ""
-            )
-            text += _BARELY_STICKS
-        return text + slow
-
-    return said
+    return sentence
 
 
 _BARELY_STICKS = (
