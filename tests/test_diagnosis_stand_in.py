@@ -13,7 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from maglev_oc.diagnosis.selection import _partial_inflation
+from maglev_oc.diagnosis.selection import RIVAL_CONSTANT_Z, _partial_inflation, another_motor
+from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE
 
 
 def _design(x: np.ndarray, blocks: int, groups: dict[str, list[int]]):
@@ -72,3 +73,50 @@ def test_the_partial_inflation_is_that_of_the_columns_left_by_the_rest(seed, mix
     # a b that is a's column plus the rest's: the two are one direction once the rest is gone
     y = np.hstack([rest, a, a[:, :1] + (rest.sum(axis=1, keepdims=True) if n_rest else 0.0)])
     assert _partial_inflation(_design(y, 3, groups), names, "a", "b") > 1e6
+
+
+_REFERENCE = {"C1": 14.2, "C2": 796.99, "C3": 31.04, "C4": 0.07}  # the papers' (SPEC)
+
+
+def _fit(values: dict[str, float], sd: dict[str, float]):
+    """A candidate's fit as :func:`another_motor` reads it: the constants' values and standard errors."""
+    names = tuple(values)
+    return SimpleNamespace(
+        names=names,
+        value=lambda n: values[n],
+        covariance=np.diag([sd[n] ** 2 for n in names]),
+    )
+
+
+OWN = _fit(
+    {"C1": 14.33, "C2": 775.6, "C3": 30.74, "C4": 0.103}, {"C1": 0.035, "C2": 2.7, "C3": 0.57, "C4": 0.027}
+)
+"""The 19 mm cogging's fit of drawn pair 9030 (tests/test_diagnose_effects.py)."""
+
+
+def test_a_stand_in_that_needs_another_motor_is_no_rival():
+    # pair 9030: the constant vertical force's fit had C2 at 47.5, -94 % from the model's
+    assert another_motor({"C2": 47.5, "C3": 1.94, "C4": 0.008}, OWN, "vertical", _REFERENCE)
+    # a 3 N hanging cable's force moved C2 by 5.6 % (bench/README, the load change): a rival
+    assert not another_motor({"C2": 752.0, "C3": 29.0, "C4": 0.07}, OWN, "vertical", _REFERENCE)
+    # only the candidate's axes count: C1 far off does not make a vertical rival another motor
+    assert not another_motor({"C1": 5.0, "C2": 770.0}, OWN, "vertical", _REFERENCE)
+    assert another_motor({"C1": 5.0, "C2": 770.0}, OWN, "horizontal", _REFERENCE)
+
+
+@settings(max_examples=60, deadline=None)
+@given(change=st.floats(-0.9, 0.9), sd=st.floats(0.1, 400.0))
+def test_another_motor_is_beyond_the_plausible_change_and_the_candidates_errors(change, sd):
+    own = _fit({"C2": 780.0}, {"C2": sd})
+    c2 = _REFERENCE["C2"] * (1 + change)
+    expected = abs(change) > PLAUSIBLE_CHANGE and abs(c2 - 780.0) > RIVAL_CONSTANT_Z * sd
+    # a candidate's own fit beyond the plausible change (by more than 5 standard errors) is no such
+    # stage either: then the rival counts (780 is within 2.2 % of the reference: never here)
+    assert another_motor({"C2": c2}, own, "vertical", _REFERENCE) == expected
+
+
+def test_a_candidate_whose_own_fit_is_no_such_stage_keeps_every_rival():
+    beyond = _fit({"C2": 400.0}, {"C2": 2.0})  # -50 % at 200 standard errors
+    assert not another_motor({"C2": 47.5}, beyond, "vertical", _REFERENCE)
+    unknown = _fit({"C2": 780.0}, {"C2": float("nan")})
+    assert not another_motor({"C2": 47.5}, unknown, "vertical", _REFERENCE)

@@ -1035,6 +1035,7 @@ def _beside_a_stand_in(
     context: tuple,
     settings: SelectionSettings,
     by_name: Mapping[str, Candidate],
+    reference: Mapping[str, float] | None = None,
 ) -> list[Judgement]:
     """``passing`` less the static forces that explain nothing beyond a candidate confounded with the base
     constants which explains at least as much; each of those goes to ``judged`` as not separable
@@ -1069,21 +1070,38 @@ def _beside_a_stand_in(
     without one (1.0), beside a gap sensor offset. A column added where it has nothing to explain
     loses about 0.1 % (module doc, point 6); 5 % lies between the two sets."""
     base = {*CONSTANT_NAMES, "C1..C4"}
-    stand_ins = [
-        j
-        for j in judged.values()
-        if j.verdict == "not separable" and j.confounded_with and set(j.confounded_with) <= base
-    ]
+    stand_ins = sorted(
+        (
+            j
+            for j in judged.values()
+            if j.verdict == "not separable" and j.confounded_with and set(j.confounded_with) <= base
+        ),
+        key=lambda j: -j.gain,
+    )
     if not stand_ins or not passing:
         return passing
-    rival = max(stand_ins, key=lambda j: j.gain)
     r0, counted, cross = context[2], context[6], context[8]
+    constants: dict[str, dict[str, float]] = {}  # a stand-in's fit's constants, fitted once
+
+    def of(rival: Judgement) -> dict[str, float]:
+        if rival.name not in constants:
+            constants[rival.name] = _estimated_constants(
+                fit_subset(design, [*current, rival.name], covariance=False)
+            )
+        return constants[rival.name]
+
     kept = []
     for j in passing:
         axes = np.flatnonzero(np.isfinite(j.gain_axes))
-        if rival.gain < j.gain or not axes.size or not _static(by_name[j.name]):
+        rivals = [r for r in stand_ins if r.gain >= j.gain]
+        if rivals and reference is not None and axes.size and _static(by_name[j.name]):
+            own = fit_subset(design, [*current, j.name])
+            axis = by_name[j.name].axis
+            rivals = [r for r in rivals if not another_motor(of(r), own, axis, reference)]
+        if not rivals or not axes.size or not _static(by_name[j.name]):
             kept.append(j)
             continue
+        rival = rivals[0]
         without = _own_gain(
             _held_out_test(design, [*current, rival.name], r0, counted, cross, axes).pooled_axes
         )
@@ -1731,25 +1749,33 @@ class Rivals:
         ranked = self.by_size.get(key, ())
         if self.reference is None or not ranked:
             return ranked[0] if ranked else None
-        names = [n for n in CONSTANT_NAMES if axis == "both" or CONSTANT_AXIS[n] == axis]
-        own = _estimated_constants(fit)
-        sd = {n: float(np.sqrt(max(fit.covariance[i, i], 0.0))) for i, n in enumerate(fit.names) if n in own}
-        if not all(np.isfinite(list(sd.values()))):
-            return ranked[0]
+        return next((r for r in ranked if not another_motor(r.constants, fit, axis, self.reference)), None)
 
-        if any(n in own and beyond_plausible(own[n], self.reference[n], sd[n]) for n in names):
-            return ranked[0]  # the candidate's own fit is no stage of this design either
 
-        def credible(constants: Mapping[str, float]) -> bool:
-            return not any(
-                n in constants
-                and n in own
-                and abs(constants[n] / self.reference[n] - 1.0) > PLAUSIBLE_CHANGE
-                and abs(constants[n] - own[n]) > RIVAL_CONSTANT_Z * sd[n]
-                for n in names
-            )
-
-        return next((r for r in ranked if credible(r.constants)), None)
+def another_motor(
+    constants: Mapping[str, float], fit: SubsetFit, axis: str, reference: Mapping[str, float]
+) -> bool:
+    """Whether a rival's fit whose base constants are ``constants`` describes a motor no stage of this
+    design is, where a candidate's own ``fit`` (on ``axis``) keeps its constants plausible: a
+    constant of ``axis`` beyond ``identify``'s plausible change
+    (:data:`~maglev_oc.identification.pipeline.PLAUSIBLE_CHANGE`) from ``reference`` and
+    :data:`RIVAL_CONSTANT_Z` of the candidate's fit's standard errors from the candidate's value
+    (:meth:`Rivals.best`, :func:`_beside_a_stand_in`). False when the candidate's own fit is no
+    such stage either, or its standard errors are not finite: the rival then counts."""
+    names = [n for n in CONSTANT_NAMES if axis == "both" or CONSTANT_AXIS[n] == axis]
+    own = _estimated_constants(fit)
+    sd = {n: float(np.sqrt(max(fit.covariance[i, i], 0.0))) for i, n in enumerate(fit.names) if n in own}
+    if not all(np.isfinite(list(sd.values()))):
+        return False
+    if any(n in own and beyond_plausible(own[n], reference[n], sd[n]) for n in names):
+        return False  # the candidate's own fit is no stage of this design either
+    return any(
+        n in constants
+        and n in own
+        and abs(constants[n] / reference[n] - 1.0) > PLAUSIBLE_CHANGE
+        and abs(constants[n] - own[n]) > RIVAL_CONSTANT_Z * sd[n]
+        for n in names
+    )
 
 
 def _rival_gains(
@@ -1914,7 +1940,9 @@ def select(
                 }
             )
             passes = [j for j in judged.values() if j.verdict == "passes"]
-            passing = _beside_a_stand_in(design, passes, judged, current, context, settings, by_name)
+            passing = _beside_a_stand_in(
+                design, passes, judged, current, context, settings, by_name, reference
+            )
             last.update(judged)
             if not passing:
                 # the pair's forms in turn (guide friction with or without its Stribeck rise): the first
