@@ -394,6 +394,55 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
     assert "cable carrier force" in refused["current_sensor_offset"].reason
 
 
+def _end_effects_16106(tmp_path, *more, seed: int = 16106):
+    """The end effects of ``bench/diagnose_rigs.py --drawn 8 --kinds end_effect --seed 15700``'s
+    draw 16106 (a raised cosine: 9.3 % of the thrust and 8.8 % of the attraction lost at +-50 mm,
+    zero 80 mm further in), with ``more`` effects, on the generator's own rig (the log's ``seed``),
+    diagnosed with the defaults and scored: (diagnosis, score)."""
+    import numpy as np
+
+    from tests.independent import write_log
+    from tests.independent.draws import draw
+    from tests.independent.simulate import Rig, Scenario, simulate
+
+    ends = draw("end_effect", np.random.default_rng(16106))
+    assert ends.profile == "cosine" and ends.thrust_loss == pytest.approx(0.0931, abs=1e-4)
+    scenario = Scenario(name="end_effect", seed=seed, effects=(ends, *more), rig=Rig())
+    path, truth_path = write_log(simulate(scenario), tmp_path, stem="ends")
+    d = diagnose_path(path)
+    return d, score("ends", json.loads(truth_path.read_text()), d.to_dict()["effects"])
+
+
+@pytest.mark.slow
+def test_a_slow_sine_that_the_end_effects_shape_moves_is_not_claimed_beside_them(tmp_path):
+    # Fitted with the exponential and rounded fall-offs, the raised cosine left a vertical misfit
+    # along the travel that a 0.034 N normal cogging at 38 mm took (z 5.3): a false claim. Refitted
+    # beside each fall-off the logged travel allows, that cogging ran from 0.034 to 0.12 N
+    # (pipeline._told_by_the_end_effects_shape): not separable from the end effects' shape, and
+    # listed so; the end effects alone are claimed.
+    d, s = _end_effects_16106(tmp_path)
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    assert [e.name for e in d.effects] == ["end_effects"]
+    shaped = {n.name: n for n in d.not_separable}["cogging_vertical_38mm"]
+    assert shaped.confounded_with == ("end_effects",) and "fall-off" in shaped.reason
+
+
+@pytest.mark.slow
+def test_a_true_slow_cogging_beside_the_same_end_effects_is_still_claimed(tmp_path):
+    # The other side of the rule above: 0.6 N of normal cogging at 38 mm (0.27 N at the 19.5 mm gap)
+    # beside the same end effects. Its size beside each fall-off ran from 0.23 to 0.44 N, half that
+    # range 0.45 times its size: claimed, with the end effects, and sized within 30 % of its peak at
+    # the reference gap (the issue's bound). (Not on every seed: on 16306 the cosine's misfit makes
+    # the cogging's two halves of the travel differ, and it is refused as not specific, as before.)
+    from tests.independent.effects import NormalCogging
+
+    cogging = NormalCogging(peak_force=0.6, period=0.0381, harmonic2_ratio=0.0, phase=2.0)
+    d, s = _end_effects_16106(tmp_path, cogging, seed=16302)
+    assert sorted(e.name for e in d.effects) == ["cogging_vertical_38mm", "end_effects"], s.claimed
+    found = {e.name: e for e in d.effects}["cogging_vertical_38mm"].parameters["amplitude_15mm"].value
+    assert found == pytest.approx(0.6, rel=0.3)
+
+
 @pytest.mark.slow
 def test_cogging_beside_end_effects_is_not_refused_for_a_stand_in_that_needs_another_motor(tmp_path):
     # A random pair (the drawn pairs' generator, seed 9030): normal cogging (1.25 N at 15 mm, 0.3 N

@@ -71,6 +71,7 @@ from maglev_oc.diagnosis.refit import (
     converged_references,
     fitted_model,
     moved,
+    sizes_over_end_profiles,
     with_model_form_spread,
 )
 from maglev_oc.diagnosis.result import ERROR_METRIC, Diagnosis, Effect, NotSeparable
@@ -932,6 +933,10 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
     if off_band:
         rejected.extend(off_band)
         sel = _without(sel, design, off_band)
+    shaped = _told_by_the_end_effects_shape(session, fitted, library, design, sel)
+    if shaped:
+        not_sep = sorted([*not_sep, *shaped], key=lambda n: -n.gain)
+        sel = _without(sel, design, [sel.last[n.name] for n in shaped])
     periods = unexplained_periods(tr)
     while True:
         chosen = [by_name[n] for n in sel.selected]
@@ -954,6 +959,75 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
             return sel, not_sep, rejected, unexplained
         rejected.extend(stale)
         sel = _without(sel, design, stale)
+
+
+def _told_by_the_end_effects_shape(
+    session: _Session, fitted: StageModel, library, design: Design, sel: Selection
+) -> list[NotSeparable]:
+    """The chosen forces periodic in the position whose size the end effects' assumed fall-off moves
+    by as much as the size itself: not separable from the end effects' shape, with why.
+
+    Over a short travel a slow sine and the end effects' fall-off span nearly the same smooth
+    functions of the position, so the sine takes up whatever the fall-off's assumed shape misses.
+    End effects falling as a raised cosine (9.3 % of the thrust, 8.8 % of the attraction at +-50 mm,
+    zero 80 mm further in; the independent generator's draw 16106), fitted beside the exponential
+    and rounded fall-offs of the scan (:func:`~maglev_oc.diagnosis.refit.best_end_profile`), left a
+    vertical misfit that a 0.034 N normal cogging at 38 mm took (its halves agreeing, z 5.3): a
+    false claim. Refitted with each fall-off the scan allows, that cogging's size ran from 0.034 to
+    0.12 N, half that range 1.3 times its size; a true 0.27 N one at 38 mm beside the same end
+    effects, 0.23-0.44 N (0.45 times), and the true 19 mm cogging and detents of 14 logs with end
+    effects at most 0.23 times (0.00-0.06 on 12 of them): a force the log shows whatever the
+    fall-off is sized nearly alike under each. A force is claimed only where half that range is
+    below its size (:func:`~maglev_oc.diagnosis.refit.sizes_over_end_profiles`)."""
+    by_name = {c.name: c for c in library}
+    ends = next((n for n in sel.selected if by_name[n].reported_name == "end_effects"), None)
+    if ends is None:
+        return []
+    others = [by_name[n] for n in sel.selected if n != ends]
+    constants = fitted_constants(sel.final)
+    held = _holding_shares(sel, library)
+    out = []
+    for cand in others:
+        if cand.variable != "position" or cand.family not in ("periodic", "geometry"):
+            continue
+        coef, cov = sel.final.group(design, cand.name)
+        params = cand.term.physical_parameters(coef, cov, constants)
+        if "amplitude" not in params:
+            continue
+        size = abs(params["amplitude"].value)
+        sizes = [size] + [
+            abs(a)
+            for a in sizes_over_end_profiles(
+                fitted,
+                session.data,
+                [o.term for o in others],
+                cand,
+                "amplitude",
+                session.train,
+                session.hold,
+                session.weights,
+                held,
+            )
+        ]
+        spread = 0.5 * (max(sizes) - min(sizes))
+        if spread < size:
+            continue
+        j = sel.last[cand.name]
+        unit = params["amplitude"].unit
+        out.append(
+            NotSeparable(
+                cand.name,
+                (ends,),
+                "set-point runs at several positions along the stator (the end effects' shape), or a run "
+                "over a longer travel, where the force repeats over more periods away from the ends",
+                j.gain,
+                f"its size depends on the end effects' assumed fall-off as much as it is large: "
+                f"{size:.3g} {unit} beside the fall-off found, {min(sizes):.3g}-{max(sizes):.3g} {unit} "
+                f"beside the {len(sizes) - 1} fall-offs the logged travel allows",
+                params,
+            )
+        )
+    return out
 
 
 def _without(sel: Selection, design: Design, dropped: Sequence[Judgement]) -> Selection:

@@ -28,6 +28,7 @@ __all__ = [
     "converged_references",
     "fitted_model",
     "moved",
+    "sizes_over_end_profiles",
     "with_model_form_spread",
 ]
 
@@ -146,9 +147,7 @@ def best_end_profile(
       its variance inflation, 307, made it not separable; at 15 mm it was found and sized right).
     """
     settings = settings or SelectionSettings()
-    lo, hi = LibraryContext(model, data).position_range
-    centre = (hi - lo) / 2.0
-    profiles = [p for p in profiles if p == current or p.fall_at(centre) <= CENTRE_FALL * (1 + 1e-9)]
+    profiles = _scannable(model, data, profiles, current)
     scanned = end_effects_at(model, data, profiles, held)
     design = build_design(
         data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
@@ -165,6 +164,43 @@ def best_end_profile(
         if c.plausible(c.term.physical_parameters(coef, cov, fitted_constants(fit))) is None:
             cost[p] = fit.chi_square
     return min(cost, key=cost.get) if cost else current
+
+
+def _scannable(
+    model: StageModel, data: PreparedLogs, profiles: Sequence[EndProfile], current: EndProfile | None
+) -> list[EndProfile]:
+    """The ``profiles`` that fall at the centre of the logged travel to at most :data:`CENTRE_FALL`
+    of their value at the ends, and ``current``."""
+    lo, hi = LibraryContext(model, data).position_range
+    centre = (hi - lo) / 2.0
+    return [p for p in profiles if p == current or p.fall_at(centre) <= CENTRE_FALL * (1 + 1e-9)]
+
+
+def sizes_over_end_profiles(
+    model: StageModel,
+    data: PreparedLogs,
+    others: Sequence[AccelerationTerm],
+    cand: Candidate,
+    parameter: str,
+    train: np.ndarray,
+    hold: np.ndarray,
+    weights: np.ndarray | None,
+    held: Mapping[str, float] | None = None,
+) -> list[float]:
+    """The physical ``parameter`` of ``cand`` (one of ``others``) fitted beside the base constants,
+    the ``others`` terms and the end effects with each fall-off :func:`best_end_profile` may choose:
+    how much the end effects' assumed shape moves it. One design carries every profile's columns;
+    each fit is a solve of its Gram blocks."""
+    scanned = end_effects_at(model, data, _scannable(model, data, END_PROFILES, None), held)
+    design = build_design(
+        data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
+    )
+    out = []
+    for c in scanned:
+        fit = fit_subset(design, ["base", *(t.name for t in others), c.name], covariance=False)
+        coef, cov = fit.group(design, cand.name)
+        out.append(cand.term.physical_parameters(coef, cov, fitted_constants(fit))[parameter].value)
+    return out
 
 
 def with_model_form_spread(
