@@ -14,6 +14,7 @@
     python bench/diagnose_rigs.py --lift-off [--rig ...]
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
+    python bench/diagnose_rigs.py --drawn-pairs 16 --pairs-with end_effect normal_cogging detent_force
     python bench/diagnose_rigs.py --vertical-force [--load-change 2] [--rig ...]
     python bench/diagnose_rigs.py ... --payload 1.5 | --load-change 2
 
@@ -99,7 +100,10 @@ that nothing else is claimed in its place.
 
 ``--drawn-pairs N [--seed S]``: N logs, each with two effects of different kinds drawn at random
 (the kinds from seed S + j, each effect's parameters as ``--drawn`` draws them), on the default
-rig: a rig has more than one effect, in combinations no set chose.
+rig: a rig has more than one effect, in combinations no set chose. ``--pairs-with A B C``: only
+the pairs of kind A beside B or C, the seeds still run from S on and each pair drawn as without it
+(``--drawn-pairs 16 --pairs-with end_effect normal_cogging detent_force --seed 9000`` gives the
+sixteen pairs 9006-9657 of cogging or detents beside end effects that bench/README (xxxiii) scores).
 
 ``--drawn N``: every effect kind N times, each with its parameters drawn at random within the
 ranges real stages show (``tests/independent/draws.py``: sizes log-uniform over at least the sets'
@@ -399,6 +403,14 @@ def main() -> None:
     )
     parser.add_argument("--kinds", nargs="*", default=None, help="with --drawn: only these kinds")
     parser.add_argument(
+        "--pairs-with",
+        nargs="+",
+        default=None,
+        metavar="KIND",
+        help="with --drawn-pairs: only the pairs of the first kind and one of the others, drawn in "
+        "turn from --seed on until N are found (the seeds the same as without it)",
+    )
+    parser.add_argument(
         "--rig",
         default="default",
         choices=list(RIGS),
@@ -467,8 +479,20 @@ def main() -> None:
 
         from tests.independent.draws import KINDS, draw
 
-        for j in range(args.drawn_pairs):
-            seed = args.seed + j
+        unknown = sorted(set(args.pairs_with or ()) - set(KINDS))
+        if unknown:
+            parser.error(f"--pairs-with: unknown {unknown}; choose from {list(KINDS)}")
+        wanted = args.pairs_with or []
+
+        def chosen(kinds) -> bool:
+            names = {KINDS[k] for k in kinds}
+            return not wanted or (wanted[0] in names and bool(names & set(wanted[1:] or KINDS)))
+
+        seed = args.seed - 1
+        for _ in range(args.drawn_pairs):
+            seed += 1
+            while not chosen(np.random.default_rng(seed).choice(len(KINDS), size=2, replace=False)):
+                seed += 1
             kinds = sorted(np.random.default_rng(seed).choice(len(KINDS), size=2, replace=False))
             effects = tuple(draw(KINDS[k], np.random.default_rng([seed, int(k)])) for k in kinds)
             name = "+".join(KINDS[k] for k in kinds)
