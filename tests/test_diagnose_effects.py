@@ -460,6 +460,24 @@ def test_cogging_beside_end_effects_is_not_refused_for_a_stand_in_that_needs_ano
 
 
 @pytest.mark.slow
+def test_end_effects_at_one_stator_end_beside_cogging_are_found_at_that_end(tmp_path):
+    # A random pair (seed 9448): normal cogging (1.96 N at 15 mm) and end effects at one stator end
+    # only, 12 mm beyond the logged high end (exponential over 21 mm, 7.7 % of the thrust and 3.4 %
+    # of the attraction; the other stator end 260 mm beyond the low one). Fitted with both ends at
+    # every scanned profile they were a fall at the high end and a growth at the low one (the
+    # scan's widths straddle the true one), implausible, and a vertical dependence on the position
+    # was reported unexplained. The fall at the high end alone keeps 99.9 % of what both ends
+    # explain there (refit.ONE_END_SHARE): both found, the thrust's loss at the logged ends sized
+    # within 30 % (the bound; measured 1.37 % for 1.23 %).
+    _, d = _drawn_pair_finds(
+        tmp_path, 9448, ("normal_cogging", "end_effect"), ["cogging_vertical_19mm", "end_effects"]
+    )
+    ends = {e.name: e for e in d.effects}["end_effects"]
+    assert ends.parameters["forces_lost_at_low_end_alone"].value == 0.0
+    assert "at the high end alone" in ends.finding, ends.finding
+
+
+@pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
     # 15 mm) and a -2.5 degree commutation offset. With 1.7 A of levitation current the offset's

@@ -1304,3 +1304,37 @@ def test_the_candidates_asked_for_by_name_are_the_librarys_own(plant):
         assert same == (w.term.parameter_names, w.term.axis, w.family), c.name
     with pytest.raises(ValueError, match="no candidate named"):
         candidate_library(StageModel(), plant.data, only=["guide_friction_sideways"])
+
+
+@pytest.mark.parametrize("end", ["low", "high"])
+def test_one_ended_end_effects_are_the_fall_at_both_ends_with_the_other_held_at_zero(plant, end):
+    """A log that reaches one stator end only (magnetics.END_ENDS): the one-ended candidate has that
+    end's two coefficients, its acceleration at any state is the four-coefficient candidate's with
+    the other end's held at zero, and so are its physical sizes and their standard errors (to
+    1e-12: the same arithmetic on an embedding of the coefficients); the other end's own fall is
+    exactly zero and judged as no growth."""
+    from maglev_oc.diagnosis.magnetics import end_effects_candidate
+
+    ctx = LibraryContext(StageModel(), plant.data)
+    both = end_effects_candidate(ctx, EndProfile(0.0189, "exponential"))
+    one = end_effects_candidate(ctx, EndProfile(0.0189, "exponential").one_ended(end))
+    k = (0, 2) if end == "low" else (1, 3)
+    assert one.term.parameter_names == tuple(both.term.parameter_names[j] for j in k)
+    q2, cov2 = np.array([0.03, 0.012]), np.array([[4e-6, 1e-6], [1e-6, 2e-6]])
+    q4, cov4 = np.zeros(4), np.zeros((4, 4))
+    q4[list(k)] = q2
+    cov4[np.ix_(k, k)] = cov2
+    rng = np.random.default_rng(0)
+    for i in rng.choice(plant.data.x.shape[1], 5, replace=False):
+        x, u = plant.data.x[:, i], plant.data.u[:, i]
+        a1 = np.asarray(one.term.evaluate(x, u, np.zeros(2), np.zeros(2), q2)).ravel()
+        a4 = np.asarray(both.term.evaluate(x, u, np.zeros(2), np.zeros(2), q4)).ravel()
+        np.testing.assert_allclose(a1, a4, rtol=1e-12, atol=1e-15)
+    p1, p4 = one.term.physical_parameters(q2, cov2, {}), both.term.physical_parameters(q4, cov4, {})
+    for name, est in p4.items():
+        assert p1[name].value == pytest.approx(est.value, rel=1e-12, abs=1e-15), name
+        assert p1[name].stderr == pytest.approx(est.stderr, rel=1e-12, abs=1e-15), name
+    other = "high" if end == "low" else "low"
+    assert p1[f"forces_lost_at_{other}_end_alone"].value == 0.0
+    assert one.plausible(p1) is None
+    assert f"the {end} end" in one.describe(p1) and f"at the {end} end alone" in one.describe(p1)

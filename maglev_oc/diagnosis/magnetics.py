@@ -32,6 +32,7 @@ from maglev_oc.regression.terms import (
 from maglev_oc.results import Estimate
 
 __all__ = [
+    "END_ENDS",
     "END_PROFILE",
     "END_PROFILES",
     "END_SHAPES",
@@ -70,10 +71,12 @@ end, zero further in than a few widths) left a misfit along the travel that othe
 
 
 class EndProfile(NamedTuple):
-    """The shape (:data:`END_SHAPES`) and width [m] of the end effects' fall-off."""
+    """The shape (:data:`END_SHAPES`) and width [m] of the end effects' fall-off, and the logged ends
+    that fall (:data:`END_ENDS`)."""
 
     width: float
     shape: str = "exponential"
+    ends: str = "both"
 
     def fall(self, u):
         """The loss at distance ``u`` [m] inside an end relative to the end's (CasADi). Beyond the
@@ -89,14 +92,32 @@ class EndProfile(NamedTuple):
 
     def scaled(self, factor: float) -> EndProfile:
         """The same shape, ``factor`` times as wide."""
-        return EndProfile(self.width * factor, self.shape)
+        return EndProfile(self.width * factor, self.shape, self.ends)
+
+    def one_ended(self, end: str) -> EndProfile:
+        """The same fall-off at the ``end`` ("low" or "high") of the logged travel alone."""
+        return EndProfile(self.width, self.shape, end)
 
     def describe(self) -> str:
         """How the losses fall inwards, in words."""
         if self.shape == "exponential":
-            return f"the losses fall by 1/e every {self.width * 1e3:.0f} mm inwards"
-        return f"the losses stay flat near the ends, then fall to 1/e {self.width * 1e3:.0f} mm inwards"
+            fall = f"the losses fall by 1/e every {self.width * 1e3:.0f} mm inwards"
+        else:
+            fall = f"the losses stay flat near the ends, then fall to 1/e {self.width * 1e3:.0f} mm inwards"
+        if self.ends == "both":
+            return fall
+        other = "low" if self.ends == "high" else "high"
+        return f"{fall}; fitted at the {self.ends} end alone (no loss of the {other} end's own)"
 
+
+END_ENDS = ("both", "low", "high")
+"""The logged ends whose losses the end effects fit: each its own (``both``), or one alone. A user's
+log need not reach both stator ends: the independent generator's drawn pair 9448 (a stator end 12
+mm beyond the logged high end, the other 260 mm beyond the low one; exponential, 21 mm wide, 7.7 %
+of the thrust) fitted with both ends at every scanned profile as a fall at the high end and a growth
+at the low one (-0.18 +- 0.04 % at 18.9 mm, the nearest width), the wrong width's misfit, and was
+judged implausible. One end alone is scanned only where no profile of both ends passes
+(:func:`~maglev_oc.diagnosis.refit.best_end_profile`)."""
 
 END_GROWTH_Z = 3.0
 """An end whose own fall (the thrust's and attraction's fractions lost where its profile is 1,
@@ -187,19 +208,26 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
     """
     lo, hi = ctx.position_range
     narrow, wide = profile.scaled(1 / END_WIDTH_STEP), profile.scaled(END_WIDTH_STEP)
+    # the fitted coefficients' places among (winding low, winding high, magnet low, magnet high)
+    kept = {"both": (0, 1, 2, 3), "low": (0, 2), "high": (1, 3)}[profile.ends]
+    embed = np.zeros((4, len(kept)))
+    embed[kept, range(len(kept))] = 1.0
 
     def fn(p: EndProfile):
         def build(x, u, du, q):
             high, low = p.fall(hi - x[2]), p.fall(x[2] - lo)
             thrust, winding_normal, magnets = ctx.force_terms(x, u)
             # a loss fraction of each force at an end: acc changes by -loss * force * profile
-            winding = q[0] * low + q[1] * high
-            magnet = q[2] * low + q[3] * high
+            v = ca.mtimes(ca.DM(embed), q)
+            winding = v[0] * low + v[1] * high
+            magnet = v[2] * low + v[3] * high
             return ca.vertcat(-(winding * winding_normal + magnet * magnets), -winding * thrust)
 
-        return term_function("end_effects", build, 4)
+        return term_function("end_effects", build, len(kept))
 
     def physical(q, cov, c):
+        # a one-ended fit is the four-coefficient one with the other end's held at zero
+        q, cov = embed @ np.asarray(q, float), embed @ np.asarray(cov, float) @ embed.T
         # the loss at an end minus at the centre of the travel, both ends' profiles summed: with
         # a the profile at the centre (L / 2 from each end, L the travel) and b at the other end,
         # q_end (1 - a) - q_other (a - b); the two ends' mean (q_low + q_high) / 2 (1 - 2a + b).
@@ -258,7 +286,10 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
             "Towards the ends of the travel the mover overhangs the stator: the thrust (and the normal force "
             "the currents make) and the magnets' attraction fall smoothly.",
             "both",
-            ("winding_loss_low", "winding_loss_high", "magnet_loss_low", "magnet_loss_high"),
+            tuple(
+                ("winding_loss_low", "winding_loss_high", "magnet_loss_low", "magnet_loss_high")[k]
+                for k in kept
+            ),
             function=fn(profile),
             physical=physical,
             signature="thrust- and attraction-proportional residual growing towards the ends of the travel",
@@ -280,15 +311,29 @@ def end_effects_candidate(ctx: LibraryContext, profile: EndProfile = END_PROFILE
             ),
             falls,
         ),
-        lambda e: (
+        lambda e: _end_effects_words(e, profile, lo, hi),
+        physical_sign=1,  # forces lost towards the ends, not gained
+    )
+
+
+def _end_effects_words(e: dict[str, Estimate], profile: EndProfile, lo: float, hi: float) -> str:
+    """The end effects' finding in words: the losses at the logged ends (or the one end fitted)."""
+    if profile.ends == "both":
+        return (
             "Towards the ends of the travel the thrust falls by "
             f"{fmt(e['thrust_loss_at_low_end'], 100, '%')} at {lo * 1e3:.0f} mm and "
             f"{fmt(e['thrust_loss_at_high_end'], 100, '%')} at {hi * 1e3:.0f} mm, "
             f"the magnets' attraction by {fmt(e['attraction_loss_at_low_end'], 100, '%')} and "
             f"{fmt(e['attraction_loss_at_high_end'], 100, '%')}, relative to the centre; "
             f"{profile.describe()}."
-        ),
-        physical_sign=1,  # forces lost towards the ends, not gained
+        )
+    end = profile.ends
+    at = lo if end == "low" else hi
+    return (
+        f"Towards the {end} end of the travel the thrust falls by "
+        f"{fmt(e[f'thrust_loss_at_{end}_end'], 100, '%')} at {at * 1e3:.0f} mm and the magnets' attraction "
+        f"by {fmt(e[f'attraction_loss_at_{end}_end'], 100, '%')}, relative to the centre (a stator end "
+        f"near that end of the travel); {profile.describe()}."
     )
 
 
