@@ -478,6 +478,27 @@ def test_end_effects_at_one_stator_end_beside_cogging_are_found_at_that_end(tmp_
 
 
 @pytest.mark.slow
+def test_end_effects_beside_sticking_vertical_guides_stand_beside_a_gap_dependence_of_another_motor(
+    tmp_path,
+):
+    # A random pair (seed 15403): vertical guide friction (1.6 N, breakaway 2.0 N at 1 mm/s) and end
+    # effects (9.6 % of the thrust, 8.7 % of the attraction lost at +-50 mm, 17.5 mm wide). Both were
+    # chosen; then the end effects were dropped as "explained as well" by a vertical dependence on
+    # the gap reported unexplained (77 % of the held-out error), and only the friction was claimed.
+    # That dependence explained it with C2 at 451 (the model's 797), C3 at 1.4 (31) and C4 at
+    # -0.016: a fit no stage of this design is, where the end effects' own has C2 at 840 and C3 at
+    # 33.3 (selection.another_motor, as for the selection's rivals). Both found, sized within 30 % (the
+    # issue's bound), on the generator's rig (and on the noisy, 2 kHz and 10 kHz rigs, bench/README
+    # (xxxiv)).
+    _drawn_pair_finds(
+        tmp_path,
+        15403,
+        ("guide_friction_vertical", "end_effect"),
+        ["end_effects", "guide_friction_vertical"],
+    )
+
+
+@pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
     # 15 mm) and a -2.5 degree commutation offset. With 1.7 A of levitation current the offset's
