@@ -1320,7 +1320,7 @@ def test_one_ended_end_effects_are_the_fall_at_both_ends_with_the_other_held_at_
 
     ctx = LibraryContext(StageModel(), plant.data)
     both = end_effects_candidate(ctx, EndProfile(0.0189, "exponential"))
-    one = end_effects_candidate(ctx, EndProfile(0.0189, "exponential").one_ended(end))
+    one = end_effects_candidate(ctx, EndProfile(0.0189, "exponential").at(end))
     k = (0, 2) if end == "low" else (1, 3)
     assert one.term.parameter_names == tuple(both.term.parameter_names[j] for j in k)
     q2, cov2 = np.array([0.03, 0.012]), np.array([[4e-6, 1e-6], [1e-6, 2e-6]])
@@ -1341,3 +1341,5 @@ def test_one_ended_end_effects_are_the_fall_at_both_ends_with_the_other_held_at_
     assert p1[f"forces_lost_at_{other}_end_alone"].value == 0.0
     assert one.plausible(p1) is None
     assert f"the {end} end" in one.describe(p1) and f"at the {end} end alone" in one.describe(p1)
+    with pytest.raises(ValueError, match="'middle' is not one of"):
+        EndProfile(0.0189).at("middle")

@@ -94,9 +94,12 @@ class EndProfile(NamedTuple):
         """The same shape, ``factor`` times as wide."""
         return EndProfile(self.width * factor, self.shape, self.ends)
 
-    def one_ended(self, end: str) -> EndProfile:
-        """The same fall-off at the ``end`` ("low" or "high") of the logged travel alone."""
-        return EndProfile(self.width, self.shape, end)
+    def at(self, ends: str) -> EndProfile:
+        """The same fall-off at the logged ``ends`` (:data:`END_ENDS`: "both", or "low" or "high"
+        alone)."""
+        if ends not in END_ENDS:
+            raise ValueError(f"EndProfile.at: ends {ends!r} is not one of {END_ENDS}")
+        return EndProfile(self.width, self.shape, ends)
 
     def describe(self) -> str:
         """How the losses fall inwards, in words."""

@@ -165,15 +165,14 @@ def best_end_profile(
     if not cost:
         # no fall at both ends passes: the log may reach one stator end only (END_ENDS)
         both = [p for p in profiles if p.ends == "both"]
-        one_ended = [p.one_ended(end) for p in both for end in ("low", "high")]
+        one_ended = [p.at(end) for p in both for end in ("low", "high")]
         passing, chi, chi_base = _profile_costs(
             model, data, others, train, hold, weights, held, [*both, *one_ended], settings
         )
         cost = {
             p: c
             for p, c in passing.items()
-            if p.ends != "both"
-            and c - chi[p.one_ended("both")] <= ONE_END_SHARE * (chi_base - chi[p.one_ended("both")])
+            if p.ends != "both" and c - chi[p.at("both")] <= ONE_END_SHARE * (chi_base - chi[p.at("both")])
         }
     return min(cost, key=cost.get) if cost else current
 
