@@ -161,20 +161,36 @@ def best_end_profile(
     """
     settings = settings or SelectionSettings()
     profiles = _scannable(model, data, profiles, current)
-    cost, _, _ = _profile_costs(model, data, others, train, hold, weights, held, profiles, settings)
+    cost, chi, chi_base = _profile_costs(model, data, others, train, hold, weights, held, profiles, settings)
     if not cost:
         # no fall at both ends passes: the log may reach one stator end only (END_ENDS)
-        both = [p for p in profiles if p.ends == "both"]
-        one_ended = [p.at(end) for p in both for end in ("low", "high")]
-        passing, chi, chi_base = _profile_costs(
-            model, data, others, train, hold, weights, held, [*both, *one_ended], settings
-        )
+        one_ended = [p.at(end) for p in profiles if p.ends == "both" for end in ("low", "high")]
+        passing, _, _ = _profile_costs(model, data, others, train, hold, weights, held, one_ended, settings)
         cost = {
             p: c
             for p, c in passing.items()
-            if p.ends != "both" and c - chi[p.at("both")] <= ONE_END_SHARE * (chi_base - chi[p.at("both")])
+            if c - chi[p.at("both")] <= ONE_END_SHARE * (chi_base - chi[p.at("both")])
         }
     return min(cost, key=cost.get) if cost else current
+
+
+def _scan_design(
+    model: StageModel,
+    data: PreparedLogs,
+    others: Sequence[AccelerationTerm],
+    profiles: Sequence[EndProfile],
+    train: np.ndarray,
+    hold: np.ndarray,
+    weights: np.ndarray | None,
+    held: Mapping[str, float] | None,
+) -> tuple[list[Candidate], Design]:
+    """The end effects with each of ``profiles`` (:func:`~maglev_oc.diagnosis.library.end_effects_at`)
+    and one design carrying their columns beside the base constants and the ``others`` terms."""
+    scanned = end_effects_at(model, data, profiles, held)
+    design = build_design(
+        data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
+    )
+    return scanned, design
 
 
 def _profile_costs(
@@ -192,10 +208,7 @@ def _profile_costs(
     and ``others``, for the ``profiles`` with which they stay end effects and separable
     (:func:`best_end_profile`); the same for every profile; and that residual without the end
     effects. One design carries every profile's columns."""
-    scanned = end_effects_at(model, data, profiles, held)
-    design = build_design(
-        data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
-    )
+    scanned, design = _scan_design(model, data, others, profiles, train, hold, weights, held)
     fixed = ["base", *(t.name for t in others)]
     cost, chi = {}, {}
     for p, c in zip(profiles, scanned, strict=True):
@@ -236,10 +249,8 @@ def sizes_over_end_profiles(
     the ``others`` terms and the end effects with each fall-off :func:`best_end_profile` may choose:
     how much the end effects' assumed shape moves it. One design carries every profile's columns;
     each fit is a solve of its Gram blocks."""
-    scanned = end_effects_at(model, data, _scannable(model, data, END_PROFILES, None), held)
-    design = build_design(
-        data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
-    )
+    profiles = _scannable(model, data, END_PROFILES, None)
+    scanned, design = _scan_design(model, data, others, profiles, train, hold, weights, held)
     out = []
     for c in scanned:
         fit = fit_subset(design, ["base", *(t.name for t in others), c.name], covariance=False)
