@@ -499,6 +499,44 @@ def test_end_effects_beside_sticking_vertical_guides_stand_beside_a_gap_dependen
 
 
 @pytest.mark.slow
+def test_vertical_friction_is_not_refused_beside_a_gap_dependence_of_another_motor(tmp_path):
+    # A random pair (bench/diagnose_rigs.py --drawn-pairs 10 --pairs-with end_effect
+    # guide_friction_vertical guide_friction_horizontal --seed 9000): vertical guide friction
+    # (Coulomb 1.61 N, viscous 11.3 N s/m) and end effects of the thrust alone (10 % at +-50 mm, a
+    # 32 mm Gaussian; 5.4 % at the logged ends relative to the centre). The friction was refused as
+    # "not specific": beside a smooth function of the gap it explained -3 % of the held-out error.
+    # That function's fit had C2 = 438, C3 = 0.24 and C4 = -0.006 (a stage whose attraction does not
+    # depend on the current; the friction's own fit 816, 29.2, 0.059, the truth 818, 29.9, 0.071),
+    # and the end effects were claimed with the forces rising at the ends, 1.5 N RMS of vertical
+    # residual left unexplained. Held to another_motor (selection._beyond_the_misfit), the friction
+    # is found; sized as the guides hold them (library.sized_as_held), the end effects as a fall of
+    # the thrust of 3.8-5.0 % (1.1-1.9 % unheld). Both within 30 % (the issue's bound), nothing
+    # left unexplained.
+    effects, d, s = _drawn_pair(tmp_path, 9112, ("guide_friction_vertical", "end_effect"))
+    assert effects[0].coulomb_force == pytest.approx(1.612, abs=1e-3)  # the bench's log
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["end_effects", "guide_friction_vertical"]
+    ends = next(e for e in d.effects if e.name == "end_effects").parameters
+    assert min(ends[f"thrust_loss_at_{end}_end"].value for end in ("low", "high")) > 0
+    assert not d.unexplained, [u.description for u in d.unexplained]
+
+
+@pytest.mark.slow
+def test_end_effects_beside_sticking_vertical_guides_are_sized_as_the_guides_hold_them(tmp_path):
+    # A random pair (the same bench run as pair 9112's above, seed 9330): vertical guide friction
+    # (Coulomb 1.10 N, breakaway 2.05 N) and end effects losing 6.6 % of the thrust and 6.5 % of the
+    # attraction at +-50 mm (a 23 mm Gaussian; 3.4 % at the logged ends relative to the centre).
+    # Both were claimed, the end effects at 1.0-1.4 %: fitted unheld, the stuck samples, where the
+    # guides hold their force, counted as showing none. Sized as the guides hold them
+    # (library.sized_as_held): 2.8-3.2 %, within 30 % (the issue's bound); the log of the same end
+    # effects alone gives 3.2-3.6 %.
+    effects, d, s = _drawn_pair(tmp_path, 9330, ("guide_friction_vertical", "end_effect"))
+    assert effects[1].thrust_loss == pytest.approx(0.0661, abs=1e-4), effects[1]  # the bench's log
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["end_effects", "guide_friction_vertical"]
+
+
+@pytest.mark.slow
 def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thrust_it_makes(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9018): normal cogging (1.66 N at
     # 15 mm) and a -2.5 degree commutation offset. With 1.7 A of levitation current the offset's

@@ -58,6 +58,7 @@ from maglev_oc.diagnosis.candidate import Candidate, fmt
 from maglev_oc.diagnosis.library import (
     candidate_library,
     refine_waviness_period,
+    sized_as_held,
     smooth_probes,
     waviness_candidate,
 )
@@ -1167,19 +1168,39 @@ def _separating(j: Judgement, cand: Candidate, session: _Session) -> str:
 
 
 def _effects(session: _Session, fitted: StageModel, library, design: Design, sel: Selection) -> list[Effect]:
-    """Step 7: the chosen effects with their physical parameters (model-form spread included)."""
+    """Step 7: the chosen effects with their physical parameters (model-form spread included); the
+    end effects beside a friction that holds its axis sized as the guides hold them
+    (:func:`~maglev_oc.diagnosis.library.sized_as_held`), from a fit of every chosen effect so."""
     by_name = {c.name: c for c in library}
     chosen = [by_name[n] for n in sel.selected]
     steps = {s.chosen: s for s in sel.steps}
-    constants = fitted_constants(sel.final)
     masses = (session.model.params.mass_vertical, session.model.params.mass_horizontal)
+    sized = sized_as_held(chosen, _holding_shares(sel, library))
+    sizing = (design, sel.final)
+    if any(a is not b for a, b in zip(sized, chosen, strict=True)):
+        held = build_design(
+            session.data,
+            fitted,
+            terms=[c.term for c in sized],
+            fit=session.train,
+            holdout=session.hold,
+            weights=session.weights,
+        )
+        sizing = (held, fit_subset(held, list(held.groups)))
     effects = []
-    for name in sel.selected:
-        cand = by_name[name]
-        coef, cov = sel.final.group(design, name)
-        params = cand.term.physical_parameters(coef, cov, constants)
+    for name, cand, own in zip(sel.selected, chosen, sized, strict=True):
+        on, fit = sizing if own is not cand else (design, sel.final)
+        coef, cov = fit.group(on, name)
+        params = cand.term.physical_parameters(coef, cov, fitted_constants(fit))
         params = with_model_form_spread(
-            params, session.data, fitted, chosen, cand, session.train, session.hold, session.weights
+            params,
+            session.data,
+            fitted,
+            sized if own is not cand else chosen,
+            own,
+            session.train,
+            session.hold,
+            session.weights,
         )
         if cand.term.depends_on_rates():
             params = _on_a_narrower_band(params, session, fitted, chosen, cand)

@@ -1904,7 +1904,7 @@ def select(
         """``name`` judged given ``others`` (the backward pass's judgement)."""
         fit_o = fit_subset(design, others, covariance=False)
         context, friction, thrust, _ = step_context(others, fit_o, [name])
-        return _judged_again(design, by_name[name], context, friction, probes, periodic, thrust)
+        return _judged_again(design, by_name[name], context, friction, probes, periodic, thrust, reference)
 
     def judged_alone() -> bool:
         """Whether an effect is judged even when it is the only one chosen: a line-like shape
@@ -2133,13 +2133,14 @@ def _judged_again(
     probes,
     periodic: Sequence[tuple[Candidate, float]] = (),
     thrust: _ThrustStep | None = None,
+    reference: Mapping[str, float] | None = None,
 ) -> Judgement:
     """The backward pass's judgement of ``cand`` beside the others (``context``: judge's arguments
     from ``current`` to ``cross``), its further orders included (:func:`_beyond_its_span`)."""
     others, _, _, _, settings, _, counted, _, _ = context
     j = judge(design, cand, *context, friction_axes=friction, periodic=periodic, thrust=thrust)
     j = _beyond_its_span(design, j, cand, others, counted, probes, settings)
-    return _beyond_the_misfit(design, j, cand, others, counted, probes, settings)
+    return _beyond_the_misfit(design, j, cand, others, counted, probes, settings, reference)
 
 
 STATE_OF_AXIS = {"vertical": "gap", "horizontal": "position"}
@@ -2160,11 +2161,14 @@ def _beyond_the_misfit(
     counted: np.ndarray | None,
     probes: dict[tuple[str, str], str] | None,
     settings: SelectionSettings,
+    reference: Mapping[str, float] | None = None,
 ) -> Judgement:
     """``j`` (a candidate that passes), or not specific when ``cand`` is a friction that holds its
     axis while it sticks and, beside a smooth function of that axis's state (the gap vertically,
     the position along the track; the generic probe, :data:`STATE_OF_AXIS`), explains less than
-    ``min_gain`` more of the held-out error on its axis.
+    ``min_gain`` more of the held-out error on its axis, unless that function's fit needs a motor
+    no stage of this design is (:func:`another_motor`, against ``reference``, the model's
+    constants; None: it always counts).
 
     Holding the axis at standstill, the friction's model sets the acceleration there to zero
     whatever the forces: it takes up any misfit of the model's forces where the axis is slow, and
@@ -2184,14 +2188,15 @@ def _beyond_the_misfit(
     # without the errors-in-variables correction: beside a function of the gap, which nearly
     # repeats the constants' columns, the corrected normal equations are near-singular (true
     # vertical frictions of the noisy named sets came out at -10^17 % there)
-    r1, r2 = (
-        _holdout_residual(
-            design, fit_subset(design, g, covariance=False, extra=columns, compensate=False), counted
-        )
+    beside, within = (
+        fit_subset(design, g, covariance=False, extra=columns, compensate=False)
         for g in (current, [*current, cand.name])
     )
+    r1, r2 = (_holdout_residual(design, f, counted) for f in (beside, within))
     gain, z = holdout_significance(design, r1, r2, a)
-    if gain >= settings.min_gain:
+    if gain >= settings.min_gain or (
+        reference is not None and another_motor(_estimated_constants(beside), j.fit, cand.axis, reference)
+    ):
         return j
     return dataclasses.replace(
         j,
