@@ -1176,9 +1176,9 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
     steps = {s.chosen: s for s in sel.steps}
     masses = (session.model.params.mass_vertical, session.model.params.mass_horizontal)
     sized = sized_as_held(chosen, _holding_shares(sel, library))
-    sizing = (design, sel.final)
-    if any(a is not b for a, b in zip(sized, chosen, strict=True)):
-        held = build_design(
+    held = None
+    if any(own is not cand for own, cand in zip(sized, chosen, strict=True)):
+        on = build_design(
             session.data,
             fitted,
             terms=[c.term for c in sized],
@@ -1186,21 +1186,14 @@ def _effects(session: _Session, fitted: StageModel, library, design: Design, sel
             holdout=session.hold,
             weights=session.weights,
         )
-        sizing = (held, fit_subset(held, list(held.groups)))
+        held = (on, fit_subset(on, list(on.groups)), sized)
     effects = []
     for name, cand, own in zip(sel.selected, chosen, sized, strict=True):
-        on, fit = sizing if own is not cand else (design, sel.final)
+        on, fit, beside = (design, sel.final, chosen) if own is cand else held
         coef, cov = fit.group(on, name)
         params = cand.term.physical_parameters(coef, cov, fitted_constants(fit))
         params = with_model_form_spread(
-            params,
-            session.data,
-            fitted,
-            sized if own is not cand else chosen,
-            own,
-            session.train,
-            session.hold,
-            session.weights,
+            params, session.data, fitted, beside, own, session.train, session.hold, session.weights
         )
         if cand.term.depends_on_rates():
             params = _on_a_narrower_band(params, session, fitted, chosen, cand)
