@@ -128,12 +128,6 @@ def end_effects_at(
     return out
 
 
-def _held(c: Candidate, held: Mapping[str, float] | None) -> Candidate:
-    if held and held_by_sticking_guides(c) and c.axis in (*held, "both"):
-        return dataclasses.replace(c, term=held_by_guides(c.term, held))
-    return c
-
-
 def held_by_sticking_guides(c: Candidate) -> bool:
     """Whether sticking guides hold ``c``'s force as they hold the motor's: static friction holds a
     stuck axis against every force on it. All but the friction itself, the smooth dependences on
@@ -152,6 +146,18 @@ def held_by_sticking_guides(c: Candidate) -> bool:
     return c.family not in ("friction", "profile") and c.variable != "gap"
 
 
+def _held(
+    c: Candidate,
+    held: Mapping[str, float] | None,
+    holds: Callable[[Candidate], bool] = held_by_sticking_guides,
+) -> Candidate:
+    """``c`` with the share ``held`` of its force taken off on the axes whose guides stick, where
+    ``holds`` says sticking guides hold it."""
+    if held and holds(c) and c.axis in (*held, "both"):
+        return dataclasses.replace(c, term=held_by_guides(c.term, held))
+    return c
+
+
 def sized_as_held(chosen: Sequence[Candidate], held: Mapping[str, float] | None) -> list[Candidate]:
     """``chosen`` as they are sized once claimed: the end effects held by sticking guides too
     (``held``, as :func:`candidate_library` takes it), every other candidate as it was judged.
@@ -162,13 +168,12 @@ def sized_as_held(chosen: Sequence[Candidate], held: Mapping[str, float] | None)
     they came out small, the stuck samples, where the guides hold their force, counted as showing
     none. Drawn pair 9330 of the independent generator (vertical friction, 1.1 N Coulomb; end
     effects losing 3.4 % of the thrust and attraction at the logged ends relative to the centre):
-    unheld 1.0-1.4 %, held 2.9-3.3 %, and 3.2-3.6 % on the log of the same end effects alone."""
-    return [
-        dataclasses.replace(c, term=held_by_guides(c.term, held))
-        if held and c.family == "profile" and c.variable == "position" and c.axis in (*held, "both")
-        else c
-        for c in chosen
-    ]
+    unheld 1.0-1.4 %, held 2.8-3.2 %, and 3.2-3.6 % on the log of the same end effects alone."""
+    return [_held(c, held, _end_effects) for c in chosen]
+
+
+def _end_effects(c: Candidate) -> bool:
+    return c.family == "profile" and c.variable == "position"
 
 
 def _named(*names: str) -> Callable[[str], bool]:
