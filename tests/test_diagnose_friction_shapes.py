@@ -9,7 +9,7 @@ changing along the track.
    (``pipeline._merged_friction_by_direction``), unless the force is larger than half the friction,
    which no guide's asymmetry gives.
 2. Friction whose level changes along the track left a residual the thrust's probe took, read as
-   magnets stronger towards one end; the friction's own probe now reports it
+   the forces rising towards one end; the friction's own probe now reports it
    (``unexplained._friction_along_track``).
 3. Vertical damping with hardly any Coulomb friction, on a rig whose logged currents are as noisy as
    ``../shared/logs/independent_clean.csv``'s: an axis that barely sticks.

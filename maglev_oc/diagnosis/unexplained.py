@@ -267,8 +267,11 @@ def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
     forces fall where the mover overhangs a stator end, at both ends if both are near the travel and
     towards one if one is (drawn pair 9813 of the independent generator: a stator end just beyond
     +50 mm, the other far off, the forces falling over the whole travel towards +33 mm); forces
-    higher towards an end are no end effect but magnets stronger there. A sentence, or "" when
-    the forces do not change."""
+    higher towards an end are no end effect. The magnets ride on the mover (000 Sec. II: four N35
+    magnets on a ferromagnetic backing), so what else changes along the travel is the stator and
+    the true gap to it: its face not parallel to the guides (the gap encoder reads the mover
+    against the frame, not against the stator), or its iron not uniform along it. A sentence, or ""
+    when the forces do not change."""
     larger = max(abs(low), abs(high))
     if not larger > 0:
         return ""
@@ -279,18 +282,21 @@ def along_the_stator(low: float, high: float, lo: float, hi: float) -> str:
                 "(end effects)."
             )
         return (
-            " Higher at both ends: magnets stronger towards the ends of the array, which no end effect gives."
+            " Higher at both ends: the stator's face nearer the mover towards both ends (the true gap "
+            "narrower there than the gap encoder reads), which no end effect gives."
         )
     at_high = abs(high) >= abs(low)
     towards = f"the high end ({hi * M_TO_MM:.0f} mm)" if at_high else f"the low end ({lo * M_TO_MM:.0f} mm)"
     if (high if at_high else low) < 0:
         return (
             f" Falling towards {towards}: what a stator end near that end of the travel gives (an end "
-            "effect), or magnets weaker towards it (a field not uniform along the stator)."
+            "effect), or the stator's face drawing away from the mover towards it (the true gap wider there "
+            "than the gap encoder reads) or its iron not uniform along the travel."
         )
     return (
-        f" Rising towards {towards}: magnets stronger towards it (a field not uniform along the stator); "
-        "an end effect lowers the forces."
+        f" Rising towards {towards}: the stator's face nearer the mover towards it (the true gap narrower "
+        "there than the gap encoder reads) or its iron not uniform along the travel; an end effect lowers "
+        "the forces."
     )
 
 
@@ -417,7 +423,7 @@ def _friction_along_track(
     On a regulated stage the thrust current follows the friction, so such a residual is also the
     thrust changing along the travel: on six logs of the independent generator whose guides' friction
     changed by 20-32 % over the logged travel (``bench/diagnose_rigs.py --friction-shapes``), the
-    thrust's probe took it and was read as magnets stronger towards one end. The friction's own
+    thrust's probe took it and was read as the forces rising towards one end. The friction's own
     probe explains it better, and says what it is."""
     if "horizontal" not in friction_axes or not data.moving[1]:
         return []
