@@ -295,9 +295,15 @@ def cable_candidate(ctx: LibraryContext) -> Candidate:
         # tilt's candidate is (a random pair of the independent generator, a tilt beside a detent,
         # was claimed as a "cable carrier" of -0.016 +- 0.01 N/m neutral at 14 m)
         all_of(detected("stiffness", "spring along the track"), not_too_strong),
+        # its neutral position takes up every constant force along the track: a tilt of the guides
+        # beside it is the same two columns (drawn pair 18009 of the independent generator: a 0.087 N
+        # tilt beside a 6 N/m cable carrier; the spring found at 6.04 N/m, its neutral moved from
+        # -28.8 mm to -25 mm, the tilt not separable on that log)
         lambda e: (
             f"A spring-like force along the track (cable carrier): stiffness {fmt(e['stiffness'])}, "
-            f"neutral at {fmt(e['neutral_position'], 1e3, 'mm')}."
+            f"neutral at {fmt(e['neutral_position'], 1e3, 'mm')}: where it balances every constant force "
+            "along the track too (a tilt of the guides, a preload), which one log cannot tell from its own "
+            "(a run with a load added would: a tilt's force grows with the mass, a spring's does not)."
         ),
         # a line in the position: the linear part of any smooth dependence on it (a random pair of
         # the independent generator claimed 0.32 N/m for the horizontal force of a 69 mm guide
