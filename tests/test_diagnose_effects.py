@@ -394,6 +394,73 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
     assert "cable carrier force" in refused["current_sensor_offset"].reason
 
 
+@pytest.mark.slow
+def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offset_on_both_axes(tmp_path):
+    # A random pair on a rig logging its amplifiers' measured currents with 10 mA of noise
+    # (bench/diagnose_rigs.py --drawn-pairs 12 --rig measured --seed 18300, pair 18310): guides
+    # sloping 4.8 mrad against the stator with 4.9 um of waviness at 74 mm, and a cable carrier's
+    # 11.3 N/m spring. One effect at a time, a current sensor offset, whose forces turn along the
+    # track on both axes, explained 61.6 % of the held-out error at the first step against 46.9 %
+    # and 36.9 % for each true effect alone, and was claimed alone: a false claim, both true effects
+    # missed. Together the two explain more than the offset by far (pooled held-out gains 0.97 and
+    # 0.95 per axis against 0.48 and 0.72) and the offset does not pass beside them
+    # (selection._pair_over_best); the waviness is then found beside the spring
+    # (pipeline._waviness_beyond_travel). Both sized within 30 % (the issue's bound; measured
+    # 11 N/m, 4.8 mrad, and 5.6 um at 73.7 mm for the waviness).
+    from tests.independent.simulate import Rig
+
+    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
+    effects, d, s = _drawn_pair(tmp_path, 18310, ("guide_misalignment", "cable_carrier"), rig)
+    assert effects[1].stiffness == pytest.approx(11.277, abs=1e-3)  # the bench's log
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
+    # the waviness at its own period, not at a motor pitch (5 %: under a quarter of the way to the
+    # pole pitch, 57 mm, 23 % off)
+    slope = next(e for e in d.effects if e.name == "guide_misalignment").parameters
+    assert slope["waviness_period"].value == pytest.approx(effects[0].waviness_wavelength, rel=0.05)
+
+
+@pytest.mark.slow
+def test_a_pair_standing_in_for_a_misalignment_and_its_next_effect_is_not_chosen_over_them(tmp_path):
+    # A random pair on the noisy rig (observers at 2.8 kHz, the logged currents as noisy as
+    # ../shared/logs/independent_clean.csv's; bench/diagnose_rigs.py --drawn-pairs 12 --rig obs2800
+    # --seed 18400): end effects and guides sloping against the stator. The slope is the best effect
+    # alone; end effects with a tilt of the guides explain more than it does, and beside those two
+    # the slope fell short of passing (8.5 % at z 2.4): a pair chosen over the step's best alone
+    # claimed the tilt, a false claim, and missed the slope. Held against the best with another
+    # effect (selection._pair_over_best), the slope and the end effects explain more: both true
+    # effects, nothing else.
+    from tests.independent.simulate import Rig
+
+    _, d, s = _drawn_pair(
+        tmp_path, 18400, ("end_effect", "guide_misalignment"), Rig(observer_bandwidth=2800.0)
+    )
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["end_effects", "guide_misalignment"]
+
+
+@pytest.mark.slow
+def test_a_ripple_beside_a_commutation_offset_ripples_the_thrust_of_the_levitation_current(tmp_path):
+    # A random pair on the papers' PID loops (bench/diagnose_rigs.py --drawn-pairs 12 --rig pid
+    # --seed 18500, pair 18502): the thrust per ampere rippling by 3.4 % over the slot pitch and
+    # 1.7 % over the pole pitch, and a commutation offset of -1.2 degrees. The current that makes
+    # thrust is then i_q + d i_d, and i_d, the levitation current, is 1.7 A against at most 0.14 A of
+    # i_q: rippling i_q alone, the ripple of d i_d was left over and claimed as a 0.0095 +- 0.004 N
+    # detent at the slot pitch (a false claim), the pole pitch's ripple sized at 1.2 %. The selection
+    # repeated with the ripple of i_q + d i_d (pipeline._ripple_beside_commutation): the two true
+    # effects and nothing else, the ripples at 3.4 % and 1.7 % (within 30 %, the issue's bound).
+    from tests.independent.simulate import Rig
+
+    effects, d, s = _drawn_pair(
+        tmp_path, 18502, ("thrust_ripple", "commutation_offset"), Rig(controller="pid")
+    )
+    assert effects[0].ratio == pytest.approx(0.03378, abs=1e-5)  # the bench's log
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["commutation_offset", "thrust_ripple"]
+    ripple = next(e for e in d.effects if e.name == "thrust_ripple").parameters
+    assert ripple["amplitude_pole_pitch"].value == pytest.approx(effects[0].ratio2, rel=0.3)
+
+
 def _end_effects_16106(tmp_path, *more, seed: int = 16106):
     """The end effects of ``bench/diagnose_rigs.py --drawn 8 --kinds end_effect --seed 15700``'s
     draw 16106 (a raised cosine: 9.3 % of the thrust and 8.8 % of the attraction lost at +-50 mm,

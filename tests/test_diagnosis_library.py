@@ -1343,3 +1343,21 @@ def test_one_ended_end_effects_are_the_fall_at_both_ends_with_the_other_held_at_
     assert f"the {end} end" in one.describe(p1) and f"at the {end} end alone" in one.describe(p1)
     with pytest.raises(ValueError, match="'middle' is not one of"):
         EndProfile(0.0189).at("middle")
+
+
+def test_the_ripple_beside_a_commutation_offset_ripples_the_current_that_makes_thrust(plant):
+    # Beside a commutation offset d the thrust is made by i_q + d i_d (currents.commutation_candidate's
+    # first order), and the thrust per ampere ripples for all of it (currents.ripple_candidate): at
+    # a point with the levitation current ten times the thrust current, the ripple's force is the
+    # one without the offset times (i_q + d i_d) / i_q, to rounding. Without it, pair 18502 of the
+    # independent generator claimed the ripple of d i_d as a detent (tests/test_diagnose_effects.py).
+    import numpy as np
+
+    d = 0.02
+    (plain,) = candidate_library(StageModel(), plant.data, only=["thrust_ripple"])
+    (turned,) = candidate_library(StageModel(), plant.data, only=["thrust_ripple"], commutation_angle=d)
+    x, u, du, q = [0.018, 0.0, 0.012, 0.0], [0.17, 1.7], [0.0, 0.0], [0.03, 0.01, 0.02, -0.01]
+    a0 = np.asarray(plain.term.function(x, u, du, q)).ravel()
+    a1 = np.asarray(turned.term.function(x, u, du, q)).ravel()
+    assert a0[1] != 0.0 and a0[0] == a1[0] == 0.0
+    assert a1[1] / a0[1] == pytest.approx((u[0] + d * u[1]) / u[0], rel=1e-12)

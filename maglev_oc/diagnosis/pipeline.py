@@ -637,15 +637,17 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
 
     The first selection that chooses the end effects has their fall-off's shape and width scanned
     (:func:`_end_profile`); at another profile than the library's the selection is repeated with it
-    (a third time when that was the second)."""
+    (a third time when that was the second). A selection that chooses a commutation offset is
+    repeated with the thrust's ripple of the current that makes the thrust, i_q + d i_d
+    (:func:`_ripple_beside_commutation`), in the same way."""
     held: dict[str, float] = {}
-    end_profile, scanned = END_PROFILE, False
+    end_profile, scanned, angle = END_PROFILE, False, 0.0
     # a line-like shape is judged by what is left beside it only in the kept selection, once the
     # residual has been searched for guide waviness (SelectionSettings.judge_lines)
     early = dataclasses.replace(session.settings, judge_lines=False)
     relaxed = dataclasses.replace(early, max_axis_loss=math.inf)
     for attempt in range(3):
-        full = candidate_library(fitted, session.data, held, end_profile=end_profile)
+        full = candidate_library(fitted, session.data, held, end_profile=end_profile, commutation_angle=angle)
         effects = list(dict.fromkeys(c.reported_name for c in full))
         unknown = sorted(set(exclude) - set(effects))
         if unknown:
@@ -668,6 +670,8 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         found = None if scanned else _end_profile(session, fitted, library, sel, held)
         scanned = scanned or found is not None
         profile = found or end_profile
+        turned = _ripple_beside_commutation(sel)
+        reangled = _turned(turned, angle)
         converged = converged_references(
             session.model,
             fitted,
@@ -678,18 +682,19 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             session.weights,
             held=shares,
             # the first round's library, built above
-            library=full if shares == held and profile == end_profile else None,
+            library=full if shares == held and profile == end_profile and not reangled else None,
             end_profile=profile,
+            commutation_angle=turned,
         )
         rewidthed = profile != end_profile
-        end_profile = profile
-        same = shares == held and rebalanced is None and not rewidthed
+        end_profile, angle = profile, turned
+        same = shares == held and rebalanced is None and not rewidthed and not reangled
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
                 sel = session.select(design, library, fitted, early)
             break
-        if attempt == 2 or (attempt > 0 and not rewidthed):
+        if attempt == 2 or (attempt > 0 and not (rewidthed or reangled)):
             # once repeated, a selection is kept (but for the end effects' first width), with the
             # references its design was built about: the steps after it pair that design with
             # this model (the thrust side, the limits' felt currents)
@@ -771,6 +776,33 @@ def _holding_shares(sel: Selection, library: Sequence[Candidate]) -> dict[str, f
         if cand.family == "friction" and holding is not None:
             shares[cand.axis] = float(np.clip(holding.value, 0.0, 1.0))
     return shares
+
+
+def _ripple_beside_commutation(sel: Selection) -> float:
+    """[rad] The commutation offset as the thrust sees it (its ``angle_horizontal``) when ``sel``
+    chose it, which makes the current a thrust ripple ripples i_q + d i_d
+    (:func:`~maglev_oc.diagnosis.currents.ripple_candidate`); 0 otherwise.
+
+    Whether or not the ripple was chosen beside it: rippling i_q alone, a ripple beside an offset
+    of 1.4-2.9 degrees (d i_d as large as the commanded i_q or larger) explained too little to be
+    claimed on 6 of 16 drawn pairs of the two (``--drawn-pairs 16 --pairs-with thrust_ripple
+    commutation_offset detent_force --seed 18600``), ripples of 2.2-3.9 % over the slot pitch."""
+    if "commutation_offset" not in sel.selected:
+        return 0.0
+    angle = sel.last["commutation_offset"].physical.get("angle_horizontal")
+    return float(angle.value) if angle is not None and math.isfinite(angle.value) else 0.0
+
+
+ANGLE_TOLERANCE = 0.1
+"""A commutation offset that moves by less than this share of itself between selections leaves the
+ripple's thrust current as it was (the selection is not repeated for it): its i_d part changes by
+a tenth of the ripple's d i_d term, a few thousandths of the ripple itself."""
+
+
+def _turned(angle: float, before: float) -> bool:
+    """Whether the ripple's thrust current changes from ``before`` to ``angle`` [rad] by more than
+    :data:`ANGLE_TOLERANCE` of the offset."""
+    return abs(angle - before) > ANGLE_TOLERANCE * max(abs(angle), abs(before))
 
 
 def _waviness_periods(
@@ -857,19 +889,27 @@ def _waviness_beyond_travel(
     smooth = [n for n in chosen if _smooth_along_track(by_name[n])]
     if "guide_misalignment" not in chosen or not smooth:
         return []
-    kept = [n for n in chosen if n not in smooth]
     x3 = session.data.x[2, session.train]
     travel = float(np.subtract(*np.percentile(x3, [99, 1])))
-    errors = {}
-    for period in travel * np.geomspace(1.0, LONGEST_WAVINESS, 12):
-        wavy = waviness_candidate(fitted, session.data, float(period))
-        design = session.design(fitted, [*(by_name[n].term for n in kept), wavy.term])
-        errors[float(period)] = fit_subset(design, ["base", *kept, wavy.name], covariance=False).chi_square
-    best = min(errors, key=errors.get)
-    # least at the longest period scanned: the data show a line of the gap, not a bow, and the
-    # line is the misalignment's (drawn pair 10085: a 6 N/m cable carrier beside guides tilted by
-    # 2.9 mrad; a waviness at three travels took the slope's place)
-    return [] if best == max(errors) else [round(best, 4)]
+    # in their place, then beside them: a true spring along the track leaves a line of the position
+    # that a waviness in its place fits best at its longest period, and the bow is then seen only
+    # beside it (drawn pair 18310 on the rig logging measured currents: guides tilted by 4.8 mrad
+    # with 4.9 um of waviness at 74 mm, and a 11.3 N/m cable carrier)
+    for kept in ([n for n in chosen if n not in smooth], list(chosen)):
+        errors = {}
+        for period in travel * np.geomspace(1.0, LONGEST_WAVINESS, 12):
+            wavy = waviness_candidate(fitted, session.data, float(period))
+            design = session.design(fitted, [*(by_name[n].term for n in kept), wavy.term])
+            errors[float(period)] = fit_subset(
+                design, ["base", *kept, wavy.name], covariance=False
+            ).chi_square
+        best = min(errors, key=errors.get)
+        # least at the longest period scanned: the data show a line of the gap, not a bow, and the
+        # line is the misalignment's (drawn pair 10085: a 6 N/m cable carrier beside guides tilted by
+        # 2.9 mrad; a waviness at three travels took the slope's place)
+        if best != max(errors):
+            return [round(best, 4)]
+    return []
 
 
 def _smooth_along_track(cand: Candidate) -> bool:
