@@ -383,15 +383,16 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
     # claimed, 64 % of the horizontal residual left unexplained. Without the sensors' errors the
     # other candidates explain 94.8 % against 79.6 % (pipeline._tie_shown): the two true effects,
     # sized within 30 % (the issue's bound; measured slope -2.3 for -2.36 mrad, 8.7 for 8.78 N/m).
+    # Since the selection tries two effects over its step's best (selection._pair_over_best), the
+    # spring and the slope are chosen together at the first step, and beside them the offset
+    # explains nothing that passes: not claimed, and no longer listed as refused.
     from tests.independent.simulate import Rig
 
     _, d, s = _drawn_pair(tmp_path, 15307, ("guide_misalignment", "cable_carrier"), Rig(controller="pid"))
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
-    refused = {j.name: j for j in d.rejected}
-    assert refused["current_sensor_offset"].verdict == "not specific", refused
-    # the reason names what explains the log in its place, in words
-    assert "cable carrier force" in refused["current_sensor_offset"].reason
+    offset = d.selection.last["current_sensor_offset"]
+    assert offset.verdict not in ("passes", "accepted"), offset
 
 
 @pytest.mark.slow

@@ -223,11 +223,13 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     widths = []
     asked = []
 
-    def spy(fitted, data, held=None, *, end_profile, only=None):
+    def spy(fitted, data, held=None, *, end_profile, only=None, commutation_angle=0.0):
         built_for.append(fitted.constants.C1)
         widths.append(end_profile)
         asked.append(only)
-        return candidate_library(fitted, data, held, end_profile=end_profile, only=only)
+        return candidate_library(
+            fitted, data, held, end_profile=end_profile, only=only, commutation_angle=commutation_angle
+        )
 
     monkeypatch.setattr(refit, "candidate_library", spy)
     args = (model, start, data, ["guide_friction_horizontal"], train, hold, np.array([0.0, 1.0]))
