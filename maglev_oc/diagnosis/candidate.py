@@ -278,14 +278,14 @@ class LibraryContext:
 
     ``model``: geometry and the magnetic references (the base fit's constants); ``data``: the
     prepared log, whose valid samples give the ranges (1st-99th percentiles) that profiles and
-    reports use; ``commutation_angle``: the commutation offset the thrust's ripple acts beside.
+    reports use; ``commutation_angle``: the chosen commutation offset, beside which the thrust's ripple acts.
     """
 
     model: StageModel
     data: PreparedLogs
     commutation_angle: float = 0.0
-    """[rad] The commutation offset chosen beside the thrust's ripple, as the thrust sees it (its
-    ``angle_horizontal``): the current that makes thrust is i_q + d i_d (0: none chosen)."""
+    """[rad] The commutation offset chosen, as the thrust sees it (its ``angle_horizontal``): the
+    current that makes thrust, which the thrust's ripple ripples, is i_q + d i_d (0: none chosen)."""
     gap_range: tuple[float, float] = field(init=False)
     position_range: tuple[float, float] = field(init=False)
     gap_median: float = field(init=False)

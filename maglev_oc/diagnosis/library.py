@@ -99,8 +99,8 @@ def candidate_library(
     ``only``: the names of the candidates wanted (in the library's order), the others' families
     not built: the same candidates as the whole library's, built the same way (a refit round
     needs the chosen few, and the whole library took 1.1-1.9 s of a diagnosis's refit rounds).
-    ``commutation_angle``: the commutation offset [rad] chosen beside the thrust's ripple, which
-    then ripples i_q + d i_d (:func:`~maglev_oc.diagnosis.currents.ripple_candidate`).
+    ``commutation_angle``: the chosen commutation offset [rad], beside which the thrust's ripple
+    ripples i_q + d i_d (:func:`~maglev_oc.diagnosis.currents.ripple_candidate`).
     """
     ctx = LibraryContext(model, data, commutation_angle)
     if only is None:

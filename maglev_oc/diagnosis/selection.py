@@ -1900,47 +1900,44 @@ def select(
         context = (model, fit, around.residual, mse0, settings, rivals, counted, periods, cross)
         return context, frozenset(_friction_axes(chosen)), thrust, around
 
+    def beside(name: str, others: list[str]):
+        """(judge's arguments from ``others`` to ``cross``, friction axes, thrust side) for judging
+        ``name`` given ``others``."""
+        context, friction, thrust, _ = step_context(
+            others, fit_subset(design, others, covariance=False), [name]
+        )
+        return context, friction, thrust
+
     def judged_beside(name: str, others: list[str]) -> Judgement:
         """``name`` judged given ``others`` (the backward pass's judgement)."""
-        fit_o = fit_subset(design, others, covariance=False)
-        context, friction, thrust, _ = step_context(others, fit_o, [name])
+        context, friction, thrust = beside(name, others)
         return _judged_again(design, by_name[name], context, friction, probes, periodic, thrust, reference)
 
     def judged_next(name: str, others: list[str]) -> Judgement:
         """``name`` judged given ``others`` as a forward step judges it."""
-        fit_o = fit_subset(design, others, covariance=False)
-        context, friction, thrust, _ = step_context(others, fit_o, [name])
+        context, friction, thrust = beside(name, others)
         return judge(
             design, by_name[name], *context, friction_axes=friction, periodic=periodic, thrust=thrust
         )
 
-    def pair_confidence(pair: tuple[Judgement, Judgement], best: Judgement) -> float:
-        """The share of block-bootstrap resamples of the training data in which ``pair``, fitted
-        together, explains more of the held-out error than ``best`` alone (both less the parsimony
-        penalty of their parameters), as the steps' confidence counts a first place."""
-        counted = evidence(design, [by_name[n] for n in current[1:]], settings)
-        moving = np.flatnonzero(design.moving)
-        names = {"pair": [*current, *(j.name for j in pair)], "best": [*current, best.name]}
-        penalty = {
-            "pair": sum(_reported(by_name[j.name]) for j in pair),
-            "best": _reported(by_name[best.name]),
-        }
+    def resampled_scores(on, grams, around, moving, counted, options: dict[str, list[str]]):
+        """Per block-bootstrap resample of the training data, each option's held-out gain over
+        ``current`` fitted on that resample (mean over the ``moving`` rows of ``on``), less the
+        parsimony penalty of the effects it adds: option -> its chosen effects beyond ``current``."""
+        # each resample's fits are near the full fits: their mean squares about those
         near = {
-            k: held_out.around(fit_subset(design, v, covariance=False), counted) for k, v in names.items()
+            k: grams.around(fit_subset(on, [*current, *v], covariance=False), counted)
+            for k, v in options.items()
         }
-        votes = 0
         for blocks in resamples:
-            ms = {
-                k: float(
-                    np.mean(
-                        near[k].mean_squares(fit_subset(design, v, blocks=blocks, covariance=False))[moving]
-                    )
-                )
-                for k, v in names.items()
-            }
-            score = {k: -ms[k] * (1.0 + settings.parameter_penalty * penalty[k]) for k in ms}
-            votes += score["pair"] > score["best"]
-        return votes / max(len(resamples), 1)
+            fb = fit_subset(on, current, blocks=blocks, covariance=False)
+            mb = np.maximum(around.mean_squares(fb), 1e-30)
+            score = {}
+            for k, v in options.items():
+                f = fit_subset(on, [*current, *v], blocks=blocks, covariance=False)
+                gain = float(np.mean(1 - near[k].mean_squares(f)[moving] / mb[moving]))
+                score[k] = gain - settings.parameter_penalty * sum(_reported(by_name[n]) for n in v)
+            yield score
 
     def judged_alone() -> bool:
         """Whether an effect is judged even when it is the only one chosen: a line-like shape
@@ -2011,10 +2008,15 @@ def select(
             )
             best = _form_of_effect(design, best, passing, by_name, held_out, counted, settings)
             pair = _pair_over_best(design, best, passing, context, by_name, judged_next, settings)
+            moving = np.flatnonzero(design.moving)
             if pair is not None:
+                # confidence: the share of resamples in which the pair explains more than the best
+                options = {"pair": [j.name for j in pair], "best": [best.name]}
+                scores = resampled_scores(design, held_out, around0, moving, counted, options)
+                confidence = sum(sc["pair"] > sc["best"] for sc in scores) / max(len(resamples), 1)
                 for j in pair:
                     last[j.name] = _accepted(j)
-                    steps.append(Step(j.name, pair_confidence(pair, best), {**judged, j.name: last[j.name]}))
+                    steps.append(Step(j.name, confidence, {**judged, j.name: last[j.name]}))
                     current.append(j.name)
                 effects = {by_name[j.name].reported_name for j in pair}
                 pool = [n for n in pool if by_name[n].reported_name not in effects]
@@ -2027,30 +2029,14 @@ def select(
             on, grams, around, moving = (
                 (thrust.design, thrust_side.held, thrust.around, np.array([THRUST]))
                 if best.side
-                else (design, held_out, around0, np.flatnonzero(design.moving))
+                else (design, held_out, around0, moving)
             )
-            votes = 0
-            # each resample's fits are near the full fits: their mean squares about those
-            near = (
-                {
-                    n: grams.around(fit_subset(on, [*current, n], covariance=False), counted)
-                    for n in contenders
-                }
-                if len(contenders) > 1
-                else {}
-            )
-            for blocks in resamples if len(contenders) > 1 else []:
-                fb = fit_subset(on, current, blocks=blocks, covariance=False)
-                mb = np.maximum(around.mean_squares(fb), 1e-30)
-                score = {}
-                for n in contenders:
-                    f = fit_subset(on, [*current, n], blocks=blocks, covariance=False)
-                    gain = float(np.mean(1 - near[n].mean_squares(f)[moving] / mb[moving]))
-                    score[n] = gain - settings.parameter_penalty * _reported(by_name[n])
+            votes = len(resamples)
+            if len(contenders) > 1:
+                scores = resampled_scores(on, grams, around, moving, counted, {n: [n] for n in contenders})
                 # the same effect in another of its forms is a vote for the effect
-                votes += by_name[max(score, key=score.get)].reported_name == by_name[best.name].reported_name
-            if len(contenders) == 1:
-                votes = len(resamples)
+                effect = by_name[best.name].reported_name
+                votes = sum(by_name[max(sc, key=sc.get)].reported_name == effect for sc in scores)
             judged[best.name] = _accepted(best)
             last[best.name] = judged[best.name]
             steps.append(Step(best.name, votes / max(len(resamples), 1), judged))
