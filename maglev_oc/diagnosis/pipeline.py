@@ -54,7 +54,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from maglev_oc.data.logs import Log, LogError
-from maglev_oc.diagnosis.candidate import Candidate, fmt
+from maglev_oc.diagnosis.candidate import Candidate, LibraryContext, fmt
+from maglev_oc.diagnosis.currents import LAG
 from maglev_oc.diagnosis.library import (
     candidate_library,
     refine_waviness_period,
@@ -97,7 +98,7 @@ from maglev_oc.diagnosis.selection import (
 )
 from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
-from maglev_oc.diagnosis.unexplained import Unexplained, find_unexplained
+from maglev_oc.diagnosis.unexplained import Unexplained, currents_late, find_unexplained
 from maglev_oc.diagnosis.words import listed, plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.masses import MassChange, moving_mass_change
@@ -986,7 +987,9 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
         # a periodic force seen over too few periods explains nothing: the residual's position
         # dependence it stands for is still reported
         explained = chosen + [by_name[n.name] for n in not_sep if _stands_for_residual(n, by_name[n.name])]
-        unexplained = find_unexplained(
+        late = _currents_late(session, fitted, by_name, sel)
+        explained += [by_name[LAG]] if late else []
+        unexplained = ([late] if late else []) + find_unexplained(
             session.data,
             fitted,
             explained,
@@ -1002,6 +1005,17 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
             return sel, not_sep, rejected, unexplained
         rejected.extend(stale)
         sel = _without(sel, design, stale)
+
+
+def _currents_late(session: _Session, fitted: StageModel, by_name, sel: Selection) -> Unexplained | None:
+    """The logged currents late against the positions, when the lag on both axes was refused only
+    for leading them (:func:`~maglev_oc.diagnosis.unexplained.currents_late`); None otherwise (no
+    such lag in the library, or a lag chosen)."""
+    j = sel.last.get(LAG)
+    if j is None or LAG not in by_name or any(by_name[n].form_of == LAG or n == LAG for n in sel.selected):
+        return None
+    hold = LibraryContext(fitted, session.data).hold_delay
+    return currents_late(j, by_name[LAG], fitted, hold, session.data.sample_time)
 
 
 def _told_by_the_end_effects_shape(

@@ -35,6 +35,7 @@ from maglev_oc.diagnosis.candidate import LibraryContext, legendre
 from maglev_oc.diagnosis.library import PROBE_VARIABLES, Candidate, smooth_probes
 from maglev_oc.diagnosis.selection import (
     STATE_OF_AXIS,
+    Judgement,
     SelectionSettings,
     _CrossFit,
     _CrossParts,
@@ -59,6 +60,7 @@ __all__ = [
     "FRICTION_OVER_TIME_PROBE",
     "Unexplained",
     "along_the_stator",
+    "currents_late",
     "find_unexplained",
     "rate_direction",
 ]
@@ -181,6 +183,67 @@ def find_unexplained(
         current.append(term.name)
         remaining.remove(entry)
     return out
+
+
+TIMING = "currents' timing"
+"""What a residual of logged currents late against the positions depends on (:func:`currents_late`)."""
+
+
+def currents_late(
+    j: Judgement, candidate: Candidate, model: StageModel, hold: float, sample_time: float
+) -> Unexplained | None:
+    """The residual of logged currents that are late against the positions, when the amplifier lag
+    (``j``, its judgement; ``candidate``, the lag on both axes) was significant, large enough and
+    separable, and refused only because it is negative: the forces lead the logged currents by
+    more than half the loop's zero-order hold (``hold`` [s]) and two standard errors.
+
+    No amplifier makes a force before its current, so the lag refuses such a delay. But a log can
+    be late against its own positions: a filter on the current sensors delays measured currents,
+    and a logger can stamp the currents a sample after the positions they acted on. On
+    ``../shared/logs/independent_clean.csv`` with its current columns moved one sample (1 ms) late,
+    the lag's fit was -0.91 +- 0.10 ms on both axes (-0.96 ms less the 0.1 ms hold of its 5 kHz
+    loop: the 1 ms skew, to its standard error), and -1.96 +- 0.11 ms with them two samples late;
+    on the log as it is, +0.12 ms (the hold), not significant. With the lag refused, the residual
+    went to the probe of the gap rate, read as "a force against the motion, as damping or friction
+    the model lacks gives": over an oscillation a lead is a damping (-tau da/dt = tau omega^2 v), but
+    the guides' viscous friction made the held-out error 14 % worse there. The words now say what
+    the lag's fit says: the currents' timing, by how much, and what to do about it. ``candidate``'s
+    term is kept with the entry, so the probes are judged beside it and nothing is reported twice.
+
+    ``sample_time`` [s]: the prepared data's, to say the delay in samples.
+    """
+    delay = j.physical.get("total_delay")
+    if j.verdict != "implausible" or delay is None:
+        return None
+    lead, sd = -delay.value, delay.stderr
+    if not lead > 0.5 * hold + 2.0 * sd:
+        return None
+    gains = j.pooled_gain_axes if j.pooled_gain_axes is not None else j.gain_axes
+    a = int(np.nanargmax(np.where(np.isfinite(gains), gains, -np.inf)))
+    size = float(j.contribution_rms[a])
+    p = model.params
+    mass = p.mass_vertical if a == 0 else p.mass_horizontal
+    late = lead + hold  # the skew: the lead, and the hold every sampled loop adds
+    return Unexplained(
+        axis=AXES[a],
+        depends_on=TIMING,
+        size=size,
+        force_rms=size * mass,
+        gain=float(gains[a]),
+        z=float(j.z),
+        description=(
+            f"The forces lead the logged currents by {lead * 1e3:.2f} ± {sd * 1e3:.2f} ms ({size:.3g} m/s² "
+            f"RMS on the {AXES[a]} axis, lowering its held-out error by {gains[a]:.1%}, z = {j.z:.1f}): "
+            "fitted as the amplifiers' lag, it comes out negative. No amplifier or loop makes a force "
+            "before its current: the logged currents are late against the positions, by about "
+            f"{late * 1e3:.2g} ms with the loop's {hold * 1e3:.2g} ms hold ({late / sample_time:.1f} "
+            f"sample periods of {sample_time * 1e3:g} ms), as a filter on measured currents or a logger "
+            "that stamps the currents after the positions they acted on makes them. Align the current "
+            "columns with the positions and diagnose again: the constants and every effect of the "
+            "currents are fitted to currents out of place in time."
+        ),
+        term=candidate.term,
+    )
 
 
 def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
