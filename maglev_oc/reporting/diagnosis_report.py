@@ -22,6 +22,7 @@ from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.diagnosis.selection import best_first
+from maglev_oc.diagnosis.unexplained import TIMING
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting import diagnosis_plots as plots
 from maglev_oc.reporting import validation_plots
@@ -181,7 +182,9 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         (
             f"{u.axis} residual varying with the {u.depends_on.replace('_', ' ')}",
             f"{u.size:.3g}{NBSP}m/s² RMS",
-            "unexplained: no effect of the library fits it",
+            "unexplained: the logged currents are late against the positions (not a force of the stage)"
+            if u.depends_on == TIMING
+            else "unexplained: no effect of the library fits it",
         )
         for u in diag.unexplained
     ]
