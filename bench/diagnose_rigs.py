@@ -15,6 +15,7 @@
     python bench/diagnose_rigs.py --drawn 2 [--kinds end_effect ...] [--seed 1200] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 24 [--seed 9000] [--out ...]
     python bench/diagnose_rigs.py --drawn-pairs 16 --pairs-with end_effect normal_cogging detent_force
+    python bench/diagnose_rigs.py --drawn-pairs 12 --per-log 3 [--rig obs2800] [--seed 20400]
     python bench/diagnose_rigs.py --vertical-force [--load-change 2] [--rig ...]
     python bench/diagnose_rigs.py ... --payload 1.5 | --load-change 2
 
@@ -137,6 +138,13 @@ RIGS = {
     # the amplifiers' current sensors logged instead of the commands, with 10 mA of white noise (a
     # Hall sensor of a 9 A amplifier through a 12-bit converter: 4.4 mA per count)
     "measured": {"logged_currents": "measured", "current_sensor_noise": 0.01},
+    # the same through a first-order filter of 300 Hz on the current sensors (an amplifier's current
+    # monitor): the measured currents 0.53 ms late against the positions
+    "filtered": {
+        "logged_currents": "measured",
+        "current_sensor_noise": 0.01,
+        "current_sensor_bandwidth": 300.0,
+    },
     # the papers' identification runs: two independent PID loops instead of the FL regulator
     "pid": {"controller": "pid"},
 }
@@ -401,6 +409,14 @@ def main() -> None:
     parser.add_argument(
         "--drawn-pairs", type=int, default=0, help="score N random pairs of drawn effects instead"
     )
+    parser.add_argument(
+        "--per-log",
+        type=int,
+        default=2,
+        metavar="K",
+        help="with --drawn-pairs: K drawn effects of different kinds on each log instead of two (a rig "
+        "with friction, cogging and a cable carrier at once); the logs are named set_<seed>",
+    )
     parser.add_argument("--kinds", nargs="*", default=None, help="with --drawn: only these kinds")
     parser.add_argument(
         "--pairs-with",
@@ -488,16 +504,19 @@ def main() -> None:
             names = {KINDS[k] for k in kinds}
             return not wanted or (wanted[0] in names and bool(names & set(wanted[1:] or KINDS)))
 
+        if not 1 <= args.per_log <= len(KINDS):
+            parser.error(f"--per-log: between 1 and {len(KINDS)} effects on a log")
+        per_log, stem = args.per_log, "pair" if args.per_log == 2 else "set"
         seed = args.seed - 1
         for _ in range(args.drawn_pairs):
             seed += 1
-            while not chosen(np.random.default_rng(seed).choice(len(KINDS), size=2, replace=False)):
+            while not chosen(np.random.default_rng(seed).choice(len(KINDS), size=per_log, replace=False)):
                 seed += 1
-            kinds = sorted(np.random.default_rng(seed).choice(len(KINDS), size=2, replace=False))
+            kinds = sorted(np.random.default_rng(seed).choice(len(KINDS), size=per_log, replace=False))
             effects = tuple(draw(KINDS[k], np.random.default_rng([seed, int(k)])) for k in kinds)
             name = "+".join(KINDS[k] for k in kinds)
             groups.setdefault("drawn_pairs", []).append(
-                (f"pair_{seed}", Scenario(name=name, seed=seed, effects=effects, rig=rig))
+                (f"{stem}_{seed}", Scenario(name=name, seed=seed, effects=effects, rig=rig))
             )
     elif args.sensors:
         for name, effect in sensors().items():

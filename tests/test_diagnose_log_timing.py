@@ -17,6 +17,9 @@ from maglev_oc.diagnosis.currents import LAG
 from maglev_oc.diagnosis.unexplained import TIMING
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from tests.diagnosis_support import diagnose_path
+from tests.independent.logio import write_log
+from tests.independent.sets import named_set
+from tests.independent.simulate import Rig, simulate
 
 
 def _late(path, samples: int):
@@ -53,3 +56,23 @@ def test_the_same_log_as_recorded_has_no_timing_entry(generated):
     d = diagnose_path(path)
     assert d.effects == [] and d.unexplained == []
     assert d.selection.last[LAG].physical["total_delay"].value > 0
+
+
+@pytest.mark.slow
+def test_measured_currents_through_a_sensor_filter_are_said_to_be_late_by_its_delay(tmp_path):
+    """The independent generator's clean_01 on a rig that logs its amplifiers' current sensors
+    through a 300 Hz first-order filter (an amplifier's current monitor): the measured currents
+    are 1 / (2 pi 300 Hz) = 0.53 ms late against the positions, and no hold lies between a
+    measured current and its force."""
+    bandwidth = 300.0
+    rig = Rig(logged_currents="measured", current_sensor_noise=0.01, current_sensor_bandwidth=bandwidth)
+    scenario = dataclasses.replace(dict(named_set("clean"))["clean_01"], rig=rig)
+    csv, _ = write_log(simulate(scenario), tmp_path, stem="filtered")
+    d = diagnose_path(csv)
+    assert d.effects == []
+    assert [u.depends_on for u in d.unexplained] == [TIMING]
+    delay = d.selection.last[LAG].physical["total_delay"]
+    filter_delay = 1.0 / (2.0 * np.pi * bandwidth)
+    # within three of the fit's standard errors (0.05 ms): measured 0.47 ms
+    assert abs(-delay.value - filter_delay) < 3 * delay.stderr
+    assert "first-order filter on the current sensors" in d.unexplained[0].description

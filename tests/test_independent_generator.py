@@ -7,6 +7,7 @@ Every tolerance says where it comes from.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -221,6 +222,33 @@ def test_shorter_run_is_the_beginning_of_the_longer_one():
     n = a.t.size
     for k in ("x1", "x3", "u1", "u2"):
         assert np.array_equal(getattr(a, k), getattr(b, k)[:n])
+
+
+def test_a_current_sensor_filter_delays_the_measured_currents_and_nothing_else():
+    """A first-order filter on the current sensors changes what is logged, not the loop: the plant's
+    states are the same to the bit; the logged currents are smoother (the amplifier output's jumps
+    at each command are filtered) and later: regressed on their unfiltered rate, the filtered
+    currents trail by the filter's time constant 1 / (2 pi f) within a factor of two (a first-order
+    fit of a first-order filter on currents that jump with the commands, smoothed over 25 ms: 0.47 ms
+    on this seed, 0.63 and 0.70 ms on clean_01, for 0.53 ms)."""
+    bandwidth = 300.0
+    scenario = Scenario(name="f", seed=5, duration=10.0)
+    plain = simulate(dataclasses.replace(scenario, rig=Rig(logged_currents="measured")))
+    filtered = simulate(
+        dataclasses.replace(scenario, rig=Rig(logged_currents="measured", current_sensor_bandwidth=bandwidth))
+    )
+    assert np.array_equal(plain.x1, filtered.x1) and np.array_equal(plain.x3, filtered.x3)
+    tau = 1.0 / (2.0 * math.pi * bandwidth)
+    smooth = np.ones(25) / 25
+    for raw, late in ((plain.u1, filtered.u1), (plain.u2, filtered.u2)):
+        assert np.std(np.diff(late)) < np.std(np.diff(raw))
+        a = np.convolve(raw, smooth, "same")[100:-100]
+        b = np.convolve(late, smooth, "same")[100:-100]
+        rate = np.gradient(a, 1e-3)
+        trail = -np.dot(b - a, rate) / np.dot(rate, rate)
+        assert 0.5 * tau < trail < 2 * tau
+    with pytest.raises(ValueError, match="current_sensor_bandwidth"):
+        Rig(current_sensor_bandwidth=bandwidth)  # commanded currents have no sensor
 
 
 def test_sixty_second_log_is_logged_at_one_kilohertz():

@@ -190,7 +190,7 @@ TIMING = "currents' timing"
 
 
 def currents_late(
-    j: Judgement, candidate: Candidate, model: StageModel, hold: float, sample_time: float
+    j: Judgement, candidate: Candidate, model: StageModel, hold: float, data: PreparedLogs
 ) -> Unexplained | None:
     """The residual of logged currents that are late against the positions, when the amplifier lag
     (``j``, its judgement; ``candidate``, the lag on both axes) was significant, large enough and
@@ -206,11 +206,16 @@ def currents_late(
     on the log as it is, +0.12 ms (the hold), not significant. With the lag refused, the residual
     went to the probe of the gap rate, read as "a force against the motion, as damping or friction
     the model lacks gives": over an oscillation a lead is a damping (-tau da/dt = tau omega^2 v), but
-    the guides' viscous friction made the held-out error 14 % worse there. The words now say what
-    the lag's fit says: the currents' timing, by how much, and what to do about it. ``candidate``'s
-    term is kept with the entry, so the probes are judged beside it and nothing is reported twice.
+    the guides' viscous friction made the held-out error 14 % worse there. On the independent
+    generator's clean_01 one sample late, a horizontal guide friction was claimed. Measured currents
+    through a 300 Hz first-order sensor filter (0.53 ms; the generator's
+    ``Rig.current_sensor_bandwidth``) gave a lead of 0.47 +- 0.05 ms. The words now say what the
+    lag's fit says: the currents' timing, by how much, and what to do about it. ``candidate``'s term
+    is kept with the entry, so the probes and the chosen effects are judged beside it and nothing is
+    reported twice.
 
-    ``sample_time`` [s]: the prepared data's, to say the delay in samples.
+    ``data``: the prepared logs, for their sample time and whether their currents are measured (no
+    hold between a measured current and its force, so the lead is the whole delay).
     """
     delay = j.physical.get("total_delay")
     if j.verdict != "implausible" or delay is None:
@@ -223,7 +228,21 @@ def currents_late(
     size = float(j.contribution_rms[a])
     p = model.params
     mass = p.mass_vertical if a == 0 else p.mass_horizontal
-    late = lead + hold  # the skew: the lead, and the hold every sampled loop adds
+    dt = data.sample_time
+    if data.settings.get("currents_measured"):
+        late = lead
+        why = (
+            f"{late * 1e3:.2g} ms ({late / dt:.1f} sample periods of {dt * 1e3:g} ms), as a first-order "
+            f"filter on the current sensors of bandwidth {1 / (2 * math.pi * late):.3g} Hz, or a logger "
+            "that stamps the currents after the positions they acted on, makes them"
+        )
+    else:
+        late = lead + hold  # the skew: the lead, and the hold every sampled loop adds
+        why = (
+            f"about {late * 1e3:.2g} ms with the loop's {hold * 1e3:.2g} ms hold ({late / dt:.1f} sample "
+            f"periods of {dt * 1e3:g} ms), as a logger that stamps the currents after the positions they "
+            "acted on makes them"
+        )
     return Unexplained(
         axis=AXES[a],
         depends_on=TIMING,
@@ -235,12 +254,9 @@ def currents_late(
             f"The forces lead the logged currents by {lead * 1e3:.2f} ± {sd * 1e3:.2f} ms ({size:.3g} m/s² "
             f"RMS on the {AXES[a]} axis, lowering its held-out error by {gains[a]:.1%}, z = {j.z:.1f}): "
             "fitted as the amplifiers' lag, it comes out negative. No amplifier or loop makes a force "
-            "before its current: the logged currents are late against the positions, by about "
-            f"{late * 1e3:.2g} ms with the loop's {hold * 1e3:.2g} ms hold ({late / sample_time:.1f} "
-            f"sample periods of {sample_time * 1e3:g} ms), as a filter on measured currents or a logger "
-            "that stamps the currents after the positions they acted on makes them. Align the current "
-            "columns with the positions and diagnose again: the constants and every effect of the "
-            "currents are fitted to currents out of place in time."
+            f"before its current: the logged currents are late against the positions, by {why}. Align "
+            "the current columns with the positions (or log the commanded currents) and diagnose again: "
+            "the constants and every effect of the currents are fitted to currents out of place in time."
         ),
         term=candidate.term,
     )

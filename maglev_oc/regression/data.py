@@ -610,6 +610,8 @@ def prepare(
                 r == min(rates) and not d for r, d in zip(rates, declared, strict=True)
             ),
             "max_rate_hz": max_rate,
+            # every log's currents are its amplifiers' measured output, not commands held by the loop
+            "currents_measured": all(log.currents_measured for log in logs),
             # each log's declared payload [kg], when any log declares one (regression.payload)
             **({"payload_kg": [log.payload for log in logs]} if load is not None else {}),
         },

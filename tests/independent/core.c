@@ -282,7 +282,8 @@ static void shaken(const Params *p, const double *base_acc, int k, double *ds)
  * rec    (n_rec x NREC) with n_rec = ceil(n_ctrl / record_every): rows at every record_every-th
  *        control instant: x1 x2 x3 x4 (true), y1 y3 (encoder), u1 u2 (commanded),
  *        iq id (actual), gap (true), F_fric_h F_fric_v [N], v1 v2, xhat2 xhat4, the amplifier's
- *        output iq id in the commanded frame (what its current sensors read).
+ *        output iq id in the commanded frame (what its current sensors read; through their
+ *        first-order filter when p->sensor_tau > 0).
  * info   (5): status (0 ok, 1 left the stage's range, 2 not finite), control index of failure,
  *        samples with R clipped at 0, samples with a command clipped at i_max, substeps with the
  *        amplifier at its peak.
@@ -303,6 +304,8 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
     double xiv[3] = {0, 0, 0}, xih[3] = {0, 0, 0};
     double vprev1 = 0.0, vprev2 = 0.0, yprev1 = 0.0, yprev3 = 0.0;
     double ia_q = 0.0, ia_d = 0.0; /* amplifier output (dq, commanded frame) */
+    double fs_q = 0.0, fs_d = 0.0; /* its current sensors' filtered reading */
+    const double Es = p->sensor_tau > 0.0 ? exp(-h / p->sensor_tau) : 0.0;
     double piv = 0.0, pih = 0.0;   /* the PID loops' error integrals */
     double aux[NAUX];
     int k, j, i, nrec = 0;
@@ -375,6 +378,8 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
             /* the amplifier was already delivering the first command before t = 0 */
             ia_q = u1;
             ia_d = u2;
+            fs_q = u1;
+            fs_d = u2;
         }
 
         /* plant over [t_k, t_k + Tc) */
@@ -421,10 +426,14 @@ int simulate(const Params *p, int n_ctrl, const double *ref, const double *noise
                 r[14] = v2;
                 r[15] = ov[1];
                 r[16] = oh[1];
-                r[17] = iq0;
-                r[18] = id0;
+                r[17] = p->sensor_tau > 0.0 ? fs_q : iq0;
+                r[18] = p->sensor_tau > 0.0 ? fs_d : id0;
             } else {
                 plant_rhs(p, s, iq0, id0, tk, k1, NULL);
+            }
+            if (p->sensor_tau > 0.0) { /* the sensors' filter over the substep, at its mid current */
+                fs_q = iqh + (fs_q - iqh) * Es;
+                fs_d = idh + (fs_d - idh) * Es;
             }
             shaken(p, base_acc, k, k1);
             for (i = 0; i < NSTATE; i++) st[i] = s[i] + 0.5 * h * k1[i];

@@ -92,6 +92,8 @@ FIELDS: list[tuple[str, object]] = [
     ("tr_on", _I), ("tr_amp", _D * 2), ("tr_period", _D * 2), ("tr_phase", _D * 2),
     # commutation error, amplifier
     ("com_cos", _D), ("com_sin", _D), ("amp_tau", _D), ("amp_delay_sub", _I), ("amp_peak", _D),
+    # a first-order filter on the amplifiers' current sensors (time constant [s]; 0: none)
+    ("sensor_tau", _D),
     # field shape
     ("fs_on", _I), ("fs_k1", _D), ("fs_k2", _D), ("fs_gref", _D), ("fs_thrust", _I),
     # saturation of the iron by the stator current

@@ -93,6 +93,10 @@ class Rig:
         measured``).
     current_sensor_noise : float
         [A] standard deviation of the white noise on each measured current (``"measured"`` only).
+    current_sensor_bandwidth : float
+        [Hz] the bandwidth of a first-order filter on the current sensors (an amplifier's current
+        monitor, or the anti-aliasing filter before its converter), ``"measured"`` only; 0: none
+        (the default). A filter at bandwidth f delays the measured currents by about 1 / (2 pi f).
     controller : str
         ``"fl"`` (the papers' FL output regulator) or ``"pid"`` (the two independent PID regulators
         of the papers' identification runs, :func:`~tests.independent.controller.pid_design`, with
@@ -120,6 +124,7 @@ class Rig:
     end_stops: tuple[float, float] | None = None
     logged_currents: str = "commanded"
     current_sensor_noise: float = 0.0
+    current_sensor_bandwidth: float = 0.0
     controller: str = "fl"
     pid_poles: tuple[float, float] = PID_POLES
     operating_gap: float = 0.0195
@@ -137,6 +142,10 @@ class Rig:
             raise ValueError(
                 "Rig.current_sensor_noise: a standard deviation >= 0 [A], of measured currents only"
             )
+        if not self.current_sensor_bandwidth >= 0 or (
+            self.current_sensor_bandwidth and self.logged_currents != "measured"
+        ):
+            raise ValueError("Rig.current_sensor_bandwidth: a bandwidth >= 0 [Hz], of measured currents only")
 
     @property
     def control_period(self) -> float:
@@ -164,6 +173,11 @@ class Rig:
                 if self.logged_currents == "commanded"
                 else "amplifiers' measured output currents at the logging instants (commanded frame), "
                 f"with white sensor noise of {self.current_sensor_noise:g} A"
+                + (
+                    f", through a first-order filter of bandwidth {self.current_sensor_bandwidth:g} Hz"
+                    if self.current_sensor_bandwidth
+                    else ""
+                )
             ),
             "logged_currents": self.logged_currents,
             "plant_integrator": f"classical RK4, {self.plant_substeps} steps per control period "
@@ -341,6 +355,8 @@ def build_params(
         p.x3_stop_lo, p.x3_stop_hi = rig.end_stops
     p.com_cos, p.com_sin = 1.0, 0.0
     p.amp_peak = rig.amplifier_peak
+    if rig.current_sensor_bandwidth:
+        p.sensor_tau = 1.0 / (2.0 * math.pi * rig.current_sensor_bandwidth)
     if rig.controller == "pid":
         design = pid_design(rig.operating_gap, rig.pid_poles, rig.controller_constants)
         p.pid_on = 1
