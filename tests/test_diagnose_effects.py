@@ -396,6 +396,30 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
 
 
 @pytest.mark.slow
+def test_a_commutation_offset_that_only_the_thrust_shows_is_found_from_the_thrust(tmp_path):
+    # A random pair on a rig logging its amplifiers' measured currents with 10 mA of noise
+    # (bench/diagnose_rigs.py --rig measured --drawn-pairs, seed 20511): a -1.2 degree commutation
+    # offset, whose thrust (i_d sin d, i_d about 1.7 A) rivals the commanded i_q (-0.02 to 0.08 A),
+    # and end effects of 8 % of the thrust and 5 % of the attraction at +-50 mm (a raised cosine
+    # 27 mm long). Fitted on both axes the offset had the true angle from the thrust but its free
+    # vertical coefficient, weighed by i_q alone, made the vertical held-out error 2.3 % worse: refused
+    # as not specific, nothing claimed, C1 left at 0.56 (true 14.7) with its warning, the horizontal
+    # residual reported unexplained. Its form fitted on the thrust alone is the offset found there.
+    from tests.independent.simulate import Rig
+
+    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
+    effects, d, s = _drawn_pair(tmp_path, 20511, ("end_effect", "commutation_offset"), rig)
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["commutation_offset", "end_effects"]
+    offset = next(e for e in d.effects if e.name == "commutation_offset").parameters["angle"]
+    true_angle = effects[1].angle
+    # within 30 % (the issue's bound; measured -0.02100 rad for -0.02103)
+    assert abs(offset.value / true_angle - 1) < 0.3
+    assert not d.warnings
+    assert abs(relative_errors(d, json.loads((tmp_path / "pair.truth.json").read_text()))["C1"]) < 0.05
+
+
+@pytest.mark.slow
 def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offset_on_both_axes(tmp_path):
     # A random pair on a rig logging its amplifiers' measured currents with 10 mA of noise
     # (bench/diagnose_rigs.py --drawn-pairs 12 --rig measured --seed 18300, pair 18310): guides

@@ -31,9 +31,11 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 
 from maglev_oc.diagnosis.candidate import FAMILIES, VARIABLES, Candidate, LibraryContext
 from maglev_oc.diagnosis.currents import (
+    COMMUTATION,
+    COMMUTATION_HORIZONTAL,
     LAG,
     LAG_VERTICAL,
-    commutation_candidate,
+    commutation_candidates,
     lag_candidates,
     ripple_candidate,
     saturation_candidate,
@@ -199,7 +201,7 @@ _FAMILIES: tuple[
     (_named("magnet_field_gap_dependence"), lambda ctx, _: [field_shape_candidate(ctx)]),
     (_named("magnet_field_drift"), lambda ctx, _: [field_drift_candidate(ctx)]),
     (_named("thrust_ripple"), lambda ctx, _: [ripple_candidate(ctx)]),
-    (_named("commutation_offset"), lambda ctx, _: [commutation_candidate(ctx)]),
+    (_named(COMMUTATION, COMMUTATION_HORIZONTAL), lambda ctx, _: commutation_candidates(ctx)),
     (_named(LAG, LAG_VERTICAL), lambda ctx, _: lag_candidates(ctx)),
     (_named("current_saturation"), lambda ctx, _: [saturation_candidate(ctx)]),
     (_named("current_sensor_offset"), lambda ctx, _: [sensor_offset_candidate(ctx)]),

@@ -55,7 +55,7 @@ import numpy as np
 
 from maglev_oc.data.logs import Log, LogError
 from maglev_oc.diagnosis.candidate import Candidate, LibraryContext, fmt
-from maglev_oc.diagnosis.currents import LAG
+from maglev_oc.diagnosis.currents import COMMUTATION, COMMUTATION_HORIZONTAL, LAG
 from maglev_oc.diagnosis.library import (
     candidate_library,
     refine_waviness_period,
@@ -788,9 +788,10 @@ def _ripple_beside_commutation(sel: Selection) -> float:
     of 1.4-2.9 degrees (d i_d as large as the commanded i_q or larger) explained too little to be
     claimed on 6 of 16 drawn pairs of the two (``--drawn-pairs 16 --pairs-with thrust_ripple
     commutation_offset detent_force --seed 18600``), ripples of 2.2-3.9 % over the slot pitch."""
-    if "commutation_offset" not in sel.selected:
+    chosen = [n for n in (COMMUTATION, COMMUTATION_HORIZONTAL) if n in sel.selected]
+    if not chosen:
         return 0.0
-    angle = sel.last["commutation_offset"].physical.get("angle_horizontal")
+    angle = sel.last[chosen[0]].physical.get("angle_horizontal")
     return float(angle.value) if angle is not None and math.isfinite(angle.value) else 0.0
 
 

@@ -21,6 +21,7 @@ _WORDS = {
     "guide_misalignment": "guides tilted against the stator",
     "cable_carrier_force": "cable carrier force",
     "commutation_offset": "commutation angle offset",
+    "commutation_offset_horizontal": "commutation angle offset, fitted on the thrust",
     "current_sensor_offset": "current sensor offset",
     "current_sensor_gain_mismatch": "current sensors' gain mismatch",
     "end_effects": "end effects",
