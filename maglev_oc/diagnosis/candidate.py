@@ -95,6 +95,10 @@ class Candidate:
     bound this one holds (None: it does not, and the fallback is not judged). An implausible parent
     for another reason is no case for holding that parameter (a pure viscous friction refused for
     "no Coulomb" is not a Coulomb friction with its viscous part held at zero)."""
+    fallback_verdicts: tuple[str, ...] = ("implausible",)
+    """For a fallback: the parent's verdicts that make the case for it. A form that leaves out a
+    coefficient of the parent's (the commutation offset fitted on the thrust alone) stands in where
+    that coefficient made the parent "not specific": an axis it made worse."""
     size_direction: Callable[[Mapping[str, float]], np.ndarray] | None = field(default=None, repr=False)
     """For an effect whose size is one number shared by several coefficients (the commutation
     angle, one coefficient per axis): the fitted constants -> the direction in the space of its

@@ -209,9 +209,8 @@ COMMUTATION_HORIZONTAL = f"{COMMUTATION}_horizontal"
 
 
 def commutation_candidates(ctx: LibraryContext) -> list[Candidate]:
-    """The commutation offset on both axes, and the same offset fitted on the thrust alone (a form
-    of it, ``form_of``: the selection takes the simpler form unless the richer one improves on it
-    significantly, and reports either as the offset).
+    """The commutation offset on both axes, and the same offset fitted on the thrust alone, judged
+    only where the first is not specific (a fallback, ``fallback_for``; reported as the offset).
 
     The attraction's part, C3 l3 d i_q, is the offset times a current the loop keeps small, and its
     coefficient is free (:func:`commutation_candidate`): where i_q stays under 0.1 A it weighs
@@ -222,7 +221,9 @@ def commutation_candidates(ctx: LibraryContext) -> list[Candidate]:
     85 % of the horizontal held-out error at z 34; its vertical angle, 0.7 +- 3.3 degrees, made the
     vertical held-out error 2.3 % worse, and the offset was refused as not specific. The base
     fit's C1 stayed at 0.56, and the horizontal residual was reported as an unexplained dependence
-    on the gap (i_d follows the gap)."""
+    on the gap (i_d follows the gap). Not as a form of the offset chosen whenever the full form is
+    not significantly better: that left the attraction's part out on drawn pair 21060 (a 1.6 degree
+    offset beside normal cogging), and a guide misalignment took it, a false claim."""
     full = commutation_candidate(ctx)
     c_ref = ctx.references
 
@@ -263,7 +264,8 @@ def commutation_candidates(ctx: LibraryContext) -> list[Candidate]:
             full,
             term=term,
             describe=describe,
-            form_of=COMMUTATION,
+            fallback_for=COMMUTATION,
+            fallback_verdicts=("not specific",),
             size_direction=lambda c: np.array([1.0 / ctx.reference_ratio("C1", c)]),
             size_relative_to=("C1",),
         ),

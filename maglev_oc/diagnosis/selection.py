@@ -1427,10 +1427,12 @@ def _axis_lost(j: Judgement, axes: np.ndarray, settings: SelectionSettings):
     return (worse, float(-pooled[worse])), (better, float(pooled[better]))
 
 
-def _stands_in(cand: Candidate, implausible: dict[str, Judgement]) -> bool:
-    """Whether fallback ``cand`` is judged: its parent implausible, beyond the bound it holds."""
-    parent = implausible.get(cand.fallback_for) if cand.fallback_for else None
-    if parent is None:
+def _stands_in(cand: Candidate, refused: dict[str, Judgement]) -> bool:
+    """Whether fallback ``cand`` is judged: its parent refused with one of the fallback's verdicts
+    (implausible, beyond the bound it holds; or not specific, for a form without the coefficient
+    that made it so)."""
+    parent = refused.get(cand.fallback_for) if cand.fallback_for else None
+    if parent is None or parent.verdict not in cand.fallback_verdicts:
         return False
     return cand.fallback_when is None or cand.fallback_when(parent.physical) is not None
 
@@ -1962,8 +1964,8 @@ def select(
             }
             # a fallback (the same effect with a parameter at its bound) only where its parent's free fit
             # is physically implausible because that parameter lies beyond the bound
-            implausible = {n: j for n, j in judged.items() if j.verdict == "implausible"}
-            again = [n for n in pool if _stands_in(by_name[n], implausible)]
+            refused = {n: j for n, j in judged.items() if j.verdict in ("implausible", "not specific")}
+            again = [n for n in pool if _stands_in(by_name[n], refused)]
             judged.update(
                 {
                     n: judge(
