@@ -809,7 +809,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for path in args.logs:
         if not Path(path).is_file():
             raise InputError(f"{path}: no such file")
-        log = read_log(path, params=model.params)
+        log = read_log(path, params=model.params).currents_advanced(args.currents_late)
         _excited_axes(log, check_excitation)
         logs.append(log)
     diag = diagnose(logs, model, holdout_fraction=args.holdout, limits=not args.no_limits)
@@ -1093,6 +1093,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-limits",
         action="store_true",
         help="skip the detection limits, what the log could not have shown (a fifth to a third of the time)",
+    )
+    p.add_argument(
+        "--currents-late",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="the logs' currents were logged this late against the positions (a diagnosis's \"currents' "
+        'timing" says by how much): moved that much earlier before anything is fitted',
     )
     p.set_defaults(func=cmd_diagnose)
 

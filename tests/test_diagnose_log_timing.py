@@ -76,3 +76,24 @@ def test_measured_currents_through_a_sensor_filter_are_said_to_be_late_by_its_de
     # within three of the fit's standard errors (0.05 ms): measured 0.47 ms
     assert abs(-delay.value - filter_delay) < 3 * delay.stderr
     assert "first-order filter on the current sensors" in d.unexplained[0].description
+
+
+@pytest.mark.slow
+def test_the_command_line_moves_late_currents_back_and_then_nothing_is_left(generated, tmp_path):
+    """``maglev-oc diagnose --currents-late`` with the delay the timing entry gives: the same log,
+    its currents put back, explains itself (nothing claimed, nothing unexplained); the input file
+    is left as it was."""
+    import json
+
+    from maglev_oc.cli import main
+    from maglev_oc.data.logs import write_log as write_project_log
+
+    path, _ = generated("clean", "clean_01")
+    late = tmp_path / "late.csv"
+    write_project_log(late, _late(path, 1))
+    before = late.read_bytes()
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(late), "--json", str(out), "--no-limits", "--currents-late", "0.001"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["effects"] == [] and doc["unexplained"] == []
+    assert late.read_bytes() == before

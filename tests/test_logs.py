@@ -19,6 +19,7 @@ from maglev_oc.data.logs import (
     write_log,
     write_log_arrays,
 )
+from maglev_oc.errors import InputError
 from maglev_oc.model.parameters import StageParameters
 
 TAU = StageParameters().pole_pitch
@@ -552,3 +553,31 @@ def test_a_60s_5khz_log_reads_whole(tmp_path: Path):
     log = read_log(path)  # its speed: bench/log_io.py
     assert log.n == n
     assert np.array_equal(log.x[2], sig["x3"]) and np.array_equal(log.u[1], sig["u2"])  # %.17g round-trips
+
+
+def test_currents_moved_earlier_are_the_logged_ones_a_whole_sample_later(tmp_path: Path):
+    """``Log.currents_advanced``: the currents of a log logged late, put back against the positions
+    (``maglev-oc diagnose --currents-late``). A whole sample is exact; half a sample is the mean of
+    the two neighbours (linear interpolation); the positions and times are kept, less the samples at
+    the end that have no current that late; nothing to move, the same log."""
+    path = tmp_path / "run.csv"
+    path.write_text(_csv_text())
+    log = read_log(path)
+    moved = log.currents_advanced(1e-3)
+    assert moved.n == log.n - 1
+    assert_array_equal(moved.u, log.u[:, 1:])
+    assert_array_equal(moved.x[[0, 2]], log.x[[0, 2], :-1])
+    assert_array_equal(moved.t, log.t[:-1])
+    assert "earlier against the positions" in moved.notes[-1]
+    half = log.currents_advanced(0.5e-3)
+    assert_allclose(half.u, 0.5 * (log.u[:, :-1] + log.u[:, 1:]), rtol=0, atol=1e-12)
+    assert log.currents_advanced(0.0) is log
+
+
+@pytest.mark.parametrize("delay", [-1e-3, float("nan"), 0.06])
+def test_currents_moved_by_a_negative_or_too_long_delay_are_refused(tmp_path: Path, delay):
+    path = tmp_path / "run.csv"
+    path.write_text(_csv_text())  # 0.6 s: a tenth is 0.06 s
+    with pytest.raises(InputError, match="currents late by") as info:
+        read_log(path).currents_advanced(delay)
+    assert str(path) in str(info.value)

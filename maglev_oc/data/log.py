@@ -13,6 +13,7 @@ has NaN rows for x2 and x4 (:attr:`Log.states_measured` says which rows are data
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -210,6 +211,41 @@ class Log:
         return dataclasses.replace(
             self, t=self.t[sel], x=self.x[:, sel], u=self.u[:, sel], notes=(*self.notes, note)
         )
+
+    def currents_advanced(self, delay: float) -> Log:
+        """The log with its currents moved ``delay`` seconds earlier against the positions, as a new
+        Log with a note saying so: for currents that were logged late (a logger that stamps them
+        after the positions they acted on, a filter on measured currents; ``diagnose`` reports
+        such a log's "currents' timing"). Each current at t is the logged one at t + delay (linear
+        interpolation between samples, exact for whole samples); the last samples, which have no
+        current that late, are left out.
+
+        Parameters
+        ----------
+        delay : float
+            [s], at least 0 and under a tenth of the log.
+
+        Returns
+        -------
+        Log
+        """
+        if not (math.isfinite(delay) and 0.0 <= delay < 0.1 * self.duration):
+            raise InputError(
+                f"{self.source}: currents late by {delay!r} s: expected a delay of at least 0 and under a "
+                f"tenth of the log ({0.1 * self.duration:.3g} s)"
+            )
+        if delay == 0.0:
+            return self
+        samples = round(delay / self.sample_time)
+        if samples and abs(delay - samples * self.sample_time) <= 1e-6 * self.sample_time:
+            keep = np.arange(self.n) < self.n - samples  # whole samples: the logged values themselves
+            u = self.u[:, samples:]
+        else:
+            keep = self.t + delay <= self.t[-1]
+            u = np.vstack([np.interp(self.t[keep] + delay, self.t, row) for row in self.u])
+        t = self.t[keep]
+        note = f"currents moved {delay * 1e3:.3g} ms earlier against the positions (logged late)"
+        return dataclasses.replace(self, t=t, x=self.x[:, keep], u=u, notes=(*self.notes, note))
 
     def time_slice(self, t_start: float, t_stop: float) -> Log:
         """Samples with ``t_start <= t < t_stop`` as a new Log (e.g. a held-out part).

@@ -255,8 +255,9 @@ def currents_late(
             f"RMS on the {AXES[a]} axis, lowering its held-out error by {gains[a]:.1%}, z = {j.z:.1f}): "
             "fitted as the amplifiers' lag, it comes out negative. No amplifier or loop makes a force "
             f"before its current: the logged currents are late against the positions, by {why}. Align "
-            "the current columns with the positions (or log the commanded currents) and diagnose again: "
-            "the constants and every effect of the currents are fitted to currents out of place in time."
+            f"them with the positions (maglev-oc diagnose --currents-late {late:.2g}) or log the commanded "
+            "currents, and diagnose again: the constants and every effect of the currents are fitted to "
+            "currents out of place in time."
         ),
         term=candidate.term,
     )
