@@ -104,6 +104,8 @@ OPTION_TESTS: dict[str, str] = {
     "diagnose --holdout": f"{HERE}::test_diagnose_holdout_holds_out_that_share",
     "diagnose --no-control": f"{HERE}::test_diagnose_no_control_leaves_out_the_closed_loop_study",
     "diagnose --no-limits": f"{HERE}::test_diagnose_no_limits_leaves_out_what_the_log_could_not_have_shown",
+    "diagnose --currents-late": "tests/test_diagnose_log_timing.py::"
+    "test_the_command_line_moves_late_currents_back_and_then_nothing_is_left",
     # identify
     "identify --json": "tests/test_identify_pipeline.py::test_cli_writes_json",
     "identify --report": f"{HERE}::test_identify_report_is_written_with_the_fit",

@@ -26,6 +26,7 @@ __all__ = [
     "COMMUTATION",
     "COMMUTATION_HORIZONTAL",
     "LAG",
+    "LAG_BOUND",
     "LAG_VERTICAL",
     "commutation_candidate",
     "commutation_candidates",
@@ -513,6 +514,9 @@ def saturation_candidate(ctx: LibraryContext) -> Candidate:
 
 
 LAG = "current_amplifier_lag"
+LAG_BOUND = 5e-3
+"""[s] The largest lag taken as physical (25 control periods of the rig's loop), and the largest lead
+taken as the log's timing (:func:`~maglev_oc.diagnosis.unexplained.currents_late`)."""
 LAG_VERTICAL = f"{LAG}_vertical"
 """The lag's form fitted on the vertical axis alone (:func:`lag_candidates`)."""
 
@@ -590,7 +594,7 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
         "current_rate",
         "current steps at several amplitudes, measured with a current probe, separate an amplifier lag "
         "from the regulator's own dynamics",
-        all_of(_beyond_hold(hold), within("time_constant", 5e-3, "lag")),
+        all_of(_beyond_hold(hold), within("time_constant", LAG_BOUND, "lag")),
         lambda e: (
             f"The currents lag their commands by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
             f"{hold * 1e3:.2g} ms of the loop's zero-order hold." + _assumed_rate(ctx, e)
