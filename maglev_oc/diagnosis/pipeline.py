@@ -1016,7 +1016,7 @@ def _currents_late(session: _Session, fitted: StageModel, by_name, sel: Selectio
     if j is None or LAG not in by_name or any(by_name[n].form_of == LAG or n == LAG for n in sel.selected):
         return None
     hold = LibraryContext(fitted, session.data).hold_delay
-    return currents_late(j, by_name[LAG], fitted, hold, session.data)
+    return currents_late(j, by_name[LAG], fitted, hold, session.data, session.settings.max_axis_loss)
 
 
 def _told_by_the_end_effects_shape(
