@@ -97,3 +97,65 @@ def test_the_command_line_moves_late_currents_back_and_then_nothing_is_left(gene
     doc = json.loads(out.read_text())
     assert doc["effects"] == [] and doc["unexplained"] == []
     assert late.read_bytes() == before
+
+
+def _lag_judgement(delay: float, sd: float, gains, verdict: str = "implausible"):
+    """A judgement of the amplifier lag as the selection makes one: its fitted total delay [s] with
+    standard error ``sd``, the loop's 0.1 ms hold, and its pooled held-out gain per axis."""
+    from maglev_oc.diagnosis.selection import Judgement
+    from maglev_oc.results import Estimate
+
+    gains = np.asarray(gains, dtype=float)
+    return Judgement(
+        name=LAG,
+        verdict=verdict,
+        reason="",
+        gain=float(np.nanmean(gains)),
+        gain_axes=gains,
+        z=5.0,
+        z_holdout=5.0,
+        wald=100.0,
+        wald_threshold=4.0,
+        vif=1.0,
+        confounded_with=(),
+        contribution_rms=np.array([0.01, 0.002]),
+        contribution_peak=np.array([0.02, 0.004]),
+        physical={"total_delay": Estimate(delay, sd, "s"), "hold_delay": Estimate(1e-4, 0.0, "s")},
+        fit=None,
+        pooled_gain_axes=gains,
+    )
+
+
+@pytest.mark.parametrize(
+    ("delay", "gains", "moving", "verdict", "said"),
+    [
+        (-0.9e-3, [0.035, 0.004], (True, True), "implausible", True),  # the shared log, 1 sample late
+        (-0.9e-3, [0.018, -0.001], (True, True), "implausible", True),  # the horizontal within 2 %
+        (-0.9e-3, [0.035, np.nan], (True, True), "implausible", True),  # horizontal beside friction
+        (-0.9e-3, [0.035, -0.03], (True, True), "implausible", False),  # the horizontal 3 % worse
+        (-0.9e-3, [-0.01, 0.3], (True, True), "implausible", False),  # not the vertical: a damping
+        (-15e-3, [np.nan, 0.3], (False, True), "implausible", False),  # the twin's viscous friction
+        (-0.9e-3, [0.035, np.nan], (True, False), "implausible", False),  # one axis moves
+        (-6e-3, [0.035, 0.004], (True, True), "implausible", False),  # beyond the lag's 5 ms bound
+        (-0.2e-3, [0.035, 0.004], (True, True), "implausible", False),  # under 0.05 ms + 2 sd
+        (-0.9e-3, [0.035, 0.004], (True, True), "not significant", False),  # the data do not show it
+        (+0.9e-3, [0.035, 0.004], (True, True), "implausible", False),  # a lag, not a lead
+    ],
+)
+def test_a_lead_is_the_logs_timing_only_on_both_axes_where_the_vertical_shows_it(
+    model, delay, gains, moving, verdict, said
+):
+    """Each condition of :func:`currents_late` on its own (its docstring gives the logs behind
+    them): 0.1 ms hold, 0.1 ms standard error, so a lead counts from 0.25 ms up to 5 ms."""
+    from types import SimpleNamespace
+
+    from maglev_oc.diagnosis.unexplained import currents_late
+
+    data = SimpleNamespace(moving=np.array(moving), sample_time=1e-3, settings={})
+    j = _lag_judgement(delay, 1e-4, gains, verdict)
+    entry = currents_late(j, SimpleNamespace(term=None), model, data)
+    assert (entry is not None) == said
+    if said:
+        assert entry.depends_on == TIMING and entry.axis == "vertical"
+        # the skew: the lead and the hold, in samples of the log
+        assert f"{(-delay + 1e-4) / 1e-3:.1f} sample periods" in entry.description

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from maglev_oc.data.logs import Log, LogError
-from maglev_oc.diagnosis.candidate import Candidate, LibraryContext, fmt
+from maglev_oc.diagnosis.candidate import Candidate, fmt
 from maglev_oc.diagnosis.currents import COMMUTATION, COMMUTATION_HORIZONTAL, LAG
 from maglev_oc.diagnosis.library import (
     candidate_library,
@@ -1013,10 +1013,9 @@ def _currents_late(session: _Session, fitted: StageModel, by_name, sel: Selectio
     for leading them (:func:`~maglev_oc.diagnosis.unexplained.currents_late`); None otherwise (no
     such lag in the library, or a lag chosen)."""
     j = sel.last.get(LAG)
-    if j is None or LAG not in by_name or any(by_name[n].form_of == LAG or n == LAG for n in sel.selected):
+    if j is None or LAG not in by_name or any(by_name[n].reported_name == LAG for n in sel.selected):
         return None
-    hold = LibraryContext(fitted, session.data).hold_delay
-    return currents_late(j, by_name[LAG], fitted, hold, session.data, session.settings.max_axis_loss)
+    return currents_late(j, by_name[LAG], fitted, session.data, session.settings.max_axis_loss)
 
 
 def _told_by_the_end_effects_shape(

@@ -194,14 +194,13 @@ def currents_late(
     j: Judgement,
     candidate: Candidate,
     model: StageModel,
-    hold: float,
     data: PreparedLogs,
     max_axis_loss: float = SelectionSettings.max_axis_loss,
 ) -> Unexplained | None:
     """The residual of logged currents that are late against the positions, when the amplifier lag
     (``j``, its judgement; ``candidate``, the lag on both axes) was significant, large enough and
     separable, and refused only because it is negative: the forces lead the logged currents by
-    more than half the loop's zero-order hold (``hold`` [s]) and two standard errors.
+    more than half the loop's zero-order hold (the lag's ``hold_delay``) and two standard errors.
 
     No amplifier makes a force before its current, so the lag refuses such a delay. But a log can
     be late against its own positions: a filter on the current sensors delays measured currents,
@@ -235,17 +234,17 @@ def currents_late(
     timing. The filtered rig's cogging log (`bench/diagnose_rigs.py --rigs filtered`) has a lead
     of 0.49 +- 0.05 ms that lowers the vertical error by 1.8 % and the horizontal one by -0.1 %.
     """
-    delay = j.physical.get("total_delay")
-    if j.verdict != "implausible" or delay is None:
+    delay, hold_delay = j.physical.get("total_delay"), j.physical.get("hold_delay")
+    if j.verdict != "implausible" or delay is None or hold_delay is None:
         return None
-    lead, sd = -delay.value, delay.stderr
+    lead, sd, hold = -delay.value, delay.stderr, hold_delay.value
     if not 0.5 * hold + 2.0 * sd < lead <= LAG_BOUND:
         return None
     gains = j.pooled_gain_axes if j.pooled_gain_axes is not None else j.gain_axes
     judged = np.isfinite(gains)
     if not (np.all(data.moving) and judged[0] and gains[0] > 0 and np.all(gains[judged] > -max_axis_loss)):
         return None  # one axis alone: a damping of that axis (the docstring)
-    a = int(np.nanargmax(np.where(np.isfinite(gains), gains, -np.inf)))
+    a = int(np.argmax(np.where(judged, gains, -np.inf)))
     size = float(j.contribution_rms[a])
     p = model.params
     mass = p.mass_vertical if a == 0 else p.mass_horizontal
