@@ -140,8 +140,8 @@ def test_beside_a_claimed_friction_the_velocitys_residual_is_read_against_it(mod
     q = np.array([-0.01, 0.0, 0.0, 0.0])
     seen = []
 
-    def spy(data, periods, friction_axes=frozenset()):
-        probes = _probes(data, periods, friction_axes)
+    def spy(data, periods, friction_axes=frozenset(), lagging=frozenset()):
+        probes = _probes(data, periods, friction_axes, lagging)
         seen.append({p.term.axis: p.detail(q) for p in probes if p.detail is not None})
         return probes
 

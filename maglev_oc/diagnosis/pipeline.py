@@ -98,7 +98,7 @@ from maglev_oc.diagnosis.selection import (
 )
 from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
-from maglev_oc.diagnosis.unexplained import Unexplained, currents_late, find_unexplained
+from maglev_oc.diagnosis.unexplained import Unexplained, currents_late, delayed_rates, find_unexplained
 from maglev_oc.diagnosis.words import listed, plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.masses import MassChange, moving_mass_change
@@ -1423,7 +1423,11 @@ def _explained_by_unexplained(
     reference = _constants(session.model)
     out = []
     for c in chosen:
-        own_variables = {c.variable, *((STATE_OF_AXIS[c.axis],) if holds_its_axis(c) else ())}
+        own_variables = {
+            c.variable,
+            *((STATE_OF_AXIS[c.axis],) if holds_its_axis(c) else ()),
+            *delayed_rates(c),
+        }
         rivals = [u for u in unexplained if u.term is not None and u.depends_on not in own_variables]
         if not rivals or c.name in on_thrust:
             continue

@@ -62,8 +62,10 @@ __all__ = [
     "Unexplained",
     "along_the_stator",
     "currents_late",
+    "delayed_rates",
     "find_unexplained",
     "rate_direction",
+    "rate_sense",
 ]
 
 
@@ -80,6 +82,9 @@ class Unexplained:
     description: str
     period: float | None = None  # [m] for a periodic signature
     term: AccelerationTerm | None = field(default=None, repr=False, compare=False)  # the probe
+    # a dependence on the axis's own velocity that rises with it: a force along the motion, which a
+    # delay between the logged signals and the forces gives and no passive force does (rate_direction)
+    along_motion: bool = False
 
     def to_dict(self) -> dict:
         out = {
@@ -94,6 +99,8 @@ class Unexplained:
         }
         if self.period is not None:
             out["period_m"] = self.period
+        if self.along_motion:
+            out["along_motion"] = True
         return out
 
 
@@ -105,6 +112,7 @@ class _Probe(NamedTuple):
     words: str  # that variable in words
     period: float | None = None  # [m] of a periodic probe
     detail: Callable[[np.ndarray], str] | None = None  # its coefficients -> what they mean physically
+    own_rate: bool = False  # a probe of its axis's own velocity (rate_sense reads its coefficients)
 
 
 def _probe(name: str, axis: int, build, k: int) -> AccelerationTerm:
@@ -141,8 +149,9 @@ def find_unexplained(
     best probe is added while it passes the selection's significance and size tests, at most
     ``max_per_axis`` per axis."""
     friction = frozenset(c.term.axis for c in explained if c.family == "friction")
+    lagging = frozenset(r for c in explained for r in delayed_rates(c))
     probes = (
-        _probes(data, periods, friction)
+        _probes(data, periods, friction, lagging)
         + _force_probes(data, model)
         + _friction_along_track(data, model, friction)
         + _friction_over_time(data, model, friction)
@@ -178,8 +187,10 @@ def find_unexplained(
         if not seen.shows(settings) or size < settings.min_effect:
             break
         # what its coefficients say, in the words of the forces they scale
-        detail = "" if entry.detail is None else entry.detail(seen.fit.group(design, term.name)[0])
-        out.append(_unexplained(model, entry, size, float(seen.pooled_axes[a]), seen.z, detail))
+        q = seen.fit.group(design, term.name)[0]
+        detail = "" if entry.detail is None else entry.detail(q)
+        along = entry.own_rate and rate_sense(q) > 0
+        out.append(_unexplained(model, entry, size, float(seen.pooled_axes[a]), seen.z, detail, along))
         found[term.axis] += 1
         current.append(term.name)
         remaining.remove(entry)
@@ -283,12 +294,43 @@ def currents_late(
     )
 
 
-def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
+def delayed_rates(c: Candidate) -> tuple[str, ...]:
+    """The velocities of the axes whose forces ``c`` delays behind the logged currents (the
+    amplifier lag; none for any other effect). On a regulated stage a delay's column is a function
+    of them (the regulator's currents follow the motion; over an oscillation a delay is a force
+    along it), so a dependence on them left beside the chosen lag is the lag's own imperfect shape
+    (a pure delay beside a first-order lag), not its rival. Set 21707 of the independent generator
+    (a 218 Hz amplifier with 0.24 ms of delay beside a detent and a tilted base, 20 um encoders):
+    the lag was chosen at 1.17 ms, then dropped beside a polynomial of the gap rate that fitted its
+    effect as well, and the log's residual was reported as an unexplained dependence on the gap rate."""
+    if not (c.variable == "current_rate" and c.physical_sign > 0):
+        return ()
+    return tuple(f"{STATE_OF_AXIS[a]}_rate" for a in AXES if c.axis in (a, "both"))
+
+
+def rate_sense(q: np.ndarray) -> int:
+    """+1 when a probe of an axis's own velocity (mean-free Legendre polynomials of orders 1-4 over
+    the logged rates, coefficients ``q``) rises with the velocity (a force along the motion), -1 when
+    it falls (against it), 0 when its even part (both ends against the middle) outweighs its odd part
+    (the change from the slowest to the fastest logged rate: P1 and P3 are odd)."""
+    q = np.asarray(q, dtype=float)
+    odd = q[0] + q[2]  # (f(+1) - f(-1)) / 2: P1 and P3 are 1 at +1 and -1 at -1
+    even = 1.5 * q[1] + 0.625 * q[3]  # (f(+1) + f(-1)) / 2 - f(0): P2(0) = -1/2, P4(0) = 3/8
+    if not abs(odd) > abs(even):
+        return 0
+    return 1 if odd > 0 else -1
+
+
+def rate_direction(q: np.ndarray, beside_friction: bool = False, beside_lag: bool = False) -> str:
     """What a probe of an axis's own velocity (mean-free Legendre polynomials of orders 1-4 over the
     logged rates, coefficients ``q``) says of the force's direction, when its odd part (the change
     from the slowest to the fastest logged rate: P1 and P3 are odd) outweighs its even part (both
     ends against the middle); "" otherwise. ``beside_friction``: guide friction is claimed on the
-    axis, and the residual is then read against it.
+    axis, and the residual is then read against it; ``beside_lag``: an amplifier lag is claimed on
+    the axis (:func:`delayed_rates`), or fitted for the currents' timing (:func:`currents_late`),
+    and the residual is read against its fit (set 21707 of the
+    independent generator: a 218 Hz amplifier with 0.24 ms of delay, fitted as a first-order lag of
+    1.17 ms, left a residual falling with the gap rate, which without this was read as damping).
 
     Against the motion is what damping or friction the model lacks gives. Along the motion no
     passive force gives: a delay between the logged signals and the forces does on a regulated stage
@@ -302,18 +344,24 @@ def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
     motion on six logs without a lag (0.03-0.42 m/s^2), and against it (1.2 m/s^2) beside a claimed
     horizontal friction and an unclaimed lag (pair 10074): there the words say only how the residual
     stands to the friction found."""
-    q = np.asarray(q, dtype=float)
-    odd = q[0] + q[2]  # (f(+1) - f(-1)) / 2: P1 and P3 are 1 at +1 and -1 at -1
-    even = 1.5 * q[1] + 0.625 * q[3]  # (f(+1) + f(-1)) / 2 - f(0): P2(0) = -1/2, P4(0) = 3/8
-    if not abs(odd) > abs(even):
+    sense = rate_sense(q)
+    if not sense:
         return ""
-    falls = odd < 0
+    odd = float(np.asarray(q, dtype=float)[[0, 2]].sum())
+    falls = sense < 0
     change = f"{2 * abs(odd):.2g} m/s² across the logged rates"
     said = f" It {'falls as the velocity grows' if falls else 'rises with the velocity'} ({change})"
     if beside_friction:
         return (
             f"{said}, beside the guide friction found on this axis: {'more' if falls else 'less'} force "
             "against the motion at speed than the fit of that friction gives."
+        )
+    if beside_lag:
+        return (
+            f"{said}, beside the delay between the logged currents and the forces found on this log: "
+            f"{'less' if falls else 'more'} force along the motion at speed than the fit of that delay "
+            "gives, as a delay of another shape than a first-order lag leaves (a pure delay, a lag of "
+            "higher order, a filter); or a force of the axis beside it."
         )
     if falls:
         return f"{said}: a force against the motion, as damping or friction the model lacks gives."
@@ -325,17 +373,25 @@ def rate_direction(q: np.ndarray, beside_friction: bool = False) -> str:
 
 
 def _probes(
-    data: PreparedLogs, periods: Sequence[tuple[str, float]], friction_axes: frozenset[str] = frozenset()
+    data: PreparedLogs,
+    periods: Sequence[tuple[str, float]],
+    friction_axes: frozenset[str] = frozenset(),
+    lagging: frozenset[str] = frozenset(),
 ) -> list[_Probe]:
     """The additive and periodic probes on the moving axes; a probe of an axis's own velocity says
     which way the force it finds points (:func:`rate_direction`; ``friction_axes``: the axes with
-    guide friction claimed)."""
+    guide friction claimed; ``lagging``: the velocities of the axes with a lag claimed,
+    :func:`delayed_rates`)."""
     probes: list[_Probe] = []
     for (axis, var), term in smooth_probes(data).items():
         if data.moving[AXES.index(axis)]:
             own_rate = var == f"{STATE_OF_AXIS[axis]}_rate"  # the axis's velocity (PROBE_VARIABLES)
-            detail = partial(rate_direction, beside_friction=axis in friction_axes) if own_rate else None
-            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail))
+            detail = (
+                partial(rate_direction, beside_friction=axis in friction_axes, beside_lag=var in lagging)
+                if own_rate
+                else None
+            )
+            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail, own_rate=own_rate))
     for axis, period in periods:
         a = AXES.index(axis)
         if data.moving[a]:
@@ -653,9 +709,15 @@ def _best_probe(
 
 
 def _unexplained(
-    model: StageModel, entry: _Probe, size: float, gain: float, z: float, detail: str = ""
+    model: StageModel,
+    entry: _Probe,
+    size: float,
+    gain: float,
+    z: float,
+    detail: str = "",
+    along_motion: bool = False,
 ) -> Unexplained:
-    term, key, words, period, _ = entry
+    term, key, words, period = entry.term, entry.key, entry.words, entry.period
     p = model.params
     mass = p.mass_vertical if term.axis == "vertical" else p.mass_horizontal
     return Unexplained(
@@ -672,4 +734,5 @@ def _unexplained(
         ),
         period=period,
         term=term,
+        along_motion=along_motion,
     )
