@@ -435,6 +435,28 @@ def test_the_thrust_form_of_the_offset_does_not_leave_its_attraction_to_another_
 
 
 @pytest.mark.slow
+def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_path):
+    # Three effects on a rig with 20 um encoders (bench/diagnose_rigs.py --rig enc20um --drawn-pairs
+    # 12 --per-log 3 --seed 21700, set 21707): a 218 Hz amplifier with 0.24 ms of delay (0.96 ms in
+    # all), a 1.5 N detent and a base tilted 7.1 mrad. The lag was chosen (1.17 ms beyond the hold,
+    # z 9.7), then dropped as "explained as well by a dependence on the gap rate" beside a polynomial
+    # of the gap rate, which in closed loop is the lag's own column more flexibly shaped; the
+    # residual was reported unexplained. The velocities a delay acts on are its own
+    # (unexplained.delayed_rates); the residual left beside it is read against its fit, not as damping.
+    from tests.independent.simulate import Rig
+
+    rig = Rig(encoder_resolution=20e-6, encoder_noise=4e-6)
+    _, d, s = _drawn_pair(tmp_path, 21707, ("detent_force", "amplifier_dynamics", "tilted_base"), rig)
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == [
+        "cogging_horizontal_19mm",
+        "current_amplifier_lag",
+        "horizontal_guides_not_level",
+    ]
+    assert all("damping" not in u.description for u in d.unexplained), d.unexplained
+
+
+@pytest.mark.slow
 def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offset_on_both_axes(tmp_path):
     # A random pair on a rig logging its amplifiers' measured currents with 10 mA of noise
     # (bench/diagnose_rigs.py --drawn-pairs 12 --rig measured --seed 18300, pair 18310): guides

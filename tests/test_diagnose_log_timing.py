@@ -159,3 +159,26 @@ def test_a_lead_is_the_logs_timing_only_on_both_axes_where_the_vertical_shows_it
         assert entry.depends_on == TIMING and entry.axis == "vertical"
         # the skew: the lead and the hold, in samples of the log
         assert f"{(-delay + 1e-4) / 1e-3:.1f} sample periods" in entry.description
+
+
+@pytest.mark.slow
+def test_an_amplifier_lag_before_measured_currents_is_said_to_be_out_of_the_log(tmp_path):
+    """single_20 of the independent generator (its amplifiers' lag, 1.26 ms in all, found on the
+    commanded currents) on a rig that logs the amplifiers' measured output with 10 mA of noise: the
+    forces follow the measured currents, so no size of the amplifiers' lag shows. Nothing is
+    claimed, and where the lag's detection limit stood (a limit of forces lagging the measured
+    currents, which a reader would take for the amplifiers') the log says why none is found."""
+    from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
+    from maglev_oc.diagnosis.library import candidate_library
+    from maglev_oc.model.stage import StageModel
+
+    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
+    scenario = dataclasses.replace(dict(named_set("single"))["single_20"], rig=rig)
+    csv, _ = write_log(simulate(scenario), tmp_path, stem="measured")
+    d = diagnose_path(csv, limits=True)
+    assert d.effects == []
+    (lag,) = [x for x in d.detection_limits if x.name == LAG]
+    assert lag.value == np.inf and lag.reason == AMPLIFIER_LAG_NOT_LOGGED
+    # the lag the library fits on this log is of the forces behind the measured currents
+    (cand,) = [c for c in candidate_library(StageModel(), d.data) if c.name == LAG]
+    assert cand.term.explanation.startswith("The forces lag the measured currents")

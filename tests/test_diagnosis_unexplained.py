@@ -17,8 +17,15 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from maglev_oc.diagnosis import unexplained
+from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.diagnosis.selection import SelectionSettings
-from maglev_oc.diagnosis.unexplained import _probes, find_unexplained, rate_direction
+from maglev_oc.diagnosis.unexplained import (
+    _probes,
+    delayed_rates,
+    find_unexplained,
+    rate_direction,
+    rate_sense,
+)
 from maglev_oc.regression.data import prepare
 from tests.test_statistics_properties import RATE_FRICTION, _friction_candidate, _log
 
@@ -154,6 +161,27 @@ def test_beside_a_claimed_friction_the_velocitys_residual_is_read_against_it(mod
     assert "less force against the motion at speed" in rate_direction(-q, beside_friction=True)
     assert "delay" not in rate_direction(-q, beside_friction=True)
     assert rate_direction(np.array([0.001, 0.01, 0.0, 0.0])) == ""
+
+
+def test_only_the_lag_delays_and_it_owns_the_velocities_of_the_axes_it_acts_on(model):
+    """The amplifier lag on both axes owns both velocities, its form on the vertical axis the gap
+    rate alone; no other candidate of the library delays anything (a friction's velocity is its own
+    by its variable, a cogging's not at all). Beside a delay a velocity's residual is read against
+    its fit, in both directions, and never as damping or as a lag to look for."""
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    lib = {c.name: c for c in candidate_library(model, data)}
+    assert delayed_rates(lib["current_amplifier_lag"]) == ("gap_rate", "position_rate")
+    assert delayed_rates(lib["current_amplifier_lag_vertical"]) == ("gap_rate",)
+    assert [n for n, c in lib.items() if delayed_rates(c)] == [
+        "current_amplifier_lag",
+        "current_amplifier_lag_vertical",
+    ]
+    q = np.array([-0.01, 0.0, 0.0, 0.0])
+    falls, rises = rate_direction(q, beside_lag=True), rate_direction(-q, beside_lag=True)
+    assert "less force along the motion at speed than the fit of that delay" in falls
+    assert "more force along the motion at speed than the fit of that delay" in rises
+    assert "damping" not in falls and "an amplifier lag," not in rises
+    assert (rate_sense(q), rate_sense(-q), rate_sense(np.array([0.001, 0.01, 0.0, 0.0]))) == (-1, 1, 0)
 
 
 @settings(max_examples=200, deadline=None)

@@ -23,6 +23,7 @@ from maglev_oc.regression.terms import AccelerationTerm, term_function
 from maglev_oc.results import Estimate
 
 __all__ = [
+    "AMPLIFIER_LAG_NOT_LOGGED",
     "COMMUTATION",
     "COMMUTATION_HORIZONTAL",
     "LAG",
@@ -564,9 +565,24 @@ def _lag_rows(ctx: LibraryContext, x, u, du, q):
     return -(dv_du2 * du[1] + dv_du1 * du[0]) * q[0], -dh_du1 * du[0] * q[0]
 
 
+AMPLIFIER_LAG_NOT_LOGGED = (
+    "not in this log at any size: its currents are the amplifiers' measured output, after their lag, "
+    "and the forces follow them; a log of the commanded currents (# currents: commanded), or a current "
+    "step measured beside its command, shows the amplifiers' lag"
+)
+"""Why a log of measured currents shows no amplifier lag (the detection limit said in its place)."""
+
+
 def lag_candidate(ctx: LibraryContext) -> Candidate:
-    """The forces following the commanded currents late by a time constant (first order)."""
+    """The forces following the commanded currents late by a time constant (first order).
+
+    On a log of the amplifiers' measured currents (``# currents: measured``) the amplifiers' lag is
+    before the logged currents, and the forces follow those: what the candidate finds there is the
+    forces lagging the measured currents (eddy currents in the iron, positions logged late), and
+    it says so; the amplifiers' lag is not in the log at any size (:data:`AMPLIFIER_LAG_NOT_LOGGED`).
+    On the independent generator's measured-current rig, an amplifier of 218 Hz was never found."""
     hold = ctx.hold_delay
+    measured = bool(ctx.data.settings.get("currents_measured"))
 
     def lag(x, u, du, q):
         return ca.vertcat(*_lag_rows(ctx, x, u, du, q))
@@ -582,8 +598,14 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
     return Candidate(
         AccelerationTerm(
             LAG,
-            "The current amplifiers (or the real-time loop) deliver the commanded currents late, so the "
-            "forces lag the commands by a small time constant.",
+            (
+                "The forces lag the measured currents by a small time constant (eddy currents in the "
+                "iron, or the positions logged late against the currents); the amplifiers' own lag is "
+                "before the measured currents."
+                if measured
+                else "The current amplifiers (or the real-time loop) deliver the commanded currents late, "
+                "so the forces lag the commands by a small time constant."
+            ),
             "both",
             ("time_constant",),
             function=term_function("lag", lag, 1),
@@ -596,7 +618,12 @@ def lag_candidate(ctx: LibraryContext) -> Candidate:
         "from the regulator's own dynamics",
         all_of(_beyond_hold(hold), within("time_constant", LAG_BOUND, "lag")),
         lambda e: (
-            f"The currents lag their commands by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
+            f"The forces lag the measured currents by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
+            f"{hold * 1e3:.2g} ms of the loop's zero-order hold: not the amplifiers (their lag is before "
+            "the measured currents), but eddy currents in the iron, or the positions logged late against "
+            "the currents."
+            if measured
+            else f"The currents lag their commands by {fmt(e['time_constant'], 1e3, 'ms')} beyond the "
             f"{hold * 1e3:.2g} ms of the loop's zero-order hold." + _assumed_rate(ctx, e)
         ),
         # on an axis with claimed friction its column is that friction's viscous part: random pairs

@@ -55,7 +55,7 @@ import numpy as np
 
 from maglev_oc.data.logs import Log, LogError
 from maglev_oc.diagnosis.candidate import Candidate, fmt
-from maglev_oc.diagnosis.currents import COMMUTATION, COMMUTATION_HORIZONTAL, LAG
+from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED, COMMUTATION, COMMUTATION_HORIZONTAL, LAG
 from maglev_oc.diagnosis.library import (
     candidate_library,
     refine_waviness_period,
@@ -63,7 +63,7 @@ from maglev_oc.diagnosis.library import (
     smooth_probes,
     waviness_candidate,
 )
-from maglev_oc.diagnosis.limits import detection_limits
+from maglev_oc.diagnosis.limits import DetectionLimit, detection_limits
 from maglev_oc.diagnosis.magnetics import END_PROFILE, EndProfile
 from maglev_oc.diagnosis.prediction import output_error
 from maglev_oc.diagnosis.refit import (
@@ -456,6 +456,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     limits = []
     if run.limits:
         limits = clock("limits", detection_limits, design, library, sel, session.settings, fitted)
+        limits = _amplifier_lag_unlogged(limits, data, effects)
     oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects)
     val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
     timings["total"] = sum(timings.values())
@@ -500,6 +501,20 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
         warnings=warnings,
         moving_mass=mass,
     )
+
+
+def _amplifier_lag_unlogged(
+    limits: list[DetectionLimit], data: PreparedLogs, effects: Sequence[Effect]
+) -> list[DetectionLimit]:
+    """On logs of the amplifiers' measured currents the amplifiers' lag is before the logged currents
+    and no size of it shows (:data:`~maglev_oc.diagnosis.currents.AMPLIFIER_LAG_NOT_LOGGED`): said in
+    place of the lag's limit, which is there the limit of forces lagging the measured currents.
+    Unsaid, a log of the measured-current rig of the independent generator with a 218 Hz amplifier
+    read as a log without a lag."""
+    if not data.settings.get("currents_measured") or any(e.name == LAG for e in effects):
+        return limits
+    unlogged = DetectionLimit(LAG, "time_constant", math.inf, "s", "", AMPLIFIER_LAG_NOT_LOGGED)
+    return [d for d in limits if d.name != LAG] + [unlogged]
 
 
 def _constants(model: StageModel) -> dict[str, float]:
