@@ -159,3 +159,15 @@ def test_a_diagnosis_with_effects_validates_the_model_with_them(with_friction):
     assert j["after"]["residual_rms_m"] == after.to_dict()["residual_rms_m"]
     rms = [v.to_dict()["residual_rms_m"]["horizontal"] for v in (before, after)]
     assert rms[1] < rms[0]
+
+
+def test_a_report_with_nothing_found_and_no_closed_loop_study_is_written(clean, tmp_path):
+    """``diagnose --report --no-control`` on a log where nothing is found: no figure of the effects
+    (there are none) and no study; it drew an effects figure of zero rows and stopped with an
+    internal error (a measured-current log of the independent generator, 2026-12-04)."""
+    from maglev_oc.reporting.diagnosis_report import write_diagnosis_report
+
+    assert clean.effects == []
+    pdf = tmp_path / "nothing.pdf"
+    write_diagnosis_report(pdf, clean, study=None)
+    assert pdf.read_bytes().startswith(b"%PDF") and pdf.stat().st_size > 10_000

@@ -571,7 +571,7 @@ def write_diagnosis_report(
         )
         n_panels = len(plots.panels(diag))
         held_out: list[Text | Table | Plot] = []
-        if study is None or n_panels > KEY_PANELS:
+        if n_panels and (study is None or n_panels > KEY_PANELS):
             held_out.append(Plot(plots.effects_plot(diag), 0.28 * max(1, -(-n_panels // 3))))
         held_out.append(Plot(plots.timeseries_plot(diag), 0.36))
         if study is not None:
