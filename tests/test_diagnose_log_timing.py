@@ -182,3 +182,8 @@ def test_an_amplifier_lag_before_measured_currents_is_said_to_be_out_of_the_log(
     # the lag the library fits on this log is of the forces behind the measured currents
     (cand,) = [c for c in candidate_library(StageModel(), d.data) if c.name == LAG]
     assert cand.term.explanation.startswith("The forces lag the measured currents")
+    # and the report says so where it is read first: the scorecard and the findings' words
+    from maglev_oc.reporting.diagnosis_report import _finding_paragraphs, _finding_rows
+
+    assert ("not in this log at any size", "current amplifier lag") in [r[:2] for r in _finding_rows(d)]
+    assert f"Current amplifier lag: {AMPLIFIER_LAG_NOT_LOGGED}." in _finding_paragraphs(d)

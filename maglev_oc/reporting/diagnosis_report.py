@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
@@ -199,6 +200,15 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
         )
     elif not diag.limits_worked_out:
         rows.append(("not shown by this log", "not worked out (diagnose --no-limits)", "not known"))
+    rows += [
+        (
+            "not in this log at any size",
+            plain(d.name),
+            "its currents are the amplifiers' measured output, after their lag: log the commands to see it",
+        )
+        for d in diag.detection_limits
+        if d.reason == AMPLIFIER_LAG_NOT_LOGGED
+    ]
     return rows
 
 
@@ -306,6 +316,11 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
             f"Not found does not mean absent: this log could not have shown {smallest} (each put into the "
             "log at that size and judged as the diagnosis judges; every limit is in the table below)."
         )
+    out += [
+        f"{plain(d.name).capitalize()}: {d.reason}."
+        for d in diag.detection_limits
+        if d.reason == AMPLIFIER_LAG_NOT_LOGGED  # an effect this log holds none of, said where it is read
+    ]
     if not diag.limits_worked_out:
         out.append(
             "What this log could not have shown was not worked out (diagnose --no-limits): an effect not "
