@@ -346,11 +346,12 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
-def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str], rig=None):
-    """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these two kinds
-    (each effect drawn from its own generator, seeded by the log's seed and the kind's index), on
-    ``rig`` (default the generator's own, as ``--rig``), diagnosed with the defaults and scored:
-    (effects, diagnosis, score)."""
+def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig=None, extra: tuple = ()):
+    """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these kinds (each
+    effect drawn from its own generator, seeded by the log's seed and the kind's index), on ``rig``
+    (default the generator's own, as ``--rig``), with the effects ``extra`` added after them (as
+    ``--shake`` adds the base's vibration), diagnosed with the defaults and scored: (effects,
+    diagnosis, score)."""
     import numpy as np
 
     from tests.independent import write_log
@@ -358,7 +359,7 @@ def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, str], rig=None):
     from tests.independent.simulate import Rig, Scenario, simulate
 
     effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
-    scenario = Scenario(name="+".join(kinds), seed=seed, effects=effects, rig=rig or Rig())
+    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=rig or Rig())
     path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
@@ -432,6 +433,25 @@ def test_the_thrust_form_of_the_offset_does_not_leave_its_attraction_to_another_
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cogging_vertical_19mm", "commutation_offset"]
     assert "commutation_offset_horizontal" not in d.selection.last
+
+
+@pytest.mark.slow
+def test_end_effects_beside_a_commutation_offset_lose_a_share_of_the_thrust_both_currents_make(tmp_path):
+    # A random pair on a vibrating base (bench/diagnose_rigs.py --drawn-pairs 12 --shake small
+    # --seed 22400, pair 22407): a 3.2 degree commutation offset, whose thrust d i_d (i_d about
+    # 1.7 A) outweighs i_q's, and end effects of 11 % of the thrust and 7 % of the attraction at
+    # +50 mm (a cosine 18 mm long; the stator's other end far off). Their thrust share was a share
+    # of i_q's thrust alone: beside the offset it made the horizontal held-out error 59 % worse, and
+    # the end effects were not claimed (the vertical residual reported unexplained). As shares of
+    # what i_q + d i_d makes (LibraryContext.force_terms), both found, sized within 30 % (the issue's
+    # bound; measured 3.2 degrees, and 7.6 % of the thrust at the logged high end, 34 mm).
+    from tests.independent.effects import BaseVibration
+
+    kinds = ("end_effect", "commutation_offset")
+    _, d, s = _drawn_pair(tmp_path, 22407, kinds, extra=(BaseVibration.small(),))
+    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["commutation_offset", "end_effects"]
+    assert d.unexplained == []
 
 
 @pytest.mark.slow
