@@ -151,6 +151,11 @@ class Candidate:
     guide friction with its Stribeck rise): judged beside it and reported under its name; chosen
     over it only when its held-out gain beats the simpler form's by more than the parsimony
     penalty of its extra parameter."""
+    commutation_angle: float = 0.0
+    """[rad] The commutation offset its library was built beside (:attr:`LibraryContext.commutation_angle`):
+    its columns take the logged currents in the amplifiers' frame and turn them into the magnets'
+    where the offset acts (:meth:`LibraryContext.force_terms`), so currents put into them from
+    elsewhere (:func:`~maglev_oc.diagnosis.thrust_current.felt_currents`) must be in that frame too."""
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:

@@ -72,6 +72,7 @@ __all__ = [
     "Candidate",
     "candidate_library",
     "end_effects_at",
+    "frame_angle",
     "held_by_sticking_guides",
     "refine_waviness_period",
     "sized_as_held",
@@ -106,14 +107,27 @@ def candidate_library(
     """
     ctx = LibraryContext(model, data, commutation_angle)
     if only is None:
-        return [_held(c, held) for c in _candidates(ctx, end_profile)]
+        return [_framed(_held(c, held), commutation_angle) for c in _candidates(ctx, end_profile)]
     wanted = set(only)
     built = [c for owns, build in _FAMILIES if any(map(owns, wanted)) for c in build(ctx, end_profile)]
-    out = [_held(c, held) for c in built if c.name in wanted]
+    out = [_framed(_held(c, held), commutation_angle) for c in built if c.name in wanted]
     missing = wanted - {c.name for c in out}
     if missing:
         raise ValueError(f"candidate_library: no candidate named {sorted(missing)} for this log")
     return out
+
+
+def _framed(c: Candidate, angle: float) -> Candidate:
+    """``c`` marked with the commutation offset its columns were built beside
+    (``Candidate.commutation_angle``)."""
+    return c if angle == 0.0 else dataclasses.replace(c, commutation_angle=angle)
+
+
+def frame_angle(library: Sequence[Candidate]) -> float:
+    """The commutation offset [rad] the candidates of ``library`` were built beside (0 when none
+    was): the angle by which currents from the magnets' frame are turned into the amplifiers' for
+    their columns (:func:`~maglev_oc.diagnosis.thrust_current.felt_currents`)."""
+    return next((c.commutation_angle for c in library if c.commutation_angle), 0.0)
 
 
 def end_effects_at(

@@ -63,6 +63,7 @@ import numpy as np
 from scipy import sparse
 
 from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.library import frame_angle
 from maglev_oc.diagnosis.selection import (
     THRUST_SIDE,
     Judgement,
@@ -194,6 +195,7 @@ def detection_limits(
         return []
     fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
     counted = evidence(design, chosen, settings)
+    angle = frame_angle(library)  # the felt currents in the frame the columns take (felt_currents)
     ctx = _Context(
         design,
         current,
@@ -202,9 +204,9 @@ def detection_limits(
         counted,
         fold.counted(chosen, settings) if fold else [],
         frozenset(_friction_axes(chosen)),
-        _felt_columns(design, model, [c for _, c in judged]),
+        _felt_columns(design, model, [c for _, c in judged], angle),
     )
-    side = thrust_side(design, model) if any(c.thrust_proportional for _, c in judged) else None
+    side = thrust_side(design, model, angle=angle) if any(c.thrust_proportional for _, c in judged) else None
     on_side = None
     if side is not None:
         per_unit = np.zeros((2, side.per_ampere.size))
@@ -307,7 +309,7 @@ def _limit(
 
 
 def _felt_columns(
-    design: Design, model: StageModel, candidates: Sequence[Candidate]
+    design: Design, model: StageModel, candidates: Sequence[Candidate], angle: float = 0.0
 ) -> dict[str, np.ndarray]:
     """Per candidate of the currents, its filtered columns (p, 2, n) evaluated at the currents the
     plant felt (:func:`felt_currents`) instead of the logged ones. The logged currents' errors
@@ -316,7 +318,7 @@ def _felt_columns(
     ripple put into a noisy rig's clean log with the logged columns explained 5.6 % of its held-out
     error at z 5.0; the log of that plant with the ripple in it, 1.3 % at z 1.1."""
     terms = [c.term for c in candidates if c.term.depends_on_inputs()]
-    felt = felt_currents(design.prepared, model) if terms else None
+    felt = felt_currents(design.prepared, model, angle=angle) if terms else None
     if felt is None:
         return {}
     index = np.concatenate([design.indices([t.name]) for t in terms])

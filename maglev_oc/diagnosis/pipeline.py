@@ -58,6 +58,7 @@ from maglev_oc.diagnosis.candidate import Candidate, fmt
 from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED, COMMUTATION, COMMUTATION_HORIZONTAL, LAG
 from maglev_oc.diagnosis.library import (
     candidate_library,
+    frame_angle,
     refine_waviness_period,
     sized_as_held,
     smooth_probes,
@@ -200,7 +201,11 @@ class _Session:
         proportional to the thrust current judged on it too where the logged thrust current is
         mostly its error (:mod:`~maglev_oc.diagnosis.thrust_current`)."""
         probes = {k: t.name for k, t in self.probes.items()}
-        side = thrust_side(design, model) if any(c.thrust_proportional for c in library) else None
+        side = (
+            thrust_side(design, model, angle=frame_angle(library))
+            if any(c.thrust_proportional for c in library)
+            else None
+        )
         return select(design, library, settings or self.settings, probes, side, _constants(self.model))
 
 
