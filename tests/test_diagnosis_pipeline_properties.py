@@ -503,9 +503,9 @@ def test_the_kept_selections_design_goes_on_with_the_references_it_was_built_abo
     restated: list[int] = []
     restate = thrust_current._restated
 
-    def counting(design, model, min_share):
+    def counting(design, model, min_share, angle):
         restated.append(id(design))
-        return restate(design, model, min_share)
+        return restate(design, model, min_share, angle)
 
     monkeypatch.setattr(pipeline._Session, "library_design", recording_design)
     monkeypatch.setattr(pipeline, "_select", recording_select)

@@ -19,7 +19,7 @@ import pytest
 
 from maglev_oc.diagnosis.selection import SelectionSettings
 from maglev_oc.diagnosis.trace import trace
-from maglev_oc.diagnosis.unexplained import _probes, _unexplained, find_unexplained
+from maglev_oc.diagnosis.unexplained import _Probe, _probes, _unexplained, find_unexplained
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
@@ -79,7 +79,7 @@ def test_an_unexplained_force_is_its_size_times_its_own_axis_mass(model):
     p = model.params
     assert p.mass_vertical != p.mass_horizontal
     for axis, mass in (("vertical", p.mass_vertical), ("horizontal", p.mass_horizontal)):
-        entry = (SimpleNamespace(axis=axis), "gap", "the gap", None, None)
+        entry = _Probe(SimpleNamespace(axis=axis), "gap", "the gap")
         u = _unexplained(model, entry, 0.01, 0.1, 5.0)
         assert u.force_rms == pytest.approx(0.01 * mass, rel=1e-12)
 
@@ -169,8 +169,8 @@ def test_a_periodic_probe_names_its_period_in_mm(model, period):
     data = prepare([_log(model, friction=0.0)], bandwidth=10.0)
     assert data.moving[1]  # the horizontal sweep: its probes are built
     (periodic,) = [p for p in _probes(data, [("horizontal", period)]) if p.period is not None]
-    term, key, words, got, detail = periodic
-    assert detail is None
+    term, key, words, got, detail, own_rate = periodic
+    assert detail is None and not own_rate
     mm = f"{period * 1e3:.1f} mm"
     assert key == f"position (period {mm})"
     assert words == f"the horizontal position, periodically over {mm}"
