@@ -169,8 +169,8 @@ def test_a_periodic_probe_names_its_period_in_mm(model, period):
     data = prepare([_log(model, friction=0.0)], bandwidth=10.0)
     assert data.moving[1]  # the horizontal sweep: its probes are built
     (periodic,) = [p for p in _probes(data, [("horizontal", period)]) if p.period is not None]
-    term, key, words, got, detail, own_rate = periodic
-    assert detail is None and not own_rate
+    term, key, words, got, detail = periodic
+    assert detail is None
     mm = f"{period * 1e3:.1f} mm"
     assert key == f"position (period {mm})"
     assert words == f"the horizontal position, periodically over {mm}"

@@ -82,9 +82,6 @@ class Unexplained:
     description: str
     period: float | None = None  # [m] for a periodic signature
     term: AccelerationTerm | None = field(default=None, repr=False, compare=False)  # the probe
-    # a dependence on the axis's own velocity that rises with it: a force along the motion, which a
-    # delay between the logged signals and the forces gives and no passive force does (rate_direction)
-    along_motion: bool = False
 
     def to_dict(self) -> dict:
         out = {
@@ -99,8 +96,6 @@ class Unexplained:
         }
         if self.period is not None:
             out["period_m"] = self.period
-        if self.along_motion:
-            out["along_motion"] = True
         return out
 
 
@@ -112,7 +107,6 @@ class _Probe(NamedTuple):
     words: str  # that variable in words
     period: float | None = None  # [m] of a periodic probe
     detail: Callable[[np.ndarray], str] | None = None  # its coefficients -> what they mean physically
-    own_rate: bool = False  # a probe of its axis's own velocity (rate_sense reads its coefficients)
 
 
 def _probe(name: str, axis: int, build, k: int) -> AccelerationTerm:
@@ -187,10 +181,8 @@ def find_unexplained(
         if not seen.shows(settings) or size < settings.min_effect:
             break
         # what its coefficients say, in the words of the forces they scale
-        q = seen.fit.group(design, term.name)[0]
-        detail = "" if entry.detail is None else entry.detail(q)
-        along = entry.own_rate and rate_sense(q) > 0
-        out.append(_unexplained(model, entry, size, float(seen.pooled_axes[a]), seen.z, detail, along))
+        detail = "" if entry.detail is None else entry.detail(seen.fit.group(design, term.name)[0])
+        out.append(_unexplained(model, entry, size, float(seen.pooled_axes[a]), seen.z, detail))
         found[term.axis] += 1
         current.append(term.name)
         remaining.remove(entry)
@@ -391,7 +383,7 @@ def _probes(
                 if own_rate
                 else None
             )
-            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail, own_rate=own_rate))
+            probes.append(_Probe(term, var, PROBE_VARIABLES[var][1], detail=detail))
     for axis, period in periods:
         a = AXES.index(axis)
         if data.moving[a]:
@@ -715,7 +707,6 @@ def _unexplained(
     gain: float,
     z: float,
     detail: str = "",
-    along_motion: bool = False,
 ) -> Unexplained:
     term, key, words, period = entry.term, entry.key, entry.words, entry.period
     p = model.params
@@ -734,5 +725,4 @@ def _unexplained(
         ),
         period=period,
         term=term,
-        along_motion=along_motion,
     )
