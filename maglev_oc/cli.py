@@ -843,10 +843,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
         words = ", ".join(f"{plain(d.name)} below {limit_size(d)}" for d in seen[:LIMITS_IN_WORDS])
         print(f"  this log could not have shown: {words} (all in the JSON's detection_limits)")
-    from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
-
     for d in diag.detection_limits:
-        if d.reason == AMPLIFIER_LAG_NOT_LOGGED:
+        if d.not_in_log:
             print(f"  {d.name.replace('_', ' ')}: {d.reason}")
     print(f"  wrote {args.json} ({diag.timings['total']:.1f} s)")
     if args.report:

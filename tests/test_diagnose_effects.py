@@ -365,10 +365,19 @@ def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig=None, extra: tu
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
 
 
-def _drawn_pair_finds(tmp_path, seed: int, kinds: tuple[str, str], names: list[str], sized: bool = True):
-    """:func:`_drawn_pair`, asserting the true effect first, no false claim, every size within 30 %
-    (the issue's bound) when ``sized``, and exactly the effects ``names``: (effects, diagnosis)."""
-    effects, d, s = _drawn_pair(tmp_path, seed, kinds)
+def _drawn_pair_finds(
+    tmp_path,
+    seed: int,
+    kinds: tuple[str, ...],
+    names: list[str],
+    sized: bool = True,
+    rig=None,
+    extra: tuple = (),
+):
+    """:func:`_drawn_pair` (on ``rig``, with ``extra``), asserting the true effect first, no false
+    claim, every size within 30 % (the issue's bound) when ``sized``, and exactly the effects
+    ``names``: (effects, diagnosis)."""
+    effects, d, s = _drawn_pair(tmp_path, seed, kinds, rig, extra)
     assert s.true_first and s.no_false_claim and (s.size_right or not sized), (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == sorted(names)
     return effects, d
@@ -429,9 +438,8 @@ def test_the_thrust_form_of_the_offset_does_not_leave_its_attraction_to_another_
     from tests.independent.simulate import Rig
 
     rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
-    _, d, s = _drawn_pair(tmp_path, 21060, ("normal_cogging", "commutation_offset"), rig)
-    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["cogging_vertical_19mm", "commutation_offset"]
+    kinds = ("normal_cogging", "commutation_offset")
+    _, d = _drawn_pair_finds(tmp_path, 21060, kinds, ["cogging_vertical_19mm", "commutation_offset"], rig=rig)
     assert "commutation_offset_horizontal" not in d.selection.last
 
 
@@ -447,10 +455,8 @@ def test_end_effects_beside_a_commutation_offset_lose_a_share_of_the_thrust_both
     # bound; measured 3.2 degrees, and 7.6 % of the thrust at the logged high end, 34 mm).
     from tests.independent.effects import BaseVibration
 
-    kinds = ("end_effect", "commutation_offset")
-    _, d, s = _drawn_pair(tmp_path, 22407, kinds, extra=(BaseVibration.small(),))
-    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["commutation_offset", "end_effects"]
+    kinds, names = ("end_effect", "commutation_offset"), ["commutation_offset", "end_effects"]
+    _, d = _drawn_pair_finds(tmp_path, 22407, kinds, names, extra=(BaseVibration.small(),))
     assert d.unexplained == []
 
 
@@ -466,9 +472,8 @@ def test_the_offsets_thrust_is_not_counted_twice_on_the_thrust_side(tmp_path):
     from tests.independent.simulate import Rig
 
     rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
-    _, d, s = _drawn_pair(tmp_path, 21030, ("end_effect", "commutation_offset"), rig)
-    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == ["commutation_offset", "end_effects"]
+    kinds, names = ("end_effect", "commutation_offset"), ["commutation_offset", "end_effects"]
+    _drawn_pair_finds(tmp_path, 21030, kinds, names, rig=rig)
 
 
 @pytest.mark.slow
@@ -483,13 +488,9 @@ def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_
     from tests.independent.simulate import Rig
 
     rig = Rig(encoder_resolution=20e-6, encoder_noise=4e-6)
-    _, d, s = _drawn_pair(tmp_path, 21707, ("detent_force", "amplifier_dynamics", "tilted_base"), rig)
-    assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
-    assert sorted(e.name for e in d.effects) == [
-        "cogging_horizontal_19mm",
-        "current_amplifier_lag",
-        "horizontal_guides_not_level",
-    ]
+    kinds = ("detent_force", "amplifier_dynamics", "tilted_base")
+    names = ["cogging_horizontal_19mm", "current_amplifier_lag", "horizontal_guides_not_level"]
+    _, d = _drawn_pair_finds(tmp_path, 21707, kinds, names, rig=rig)
     assert all("damping" not in u.description for u in d.unexplained), d.unexplained
 
 

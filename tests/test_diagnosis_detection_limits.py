@@ -173,6 +173,9 @@ def test_every_effect_the_selection_judged_not_shown_and_only_those_gets_a_limit
     }
     limits = {x.name for x in d.detection_limits}
     assert limits == unseen, limits ^ unseen
+    # a log of the commanded currents holds the amplifiers' lag: its limit is worked out, never
+    # said to be out of the log (that is for logs of measured currents)
+    assert not any(x.not_in_log for x in d.detection_limits)
     for x in d.detection_limits:
         assert (not math.isfinite(x.value)) == bool(x.reason), x
         assert math.isnan(x.value) or x.value > 0, x

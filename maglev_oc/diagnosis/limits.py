@@ -63,6 +63,7 @@ import numpy as np
 from scipy import sparse
 
 from maglev_oc.diagnosis.candidate import Candidate
+from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
 from maglev_oc.diagnosis.library import frame_angle
 from maglev_oc.diagnosis.selection import (
     THRUST_SIDE,
@@ -119,6 +120,13 @@ class DetectionLimit:
     binding: str
     reason: str = ""
     side: str = ""
+
+    @property
+    def not_in_log(self) -> bool:
+        """Whether no size of the effect can be in this log at all (the amplifiers' lag before a
+        log's measured currents, :data:`~maglev_oc.diagnosis.currents.AMPLIFIER_LAG_NOT_LOGGED`), as
+        against not shown at any size tried: said where the findings are read first."""
+        return self.reason == AMPLIFIER_LAG_NOT_LOGGED
 
     def to_dict(self) -> dict:
         return {

@@ -18,7 +18,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
@@ -207,7 +206,7 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
             "its currents are the amplifiers' measured output, after their lag: log the commands to see it",
         )
         for d in diag.detection_limits
-        if d.reason == AMPLIFIER_LAG_NOT_LOGGED
+        if d.not_in_log
     ]
     return rows
 
@@ -319,7 +318,7 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
     out += [
         f"{plain(d.name).capitalize()}: {d.reason}."
         for d in diag.detection_limits
-        if d.reason == AMPLIFIER_LAG_NOT_LOGGED  # an effect this log holds none of, said where it is read
+        if d.not_in_log  # an effect this log holds none of, said where it is read
     ]
     if not diag.limits_worked_out:
         out.append(
