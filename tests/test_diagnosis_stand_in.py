@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from maglev_oc.diagnosis.selection import RIVAL_CONSTANT_Z, _partial_inflation, another_motor
@@ -107,6 +107,8 @@ def test_a_stand_in_that_needs_another_motor_is_no_rival():
 @settings(max_examples=60, deadline=None)
 @given(change=st.floats(-0.9, 0.9), sd=st.floats(0.1, 400.0))
 def test_another_motor_is_beyond_the_plausible_change_and_the_candidates_errors(change, sd):
+    # at the bound itself the verdict is the rounding's (change 0.3: C2 / 797 - 1 is 0.30000000000000004)
+    assume(abs(abs(change) - PLAUSIBLE_CHANGE) > 1e-9)
     own = _fit({"C2": 780.0}, {"C2": sd})
     c2 = _REFERENCE["C2"] * (1 + change)
     expected = abs(change) > PLAUSIBLE_CHANGE and abs(c2 - 780.0) > RIVAL_CONSTANT_Z * sd
