@@ -477,6 +477,52 @@ def test_the_offsets_thrust_is_not_counted_twice_on_the_thrust_side(tmp_path):
 
 
 @pytest.mark.slow
+def test_tilted_guides_a_cable_carrier_and_a_commutation_offset_on_fine_encoders(tmp_path):
+    # Three effects on a rig with 1 um encoders (bench/diagnose_rigs.py --rig enc1um --drawn-pairs 12
+    # --per-log 3 --seed 24100, set 24110): guides tilted by -2.5 mrad with 5 um of waviness at
+    # 66 mm, a 10.2 N/m cable carrier and a -2.7 degree commutation offset (i_d about 2 A against
+    # 0.1-0.2 A of i_q). Only the tilt was claimed, C1 refitted at 1.14 (92 % below the model's)
+    # and three residuals unexplained. Three things refused the other two:
+    # - the tilt's gap changed the thrust of the logged i_q alone, not of i_q + d i_d: beside the
+    #   spring and the offset it made the horizontal error 26 % worse (LibraryContext.gap_sensitivity);
+    # - then the waviness's push along the track, which the tilt's one slope leaves out, 5.7 %
+    #   worse while it explained 96.3 % of the vertical error (SelectionSettings.axis_loss_share);
+    # - beside the tilt the spring's line was refused as the first terms of a smooth function of
+    #   the position, whose further orders explained the waviness's 0.026 N: a tenth of what the
+    #   0.8 N line explains (SelectionSettings.max_bow_share).
+    # All three are found, sized within 30 % (the issue's bound).
+    from tests.independent.simulate import Rig
+
+    rig = Rig(encoder_resolution=1e-6, encoder_noise=0.5e-6)
+    kinds = ("guide_misalignment", "cable_carrier", "commutation_offset")
+    names = ["cable_carrier_force", "commutation_offset", "guide_misalignment"]
+    _, d = _drawn_pair_finds(tmp_path, 24110, kinds, names, rig=rig)
+    assert d.constants_final["C1"].value == pytest.approx(14.2, rel=0.3)  # identify's plausible change
+
+
+@pytest.mark.slow
+def test_a_lead_of_filtered_currents_is_not_a_friction_of_the_guides(tmp_path):
+    # A random pair on the rig logging its amplifiers' currents through a 300 Hz sensor filter, 0.53 ms
+    # late (bench/diagnose_rigs.py --rig filtered --drawn-pairs 12 --seed 24200, pair 24206): a normal
+    # cogging force and a 4.4 % thrust ripple. The forces lead the logged currents by 0.64 +- 0.04 ms
+    # on both axes, which the amplifiers' lag refuses (negative); over an oscillation a lead is a
+    # damping, and a vertical guide friction (0.9 % of the held-out error) was claimed on guides that
+    # have none. Beside it the lead was no longer judged on the vertical axis, so it was not reported.
+    # The lead as judged before the friction was chosen is reported, and the friction judged beside
+    # it is dropped.
+    from maglev_oc.diagnosis.unexplained import TIMING
+    from tests.independent.simulate import Rig
+
+    rig = Rig(logged_currents="measured", current_sensor_noise=0.01, current_sensor_bandwidth=300.0)
+    kinds, names = ("normal_cogging", "thrust_ripple"), ["cogging_vertical_19mm", "thrust_ripple"]
+    _, d = _drawn_pair_finds(tmp_path, 24206, kinds, names, rig=rig)
+    (late,) = [u for u in d.unexplained if u.depends_on == TIMING]
+    assert "guide_friction_vertical" in {j.name for j in d.rejected}
+    # the filter's 1 / (2 pi 300 Hz) = 0.53 ms, within the lead's +-0.1 ms (two of its standard errors)
+    assert "lead the logged currents by 0.5" in late.description
+
+
+@pytest.mark.slow
 def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_path):
     # Three effects on a rig with 20 um encoders (bench/diagnose_rigs.py --rig enc20um --drawn-pairs
     # 12 --per-log 3 --seed 21700, set 21707): a 218 Hz amplifier with 0.24 ms of delay (0.96 ms in

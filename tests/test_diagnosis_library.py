@@ -1361,3 +1361,34 @@ def test_the_ripple_beside_a_commutation_offset_ripples_the_current_that_makes_t
     a1 = np.asarray(turned.term.function(x, u, du, q)).ravel()
     assert a0[1] != 0.0 and a0[0] == a1[0] == 0.0
     assert a1[1] / a0[1] == pytest.approx((u[0] + d * u[1]) / u[0], rel=1e-12)
+
+
+def test_the_gap_of_tilted_guides_changes_the_forces_of_the_currents_in_the_magnets_frame(plant):
+    # Beside a commutation offset d the currents act as (i_q + d i_d, i_d - d i_q) (first order), and a
+    # gap error changes the forces they make there: the tilted guides' columns (the gap's sensitivity
+    # times x3, and the normal force along the slope) are the model's with those currents, to the
+    # central difference's rounding. With the logged i_q alone, set 24110 of the independent
+    # generator (a -2.7 degree offset, i_d about 2 A against 0.1-0.2 A of i_q) had the tilt's thrust
+    # change along the travel miss d i_d, and the tilt was refused (tests/test_diagnose_effects.py).
+    import numpy as np
+
+    d, model = -0.047, StageModel()
+    (plain,) = candidate_library(model, plant.data, only=["guide_misalignment"])
+    (turned,) = candidate_library(model, plant.data, only=["guide_misalignment"], commutation_angle=d)
+    x, u, q = [0.018, 0.0, 0.03, 0.0], [0.1, 2.0], [1e-3]
+    framed = [u[0] + d * u[1], u[1] - d * u[0]]
+    p = model.params
+
+    def acc(gap, currents):
+        return np.asarray(model.f([gap, 0.0, x[2], 0.0], currents)).ravel()[[1, 3]]
+
+    h = 1e-7
+    sensitivity = (acc(x[0] + h, framed) - acc(x[0] - h, framed)) / (2 * h)
+    normal = p.mass_vertical * (p.gravity - acc(x[0], framed)[0])
+    along = (p.mass_horizontal * p.gravity - normal) / p.mass_horizontal
+    expected = (sensitivity * x[2] + np.array([0.0, along])) * q[0]
+    got = np.asarray(turned.term.function(x, u, [0.0, 0.0], q)).ravel()
+    assert got == pytest.approx(expected, rel=1e-6)
+    # the thrust's row moves by about d i_d / i_q (-94 %) of its gap-dependent part: not the plain one
+    untouched = np.asarray(plain.term.function(x, u, [0.0, 0.0], q)).ravel()
+    assert abs(got[1] - untouched[1]) > 0.1 * abs(untouched[1] - along * q[0])
