@@ -960,3 +960,27 @@ def test_a_one_sided_fall_at_a_stator_end_is_neither_cogging_nor_waviness(tmp_pa
     assert effects[0].end_position_plus == pytest.approx(0.05)  # the bench's log
     (end,) = [e for e in d.effects if e.name == "end_effects"]
     assert "stay flat near the ends" in end.finding  # the rounded profile
+
+
+@pytest.mark.slow
+def test_the_misalignments_columns_are_built_at_the_slope_it_is_claimed_at(generated, monkeypatch):
+    # The large misalignment alone (guides tilted 3 mrad against the stator): the selection that is
+    # kept was made on columns built at the slope it claims, within the tenth its repeat allows
+    # (pipeline._turned, LibraryContext.at_the_tilted_gap); the first was built at none.
+    from maglev_oc.diagnosis import pipeline
+
+    built = []
+    library = pipeline.candidate_library
+
+    def spy(*args, **kwargs):
+        built.append(kwargs.get("guide_slope", 0.0))
+        return library(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "candidate_library", spy)
+    stem = next(s for s, sc in named_set("single") if sc.name == "guide_misalignment_large")
+    path, _ = generated("single", stem)
+    d = diagnose_path(path)
+    (found,) = [e for e in d.effects if e.name == "guide_misalignment"]
+    slope = found.parameters["slope"].value
+    assert built[0] == 0.0 and built[-1] != 0.0
+    assert built[-1] == pytest.approx(slope, rel=0.1)

@@ -320,9 +320,10 @@ def misalignment_candidate(ctx: LibraryContext) -> Candidate:
 
     def misalignment(x, u, du, q):
         # the gap error changes both accelerations; along the sloping guides the weight of what
-        # moves horizontally pulls down-slope and the normal force towards the stator
-        along = ca.vertcat(0, (weight_h - ctx.normal_force(x, u)) / mh)
-        return (ctx.gap_sensitivity(x, u) * x[2] + along) * q[0]
+        # moves horizontally pulls down-slope and the normal force towards the stator (both at the
+        # gap of the slope found, when one was: LibraryContext.at_the_tilted_gap)
+        change, normal = ctx.at_the_tilted_gap(x, u)
+        return (change + ca.vertcat(0, (weight_h - normal) / mh)) * q[0]
 
     def physical(q, cov, c):
         sd = math.sqrt(max(cov[0, 0], 0))

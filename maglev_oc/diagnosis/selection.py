@@ -2443,19 +2443,23 @@ def _beyond_its_span(
     ):
         return j
     axis, var, k = cand.rival_span
-    further = tuple(_rival_columns(design, probes, axis, var)[k:])
+    columns = _rival_columns(design, probes, axis, var)
+    further = tuple(columns[k:])
     if not further:
         return j
     a = np.array([AXIS_INDEX[axis]])
     r1 = _holdout_residual(design, j.fit, counted)
+    # what its own top order explains beside the lower ones (a spring's slope beside a constant force)
+    r0 = _holdout_residual(
+        design, fit_subset(design, current, covariance=False, extra=tuple(columns[: k - 1])), counted
+    )
     r2 = _holdout_residual(
         design, fit_subset(design, [*current, cand.name], covariance=False, extra=further), counted
     )
     gain, z = holdout_significance(design, r1, r2, a)
     if not (gain >= settings.min_gain and z >= settings.min_z_strong):
         return j
-    # what the further orders explain beside the line, against what the line explains
-    r0 = _holdout_residual(design, fit_subset(design, current, covariance=False), counted)
+    # what the further orders explain beside the line, against what its own order explains
     ss0, ss1, ss2 = (float(np.sum(r[a] ** 2)) for r in (r0, r1, r2))
     if ss1 - ss2 < settings.max_bow_share * (ss0 - ss1):
         return j
