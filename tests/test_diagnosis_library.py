@@ -1392,29 +1392,3 @@ def test_the_gap_of_tilted_guides_changes_the_forces_of_the_currents_in_the_magn
     # the thrust's row moves by about d i_d / i_q (-94 %) of its gap-dependent part: not the plain one
     untouched = np.asarray(plain.term.function(x, u, [0.0, 0.0], q)).ravel()
     assert abs(got[1] - untouched[1]) > 0.1 * abs(untouched[1] - along * q[0])
-
-
-def test_the_tilted_guides_columns_are_exact_at_the_slope_found(plant):
-    # Built at the slope s0 the misalignment was found at (LibraryContext.at_the_tilted_gap), its
-    # columns times s0 are the model's accelerations at the gap x1 + s0 x3 less those at x1, and the
-    # normal force along the guides the one at that gap: exact, to rounding, where the first-order
-    # columns are off by the attraction's curvature (a few per cent of the change at 3.5 mrad).
-    import numpy as np
-
-    s0, model = -0.0035, StageModel()
-    (first,) = candidate_library(model, plant.data, only=["guide_misalignment"])
-    (exact,) = candidate_library(model, plant.data, only=["guide_misalignment"], guide_slope=s0)
-    x, u = [0.018, 0.0, 0.04, 0.0], [0.3, 2.0]
-    p = model.params
-
-    def acc(gap):
-        return np.asarray(model.f([gap, 0.0, x[2], 0.0], u)).ravel()[[1, 3]]
-
-    true_gap = x[0] + s0 * x[2]
-    normal = p.mass_vertical * (p.gravity - acc(true_gap)[0])
-    along = s0 * (p.mass_horizontal * p.gravity - normal) / p.mass_horizontal
-    expected = acc(true_gap) - acc(x[0]) + np.array([0.0, along])
-    got = np.asarray(exact.term.function(x, u, [0.0, 0.0], [s0])).ravel()
-    assert got == pytest.approx(expected, rel=1e-9)
-    tangent = np.asarray(first.term.function(x, u, [0.0, 0.0], [s0])).ravel()
-    assert abs(tangent[0] - expected[0]) > 0.01 * abs(expected[0])  # the curvature the tangent misses

@@ -223,21 +223,12 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     widths = []
     asked = []
 
-    slopes = []
-
-    def spy(fitted, data, held=None, *, end_profile, only=None, commutation_angle=0.0, guide_slope=0.0):
+    def spy(fitted, data, held=None, *, end_profile, only=None, commutation_angle=0.0):
         built_for.append(fitted.constants.C1)
         widths.append(end_profile)
         asked.append(only)
-        slopes.append(guide_slope)
         return candidate_library(
-            fitted,
-            data,
-            held,
-            end_profile=end_profile,
-            only=only,
-            commutation_angle=commutation_angle,
-            guide_slope=guide_slope,
+            fitted, data, held, end_profile=end_profile, only=only, commutation_angle=commutation_angle
         )
 
     monkeypatch.setattr(refit, "candidate_library", spy)
@@ -258,7 +249,3 @@ def test_converged_references_rebuilds_the_library_from_each_refit(model, monkey
     scanned = EndProfile(0.02, "rounded")
     refit.converged_references(*args, end_profile=scanned)
     assert widths and set(widths) == {scanned}
-    # and the guides' slope the misalignment was found at (LibraryContext.at_the_tilted_gap)
-    slopes.clear()
-    refit.converged_references(*args, guide_slope=-2e-3)
-    assert slopes and set(slopes) == {-2e-3}

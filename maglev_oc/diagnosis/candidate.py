@@ -126,6 +126,11 @@ class Candidate:
     position): the equal-complexity comparison is then a tie by construction, so its shape is
     judged by what is left: the rival's further orders must not explain significantly more of the
     held-out data beside it."""
+    simpler: str | None = None
+    """The candidate with fewer parameters that this one becomes with its extra ones at zero (a
+    spring along the track at zero stiffness is a constant force, a tilt's): once everything else is
+    chosen, it takes this one's place where it explains as much beside the rest, within the
+    parsimony penalty of the parameters it lacks (the selection's backward pass)."""
     physical_sign: int = 0
     """+1 when only a positive size is physical (a friction's Coulomb force, a lag, a loss of force):
     the detection limit (:mod:`~maglev_oc.diagnosis.limits`) is then sought in that direction
@@ -296,9 +301,6 @@ class LibraryContext:
     commutation_angle: float = 0.0
     """[rad] The commutation offset chosen, as the thrust sees it (its ``angle_horizontal``): the
     current that makes thrust, which the thrust's ripple ripples, is i_q + d i_d (0: none chosen)."""
-    guide_slope: float = 0.0
-    """[rad] The slope of the guides against the stator chosen (the misalignment's ``slope``), at
-    which the misalignment's columns are exact (:meth:`at_the_tilted_gap`; 0: none chosen)."""
     gap_range: tuple[float, float] = field(init=False)
     position_range: tuple[float, float] = field(init=False)
     gap_median: float = field(init=False)
@@ -368,30 +370,6 @@ class LibraryContext:
         xs = ca.SX.sym("xs", 4)
         acc = self.model.f(xs, self.magnets_frame(u))[[1, 3]]
         return ca.substitute(ca.jacobian(acc, xs[0]), xs, x)
-
-    def at_the_tilted_gap(self, x, u):
-        """(the change of (x2', x4') per unit slope of the guides, the magnetic normal force [N]) at
-        the gap the guides' slope s0 (:attr:`guide_slope`) makes, x1 + s0 x3: the secant of the
-        model's accelerations from the read gap to it, and the normal force there; at s0 = 0 the
-        gap sensitivity (:meth:`gap_sensitivity`) times x3 and the normal force at the read gap.
-
-        The columns are then exact at the slope found, not only to first order in it. Along the
-        sloping guides the normal force pushes the platform, and the force is the one at the true
-        gap: at the read gap it is off by M_v (dx2'/dx1) s0 x3, which grows along the track like a
-        spring's (s0^2 M_v |dx2'/dx1|, 0.02-0.06 N/m for 2-3.5 mrad); the gap's own change is
-        curved (the attraction falls about exponentially with the gap). What it is worth on fine
-        encoders: pair 24508 of the independent generator on 1 um encoders (guides tilted by
-        3.5 mrad, a base tilted the other way), the two fitted together at the true slope left
-        0.0031 and 0.00305 m/s^2 RMS of held-out error (vertical, horizontal) with the columns
-        exact there, 0.0065 and 0.0032 with the first-order ones. The selection repeats when the
-        slope moves by more than a tenth (``pipeline._turned``)."""
-        s0 = self.guide_slope
-        if not s0:
-            return self.gap_sensitivity(x, u) * x[2], self.normal_force(x, u)
-        shifted = ca.vertcat(x[0] + s0 * x[2], x[1], x[2], x[3])
-        framed = self.magnets_frame(u)
-        change = (self.model.f(shifted, framed)[[1, 3]] - self.model.f(x, framed)[[1, 3]]) / s0
-        return change, self.normal_force(shifted, u)
 
     def force_terms(self, x, u):
         """(thrust, currents' normal force, magnets' attraction): each force's part of the model's

@@ -89,7 +89,6 @@ def candidate_library(
     end_profile: EndProfile = END_PROFILE,
     only: Collection[str] | None = None,
     commutation_angle: float = 0.0,
-    guide_slope: float = 0.0,
 ) -> list[Candidate]:
     """Every candidate for ``data``, with magnetic references from ``model`` (the base fit).
 
@@ -105,10 +104,8 @@ def candidate_library(
     needs the chosen few, and the whole library took 1.1-1.9 s of a diagnosis's refit rounds).
     ``commutation_angle``: the chosen commutation offset [rad], beside which the thrust's ripple
     ripples i_q + d i_d (:func:`~maglev_oc.diagnosis.currents.ripple_candidate`).
-    ``guide_slope``: the chosen misalignment's slope [rad], at which its columns are exact
-    (:meth:`~maglev_oc.diagnosis.candidate.LibraryContext.at_the_tilted_gap`).
     """
-    ctx = LibraryContext(model, data, commutation_angle, guide_slope)
+    ctx = LibraryContext(model, data, commutation_angle)
     if only is None:
         return [_framed(_held(c, held), commutation_angle) for c in _candidates(ctx, end_profile)]
     wanted = set(only)

@@ -662,15 +662,13 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
     repeated with the thrust's ripple of the current that makes the thrust, i_q + d i_d
     (:func:`_ripple_beside_commutation`), in the same way."""
     held: dict[str, float] = {}
-    end_profile, scanned, angle, slope = END_PROFILE, False, 0.0, 0.0
+    end_profile, scanned, angle = END_PROFILE, False, 0.0
     # a line-like shape is judged by what is left beside it only in the kept selection, once the
     # residual has been searched for guide waviness (SelectionSettings.judge_lines)
     early = dataclasses.replace(session.settings, judge_lines=False)
     relaxed = dataclasses.replace(early, max_axis_loss=math.inf)
     for attempt in range(3):
-        full = candidate_library(
-            fitted, session.data, held, end_profile=end_profile, commutation_angle=angle, guide_slope=slope
-        )
+        full = candidate_library(fitted, session.data, held, end_profile=end_profile, commutation_angle=angle)
         effects = list(dict.fromkeys(c.reported_name for c in full))
         unknown = sorted(set(exclude) - set(effects))
         if unknown:
@@ -695,8 +693,6 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
         profile = found or end_profile
         turned = _ripple_beside_commutation(sel)
         reangled = _turned(turned, angle)
-        tilted = _guide_slope(sel)
-        resloped = _turned(tilted, slope)
         converged = converged_references(
             session.model,
             fitted,
@@ -707,20 +703,19 @@ def _select(session: _Session, fitted: StageModel, exclude: tuple[str, ...]):
             session.weights,
             held=shares,
             # the first round's library, built above
-            library=full if shares == held and profile == end_profile and not reangled | resloped else None,
+            library=full if shares == held and profile == end_profile and not reangled else None,
             end_profile=profile,
             commutation_angle=turned,
-            guide_slope=tilted,
         )
         rewidthed = profile != end_profile
-        end_profile, angle, slope = profile, turned, tilted
-        same = shares == held and rebalanced is None and not rewidthed and not reangled and not resloped
+        end_profile, angle = profile, turned
+        same = shares == held and rebalanced is None and not rewidthed and not reangled
         if moved(converged, fitted) <= REFIT_TOLERANCE and same:
             chosen = [st.judgements[st.chosen] for st in sel.steps]
             if attempt == 0 and any(axis_loss_breaks(j, session.settings) for j in chosen):
                 sel = session.select(design, library, fitted, early)
             break
-        if attempt == 2 or (attempt > 0 and not (rewidthed or reangled or resloped)):
+        if attempt == 2 or (attempt > 0 and not (rewidthed or reangled)):
             # once repeated, a selection is kept (but for the end effects' first width), with the
             # references its design was built about: the steps after it pair that design with
             # this model (the thrust side, the limits' felt currents)
@@ -828,20 +823,8 @@ a tenth of the ripple's d i_d term, a few thousandths of the ripple itself."""
 
 def _turned(angle: float, before: float) -> bool:
     """Whether the ripple's thrust current changes from ``before`` to ``angle`` [rad] by more than
-    :data:`ANGLE_TOLERANCE` of the offset; the same for the guides' slope
-    (:func:`_guide_slope`): the misalignment's columns, exact at the slope they were built at, are
-    off at another by that share of their second-order part, a few per cent of the first."""
+    :data:`ANGLE_TOLERANCE` of the offset."""
     return abs(angle - before) > ANGLE_TOLERANCE * max(abs(angle), abs(before))
-
-
-def _guide_slope(sel: Selection) -> float:
-    """[rad] The guides' slope against the stator when ``sel`` chose the misalignment, at which its
-    columns are built exact (:meth:`~maglev_oc.diagnosis.candidate.LibraryContext.at_the_tilted_gap`);
-    0 otherwise."""
-    if "guide_misalignment" not in sel.selected:
-        return 0.0
-    slope = sel.last["guide_misalignment"].physical.get("slope")
-    return float(slope.value) if slope is not None and math.isfinite(slope.value) else 0.0
 
 
 def _waviness_periods(

@@ -85,7 +85,6 @@ def converged_references(
     library: Sequence[Candidate] | None = None,
     end_profile: EndProfile = END_PROFILE,
     commutation_angle: float = 0.0,
-    guide_slope: float = 0.0,
 ) -> StageModel:
     """The constants of the joint fit of the base model and the ``chosen`` effects, iterated until
     the effects' magnetic references (which scale some of their columns) agree with them.
@@ -93,22 +92,16 @@ def converged_references(
     Terms such as the commutation offset are bilinear in a constant and their own parameter;
     their columns are linearized at the references, so each joint fit is a Gauss-Newton step,
     repeated here (a few tenths of a second each: only the chosen effects' columns) until the
-    constants move by less than ``tolerance``. ``held``, ``end_profile``, ``commutation_angle``,
-    ``guide_slope``: as :func:`candidate_library` takes them; ``library``: ``candidate_library(fitted,
-    data, held, end_profile=end_profile, commutation_angle=commutation_angle, guide_slope=guide_slope)``
-    when the caller has it (the first round's)."""
+    constants move by less than ``tolerance``. ``held``, ``end_profile``, ``commutation_angle``: as
+    :func:`candidate_library` takes them; ``library``: ``candidate_library(fitted, data, held,
+    end_profile=end_profile, commutation_angle=commutation_angle)`` when the caller has it (the first
+    round's)."""
     for k in range(max_rounds):
         current = (
             library
             if k == 0 and library is not None
             else candidate_library(
-                fitted,
-                data,
-                held,
-                end_profile=end_profile,
-                only=chosen,
-                commutation_angle=commutation_angle,
-                guide_slope=guide_slope,
+                fitted, data, held, end_profile=end_profile, only=chosen, commutation_angle=commutation_angle
             )
         )
         by_name = {c.name: c for c in current}

@@ -2070,7 +2070,25 @@ def select(
                 others = [c for c in current if c != name]
                 j = judged_beside(name, others)
                 if j.verdict == "passes":
-                    continue
+                    simpler = _simpler_in_place(j, by_name, others, judged_beside, settings)
+                    if simpler is None:
+                        continue
+                    last[name] = dataclasses.replace(
+                        j,
+                        verdict="not specific",
+                        reason=(
+                            f"beside the rest, {simpler.name.replace('_', ' ')} explains as much of the "
+                            f"held-out error ({percent(simpler.own_pooled_gain)} against "
+                            f"{percent(j.own_pooled_gain)}) with fewer parameters"
+                        ),
+                    )
+                    current = [simpler.name if c == name else c for c in current]
+                    last[simpler.name] = _accepted(simpler)
+                    steps = _in_place_of(steps, name, last[simpler.name])
+                    effect = by_name[simpler.name].reported_name
+                    pool = [n for n in pool if by_name[n].reported_name != effect]
+                    dropped = rounds_dropped = True
+                    break
                 # the same effect with a parameter at its bound, where the free fit now lies beyond it
                 # (as in the forward steps): swapped in when it passes
                 stand_in = next(
@@ -2090,16 +2108,7 @@ def select(
                 else:
                     current = [stand_in.name if c == name else c for c in current]
                     last[stand_in.name] = _accepted(stand_in)
-                    steps = [
-                        dataclasses.replace(
-                            st,
-                            chosen=stand_in.name,
-                            judgements={**st.judgements, stand_in.name: last[stand_in.name]},
-                        )
-                        if st.chosen == name
-                        else st
-                        for st in steps
-                    ]
+                    steps = _in_place_of(steps, name, last[stand_in.name])
                 dropped = rounds_dropped = True
                 break
 
@@ -2108,6 +2117,38 @@ def select(
         cur_fit = fit_subset(design, current)
 
     return Selection(steps, base, fit_subset(design, current), last)
+
+
+def _in_place_of(steps: list[Step], name: str, j: Judgement) -> list[Step]:
+    """``steps`` with the step that chose ``name`` choosing ``j``'s candidate instead."""
+
+    def swapped(st: Step) -> Step:
+        return dataclasses.replace(st, chosen=j.name, judgements={**st.judgements, j.name: j})
+
+    return [swapped(st) if st.chosen == name else st for st in steps]
+
+
+def _simpler_in_place(
+    j: Judgement,
+    by_name: Mapping[str, Candidate],
+    others: list[str],
+    judged_beside: Callable[[str, list[str]], Judgement],
+    settings: SelectionSettings,
+) -> Judgement | None:
+    """The judgement of ``j``'s simpler form (``Candidate.simpler``) beside ``others`` when it passes
+    and explains as much of the held-out error on its axes (pooled), within the parsimony penalty
+    of the parameters it lacks; None otherwise (no simpler form, already chosen, or it explains
+    less). ``j``: the chosen candidate as the backward pass judged it beside the same others."""
+    name = by_name[j.name].simpler
+    if name is None or name not in by_name or name in others:
+        return None
+    extra = _reported(by_name[j.name]) - _reported(by_name[name])
+    simpler = judged_beside(name, others)
+    if simpler.verdict != "passes":
+        return None
+    if simpler.own_pooled_gain < j.own_pooled_gain - settings.parameter_penalty * extra:
+        return None
+    return simpler
 
 
 def _pairs_restoring_thrust(
@@ -2428,14 +2469,16 @@ def _beyond_its_span(
     0.9-1.3 % more at z 1.9-2.4 beside a spring of 2-3 % gain, both of a guide waviness's force).
 
     Nor is a line refused when the further orders explain less than ``max_bow_share`` (a quarter)
-    of the held-out error the line explains on its axis: the line is then most of the dependence,
-    and the bow beside it is left to the unexplained residual. Over one period or more a sine's
-    further orders explain at least 0.63 times what its line does, whatever its phase (2.3 times
-    at the median; at 1.2 periods 3.7), so a waviness's force is still refused as a spring; a
-    spring with a waviness beside it is not. Set 24110 above: a 10 N/m cable carrier (0.8 N over
-    the travel) explained 86 % of the horizontal error beside the tilted guides, the further orders
-    59.5 % of what was left (the 0.026 N of the waviness): 0.10 of the line's; refused, neither
-    the spring nor the commutation offset proposed with it was claimed."""
+    of the held-out error that its own order explains on its axis beyond the lower ones (a spring's
+    slope beyond a constant force, which a tilt's constant would take): the line is then most of
+    the dependence, and the bow beside it is left to the unexplained residual. Over one period or
+    more a sine's further orders explain at least 0.63 times what its line does, whatever its phase
+    (2.3 times at the median; at 1.2 periods 3.7), so a waviness's force is still refused as a
+    spring; a spring with a waviness beside it is not. Set 24110 above: beside the tilted guides
+    and the offset a 10 N/m cable carrier's slope (0.8 N over the travel) took the held-out sum of
+    squares of the horizontal axis from 137 to 0.36 beyond a constant force, the further orders
+    (the waviness's 0.026 N) from 0.36 to 0.15: 0.0016 of the line's; refused, neither the spring
+    nor the commutation offset proposed with it was claimed."""
     if (
         j.verdict != "passes"
         or getattr(cand, "rival_span", None) is None
