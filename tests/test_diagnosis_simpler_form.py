@@ -1,0 +1,50 @@
+"""A chosen effect gives way to its simpler form (``Candidate.simpler``) when, beside the rest of
+the selection, that form explains as much of the held-out error within the parsimony penalty of the
+parameters it lacks (the selection's backward pass, ``selection._simpler_in_place``)."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+
+from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _simpler_in_place
+from tests._diagnosis_cases import _judgement as injected_judgement
+
+
+def _named(j: Judgement, name: str, gain: float, verdict: str = "passes") -> Judgement:
+    return dataclasses.replace(j, name=name, verdict=verdict, gain_axes=np.array([np.nan, gain]))
+
+
+def test_a_spring_gives_way_to_a_tilt_that_explains_as_much_beside_the_rest():
+    # A spring along the track at zero stiffness is the tilt's constant force (guides.cable_candidate):
+    # beside the rest of a selection the tilt takes its place when it explains as much of the held-out
+    # error within the parsimony penalty of the one parameter it lacks (set 24602: 0.06 N/m of spring
+    # that explained nothing more than the constant), and not when the spring explains more.
+    s = SelectionSettings()
+    term = lambda *names: SimpleNamespace(parameter_names=names)  # noqa: E731
+    by_name = {
+        "cable_carrier_force": SimpleNamespace(
+            simpler="horizontal_guides_not_level", term=term("stiffness", "force_at_zero"), nuisance=()
+        ),
+        "horizontal_guides_not_level": SimpleNamespace(simpler=None, term=term("force"), nuisance=()),
+    }
+    base = injected_judgement(z=5.0, wald=100.0)
+    spring = _named(base, "cable_carrier_force", 0.50)
+
+    def beside(gain, verdict="passes"):
+        return lambda name, others: _named(base, name, gain, verdict)
+
+    others = ["base", "guide_misalignment"]
+    assert _simpler_in_place(spring, by_name, others, beside(0.50 - 0.9 * s.parameter_penalty), s).name == (
+        "horizontal_guides_not_level"
+    )
+    assert _simpler_in_place(spring, by_name, others, beside(0.50 - 1.1 * s.parameter_penalty), s) is None
+    # one that does not pass beside the rest, or is chosen already, does not take the place
+    assert _simpler_in_place(spring, by_name, others, beside(0.50, "not significant"), s) is None
+    chosen = [*others, "horizontal_guides_not_level"]
+    assert _simpler_in_place(spring, by_name, chosen, beside(0.50), s) is None
+    # a candidate without a simpler form is left alone
+    tilt = _named(base, "horizontal_guides_not_level", 0.50)
+    assert _simpler_in_place(tilt, by_name, others, beside(0.60), s) is None
