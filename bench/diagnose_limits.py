@@ -55,7 +55,6 @@ def main() -> None:
     from tests.independent.core import with_generic_libm
 
     with_generic_libm()  # the logs the test suite generates, whatever the CPU
-    from bench.diagnose_rigs import RIGS
     from maglev_oc.data.reading import read_log
     from maglev_oc.diagnosis.pipeline import diagnose
     from tests.independent.effects import (
@@ -66,6 +65,7 @@ def main() -> None:
         TiltedBase,
     )
     from tests.independent.logio import write_log
+    from tests.independent.rigs import RIGS
     from tests.independent.simulate import Rig, Scenario, SimulationError, simulate
 
     rig = Rig(**RIGS[args.rig])

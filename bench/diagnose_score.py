@@ -40,8 +40,7 @@ def main() -> None:
     from tests.independent.scoring import score
 
     if args.rig != "default":
-        sys.path.insert(0, str(ROOT / "bench"))
-        from diagnose_rigs import RIGS
+        from tests.independent.rigs import RIGS
 
         if args.rig not in RIGS:
             parser.error(f"--rig: no rig {args.rig!r}; the rigs are {', '.join(RIGS)}")

@@ -346,20 +346,21 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
-def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig=None, extra: tuple = ()):
+def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig: str = "default", extra: tuple = ()):
     """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these kinds (each
-    effect drawn from its own generator, seeded by the log's seed and the kind's index), on ``rig``
-    (default the generator's own, as ``--rig``), with the effects ``extra`` added after them (as
-    ``--shake`` adds the base's vibration), diagnosed with the defaults and scored: (effects,
-    diagnosis, score)."""
+    effect drawn from its own generator, seeded by the log's seed and the kind's index), on the rig
+    named ``rig`` (``tests.independent.rigs.RIGS``, as ``--rig``), with the effects ``extra`` added
+    after them (as ``--shake`` adds the base's vibration), diagnosed with the defaults and scored:
+    (effects, diagnosis, score)."""
     import numpy as np
 
     from tests.independent import write_log
     from tests.independent.draws import KINDS, draw
+    from tests.independent.rigs import RIGS
     from tests.independent.simulate import Rig, Scenario, simulate
 
     effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
-    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=rig or Rig())
+    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=Rig(**RIGS[rig]))
     path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
@@ -371,12 +372,12 @@ def _drawn_pair_finds(
     kinds: tuple[str, ...],
     names: list[str],
     sized: bool = True,
-    rig=None,
+    rig: str = "default",
     extra: tuple = (),
 ):
-    """:func:`_drawn_pair` (on ``rig``, with ``extra``), asserting the true effect first, no false
-    claim, every size within 30 % (the issue's bound) when ``sized``, and exactly the effects
-    ``names``: (effects, diagnosis)."""
+    """:func:`_drawn_pair` (on the rig named ``rig``, with ``extra``), asserting the true effect
+    first, no false claim, every size within 30 % (the issue's bound) when ``sized``, and exactly
+    the effects ``names``: (effects, diagnosis)."""
     effects, d, s = _drawn_pair(tmp_path, seed, kinds, rig, extra)
     assert s.true_first and s.no_false_claim and (s.size_right or not sized), (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == sorted(names)
@@ -396,9 +397,7 @@ def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_er
     # Since the selection tries two effects over its step's best (selection._pair_over_best), the
     # spring and the slope are chosen together at the first step, and beside them the offset
     # explains nothing that passes: not claimed, and no longer listed as refused.
-    from tests.independent.simulate import Rig
-
-    _, d, s = _drawn_pair(tmp_path, 15307, ("guide_misalignment", "cable_carrier"), Rig(controller="pid"))
+    _, d, s = _drawn_pair(tmp_path, 15307, ("guide_misalignment", "cable_carrier"), "pid")
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
     offset = d.selection.last["current_sensor_offset"]
@@ -415,10 +414,7 @@ def test_a_commutation_offset_that_only_the_thrust_shows_is_found_from_the_thrus
     # vertical coefficient, weighed by i_q alone, made the vertical held-out error 2.3 % worse: refused
     # as not specific, nothing claimed, C1 left at 0.56 (true 14.7) with its warning, the horizontal
     # residual reported unexplained. Its form fitted on the thrust alone is the offset found there.
-    from tests.independent.simulate import Rig
-
-    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
-    effects, d, s = _drawn_pair(tmp_path, 20511, ("end_effect", "commutation_offset"), rig)
+    effects, d, s = _drawn_pair(tmp_path, 20511, ("end_effect", "commutation_offset"), "measured")
     assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["commutation_offset", "end_effects"]
     offset = next(e for e in d.effects if e.name == "commutation_offset").parameters["angle"]
@@ -435,11 +431,8 @@ def test_the_thrust_form_of_the_offset_does_not_leave_its_attraction_to_another_
     # form of the offset chosen whenever the full form was not significantly better (a first form of
     # the change above), the attraction that i_q makes was left out and a guide misalignment took it:
     # a false claim. The thrust form stands in only where the full form is not specific.
-    from tests.independent.simulate import Rig
-
-    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
-    kinds = ("normal_cogging", "commutation_offset")
-    _, d = _drawn_pair_finds(tmp_path, 21060, kinds, ["cogging_vertical_19mm", "commutation_offset"], rig=rig)
+    kinds, names = ("normal_cogging", "commutation_offset"), ["cogging_vertical_19mm", "commutation_offset"]
+    _, d = _drawn_pair_finds(tmp_path, 21060, kinds, names, rig="measured")
     assert "commutation_offset_horizontal" not in d.selection.last
 
 
@@ -469,11 +462,8 @@ def test_the_offsets_thrust_is_not_counted_twice_on_the_thrust_side(tmp_path):
     # currents of the thrust side left in the magnets' frame, the offset's thrust was counted twice
     # there and a 0.6 % thrust ripple the log does not have was claimed (z 5.1 on the thrust
     # current). The felt currents are turned into the amplifiers' frame (felt_currents' angle).
-    from tests.independent.simulate import Rig
-
-    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
     kinds, names = ("end_effect", "commutation_offset"), ["commutation_offset", "end_effects"]
-    _drawn_pair_finds(tmp_path, 21030, kinds, names, rig=rig)
+    _drawn_pair_finds(tmp_path, 21030, kinds, names, rig="measured")
 
 
 @pytest.mark.slow
@@ -491,12 +481,9 @@ def test_tilted_guides_a_cable_carrier_and_a_commutation_offset_on_fine_encoders
     #   the position, whose further orders explained the waviness's 0.026 N: 0.2 % of what the
     #   0.8 N line explains (SelectionSettings.max_bow_share).
     # All three are found, sized within 30 % (the issue's bound).
-    from tests.independent.simulate import Rig
-
-    rig = Rig(encoder_resolution=1e-6, encoder_noise=0.5e-6)
     kinds = ("guide_misalignment", "cable_carrier", "commutation_offset")
     names = ["cable_carrier_force", "commutation_offset", "guide_misalignment"]
-    _, d = _drawn_pair_finds(tmp_path, 24110, kinds, names, rig=rig)
+    _, d = _drawn_pair_finds(tmp_path, 24110, kinds, names, rig="enc1um")
     assert d.constants_final["C1"].value == pytest.approx(14.2, rel=0.3)  # identify's plausible change
 
 
@@ -510,12 +497,9 @@ def test_a_spring_that_explains_no_more_than_a_tilt_gives_way_to_it(tmp_path):
     # parsimony penalty is 0.2 % a parameter); beside the waviness its spring explained nothing more
     # than the tilt's constant force, and a cable carrier the rig does not have was claimed in its
     # place. The tilt, its simpler form (Candidate.simpler), now takes its place.
-    from tests.independent.simulate import Rig
-
-    rig = Rig(control_rate=10000.0, log_every=10)
     kinds = ("guide_misalignment", "thrust_ripple", "tilted_base")
     names = ["guide_misalignment", "horizontal_guides_not_level", "thrust_ripple"]
-    _, d = _drawn_pair_finds(tmp_path, 24602, kinds, names, rig=rig)
+    _, d = _drawn_pair_finds(tmp_path, 24602, kinds, names, rig="ctrl10k")
     assert "fewer parameters" in d.selection.last["cable_carrier_force"].reason
 
 
@@ -530,11 +514,9 @@ def test_a_lead_of_filtered_currents_is_not_a_friction_of_the_guides(tmp_path):
     # The lead as judged before the friction was chosen is reported, and the friction judged beside
     # it is dropped.
     from maglev_oc.diagnosis.unexplained import TIMING
-    from tests.independent.simulate import Rig
 
-    rig = Rig(logged_currents="measured", current_sensor_noise=0.01, current_sensor_bandwidth=300.0)
     kinds, names = ("normal_cogging", "thrust_ripple"), ["cogging_vertical_19mm", "thrust_ripple"]
-    _, d = _drawn_pair_finds(tmp_path, 24206, kinds, names, rig=rig)
+    _, d = _drawn_pair_finds(tmp_path, 24206, kinds, names, rig="filtered")
     (late,) = [u for u in d.unexplained if u.depends_on == TIMING]
     assert "guide_friction_vertical" in {j.name for j in d.rejected}
     # the filter's 1 / (2 pi 300 Hz) = 0.53 ms, within the lead's +-0.1 ms (two of its standard errors)
@@ -550,12 +532,9 @@ def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_
     # of the gap rate, which in closed loop is the lag's own column more flexibly shaped; the
     # residual was reported unexplained. The velocities a delay acts on are its own
     # (unexplained.delayed_rates); the residual left beside it is read against its fit, not as damping.
-    from tests.independent.simulate import Rig
-
-    rig = Rig(encoder_resolution=20e-6, encoder_noise=4e-6)
     kinds = ("detent_force", "amplifier_dynamics", "tilted_base")
     names = ["cogging_horizontal_19mm", "current_amplifier_lag", "horizontal_guides_not_level"]
-    _, d = _drawn_pair_finds(tmp_path, 21707, kinds, names, rig=rig)
+    _, d = _drawn_pair_finds(tmp_path, 21707, kinds, names, rig="enc20um")
     assert all("damping" not in u.description for u in d.unexplained), d.unexplained
 
 
@@ -572,10 +551,7 @@ def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offs
     # (selection._pair_over_best); the waviness is then found beside the spring
     # (pipeline._waviness_beyond_travel). Both sized within 30 % (the issue's bound; measured
     # 11 N/m, 4.8 mrad, and 5.6 um at 73.7 mm for the waviness).
-    from tests.independent.simulate import Rig
-
-    rig = Rig(logged_currents="measured", current_sensor_noise=0.01)
-    effects, d, s = _drawn_pair(tmp_path, 18310, ("guide_misalignment", "cable_carrier"), rig)
+    effects, d, s = _drawn_pair(tmp_path, 18310, ("guide_misalignment", "cable_carrier"), "measured")
     assert effects[1].stiffness == pytest.approx(11.277, abs=1e-3)  # the bench's log
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["cable_carrier_force", "guide_misalignment"]
@@ -601,11 +577,7 @@ def test_a_pair_standing_in_for_a_misalignment_and_its_next_effect_is_not_chosen
     # claimed the tilt, a false claim, and missed the slope. Held against the best with another
     # effect (selection._pair_over_best), the slope and the end effects explain more: both true
     # effects, nothing else.
-    from tests.independent.simulate import Rig
-
-    _, d, s = _drawn_pair(
-        tmp_path, 18400, ("end_effect", "guide_misalignment"), Rig(observer_bandwidth=2800.0)
-    )
+    _, d, s = _drawn_pair(tmp_path, 18400, ("end_effect", "guide_misalignment"), "obs2800")
     assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["end_effects", "guide_misalignment"]
 
@@ -620,11 +592,7 @@ def test_a_ripple_beside_a_commutation_offset_ripples_the_thrust_of_the_levitati
     # detent at the slot pitch (a false claim), the pole pitch's ripple sized at 1.2 %. The selection
     # repeated with the ripple of i_q + d i_d (pipeline._ripple_beside_commutation): the two true
     # effects and nothing else, the ripples at 3.4 % and 1.7 % (within 30 %, the issue's bound).
-    from tests.independent.simulate import Rig
-
-    effects, d, s = _drawn_pair(
-        tmp_path, 18502, ("thrust_ripple", "commutation_offset"), Rig(controller="pid")
-    )
+    effects, d, s = _drawn_pair(tmp_path, 18502, ("thrust_ripple", "commutation_offset"), "pid")
     assert effects[0].ratio == pytest.approx(0.03378, abs=1e-5)  # the bench's log
     assert s.true_first and s.no_false_claim and s.size_right, (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == ["commutation_offset", "thrust_ripple"]

@@ -333,11 +333,7 @@ def test_on_the_noisy_rig_the_currents_error_is_calibrated_without_the_stopper(t
     # five of its standard errors; left out of both, C2, C3 within 1 % and C4 within 10 % (the
     # issue's bounds), and C1 within three standard errors (0.8 % each: its noisy currents' scatter
     # from seed to seed; found +1.0 %)
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    from diagnose_rigs import RIGS
+    from tests.independent.rigs import RIGS
 
     rig = Rig(**RIGS["obs2800"], stopper_gap=STOPPER)
     run = simulate(Scenario(name="land", seed=7602, reference=LIFT_AND_LAND, rig=rig))

@@ -27,6 +27,9 @@ simulate
     :func:`simulate` runs one scenario and returns the log and the truth.
 sets
     Named sets of scenarios (``clean``, ``eleven``, ``single``, ``pairs``).
+rigs
+    Named rig settings (faster observers, measured or filtered currents, other encoders and loop
+    rates, PID loops) that ``bench/diagnose_rigs.py --rig`` and the tests reproducing its logs share.
 generate
     Command line: ``python -m tests.independent.generate --set NAME --out DIR``.
 
