@@ -346,12 +346,12 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
-def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig: str = "default", extra: tuple = ()):
+def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig="default", extra: tuple = ()):
     """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these kinds (each
-    effect drawn from its own generator, seeded by the log's seed and the kind's index), on the rig
-    named ``rig`` (``tests.independent.rigs.RIGS``, as ``--rig``), with the effects ``extra`` added
-    after them (as ``--shake`` adds the base's vibration), diagnosed with the defaults and scored:
-    (effects, diagnosis, score)."""
+    effect drawn from its own generator, seeded by the log's seed and the kind's index), on ``rig``
+    (a ``Rig``, or the name of one of ``tests.independent.rigs.RIGS``, as ``--rig`` takes it), with
+    the effects ``extra`` added after them (as ``--shake`` adds the base's vibration), diagnosed with
+    the defaults and scored: (effects, diagnosis, score)."""
     import numpy as np
 
     from tests.independent import write_log
@@ -360,7 +360,8 @@ def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig: str = "default
     from tests.independent.simulate import Rig, Scenario, simulate
 
     effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
-    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=Rig(**RIGS[rig]))
+    on = rig if isinstance(rig, Rig) else Rig(**RIGS[rig])
+    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=on)
     path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
@@ -372,10 +373,10 @@ def _drawn_pair_finds(
     kinds: tuple[str, ...],
     names: list[str],
     sized: bool = True,
-    rig: str = "default",
+    rig="default",
     extra: tuple = (),
 ):
-    """:func:`_drawn_pair` (on the rig named ``rig``, with ``extra``), asserting the true effect
+    """:func:`_drawn_pair` (on ``rig``, with ``extra``), asserting the true effect
     first, no false claim, every size within 30 % (the issue's bound) when ``sized``, and exactly
     the effects ``names``: (effects, diagnosis)."""
     effects, d, s = _drawn_pair(tmp_path, seed, kinds, rig, extra)

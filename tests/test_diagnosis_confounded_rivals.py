@@ -41,13 +41,15 @@ from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
 from tests.diagnosis_support import diagnose_path
 from tests.independent import write_log
+from tests.independent.rigs import RIGS
 from tests.independent.scoring import score
 from tests.independent.sets import SINGLE_EFFECTS
 from tests.independent.simulate import Rig, Scenario, simulate
 from tests.test_diagnose_effects import _drawn_pair, _drawn_pair_finds
 
-NOISY = Rig(observer_bandwidth=2800.0)
-"""The generator's rig with currents as noisy as the shared clean log's (module doc)."""
+NOISY = Rig(**RIGS["obs2800"])
+"""The generator's rig with currents as noisy as the shared clean log's (module doc; the bench's
+``--rig obs2800``)."""
 
 MAX_VIF = SelectionSettings().max_vif
 
