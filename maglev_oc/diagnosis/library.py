@@ -135,14 +135,16 @@ def end_effects_at(
     data: PreparedLogs,
     profiles: Sequence[EndProfile],
     held: Mapping[str, float] | None = None,
+    commutation_angle: float = 0.0,
 ) -> list[Candidate]:
     """The end effects with each of the fall-off ``profiles``, held as :func:`candidate_library`
-    holds them, with the terms named apart (``end_effects_w0``, ...) so that one design can carry
-    them all."""
-    ctx = LibraryContext(model, data)
+    holds them and built beside ``commutation_angle`` as it builds them (the currents in the
+    magnets' frame), with the terms named apart (``end_effects_w0``, ...) so that one design can
+    carry them all."""
+    ctx = LibraryContext(model, data, commutation_angle)
     out = []
     for k, profile in enumerate(profiles):
-        c = _held(end_effects_candidate(ctx, profile), held)
+        c = _framed(_held(end_effects_candidate(ctx, profile), held), commutation_angle)
         out.append(dataclasses.replace(c, term=dataclasses.replace(c.term, name=f"{c.name}_w{k}")))
     return out
 

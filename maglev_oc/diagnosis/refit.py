@@ -141,6 +141,7 @@ def best_end_profile(
     profiles: Sequence[EndProfile] = END_PROFILES,
     settings: SelectionSettings | None = None,
     current: EndProfile = END_PROFILE,
+    commutation_angle: float = 0.0,
 ) -> EndProfile:
     """The end effects' fall-off (shape and width) among ``profiles`` whose joint fit with the base
     constants and the ``others`` terms leaves the smallest weighted training residual, among the
@@ -165,11 +166,12 @@ def best_end_profile(
     """
     settings = settings or SelectionSettings()
     profiles = _scannable(model, data, profiles, current)
-    cost, chi, chi_base = _profile_costs(model, data, others, train, hold, weights, held, profiles, settings)
+    scan = (model, data, others, train, hold, weights, held)
+    cost, chi, chi_base = _profile_costs(*scan, profiles, settings, commutation_angle)
     if not cost:
         # no fall at both ends passes: the log may reach one stator end only (END_ENDS)
         one_ended = [p.at(end) for p in profiles if p.ends == "both" for end in ("low", "high")]
-        passing, _, _ = _profile_costs(model, data, others, train, hold, weights, held, one_ended, settings)
+        passing, _, _ = _profile_costs(*scan, one_ended, settings, commutation_angle)
         cost = {
             p: c
             for p, c in passing.items()
@@ -187,10 +189,11 @@ def _scan_design(
     hold: np.ndarray,
     weights: np.ndarray | None,
     held: Mapping[str, float] | None,
+    commutation_angle: float = 0.0,
 ) -> tuple[list[Candidate], Design]:
     """The end effects with each of ``profiles`` (:func:`~maglev_oc.diagnosis.library.end_effects_at`)
     and one design carrying their columns beside the base constants and the ``others`` terms."""
-    scanned = end_effects_at(model, data, profiles, held)
+    scanned = end_effects_at(model, data, profiles, held, commutation_angle)
     design = build_design(
         data, model, terms=[*others, *(c.term for c in scanned)], fit=train, holdout=hold, weights=weights
     )
@@ -207,12 +210,15 @@ def _profile_costs(
     held: Mapping[str, float] | None,
     profiles: Sequence[EndProfile],
     settings: SelectionSettings,
+    commutation_angle: float = 0.0,
 ) -> tuple[dict[EndProfile, float], dict[EndProfile, float], float]:
     """profile -> the weighted training residual of the end effects with it beside the base constants
     and ``others``, for the ``profiles`` with which they stay end effects and separable
     (:func:`best_end_profile`); the same for every profile; and that residual without the end
     effects. One design carries every profile's columns."""
-    scanned, design = _scan_design(model, data, others, profiles, train, hold, weights, held)
+    scanned, design = _scan_design(
+        model, data, others, profiles, train, hold, weights, held, commutation_angle
+    )
     fixed = ["base", *(t.name for t in others)]
     cost, chi = {}, {}
     for p, c in zip(profiles, scanned, strict=True):
@@ -248,13 +254,16 @@ def sizes_over_end_profiles(
     hold: np.ndarray,
     weights: np.ndarray | None,
     held: Mapping[str, float] | None = None,
+    commutation_angle: float = 0.0,
 ) -> list[float]:
     """The physical ``parameter`` of ``cand`` (one of ``others``) fitted beside the base constants,
     the ``others`` terms and the end effects with each fall-off :func:`best_end_profile` may choose:
     how much the end effects' assumed shape moves it. One design carries every profile's columns;
     each fit is a solve of its Gram blocks."""
     profiles = _scannable(model, data, END_PROFILES, None)
-    scanned, design = _scan_design(model, data, others, profiles, train, hold, weights, held)
+    scanned, design = _scan_design(
+        model, data, others, profiles, train, hold, weights, held, commutation_angle
+    )
     out = []
     for c in scanned:
         fit = fit_subset(design, ["base", *(t.name for t in others), c.name], covariance=False)
