@@ -445,6 +445,25 @@ def test_the_end_effects_profile_is_scanned_when_the_data_show_them_although_not
     below = math.nextafter(settings.min_gain, 0.0)
     assert pipeline._end_profile(session, None, library, sel(both, below), {}) is None
     assert calls == []
+    # rebuilt: the effects beside them are built about the model, holds and commutation frame
+    # given (the next selection's), not taken from the library; the scan is told the frame too
+    built = []
+
+    def rebuild(model, data, held, *, only, commutation_angle):
+        built.append((model, dict(held), list(only), commutation_angle))
+        return [SimpleNamespace(term=SimpleNamespace(name=f"{n}@next")) for n in only]
+
+    frames = []
+    monkeypatch.setattr(pipeline, "candidate_library", rebuild)
+    monkeypatch.setattr(pipeline, "best_end_profile", lambda *a, **kw: frames.append(kw) or scan(*a))
+    args = (session, "next", library, sel(both, settings.min_gain), {"vertical": 0.5}, 0.03)
+    assert pipeline._end_profile(*args, rebuilt=True) == "scanned"
+    assert built == [("next", {"vertical": 0.5}, both, 0.03)]
+    assert calls[-1] == [f"{n}@next" for n in both]
+    assert frames[-1]["commutation_angle"] == 0.03
+    # not rebuilt (the end effects judged in the library they were chosen in): the library's terms
+    assert pipeline._end_profile(*args) == "scanned"
+    assert calls[-1] == both and len(built) == 1
 
 
 def test_refitted_constants_no_rig_of_the_design_has_are_a_warning(model):
