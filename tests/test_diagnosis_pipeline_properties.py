@@ -534,3 +534,29 @@ def test_the_kept_selections_design_goes_on_with_the_references_it_was_built_abo
     assert [e.name for e in d.effects][:1] == ["guide_friction_vertical"]
     assert kept and all(model is fitted for model, fitted in kept), kept
     assert len(restated) == len(set(restated)), restated
+
+
+def test_a_period_the_travel_barely_covers_is_a_waviness_only_beside_a_misalignment():
+    """pipeline._a_periodicity: without a chosen guide misalignment a residual's period is a
+    waviness candidate only when the logged travel (1st to 99th percentile) covers it min_periods
+    times (a sine over less is a bowl, as the motor periods are held to); beside one, any period."""
+    import numpy as np
+
+    from maglev_oc.diagnosis import pipeline
+    from maglev_oc.diagnosis.selection import SelectionSettings
+
+    settings = SelectionSettings()
+    x = np.zeros((4, 10001))
+    x[2] = np.linspace(-0.04, 0.04, x.shape[1])  # 80 mm, 78.4 mm between the percentiles
+    session = SimpleNamespace(data=SimpleNamespace(x=x), train=np.ones(x.shape[1], bool), settings=settings)
+    travel = 0.0784
+    straight, tilted = (
+        SimpleNamespace(selected=["cable_carrier_force"]),
+        SimpleNamespace(selected=["guide_misalignment"]),
+    )
+    longest = travel / settings.min_periods
+    assert pipeline._a_periodicity(session, straight, 0.999 * longest)
+    assert not pipeline._a_periodicity(session, straight, 1.001 * longest)
+    assert not pipeline._a_periodicity(session, straight, 0.076)  # set 26107's bowl
+    assert pipeline._a_periodicity(session, tilted, 0.076)
+    assert pipeline._a_periodicity(session, tilted, 3 * travel)
