@@ -2079,6 +2079,26 @@ def select(
                 j = judged_beside(name, others)
                 if j.verdict == "passes":
                     simpler = _simpler_in_place(j, by_name, others, judged_beside, settings)
+                    richer = (
+                        None if simpler else _richer_in_place(j, by_name, others, judged_beside, settings)
+                    )
+                    if richer is not None:
+                        last[name] = dataclasses.replace(
+                            j,
+                            verdict="not specific",
+                            reason=(
+                                f"beside the rest, {richer.name.replace('_', ' ')} explains more of the "
+                                f"held-out error ({percent(richer.own_pooled_gain)} against "
+                                f"{percent(j.own_pooled_gain)}) than its extra parameters cost"
+                            ),
+                        )
+                        current = [richer.name if c == name else c for c in current]
+                        last[richer.name] = _accepted(richer)
+                        steps = _in_place_of(steps, name, last[richer.name])
+                        effect = by_name[richer.name].reported_name
+                        pool = [n for n in pool if by_name[n].reported_name != effect]
+                        dropped = rounds_dropped = True
+                        break
                     if simpler is None:
                         continue
                     last[name] = dataclasses.replace(
@@ -2157,6 +2177,34 @@ def _simpler_in_place(
     if simpler.own_pooled_gain < j.own_pooled_gain - settings.parameter_penalty * extra:
         return None
     return simpler
+
+
+def _richer_in_place(
+    j: Judgement,
+    by_name: Mapping[str, Candidate],
+    others: list[str],
+    judged_beside: Callable[[str, list[str]], Judgement],
+    settings: SelectionSettings,
+) -> Judgement | None:
+    """The judgement of a richer form of ``j`` (a candidate whose ``Candidate.simpler`` is ``j``'s)
+    beside ``others`` when it passes and explains more of the held-out error on its axes (pooled)
+    than ``j`` by more than the parsimony penalty of its extra parameters; None otherwise.
+    :func:`_simpler_in_place` the other way round."""
+    richer = [
+        c.name for c in by_name.values() if c.simpler == j.name and c.name not in others and c.name != j.name
+    ]
+    best = None
+    for name in richer:
+        extra = _reported(by_name[name]) - _reported(by_name[j.name])
+        r = judged_beside(name, others)
+        if (
+            r.verdict != "passes"
+            or r.own_pooled_gain <= j.own_pooled_gain + settings.parameter_penalty * extra
+        ):
+            continue
+        if best is None or r.own_pooled_gain > best.own_pooled_gain:
+            best = r
+    return best
 
 
 def _pairs_restoring_thrust(
