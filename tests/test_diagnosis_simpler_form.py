@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _simpler_in_place
+from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _richer_in_place, _simpler_in_place
 from tests._diagnosis_cases import _judgement as injected_judgement
 
 
@@ -48,3 +48,36 @@ def test_a_spring_gives_way_to_a_tilt_that_explains_as_much_beside_the_rest():
     # a candidate without a simpler form is left alone
     tilt = _named(base, "horizontal_guides_not_level", 0.50)
     assert _simpler_in_place(tilt, by_name, others, beside(0.60), s) is None
+
+
+def test_a_tilt_gives_way_to_a_spring_that_explains_more_than_its_parameter_costs():
+    # The other way round (selection._richer_in_place): a tilt chosen early, when the spring's line
+    # was judged against a smooth function of the gap that the effects not yet chosen made (set
+    # 25905 on the papers' PID loops: a 7.1 N/m cable carrier beside large end effects and a
+    # commutation offset; a current sensor offset took the spring's line), gives way to the spring
+    # when beside the rest it explains more than the tilt by more than the penalty of its extra
+    # parameter, and not within it.
+    s = SelectionSettings()
+    term = lambda *names: SimpleNamespace(parameter_names=names)  # noqa: E731
+    by_name = {
+        "cable_carrier_force": SimpleNamespace(
+            simpler="horizontal_guides_not_level", term=term("stiffness", "force_at_zero"), nuisance=()
+        ),
+        "horizontal_guides_not_level": SimpleNamespace(simpler=None, term=term("force"), nuisance=()),
+        "thrust_ripple": SimpleNamespace(simpler=None, term=term("a", "b"), nuisance=()),
+    }
+    base = injected_judgement(z=5.0, wald=100.0)
+    tilt = _named(base, "horizontal_guides_not_level", 0.30)
+
+    def beside(gain, verdict="passes"):
+        return lambda name, others: _named(base, name, gain, verdict)
+
+    others = ["base", "commutation_offset"]
+    richer = _richer_in_place(tilt, by_name, others, beside(0.30 + 1.1 * s.parameter_penalty), s)
+    assert richer.name == "cable_carrier_force"
+    assert _richer_in_place(tilt, by_name, others, beside(0.30 + 0.9 * s.parameter_penalty), s) is None
+    assert _richer_in_place(tilt, by_name, others, beside(0.60, "not specific"), s) is None
+    assert _richer_in_place(tilt, by_name, [*others, "cable_carrier_force"], beside(0.60), s) is None
+    # a candidate that is no simpler form of another is left alone
+    spring = _named(base, "cable_carrier_force", 0.30)
+    assert _richer_in_place(spring, by_name, others, beside(0.60), s) is None

@@ -2190,9 +2190,7 @@ def _richer_in_place(
     beside ``others`` when it passes and explains more of the held-out error on its axes (pooled)
     than ``j`` by more than the parsimony penalty of its extra parameters; None otherwise.
     :func:`_simpler_in_place` the other way round."""
-    richer = [
-        c.name for c in by_name.values() if c.simpler == j.name and c.name not in others and c.name != j.name
-    ]
+    richer = [n for n, c in by_name.items() if c.simpler == j.name and n not in others and n != j.name]
     best = None
     for name in richer:
         extra = _reported(by_name[name]) - _reported(by_name[j.name])
