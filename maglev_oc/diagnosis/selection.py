@@ -138,7 +138,11 @@ form passes and explains as much of the held-out error within the parsimony pena
 parameters it lacks (:func:`_simpler_in_place`): chosen one step before a guide waviness, a spring
 can take the waviness's slope and beat the tilt by more than the penalty, and explain nothing more
 than it once the waviness is chosen (set 24602 of the independent generator, a 0.06 N/m cable
-carrier claimed for a base tilted by 12 mrad).
+carrier claimed for a base tilted by 12 mrad). And the other way round, a chosen simpler form gives
+way to a richer one that explains more than its extra parameters cost (:func:`_richer_in_place`):
+chosen before the effects beside it, a spring's line can be judged against what they make (set
+25905 on the papers' PID loops: "not specific" against a smooth function of the gap that a
+commutation offset's thrust of i_d is), a tilt is chosen, and another effect takes the line.
 
 A force periodic in the position at one of the motor's pitches (cogging, a detent: ``family``
 "periodic") is the same all along the stator, whose slots and magnets repeat: fitted on each half of
