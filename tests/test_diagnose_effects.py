@@ -584,6 +584,23 @@ def test_a_tilt_chosen_early_gives_way_to_the_spring_the_rest_shows(tmp_path):
 
 
 @pytest.mark.slow
+def test_the_normal_coggings_push_along_sloping_guides_is_no_detent(tmp_path):
+    # A drawn pair on warming magnets (bench/diagnose_rigs.py --drawn-pairs 12 --warm small --seed
+    # 26700, pair 26703): guides sloping by -4.0 mrad and a normal cogging of 2.4 N peak at 15 mm.
+    # Along the sloping guides the cogging pushes the platform by -slope times itself, a force along
+    # the track at the cogging's period and phase that grows as the gap closes: a detent of 0.0023 N
+    # was claimed at the phase of the 0.54 N cogging (-2.32 and -2.34 rad), which the stage does not
+    # have. It is refused as the cogging's push (pipeline._pushed_along_the_guides).
+    from tests.independent.effects import MagnetWarming
+
+    kinds = ("normal_cogging", "guide_misalignment")
+    names = ["cogging_vertical_19mm", "guide_misalignment", "magnet_field_drift"]
+    _, d = _drawn_pair_finds(tmp_path, 26703, kinds, names, extra=(MagnetWarming.small(),))
+    (j,) = [j for j in d.rejected if j.name == "cogging_horizontal_19mm"]
+    assert "push along the guides" in j.reason
+
+
+@pytest.mark.slow
 def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_path):
     # Three effects on a rig with 20 um encoders (bench/diagnose_rigs.py --rig enc20um --drawn-pairs
     # 12 --per-log 3 --seed 21700, set 21707): a 218 Hz amplifier with 0.24 ms of delay (0.96 ms in

@@ -560,3 +560,51 @@ def test_a_period_the_travel_barely_covers_is_a_waviness_only_beside_a_misalignm
     assert not pipeline._a_periodicity(session, straight, 0.076)  # set 26107's bowl
     assert pipeline._a_periodicity(session, tilted, 0.076)
     assert pipeline._a_periodicity(session, tilted, 3 * travel)
+
+
+def test_a_detent_that_is_the_normal_coggings_push_along_sloping_guides_is_refused():
+    """pipeline._pushed_along_the_guides: beside chosen guides sloping by s and a chosen normal
+    cogging of the same period, a chosen detent whose coefficients are -s times the cogging's
+    within their errors (Wald at PUSH_LEVEL) is that push; one that differs (a true detent), or one
+    without sloping guides or without the cogging, is left alone."""
+    import dataclasses
+
+    import numpy as np
+
+    from maglev_oc.diagnosis import pipeline
+    from tests._diagnosis_cases import _judgement as injected_judgement
+
+    slope = -4.0e-3
+    cogging = np.array([-0.376, -0.388, 0.078, -0.001])  # pair 26703's normal cogging [N]
+    sd = 1e-4
+
+    def selection(detent, chosen=("guide_misalignment", "cogging_vertical_19mm", "cogging_horizontal_19mm")):
+        groups = {
+            "guide_misalignment": (np.array([slope]), np.array([[1e-10]])),
+            "cogging_vertical_19mm": (cogging, 1e-6 * np.eye(4)),
+            "cogging_horizontal_19mm": (np.asarray(detent, float), sd**2 * np.eye(4)),
+        }
+        final = SimpleNamespace(group=lambda design, name: groups[name])
+        judged = {n: dataclasses.replace(injected_judgement(z=5.0, wald=100.0), name=n) for n in chosen}
+        return SimpleNamespace(selected=list(chosen), final=final, last=judged)
+
+    term = SimpleNamespace(parameter_names=("sin1", "cos1", "sin2", "cos2"))
+    library = [
+        SimpleNamespace(name=n, term=term) for n in ("cogging_vertical_19mm", "cogging_horizontal_19mm")
+    ]
+    library.append(
+        SimpleNamespace(name="guide_misalignment", term=SimpleNamespace(parameter_names=("slope",)))
+    )
+    push = -slope * cogging
+    (j,) = pipeline._pushed_along_the_guides(library, None, selection(push + sd))
+    assert j.name == "cogging_horizontal_19mm" and "push along the guides" in j.reason
+    # 20 standard errors away on one coefficient: a force of its own
+    assert (
+        pipeline._pushed_along_the_guides(library, None, selection(push + np.array([20 * sd, 0, 0, 0]))) == []
+    )
+    assert pipeline._pushed_along_the_guides(library, None, selection(0.8 * push)) == []
+    # without the sloping guides, or without the cogging, nothing is refused
+    level = selection(push, ("cogging_vertical_19mm", "cogging_horizontal_19mm"))
+    assert pipeline._pushed_along_the_guides(library, None, level) == []
+    alone = selection(push, ("guide_misalignment", "cogging_horizontal_19mm"))
+    assert pipeline._pushed_along_the_guides(library, None, alone) == []
