@@ -548,18 +548,18 @@ def test_a_period_the_travel_barely_covers_is_a_waviness_only_beside_a_misalignm
     settings = SelectionSettings()
     x = np.zeros((4, 10001))
     x[2] = np.linspace(-0.04, 0.04, x.shape[1])  # 80 mm, 78.4 mm between the percentiles
-    session = SimpleNamespace(data=SimpleNamespace(x=x), train=np.ones(x.shape[1], bool), settings=settings)
+    design = SimpleNamespace(prepared=SimpleNamespace(x=x), fit=np.ones(x.shape[1], bool))
     travel = 0.0784
     straight, tilted = (
         SimpleNamespace(selected=["cable_carrier_force"]),
         SimpleNamespace(selected=["guide_misalignment"]),
     )
     longest = travel / settings.min_periods
-    assert pipeline._a_periodicity(session, straight, 0.999 * longest)
-    assert not pipeline._a_periodicity(session, straight, 1.001 * longest)
-    assert not pipeline._a_periodicity(session, straight, 0.076)  # set 26107's bowl
-    assert pipeline._a_periodicity(session, tilted, 0.076)
-    assert pipeline._a_periodicity(session, tilted, 3 * travel)
+    assert pipeline._a_periodicity(design, straight, 0.999 * longest, settings)
+    assert not pipeline._a_periodicity(design, straight, 1.001 * longest, settings)
+    assert not pipeline._a_periodicity(design, straight, 0.076, settings)  # set 26107's bowl
+    assert pipeline._a_periodicity(design, tilted, 0.076, settings)
+    assert pipeline._a_periodicity(design, tilted, 3 * travel, settings)
 
 
 def test_a_detent_that_is_the_normal_coggings_push_along_sloping_guides_is_refused():

@@ -17,24 +17,38 @@ def _named(j: Judgement, name: str, gain: float, verdict: str = "passes") -> Jud
     return dataclasses.replace(j, name=name, verdict=verdict, gain_axes=np.array([np.nan, gain]))
 
 
+BASE = injected_judgement(z=5.0, wald=100.0)
+
+
+def _library() -> dict:
+    """A spring along the track whose simpler form is the tilt's constant force, the tilt, and a
+    candidate that is neither's form (the names, parameters and ``simpler`` links the two
+    functions read)."""
+
+    def term(*names):
+        return SimpleNamespace(parameter_names=names)
+
+    return {
+        "cable_carrier_force": SimpleNamespace(
+            simpler="horizontal_guides_not_level", term=term("stiffness", "force_at_zero"), nuisance=()
+        ),
+        "horizontal_guides_not_level": SimpleNamespace(simpler=None, term=term("force"), nuisance=()),
+        "thrust_ripple": SimpleNamespace(simpler=None, term=term("a", "b"), nuisance=()),
+    }
+
+
+def beside(gain: float, verdict: str = "passes"):
+    """A judge that finds every candidate with this held-out gain and verdict."""
+    return lambda name, others: _named(BASE, name, gain, verdict)
+
+
 def test_a_spring_gives_way_to_a_tilt_that_explains_as_much_beside_the_rest():
     # A spring along the track at zero stiffness is the tilt's constant force (guides.cable_candidate):
     # beside the rest of a selection the tilt takes its place when it explains as much of the held-out
     # error within the parsimony penalty of the one parameter it lacks (set 24602: 0.06 N/m of spring
     # that explained nothing more than the constant), and not when the spring explains more.
-    s = SelectionSettings()
-    term = lambda *names: SimpleNamespace(parameter_names=names)  # noqa: E731
-    by_name = {
-        "cable_carrier_force": SimpleNamespace(
-            simpler="horizontal_guides_not_level", term=term("stiffness", "force_at_zero"), nuisance=()
-        ),
-        "horizontal_guides_not_level": SimpleNamespace(simpler=None, term=term("force"), nuisance=()),
-    }
-    base = injected_judgement(z=5.0, wald=100.0)
-    spring = _named(base, "cable_carrier_force", 0.50)
-
-    def beside(gain, verdict="passes"):
-        return lambda name, others: _named(base, name, gain, verdict)
+    s, by_name = SelectionSettings(), _library()
+    spring = _named(BASE, "cable_carrier_force", 0.50)
 
     others = ["base", "guide_misalignment"]
     assert _simpler_in_place(spring, by_name, others, beside(0.50 - 0.9 * s.parameter_penalty), s).name == (
@@ -46,7 +60,7 @@ def test_a_spring_gives_way_to_a_tilt_that_explains_as_much_beside_the_rest():
     chosen = [*others, "horizontal_guides_not_level"]
     assert _simpler_in_place(spring, by_name, chosen, beside(0.50), s) is None
     # a candidate without a simpler form is left alone
-    tilt = _named(base, "horizontal_guides_not_level", 0.50)
+    tilt = _named(BASE, "horizontal_guides_not_level", 0.50)
     assert _simpler_in_place(tilt, by_name, others, beside(0.60), s) is None
 
 
@@ -57,20 +71,8 @@ def test_a_tilt_gives_way_to_a_spring_that_explains_more_than_its_parameter_cost
     # commutation offset; a current sensor offset took the spring's line), gives way to the spring
     # when beside the rest it explains more than the tilt by more than the penalty of its extra
     # parameter, and not within it.
-    s = SelectionSettings()
-    term = lambda *names: SimpleNamespace(parameter_names=names)  # noqa: E731
-    by_name = {
-        "cable_carrier_force": SimpleNamespace(
-            simpler="horizontal_guides_not_level", term=term("stiffness", "force_at_zero"), nuisance=()
-        ),
-        "horizontal_guides_not_level": SimpleNamespace(simpler=None, term=term("force"), nuisance=()),
-        "thrust_ripple": SimpleNamespace(simpler=None, term=term("a", "b"), nuisance=()),
-    }
-    base = injected_judgement(z=5.0, wald=100.0)
-    tilt = _named(base, "horizontal_guides_not_level", 0.30)
-
-    def beside(gain, verdict="passes"):
-        return lambda name, others: _named(base, name, gain, verdict)
+    s, by_name = SelectionSettings(), _library()
+    tilt = _named(BASE, "horizontal_guides_not_level", 0.30)
 
     others = ["base", "commutation_offset"]
     richer = _richer_in_place(tilt, by_name, others, beside(0.30 + 1.1 * s.parameter_penalty), s)
@@ -79,5 +81,5 @@ def test_a_tilt_gives_way_to_a_spring_that_explains_more_than_its_parameter_cost
     assert _richer_in_place(tilt, by_name, others, beside(0.60, "not specific"), s) is None
     assert _richer_in_place(tilt, by_name, [*others, "cable_carrier_force"], beside(0.60), s) is None
     # a candidate that is no simpler form of another is left alone
-    spring = _named(base, "cable_carrier_force", 0.30)
+    spring = _named(BASE, "cable_carrier_force", 0.30)
     assert _richer_in_place(spring, by_name, others, beside(0.60), s) is None

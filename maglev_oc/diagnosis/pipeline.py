@@ -90,6 +90,7 @@ from maglev_oc.diagnosis.selection import (
     _estimated_constants,
     _friction_axes,
     _holdout_residual,
+    _travel,
     another_motor,
     axis_loss_breaks,
     evidence,
@@ -908,14 +909,14 @@ def _waviness_periods(
         for _, lam in unexplained_periods(tr_after, tolerance=0.03, on_axis=on_axis)
     }
     periods = sorted(
-        {lam for lam in found if _a_periodicity(session, sel, lam)}
+        {lam for lam in found if _a_periodicity(design, sel, lam, session.settings)}
         | set(_chosen_pitches(library, sel))
         | set(_waviness_beyond_travel(session, fitted, library, sel))
     )
     return tr, periods
 
 
-def _a_periodicity(session: _Session, sel: Selection, period: float) -> bool:
+def _a_periodicity(design: Design, sel: Selection, period: float, settings: SelectionSettings) -> bool:
     """Whether a peak of the residual's spatial spectrum at ``period`` [m] may be a guide waviness:
     beside a chosen guide misalignment any (the guides are known not to be straight, and a waviness
     longer than the travel is their bow, :func:`_waviness_beyond_travel`); otherwise one the logged
@@ -931,9 +932,7 @@ def _a_periodicity(session: _Session, sel: Selection, period: float) -> bool:
     straight guides and a tilt of the base were claimed for end effects and a spring."""
     if "guide_misalignment" in sel.selected:
         return True
-    x3 = session.data.x[2, session.train]
-    travel = float(np.subtract(*np.percentile(x3, [99, 1])))
-    return travel >= session.settings.min_periods * period
+    return _travel(design) >= settings.min_periods * period
 
 
 def _chosen_pitches(library: Sequence[Candidate], sel: Selection) -> list[float]:
@@ -1295,7 +1294,7 @@ def _pushed_along_the_guides(library: Sequence[Candidate], design: Design, sel: 
     the independent generator (guides sloping by -4.0 mrad, a normal cogging of 2.4 N peak at 15 mm
     and the magnets warming): a 0.0023 N detent was claimed at the phase of the 0.54 N cogging
     (-2.32 and -2.34 rad), 0.0022 N being 4.0 mrad of it."""
-    chosen = set(sel.selected)
+    chosen = sel.selected  # in the selection's order: the refusals' order is the same on every run
     if "guide_misalignment" not in chosen or sel.final is None:
         return []
     by_name = {c.name: c for c in library}

@@ -2086,38 +2086,24 @@ def select(
                     richer = (
                         None if simpler else _richer_in_place(j, by_name, others, judged_beside, settings)
                     )
-                    if richer is not None:
-                        last[name] = dataclasses.replace(
-                            j,
-                            verdict="not specific",
-                            reason=(
-                                f"beside the rest, {richer.name.replace('_', ' ')} explains more of the "
-                                f"held-out error ({percent(richer.own_pooled_gain)} against "
-                                f"{percent(j.own_pooled_gain)}) than its extra parameters cost"
-                            ),
-                        )
-                        current = [richer.name if c == name else c for c in current]
-                        last[richer.name] = _accepted(richer)
-                        steps = _in_place_of(steps, name, last[richer.name])
-                        effect = by_name[richer.name].reported_name
-                        pool = [n for n in pool if by_name[n].reported_name != effect]
-                        dropped = rounds_dropped = True
-                        break
-                    if simpler is None:
+                    form = simpler or richer
+                    if form is None:
                         continue
+                    gains = f"({percent(form.own_pooled_gain)} against {percent(j.own_pooled_gain)})"
+                    how = (
+                        f"as much of the held-out error {gains} with fewer parameters"
+                        if simpler
+                        else f"more of the held-out error {gains} than its extra parameters cost"
+                    )
                     last[name] = dataclasses.replace(
                         j,
                         verdict="not specific",
-                        reason=(
-                            f"beside the rest, {simpler.name.replace('_', ' ')} explains as much of the "
-                            f"held-out error ({percent(simpler.own_pooled_gain)} against "
-                            f"{percent(j.own_pooled_gain)}) with fewer parameters"
-                        ),
+                        reason=f"beside the rest, {form.name.replace('_', ' ')} explains {how}",
                     )
-                    current = [simpler.name if c == name else c for c in current]
-                    last[simpler.name] = _accepted(simpler)
-                    steps = _in_place_of(steps, name, last[simpler.name])
-                    effect = by_name[simpler.name].reported_name
+                    current = [form.name if c == name else c for c in current]
+                    last[form.name] = _accepted(form)
+                    steps = _in_place_of(steps, name, last[form.name])
+                    effect = by_name[form.name].reported_name
                     pool = [n for n in pool if by_name[n].reported_name != effect]
                     dropped = rounds_dropped = True
                     break
