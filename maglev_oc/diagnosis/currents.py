@@ -225,12 +225,20 @@ def commutation_candidates(ctx: LibraryContext) -> list[Candidate]:
     fit's C1 stayed at 0.56, and the horizontal residual was reported as an unexplained dependence
     on the gap (i_d follows the gap). Not as a form of the offset chosen whenever the full form is
     not significantly better: that left the attraction's part out on drawn pair 21060 (a 1.6 degree
-    offset beside normal cogging), and a guide misalignment took it, a false claim."""
+    offset beside normal cogging), and a guide misalignment took it, a false claim. The form keeps
+    the attraction at the thrust's angle, C3 l3 d i_q in the references' frame (they converge on the
+    fitted constants before a selection is kept): left out, it went to another effect where i_q is
+    large enough to show it. Set 27101 of the independent generator's filtered-current rig (a
+    -2.5 degree offset, a 1.6 N detent the loop cancels with i_q at the slot pitch): its normal
+    force, -d C3/C1 = -0.09 times the detent, was claimed as a 0.036 N normal cogging."""
     full = commutation_candidate(ctx)
     c_ref = ctx.references
 
     def thrust(x, u, du, q):
-        return ca.vertcat(0, -c_ref.C1 * ctx.shapes(x)[0] * u[1] * q[0])
+        # the attraction of i_q at the thrust's angle, in the references' frame (they converge
+        # on the fitted constants before a selection is kept)
+        l = ctx.shapes(x)
+        return ca.vertcat(c_ref.C3 * l[2] * u[0] * q[0], -c_ref.C1 * l[0] * u[1] * q[0])
 
     def physical(q, cov, c):
         angle = Estimate(
@@ -256,8 +264,8 @@ def commutation_candidates(ctx: LibraryContext) -> list[Candidate]:
     def describe(e):
         return (
             f"The commutation angle is off by {fmt(e['angle'], 180 / math.pi, 'degrees')}, from the thrust "
-            "that i_d makes; fitted on the thrust alone, the attraction that i_q makes being too small on "
-            "this log to weigh it."
+            "that i_d makes; the attraction that i_q makes is too small on this log to weigh it, and is "
+            "taken at the same angle."
         )
 
     return [
