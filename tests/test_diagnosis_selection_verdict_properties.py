@@ -172,6 +172,7 @@ def _fake_fit(x, own, noise=None, blocks=3):
         noise=np.stack([noise / blocks for _ in cuts]),
         groups={"base": np.array([k for k in range(p) if k not in own]), "cand": np.array(own)},
         names=tuple(f"p{k}" for k in range(p)),
+        moving=np.array([False, True]),  # the rows of one axis
     )
     cand = SimpleNamespace(
         name="cand", nuisance=(), term=SimpleNamespace(parameter_names=tuple(f"q{k}" for k in own))
@@ -199,6 +200,53 @@ def test_the_variance_inflation_is_that_of_the_smallest_principal_angle(own):
     assert vif == pytest.approx(1.0 / math.sin(angle) ** 2, rel=1e-8)
     assert vif > 2.0  # a real inflation, not the trivial 1
     assert partners == ()
+
+
+def _two_axis_fit(vertical: np.ndarray, horizontal: np.ndarray, weights, own):
+    """A design-like object over columns with a vertical and a horizontal part ((n, P) each),
+    weighed by ``weights`` per axis (the fit's Gram) and unweighted per axis (the held-out
+    Grams, here of the same rows), both axes moving; the candidate "cand" owns ``own``."""
+    design, cand, fit = _fake_fit(np.vstack([weights[0] * vertical, weights[1] * horizontal]), own)
+    design.moving = np.array([True, True])
+    design.weights = np.asarray(weights, dtype=float)
+    design.hold_gram = np.stack([vertical.T @ vertical, horizontal.T @ horizontal])
+    return design, cand, fit
+
+
+def test_an_effect_a_weakly_weighed_axis_fixes_is_not_confounded_on_the_other():
+    # Guides sloping against the stator change the gap along the track (vertical: the position's
+    # column) and push along it with nearly the weight (horizontal: a constant plus 1 %), where a
+    # tilted base pushes with a constant. The vertical axis weighs 1/50 of the horizontal (its
+    # residual holds effects not yet modelled; set 26810 of the independent generator on 1 um
+    # encoders, 0.14 against 0.003 m/s^2): at those weights the slope's estimate correlates with
+    # the tilt's by more than 0.995 (computed here), though the vertical alone fixes it. With the
+    # vertical weighed 10^4 times more (selection.AXIS_EMPHASES) it is separable. A candidate
+    # that is the tilt's column on both axes (nothing on the vertical) stays confounded.
+    rng = np.random.default_rng(41)
+    n = 2000
+    position = np.cumsum(rng.normal(size=n)) / 30.0
+    v, h = np.zeros((n, 4)), np.zeros((n, 4))
+    v[:, 0] = rng.normal(size=n)  # a vertical base constant
+    h[:, 1] = rng.normal(size=n)  # a horizontal base constant
+    h[:, 2] = 1.0  # the tilt's constant force
+    v[:, 3], h[:, 3] = position, 1.0 + 0.01 * rng.normal(size=n)  # the slope
+    weights = (0.02, 1.0)
+    design, cand, fit = _two_axis_fit(v, h, weights, [3])
+    g = design.gram.sum(axis=0)
+    inv = np.linalg.inv(g)
+    assert abs(inv[2, 3]) / math.sqrt(inv[2, 2] * inv[3, 3]) > 0.995
+    vif, partners = _separability(design, cand, fit, SelectionSettings())
+    assert vif <= SelectionSettings().max_vif and partners == ()
+    # the tilt itself, judged beside the slope, is separable too (the slope fixed on the vertical)
+    design_t, cand_t, fit_t = _two_axis_fit(v, h, weights, [2])
+    vif_t, partners_t = _separability(design_t, cand_t, fit_t, SelectionSettings())
+    assert vif_t <= SelectionSettings().max_vif and partners_t == ()
+    # nothing on the vertical: no weighing of the axes separates it
+    v_flat = v.copy()
+    v_flat[:, 3] = 0.0
+    design_f, cand_f, fit_f = _two_axis_fit(v_flat, h, weights, [3])
+    vif_f, partners_f = _separability(design_f, cand_f, fit_f, SelectionSettings())
+    assert vif_f > SelectionSettings().max_vif and partners_f == ("p2",)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
