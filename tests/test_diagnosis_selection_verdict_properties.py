@@ -241,6 +241,13 @@ def test_an_effect_a_weakly_weighed_axis_fixes_is_not_confounded_on_the_other():
     design_t, cand_t, fit_t = _two_axis_fit(v, h, weights, [2])
     vif_t, partners_t = _separability(design_t, cand_t, fit_t, SelectionSettings())
     assert vif_t <= SelectionSettings().max_vif and partners_t == ()
+    # the same slope in a candidate with a parameter of the horizontal axis alone besides: weighing
+    # the vertical more would free that parameter of every two-axis column there, so it is not done,
+    # and on the horizontal the slope is the tilt's constant (the rule of selection.AXIS_EMPHASES)
+    v5, h5 = np.hstack([v, np.zeros((n, 1))]), np.hstack([h, rng.normal(size=(n, 1))])
+    design_m, cand_m, fit_m = _two_axis_fit(v5, h5, weights, [3, 4])
+    vif_m, _ = _separability(design_m, cand_m, fit_m, SelectionSettings())
+    assert vif_m > SelectionSettings().max_vif
     # nothing on the vertical: no weighing of the axes separates it
     v_flat = v.copy()
     v_flat[:, 3] = 0.0
