@@ -431,6 +431,14 @@ def main() -> None:
         "--payload", type=float, default=0.0, help="declare a payload of this many kg on every log run"
     )
     parser.add_argument(
+        "--undeclared",
+        action="store_true",
+        help="with --payload: leave the payload out of the log's header (a load nobody declared)",
+    )
+    parser.add_argument(
+        "--duration", type=float, default=None, help="record every log run for this many seconds (default 60)"
+    )
+    parser.add_argument(
         "--load-change",
         type=float,
         default=0.0,
@@ -580,9 +588,14 @@ def main() -> None:
     if args.payload:
         groups = {
             g: [
-                (stem, dataclasses.replace(sc, payload=args.payload, declare_payload=True))
+                (stem, dataclasses.replace(sc, payload=args.payload, declare_payload=not args.undeclared))
                 for stem, sc in runs
             ]
+            for g, runs in groups.items()
+        }
+    if args.duration is not None:
+        groups = {
+            g: [(stem, dataclasses.replace(sc, duration=args.duration)) for stem, sc in runs]
             for g, runs in groups.items()
         }
     summary: dict[str, dict] = {}

@@ -346,11 +346,19 @@ def test_end_effects_that_are_not_exponential_are_found_at_their_scanned_width(t
     assert d.effects[0].parameters["width"].value < END_WIDTHS[4]
 
 
-def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig="default", extra: tuple = ()):
+def _drawn_pair(
+    tmp_path,
+    seed: int,
+    kinds: tuple[str, ...],
+    rig="default",
+    extra: tuple = (),
+    payload: tuple = (0.0, False),
+):
     """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these kinds (each
     effect drawn from its own generator, seeded by the log's seed and the kind's index), on ``rig``
     (a ``Rig``, or the name of one of ``tests.independent.rigs.RIGS``, as ``--rig`` takes it), with
-    the effects ``extra`` added after them (as ``--shake`` adds the base's vibration), diagnosed with
+    the effects ``extra`` added after them (as ``--shake`` adds the base's vibration) and
+    ``payload`` (kg, declared in the log or not: ``--payload``, ``--undeclared``), diagnosed with
     the defaults and scored: (effects, diagnosis, score)."""
     import numpy as np
 
@@ -361,7 +369,14 @@ def _drawn_pair(tmp_path, seed: int, kinds: tuple[str, ...], rig="default", extr
 
     effects = tuple(draw(k, np.random.default_rng([seed, KINDS.index(k)])) for k in kinds)
     on = rig if isinstance(rig, Rig) else Rig(**RIGS[rig])
-    scenario = Scenario(name="+".join(kinds), seed=seed, effects=(*effects, *extra), rig=on)
+    scenario = Scenario(
+        name="+".join(kinds),
+        seed=seed,
+        effects=(*effects, *extra),
+        rig=on,
+        payload=payload[0],
+        declare_payload=payload[1],
+    )
     path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
     return effects, d, score("pair", json.loads(truth_path.read_text()), d.to_dict()["effects"])
@@ -375,11 +390,12 @@ def _drawn_pair_finds(
     sized: bool = True,
     rig="default",
     extra: tuple = (),
+    payload: tuple = (0.0, False),
 ):
-    """:func:`_drawn_pair` (on ``rig``, with ``extra``), asserting the true effect
+    """:func:`_drawn_pair` (on ``rig``, with ``extra`` and ``payload``), asserting the true effect
     first, no false claim, every size within 30 % (the issue's bound) when ``sized``, and exactly
     the effects ``names``: (effects, diagnosis)."""
-    effects, d, s = _drawn_pair(tmp_path, seed, kinds, rig, extra)
+    effects, d, s = _drawn_pair(tmp_path, seed, kinds, rig, extra, payload)
     assert s.true_first and s.no_false_claim and (s.size_right or not sized), (s.claimed, s.notes)
     assert sorted(e.name for e in d.effects) == sorted(names)
     return effects, d
@@ -566,6 +582,53 @@ def test_the_thrust_form_of_the_offset_keeps_the_attraction_its_angle_makes(tmp_
     names = ["cogging_horizontal_19mm", "commutation_offset", "guide_misalignment"]
     _, d = _drawn_pair_finds(tmp_path, 27101, kinds, names, rig="filtered")
     assert "commutation_offset_horizontal" in d.selection.selected
+
+
+@pytest.mark.slow
+def test_a_slope_the_vertical_fixes_is_not_confounded_with_a_spring_on_precise_encoders(tmp_path):
+    # Three effects on 1 um encoders (bench/diagnose_rigs.py --rig enc1um --drawn-pairs 12 --per-log 3
+    # --seed 26800, set 26810): vertical guide friction, guides sloping by -4.5 mrad, a 9.2 N/m cable
+    # carrier. Beside the carrier the horizontal residual was 0.003 m/s^2, the vertical 0.14 (the
+    # slope and the friction in it): weighed so, the slope's push along the track, nearly a constant
+    # force, was confounded with the carrier's at a variance inflation of 669, and the slope and the
+    # friction were not claimed. Judged again with the vertical axis weighed more
+    # (selection.AXIS_EMPHASES), the three are found, sized within 30 % (the issue's bound; measured
+    # -3.7 mrad, 0.87 N for 0.79 N, 9.10 N/m).
+    kinds = ("guide_friction_vertical", "guide_misalignment", "cable_carrier")
+    names = ["cable_carrier_force", "guide_friction_vertical", "guide_misalignment"]
+    _drawn_pair_finds(tmp_path, 26810, kinds, names, rig="enc1um")
+
+
+@pytest.mark.slow
+def test_a_declared_payloads_weight_pulls_along_sloping_guides(tmp_path):
+    # A random pair with a 0.8 kg payload declared in the log (bench/diagnose_rigs.py --drawn-pairs 12
+    # --payload 0.8 --seed 27900, pair 27904): guides sloping by 4.2 mrad and a 0.29 ms amplifier lag.
+    # The guides' pull along the track was the horizontal mover's weight alone; the payload's,
+    # 0.8 kg x G x 4.2 mrad = 0.033 N, was claimed as a tilted base of 0.038 N. With the weight the
+    # guides carry (LibraryContext.weight_carried): the two true effects, sized within 30 % (the
+    # issue's bound).
+    kinds, names = (
+        ("guide_misalignment", "amplifier_dynamics"),
+        ["current_amplifier_lag", "guide_misalignment"],
+    )
+    _drawn_pair_finds(tmp_path, 27904, kinds, names, payload=(0.8, True))
+
+
+@pytest.mark.slow
+def test_a_payload_nobody_declared_is_read_and_the_log_diagnosed_carrying_it(tmp_path):
+    # The same draws with the payload left out of the log (--payload 0.8 --undeclared, pair 27900):
+    # guides sloping by 2.4 mrad and a 4.1 N/m cable carrier. Sized with the model's masses, the
+    # spring came out 2.72 N/m, M_h / (M_h + 0.8) of the truth. The constants read movers
+    # 0.78 +- 0.05 kg heavier (identification.masses), and the log is diagnosed again as carrying
+    # that: both effects sized within 30 % (measured 4.05 N/m), the reading said.
+    kinds, names = ("guide_misalignment", "cable_carrier"), ["cable_carrier_force", "guide_misalignment"]
+    _, d = _drawn_pair_finds(tmp_path, 27900, kinds, names, payload=(0.8, False))
+    mass = d.moving_mass
+    assert mass is not None and mass.carried
+    # within 3 standard errors of the 0.8 kg (the reading's error is the spread of rigs' constants)
+    assert abs(mass.added.value - 0.8) < 3 * mass.added.stderr
+    assert d.settings["payload_read_kg"] == mass.added.value
+    assert "diagnosed again as carrying" in d.report()
 
 
 @pytest.mark.slow

@@ -1392,3 +1392,30 @@ def test_the_gap_of_tilted_guides_changes_the_forces_of_the_currents_in_the_magn
     # the thrust's row moves by about d i_d / i_q (-94 %) of its gap-dependent part: not the plain one
     untouched = np.asarray(plain.term.function(x, u, [0.0, 0.0], q)).ravel()
     assert abs(got[1] - untouched[1]) > 0.1 * abs(untouched[1] - along * q[0])
+
+
+def test_the_guides_pull_the_weight_of_each_logs_payload_along_the_slope(model):
+    # The weight sloping guides pull along the track is the horizontal mover's and the payload its
+    # log declares, (M_h + m) G (LibraryContext.weight_carried): on a log with 0.5 kg declared, the
+    # misalignment's horizontal column at a slope of 1 is larger than on one without by 0.5 G / M_h
+    # (the model's own numbers; double-precision arithmetic, rtol 1e-9). Two logs with different
+    # payloads make the term one in time, which reads the log's index.
+    from maglev_oc.diagnosis.guides import misalignment_candidate
+    from maglev_oc.regression.data import prepare
+    from tests.test_regression import _synthetic
+
+    plain, loaded = _synthetic(model, seconds=12.0), _synthetic(model, seconds=12.0, seed=1, payload_kg=0.5)
+    p = model.params
+    x, u = np.array([0.02, 0.0, 0.01, 0.0]), np.array([0.1, 1.5])
+    at = []
+    for logs in ([plain], [loaded]):
+        term = misalignment_candidate(LibraryContext(model, prepare(logs, bandwidth=10.0, model=model))).term
+        assert not term.in_time
+        at.append(float(term.function(x, u, np.zeros(2), 1.0)[1]))
+    assert at[1] - at[0] == pytest.approx(0.5 * p.gravity / p.mass_horizontal, rel=1e-9)
+    both = LibraryContext(model, prepare([plain, loaded], bandwidth=10.0, model=model))
+    assert both.payloads == (0.0, 0.5) and both.payloads_differ
+    term = misalignment_candidate(both).term
+    assert term.in_time
+    by_log = [float(term.function(x, u, np.zeros(2), [0.0, k], 1.0)[1]) for k in (0, 1)]
+    assert by_log == pytest.approx(at, rel=1e-9)

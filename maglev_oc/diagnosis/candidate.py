@@ -22,7 +22,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.regression.terms import AccelerationTerm
+from maglev_oc.regression.terms import AccelerationTerm, term_function, when_symbol
 from maglev_oc.results import Estimate
 
 __all__ = [
@@ -340,6 +340,48 @@ class LibraryContext:
     def weight(self, axis: str) -> float:
         """[N] M g of the mass on ``axis`` (:meth:`mass`)."""
         return self.mass(axis) * self.params.gravity
+
+    @property
+    def payloads(self) -> tuple[float, ...]:
+        """[kg] The payload each log declares (``# payload_kg``), in the order of the logs; (0,)
+        when none does."""
+        declared = self.data.settings.get("payload_kg")
+        return tuple(float(m) for m in declared) if declared else (0.0,)
+
+    @property
+    def payloads_differ(self) -> bool:
+        """Whether the logs declare different payloads (a load change): then what the guides carry
+        differs between logs, and :meth:`weight_carried` reads the log's index."""
+        return len(set(self.payloads)) > 1
+
+    def weight_carried(self, s=None):
+        """[N] The weight sloping horizontal guides pull along the track: the horizontal mover's
+        and the payload its log declares, (M_h + m) G. A term's forces are read as the unloaded
+        stage's (:mod:`~maglev_oc.regression.payload`), but the payload's weight on the guides is a
+        force of its own: with it left out, a 0.8 kg payload declared on guides sloping by 4.2 mrad
+        (drawn pairs 27904 and 27907 of the independent generator) left 0.033 N along the track,
+        claimed as a tilted base. ``s``: a term's time symbol (:func:`~maglev_oc.regression.terms.
+        when_symbol`), read when :attr:`payloads_differ`."""
+        loads = self.payloads
+        if not self.payloads_differ:
+            return (self.params.mass_horizontal + loads[0]) * self.params.gravity
+        if s is None:
+            raise InputError("LibraryContext.weight_carried: the logs' payloads differ; give the log's index")
+        load = sum(m * (s[1] == k) for k, m in enumerate(loads))
+        return (self.params.mass_horizontal + load) * self.params.gravity
+
+    def along_the_guides(self, name: str, build: Callable, n_parameters: int):
+        """A term Function of ``build(x, u, du, q, weight)``, ``weight`` the weight the guides carry
+        (:meth:`weight_carried`): (x, u, du, p) -> acc, or (x, u, du, s, p) -> acc when the logs'
+        payloads differ (the term is then in time, :attr:`~maglev_oc.regression.terms.
+        AccelerationTerm.in_time`)."""
+        if not self.payloads_differ:
+            weight = self.weight_carried()
+            return term_function(name, lambda x, u, du, q: build(x, u, du, q, weight), n_parameters)
+        x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
+        q = ca.SX.sym("p", n_parameters)
+        acc = build(x, u, du, q, self.weight_carried(s))
+        return ca.Function(name, [x, u, du, s, q], [acc], ["x", "u", "du", "s", "p"], ["acc"])
 
     def shapes(self, x):
         """The shape functions l1..l4 at the gap x[0] (L = C l)."""

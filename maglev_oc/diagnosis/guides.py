@@ -319,13 +319,13 @@ def cable_candidate(ctx: LibraryContext) -> Candidate:
 
 def misalignment_candidate(ctx: LibraryContext) -> Candidate:
     """Horizontal guides sloping against a level stator (true gap = reading + slope x3)."""
-    mh, weight_h = ctx.mass("horizontal"), ctx.weight("horizontal")
+    mh = ctx.mass("horizontal")
     lo, hi = ctx.position_range
 
-    def misalignment(x, u, du, q):
+    def misalignment(x, u, du, q, weight):
         # the gap error changes both accelerations; along the sloping guides the weight of what
-        # moves horizontally pulls down-slope and the normal force towards the stator
-        along = ca.vertcat(0, (weight_h - ctx.normal_force(x, u)) / mh)
+        # moves horizontally (its payload too) pulls down-slope and the normal force towards the stator
+        along = ca.vertcat(0, (weight - ctx.normal_force(x, u)) / mh)
         return (ctx.gap_sensitivity(x, u) * x[2] + along) * q[0]
 
     def physical(q, cov, c):
@@ -343,9 +343,10 @@ def misalignment_candidate(ctx: LibraryContext) -> Candidate:
             "force and the weight push the platform along the sloping guides.",
             "both",
             ("slope",),
-            function=term_function("misalign", misalignment, 1),
+            function=ctx.along_the_guides("misalign", misalignment, 1),
             physical=physical,
             signature="vertical residual growing along the track with the model's gap sensitivity",
+            in_time=ctx.payloads_differ,
         ),
         "geometry",
         "position",
@@ -389,13 +390,13 @@ def waviness_candidate(model: StageModel, data: PreparedLogs, period: float) -> 
     and the magnetic normal force push the platform: x4' += w'(x3) (M_h G - F_n) / M_h, as for a
     uniform slope (:func:`misalignment_candidate`)."""
     ctx = LibraryContext(model, data)
-    mh, weight_h = ctx.mass("horizontal"), ctx.weight("horizontal")
+    mh = ctx.mass("horizontal")
     k = 2 * math.pi / period
 
-    def build(x, u, du, q):
+    def build(x, u, du, q, weight):
         w = q[0] * ca.sin(k * x[2]) + q[1] * ca.cos(k * x[2])
         slope = k * (q[0] * ca.cos(k * x[2]) - q[1] * ca.sin(k * x[2]))
-        return ctx.gap_sensitivity(x, u) * w + ca.vertcat(0, slope * (weight_h - ctx.normal_force(x, u)) / mh)
+        return ctx.gap_sensitivity(x, u) * w + ca.vertcat(0, slope * (weight - ctx.normal_force(x, u)) / mh)
 
     mm = period * 1e3
     term = AccelerationTerm(
@@ -405,12 +406,13 @@ def waviness_candidate(model: StageModel, data: PreparedLogs, period: float) -> 
         "period).",
         "both",
         ("sin", "cos"),
-        function=term_function(f"waviness{mm:.0f}", build, 2),
+        function=ctx.along_the_guides(f"waviness{mm:.0f}", build, 2),
         physical=lambda q, cov, c: {
             **amplitude_phase("m", 1.0)(q, cov, c),
             "period": Estimate(period, 0.0, "m"),
         },
         signature=f"vertical residual periodic in x3 ({mm:.1f} mm) following the gap sensitivity",
+        in_time=ctx.payloads_differ,
     )
     return Candidate(
         term,
@@ -442,9 +444,11 @@ def refine_waviness_period(
     the waviness's own columns (both axes, filtered and weighted like the design)."""
     ctx = LibraryContext(model, data)
     x, u = ca.SX.sym("x", 4), ca.SX.sym("u", 2)
-    along = (ctx.weight("horizontal") - ctx.normal_force(x, u)) / ctx.mass("horizontal")
-    fn = ca.Function("wav_parts", [x, u], [ctx.gap_sensitivity(x, u), along])
-    sens, along_v = NumpyCall(fn.map(data.n))(data.x, data.u)
+    fn = ca.Function("wav_parts", [x, u], [ctx.gap_sensitivity(x, u), ctx.normal_force(x, u)])
+    sens, normal = NumpyCall(fn.map(data.n))(data.x, data.u)
+    # the weight the guides carry, each log's payload with it (LibraryContext.weight_carried)
+    carried = ctx.mass("horizontal") / data.load_factors[1] * model.params.gravity
+    along_v = (carried - normal) / ctx.mass("horizontal")
     x3 = data.x[2]
     best, best_sse = guess, np.inf
     y = (residual * weights[:, None])[:, fit].reshape(-1)

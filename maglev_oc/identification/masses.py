@@ -59,6 +59,8 @@ class MassChange:
     added: Estimate  # [kg] the mass the constants say the movers carry beyond the model's
     masses: tuple[float, float]  # [kg] the model's (M_h, M_v)
     changes: dict[str, float]  # each constant's relative change from the model's
+    # the logs were diagnosed again as carrying ``added`` (maglev_oc.diagnosis.pipeline.diagnose)
+    carried: bool = False
 
     def factor(self, name: str) -> float:
         """The factor the added mass moves constant ``name`` by (M / (M + m))."""
@@ -70,6 +72,17 @@ class MassChange:
         m = self.added.value
         heavier = "heavier" if m > 0 else "lighter"
         vertical = [self.changes[c] for c in ("C2", "C3", "C4") if c in self.changes]
+        if self.carried:
+            return (
+                f"The constants first found were those of movers {m:.2g} ± {self.added.stderr:.1g} kg "
+                f"heavier than the model's {self.masses[0]:g} kg (horizontal) and {self.masses[1]:g} kg "
+                f"(vertical): C1 {self.changes['C1']:+.0%} and C2..C4 {min(vertical):+.0%} to "
+                f"{max(vertical):+.0%} off the model's, as one mass on both movers moves them and as no "
+                "effect the model lacks does, and no log declares a payload. The logs were diagnosed again "
+                f"as carrying {m:.2g} kg (as '# payload_kg: {m:.2g}' declares it): the constants given are "
+                "the unloaded stage's and the forces in newtons those on the loaded stage. Declare the "
+                "payload in the log if it is known."
+            )
         return (
             f"The constants found are those of movers {abs(m):.2g} ± {self.added.stderr:.1g} kg {heavier} "
             f"than the model's {self.masses[0]:g} kg (horizontal) and {self.masses[1]:g} kg (vertical): C1 "
@@ -84,6 +97,7 @@ class MassChange:
     def to_dict(self) -> dict:
         """The JSON's ``moving_mass`` entry."""
         return {
+            "carried": self.carried,
             "added_kg": self.added.value,
             "added_kg_stderr": self.added.stderr,
             "model_masses_kg": {"horizontal": self.masses[0], "vertical": self.masses[1]},

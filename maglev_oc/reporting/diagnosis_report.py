@@ -175,7 +175,9 @@ def _finding_rows(diag: Diagnosis) -> list[tuple[str, str, str]]:
                 else "movers lighter than the model's",
                 f"{abs(mass.added.value):.2g} ± {mass.added.stderr:.1g}{NBSP}kg "
                 f"(C1 {mass.changes['C1']:+.0%}, C2 {mass.changes['C2']:+.0%})",
-                "a payload, not an effect: forces in N here use the model's masses (the note below)",
+                "a payload, not an effect: diagnosed again as carrying it (the note below)"
+                if mass.carried
+                else "a payload, not an effect: forces in N here use the model's masses (the note below)",
             )
         )
     rows += [
