@@ -600,6 +600,24 @@ def test_a_slope_the_vertical_fixes_is_not_confounded_with_a_spring_on_precise_e
 
 
 @pytest.mark.slow
+def test_sticking_guides_hold_an_offsets_thrust_in_the_share_they_hold_the_motors(tmp_path):
+    # Three effects logged at 500 Hz (bench/diagnose_rigs.py --rig log500 --drawn-pairs 12 --per-log 3
+    # --seed 27200, set 27206): 0.83 N of horizontal guide friction, guides sloping by 4.1 mrad, a
+    # 2.8 degree commutation offset. The offset's thrust d i_d (about 1.2 N, which the loop cancels
+    # with i_q) was held on the stuck samples with the holding share of the selection before (0.55)
+    # while the friction held 0.75 of i_q's: C1 came out at 9.9 for the true 13.7, with its warning,
+    # and 64 % of the horizontal held-out error was reported as an unexplained dependence on the
+    # gap. Held in one share with the motor's (library._held_beside): the three effects, sized within
+    # 30 % (the bound), no warning, nothing unexplained.
+    kinds = ("guide_friction_horizontal", "guide_misalignment", "commutation_offset")
+    names = ["commutation_offset", "guide_friction_horizontal", "guide_misalignment"]
+    _, d = _drawn_pair_finds(tmp_path, 27206, kinds, names, rig="log500")
+    assert not d.warnings and not d.unexplained
+    # identify's plausible change (30 %) with room to spare: measured 12.7 for 13.7
+    assert d.constants_final["C1"].value == pytest.approx(13.7, rel=0.15)
+
+
+@pytest.mark.slow
 def test_a_declared_payloads_weight_pulls_along_sloping_guides(tmp_path):
     # A random pair with a 0.8 kg payload declared in the log (bench/diagnose_rigs.py --drawn-pairs 12
     # --payload 0.8 --seed 27900, pair 27904): guides sloping by 4.2 mrad and a 0.29 ms amplifier lag.

@@ -1419,3 +1419,39 @@ def test_the_guides_pull_the_weight_of_each_logs_payload_along_the_slope(model):
     assert term.in_time
     by_log = [float(term.function(x, u, np.zeros(2), [0.0, k], 1.0)[1]) for k in (0, 1)]
     assert by_log == pytest.approx(at, rel=1e-9)
+
+
+def test_sticking_guides_hold_the_chosen_offsets_thrust_with_the_motors_in_one_share(model):
+    # Once a commutation offset d is chosen, the friction's holding holds the model's acceleration
+    # of the currents in the magnets' frame, (i_q + d i_d, i_d - d i_q): the offset's thrust d i_d
+    # is held in the same fit as the share (library._held_beside), and the offset's own term is no
+    # longer held apart with the share of the selection before; without a chosen angle it still is.
+    # Equalities of the model's own expressions (double precision, rtol 1e-12).
+    from maglev_oc.diagnosis.library import candidate_library
+    from maglev_oc.regression.data import prepare
+    from tests.test_regression import _synthetic
+
+    data = prepare([_synthetic(model, seconds=12.0)], bandwidth=10.0, model=model)
+    d, share = 0.04, 0.6
+    x, u, du = np.array([0.02, 0.0, 0.01, 0.0]), np.array([0.1, 1.5]), np.zeros(2)  # stuck: v = 0
+
+    def terms(angle, held):
+        return {c.name: c.term for c in candidate_library(model, data, held, commutation_angle=angle)}
+
+    beside, unheld = terms(d, {"horizontal": share}), terms(d, None)
+    offset = [1.0, 1.0]
+    held_offset = np.asarray(beside["commutation_offset"].function(x, u, du, offset)).ravel()
+    free_offset = np.asarray(unheld["commutation_offset"].function(x, u, du, offset)).ravel()
+    assert held_offset == pytest.approx(free_offset, rel=1e-12)
+    no_angle = terms(0.0, {"horizontal": share})["commutation_offset"]
+    plain = np.asarray(terms(0.0, None)["commutation_offset"].function(x, u, du, offset)).ravel()
+    assert np.asarray(no_angle.function(x, u, du, offset)).ravel()[1] == pytest.approx(
+        (1 - share) * plain[1], rel=1e-12
+    )
+    # the friction's holding column (Coulomb and viscous at 0, holding 1) at rest: minus the model's
+    # horizontal acceleration of the currents in the magnets' frame
+    friction = beside["guide_friction_horizontal"]
+    q = [1.0 if n == "holding" else 0.0 for n in friction.parameter_names]
+    turned = np.array([u[0] + d * u[1], u[1] - d * u[0]])
+    held = float(np.asarray(friction.function(x, u, du, q)).ravel()[1])
+    assert held == pytest.approx(-float(model.f(x, turned)[3]), rel=1e-12)

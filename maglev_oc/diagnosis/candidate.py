@@ -388,9 +388,11 @@ class LibraryContext:
         return self.model.shape(x[0])
 
     def modelled(self, axis: str) -> Callable:
-        """(x, u) -> the base model's acceleration on ``axis``, with the references."""
+        """(x, u) -> the base model's acceleration on ``axis``, with the references and the currents
+        in the magnets' frame (:meth:`magnets_frame`): the motor's whole force, which sticking
+        guides hold (the chosen commutation offset's thrust d i_d too)."""
         row = 1 if axis == "vertical" else 3
-        return lambda x, u: self.model.f(x, u)[row]
+        return lambda x, u: self.model.f(x, self.magnets_frame(u))[row]
 
     def magnets_frame(self, u):
         """The logged currents (i_q, i_d) in the magnets' frame beside the chosen commutation
