@@ -253,6 +253,12 @@ def diagnose(
     -------
     Diagnosis
         ``to_dict()`` is the SPEC 3 JSON; ``report()`` the findings in words.
+
+    When no log declares a payload (``# payload_kg``) and the constants read movers heavier than
+    the model's (:mod:`~maglev_oc.identification.masses`), the logs are diagnosed again as carrying
+    that mass (:func:`_payload_read`): the result's ``moving_mass.carried`` and
+    ``settings["payload_read_kg"]`` say so, and its timings hold the first pass's as
+    ``payload_read``.
     """
     model = StageModel() if model is None else model
     options = (holdout_fraction, bandwidth, settings, min_duration, tuple(exclude), limits)
