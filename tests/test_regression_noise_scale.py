@@ -264,7 +264,7 @@ def test_beside_effects_only_the_kept_selection_is_refitted_at_the_scale(monkeyp
             P, "_selected", lambda run, data, st=stage, passes=passes: passes.append(data) or st
         )
         monkeypatch.setattr(P, "_band_scale", lambda st, run, band=band: band)
-        out, scale = P.diagnose([None])
+        out, scale = P.diagnose([SimpleNamespace(payload=0.0)])
         assert passes == [floor]  # one selection, on the floor's estimate
         if expect == "refitted":
             assert out == ("refitted", stage, 0.8) and scale is taken
@@ -380,7 +380,7 @@ def test_the_diagnosis_calibrates_only_when_the_base_model_explains_the_log(monk
             return SimpleNamespace(data=data, sel=SimpleNamespace(selected=chosen), unexplained=[])
 
         monkeypatch.setattr(P, "_selected", selected)
-        data, scale = P.diagnose([None])
+        data, scale = P.diagnose([SimpleNamespace(payload=0.0)])
         if found_when_scaled:  # not kept: the floor's estimate, the first pass again
             assert passes == [floor, ("scaled", 0.7), floor] and data is floor
             assert not scale.calibrated and "calibrated on" in scale.message

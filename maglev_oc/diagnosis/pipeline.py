@@ -263,12 +263,12 @@ def diagnose(
     model = StageModel() if model is None else model
     options = (holdout_fraction, bandwidth, settings, min_duration, tuple(exclude), limits)
     first = _diagnosed(logs, model, *options, read_payload=not any(log.payload for log in logs))
-    if isinstance(first, Diagnosis):
+    if not isinstance(first, _PayloadRead):
         return first
     # the constants read a payload no log declares: diagnosed again as carrying it, so that the
     # forces its weight makes (its pull along sloping guides) are modelled and the sizes are the
     # loaded stage's (_payload_read)
-    mass, spent = first
+    mass, spent = first.mass, first.spent
     load = {PAYLOAD_KEY: f"{mass.added.value:.6g}"}
     carried = [dataclasses.replace(log, metadata={**log.metadata, **load}) for log in logs]
     again = _diagnosed(carried, model, *options)
@@ -279,6 +279,14 @@ def diagnose(
         settings={**settings_again, "payload_read_kg": mass.added.value},
         timings={**again.timings, "payload_read": spent, "total": again.timings["total"] + spent},
     )
+
+
+@dataclass(frozen=True)
+class _PayloadRead:
+    """A first pass stopped at its constants, which read a payload no log declares."""
+
+    mass: MassChange
+    spent: float  # [s] the pass's time
 
 
 def _payload_read(mass: MassChange | None) -> bool:
@@ -304,9 +312,9 @@ def _diagnosed(
     exclude: tuple[str, ...],
     limits: bool,
     read_payload: bool = False,
-) -> Diagnosis | tuple[MassChange, float]:
-    """:func:`diagnose` of ``logs`` as they declare their payloads; with ``read_payload``, (the
-    movers' added mass, the seconds spent) instead when the selection's constants read a payload
+) -> Diagnosis | _PayloadRead:
+    """:func:`diagnose` of ``logs`` as they declare their payloads; with ``read_payload``, the
+    movers' added mass instead when the selection's constants read a payload
     (:func:`_payload_read`): the rest is not worked out."""
     timings: dict[str, float] = {}
     clock = _Clock(timings)
@@ -515,18 +523,16 @@ def _at_scale(stage: _Stage, scale: float) -> _Stage:
     return dataclasses.replace(stage, session=session, sel=sel)
 
 
-def _finished(
-    stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale
-) -> Diagnosis | tuple[MassChange, float]:
-    """Step 7-8 and the result; (the added mass, the seconds spent) when ``run.read_payload`` and
-    the constants read a payload (:func:`_payload_read`)."""
+def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> Diagnosis | _PayloadRead:
+    """Step 7-8 and the result; the added mass when ``run.read_payload`` and the constants read a
+    payload (:func:`_payload_read`)."""
     clock, timings = run.clock, run.clock.timings
     session, fitted, library, design = stage.session, stage.fitted, stage.library, stage.design
     sel = stage.sel
     constants_final = constants_of(design, sel.final, run.model)
     mass = moving_mass_change(constants_final, _constants(run.model), run.model.params)
     if run.read_payload and _payload_read(mass):
-        return mass, sum(timings.values())
+        return _PayloadRead(mass, sum(timings.values()))
     not_sep, rejected, unexplained = stage.not_separable, stage.rejected, stage.unexplained
     design0, base0, data, model = stage.design0, stage.base0, session.data, run.model
     effects = clock("effects", _effects, session, fitted, library, design, sel)
