@@ -1419,6 +1419,13 @@ def test_the_guides_pull_the_weight_of_each_logs_payload_along_the_slope(model):
     assert term.in_time
     by_log = [float(term.function(x, u, np.zeros(2), [0.0, k], 1.0)[1]) for k in (0, 1)]
     assert by_log == pytest.approx(at, rel=1e-9)
+    # a tilted base pulls the payload too: its tilt is the force over (M_h + m) G
+    from maglev_oc.diagnosis.guides import level_candidates
+
+    loaded_ctx = LibraryContext(model, prepare([loaded], bandwidth=10.0, model=model))
+    tilt = next(c for c in level_candidates(loaded_ctx) if c.name == "horizontal_guides_not_level")
+    found = tilt.term.physical(np.array([0.1]), np.eye(1) * 1e-6, {})["tilt"].value
+    assert found == pytest.approx(math.asin(0.1 / ((p.mass_horizontal + 0.5) * p.gravity)), rel=1e-12)
 
 
 def test_sticking_guides_hold_the_chosen_offsets_thrust_with_the_motors_in_one_share(model):

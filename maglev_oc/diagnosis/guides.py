@@ -209,8 +209,10 @@ def _friction_physical(ctx: LibraryContext, term: AccelerationTerm, axis: str):
 
 
 def level_candidates(ctx: LibraryContext) -> list[Candidate]:
-    """A constant horizontal force (guides not level) and a constant vertical force."""
-    weight_h = ctx.weight("horizontal")
+    """A constant horizontal force (guides not level) and a constant vertical force. The tilt is the
+    force over the weight the guides carry, the payload's with the mover's (the logs' mean where
+    they declare different ones, whose pulls one constant force cannot hold apart)."""
+    weight_h = (ctx.mass("horizontal") + float(np.mean(ctx.payloads))) * ctx.params.gravity
     tilt = constant_force(
         ctx.params,
         "horizontal",
