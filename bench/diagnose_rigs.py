@@ -447,6 +447,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=700, help="seed of the first log; one more per effect")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "diagnose_rigs")
     args = parser.parse_args()
+    if args.undeclared and not args.payload:
+        parser.error("--undeclared: give the payload it leaves out of the logs (--payload KG)")
     from tests.independent.core import with_generic_libm
 
     with_generic_libm()  # the logs the test suite generates, whatever the CPU

@@ -366,7 +366,7 @@ class LibraryContext:
         if not self.payloads_differ:
             return (self.params.mass_horizontal + loads[0]) * self.params.gravity
         if s is None:
-            raise InputError("LibraryContext.weight_carried: the logs' payloads differ; give the log's index")
+            raise ValueError("LibraryContext.weight_carried: the logs' payloads differ; give the log's index")
         load = sum(m * (s[1] == k) for k, m in enumerate(loads))
         return (self.params.mass_horizontal + load) * self.params.gravity
 
