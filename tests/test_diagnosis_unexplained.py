@@ -103,6 +103,26 @@ def test_a_sinusoid_in_the_position_is_reported_at_its_period(model):
     assert u.to_dict()["period_m"] == PERIOD
 
 
+def test_a_period_longer_than_the_logged_travel_is_a_dependence_on_the_position(model):
+    """A sine whose period the spectrum points to but which exceeds the logged travel (1st-99th
+    percentile of the position) shows no period on this log: it is reported as a dependence on
+    the position, as the smooth probe of the position finds it, without a period. Reported with its
+    period, it was taken for another variable than the position, and the true end effects beside it
+    were dropped (drawn pair 28604 of the independent generator, unexplained._probes)."""
+    data = prepare([_log(model, friction=RATE_FRICTION)], bandwidth=10.0)
+    lo, hi = np.percentile(data.x[2, data.valid], [1, 99])
+    period = 1.3 * (hi - lo)
+
+    def acc(x3):
+        return AMPLITUDE * np.sin(2 * math.pi * x3 / period + 0.7)
+
+    found, *_ = _found(model, acc, periods=[("horizontal", period)])
+    assert [(u.axis, u.depends_on, u.period) for u in found][:1] == [("horizontal", "position", None)]
+    # within the travel the same probe is reported with its period (the test above)
+    assert all(p.period is None for p in _probes(data, [("horizontal", period)]))
+    assert [p.period for p in _probes(data, [("horizontal", 0.9 * (hi - lo))])][-1:] == [0.9 * (hi - lo)]
+
+
 def test_the_options_bound_what_is_reported(model):
     """max_per_axis = 0 reports nothing; a min_effect above the signature's size, or a min_gain
     above its gain, reports nothing either (each option ignored would report it)."""
