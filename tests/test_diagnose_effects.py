@@ -12,7 +12,7 @@ import pytest
 from maglev_oc.diagnosis.magnetics import END_WIDTHS
 from maglev_oc.diagnosis.selection import SMOOTH_POSITION, SelectionSettings
 from tests.diagnosis_support import diagnose_path, relative_errors
-from tests.independent.scoring import score
+from tests.independent.scoring import score, sizes
 from tests.independent.sets import named_set
 
 LIMITS_READ = {"field_shape_large", "field_shape_small"}
@@ -615,6 +615,39 @@ def test_sticking_guides_hold_an_offsets_thrust_in_the_share_they_hold_the_motor
     assert not d.warnings and not d.unexplained
     # identify's plausible change (30 %) with room to spare: measured 12.7 for 13.7
     assert d.constants_final["C1"].value == pytest.approx(13.7, rel=0.15)
+
+
+@pytest.mark.slow
+def test_a_cogging_force_is_found_beside_a_larger_dependence_on_the_position_nothing_names(tmp_path):
+    # Three effects (bench/diagnose_rigs.py --drawn-pairs 12 --per-log 3 --pairs-with end_effect
+    # --seed 26100, set 26139): a normal cogging force of 2.45 N peak at 15 mm over the slot pitch,
+    # end effects whose fall from the one stator end near the travel (10 % of the attraction there, a
+    # raised cosine 104 mm long) spans the whole 70 mm travel, and a field shape. No fall-off the end
+    # effects scan is that wide, so the position dependence is reported as unexplained; a smooth
+    # function of the position explained 81.7 % of the held-out vertical error, the cogging 35.5 %,
+    # and the cogging was refused as not specific: nothing was claimed. Judged beside the
+    # unexplained dependence (pipeline._shown_beside_unexplained) it passes: claimed and sized
+    # within 30 % (the issue's bound; measured 2.09 N), the dependence still reported.
+    kinds = ("normal_cogging", "end_effect", "field_shape")
+    _, d = _drawn_pair_finds(tmp_path, 26139, kinds, ["cogging_vertical_19mm"], sized=False)
+    truth = json.loads((tmp_path / "pair.truth.json").read_text())
+    cogging = next(e for e in truth["effects"] if e["kind"] == "normal_cogging")
+    true_size, found = sizes(cogging, d.to_dict()["effects"][0])
+    assert found == pytest.approx(true_size, rel=0.3)
+    assert any(u.axis == "vertical" and u.depends_on == "position" for u in d.unexplained)
+
+
+@pytest.mark.slow
+def test_a_force_judged_beside_an_unexplained_dependence_is_held_to_the_end_effects_shape(tmp_path):
+    # A random pair (bench/diagnose_rigs.py --drawn-pairs 16 --pairs-with end_effect normal_cogging
+    # detent_force --seed 9000, pair 9415): a detent and end effects. The misfit of the end effects'
+    # fall-off is reported as a vertical dependence on the position; judged beside it, a 38 mm
+    # normal cogging the stage does not have passed and was claimed, until it was held to the end
+    # effects' shape as the selection's choices are (its size moves with the assumed fall-off as
+    # much as it is large). The two true effects, sized within 30 % (the issue's bound).
+    _drawn_pair_finds(
+        tmp_path, 9415, ("detent_force", "end_effect"), ["cogging_horizontal_19mm", "end_effects"]
+    )
 
 
 @pytest.mark.slow

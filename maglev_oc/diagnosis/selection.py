@@ -325,6 +325,9 @@ class Judgement:
     # [m] the travel that would tell its period from those of the forces it is unresolved from
     # (:func:`_unresolved`; None when that is not why it is not separable)
     travel_needed: float | None = None
+    # the variable of the generic rival that explained more than it, when that is why it is not
+    # specific (:func:`_verdict`); "" otherwise
+    rival: str = ""
 
     @property
     def dominated_by_current_errors(self) -> bool:
@@ -1018,6 +1021,10 @@ def judge(
     unresolved = _unresolved(cand, measured.physical, [*beside, *in_its_place], design, settings)
     rivals = thrust.rivals(cand) if side else rivals
     verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, periods, unresolved)
+    rival = ""
+    if verdict == "not specific" and reason.startswith(RIVAL_REASON) and rivals is not None:
+        best_rival = rivals.best((cand.axis, _reported(cand)), measured.fit, cand.axis)
+        rival = best_rival.variable if best_rival is not None else ""
     if tried is not None and not side:
         reason += (
             f"; predicting the logged thrust current it explains {percent(_own_gain(tried.pooled_axes))} "
@@ -1048,7 +1055,12 @@ def judge(
     else:
         confounded = partners or ("C1..C4",)
     return dataclasses.replace(
-        measured, verdict=verdict, reason=reason, confounded_with=confounded, travel_needed=needed
+        measured,
+        verdict=verdict,
+        reason=reason,
+        confounded_with=confounded,
+        travel_needed=needed,
+        rival=rival,
     )
 
 
@@ -1427,11 +1439,16 @@ def _verdict(
         own = quarter if cand.axis == "both" else float(np.nanmean(j.gain_axes[axes]))
         if rival.gain > own + settings.rival_margin:
             return "not specific", (
-                f"a smooth function of the {rival.variable.replace('_', ' ')} explains more of the held-out "
+                f"{RIVAL_REASON} {rival.variable.replace('_', ' ')} explains more of the held-out "
                 f"error ({rival.gain:.1%} against {own:.1%}): the data show a dependence on that variable, "
                 "not this effect's shape"
             )
     return "passes", ""
+
+
+RIVAL_REASON = "a smooth function of the"
+"""How the reason of a candidate that a generic rival explains more than begins (:func:`_verdict`;
+``Judgement.rival`` names the rival's variable)."""
 
 
 def axis_loss_breaks(j: Judgement, settings: SelectionSettings) -> bool:
