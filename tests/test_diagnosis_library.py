@@ -1428,6 +1428,46 @@ def test_the_guides_pull_the_weight_of_each_logs_payload_along_the_slope(model):
     assert found == pytest.approx(math.asin(0.1 / ((p.mass_horizontal + 0.5) * p.gravity)), rel=1e-12)
 
 
+def test_stuck_vertical_guides_hold_the_weight_the_magnets_do_not_carry_the_payloads_with_it(model):
+    # A stuck axis does not accelerate, which the regression reads in the unloaded stage's units
+    # (regression.payload.unloaded): G (1 - 1 / s_v) vertically with a payload, s_v = M_v / (M_v + m).
+    # The friction's full holding (share 1, no Coulomb or viscous part, velocity 0) added to the
+    # model's acceleration must give that, at any state and currents: the guides carry the weight,
+    # the payload's with it, that the magnets do not (LibraryContext.at_rest). Held to 0, a 1 kg
+    # payload left -2.3 m/s^2 on every stuck sample (drawn pair 28907). Two logs with different
+    # payloads make the friction a term in time that reads the log's index. The model's own
+    # arithmetic: rtol 1e-9.
+    from maglev_oc.diagnosis.guides import friction_candidates
+    from maglev_oc.regression.data import prepare
+    from maglev_oc.regression.payload import factors, unloaded
+    from tests.test_regression import _synthetic
+
+    plain, loaded = _synthetic(model, seconds=12.0), _synthetic(model, seconds=12.0, seed=1, payload_kg=0.5)
+    g = model.params.gravity
+    x, u = np.array([0.018, 0.0, 0.01, 0.0]), np.array([0.1, 1.6])
+    a_model = np.asarray(model.f(x, u)).ravel()[[1, 3]]
+
+    def held(ctx, s=None):
+        term = next(c for c in friction_candidates(ctx) if c.name == "guide_friction_vertical").term
+        q = [0.0, 0.0, 1.0]  # coulomb, viscous, holding
+        args = (x, u, np.zeros(2), q) if s is None else (x, u, np.zeros(2), s, q)
+        return term, float(np.asarray(term.function(*args)).ravel()[0])
+
+    for log, m in ((plain, 0.0), (loaded, 0.5)):
+        term, h = held(LibraryContext(model, prepare([log], bandwidth=10.0, model=model)))
+        assert not term.in_time
+        at_rest = unloaded(np.zeros((2, 1)), factors(model.params, m)[:, None], g)[0, 0]
+        assert a_model[0] + h == pytest.approx(at_rest, rel=1e-9, abs=1e-9)
+    both = LibraryContext(model, prepare([plain, loaded], bandwidth=10.0, model=model))
+    term, _ = held(both, [0.0, 0.0])
+    assert term.in_time
+    by_log = [a_model[0] + held(both, [0.0, k])[1] for k in (0, 1)]
+    assert by_log == pytest.approx([0.0, -0.5 * g / model.params.mass_vertical], rel=1e-9, abs=1e-9)
+    # along the track a stuck axis is at rest at 0 whatever the payload: no term in time there
+    horizontal = next(c for c in friction_candidates(both) if c.name == "guide_friction_horizontal").term
+    assert not horizontal.in_time
+
+
 def test_sticking_guides_hold_the_chosen_offsets_thrust_with_the_motors_in_one_share(model):
     # Once a commutation offset d is chosen, the friction's holding holds the model's acceleration
     # of the currents in the magnets' frame, (i_q + d i_d, i_d - d i_q): the offset's thrust d i_d

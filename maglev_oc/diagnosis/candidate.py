@@ -388,11 +388,41 @@ class LibraryContext:
         return self.model.shape(x[0])
 
     def modelled(self, axis: str) -> Callable:
-        """(x, u) -> the base model's acceleration on ``axis``, with the references and the currents
-        in the magnets' frame (:meth:`magnets_frame`): the motor's whole force, which sticking
-        guides hold (the chosen commutation offset's thrust d i_d too)."""
+        """(x, u) -> what sticking guides on ``axis`` hold: the base model's acceleration there, with
+        the references and the currents in the magnets' frame (:meth:`magnets_frame`; the motor's
+        whole force, the chosen commutation offset's thrust d i_d too), less the acceleration of the
+        stage at rest (:meth:`at_rest`). (x, u, s) -> the same, ``s`` a term's time symbol, when the
+        payload a vertical stuck axis carries differs between the logs (:meth:`holds_in_time`)."""
         row = 1 if axis == "vertical" else 3
-        return lambda x, u: self.model.f(x, self.magnets_frame(u))[row]
+        if self.holds_in_time(axis):
+            return lambda x, u, s: self.model.f(x, self.magnets_frame(u))[row] - self.at_rest(axis, s)
+        rest = self.at_rest(axis)
+        return lambda x, u: self.model.f(x, self.magnets_frame(u))[row] - rest
+
+    def holds_in_time(self, axis: str) -> bool:
+        """Whether what the guides on ``axis`` hold reads the log's index (:meth:`modelled`): on the
+        vertical axis when the logs declare different payloads."""
+        return axis == "vertical" and self.payloads_differ
+
+    def at_rest(self, axis: str, s=None):
+        """[m/s^2] The acceleration of a stage at rest on ``axis`` as the regression reads it, in the
+        unloaded stage's units (:func:`~maglev_oc.regression.payload.unloaded`): G (1 - (M_v + m) / M_v)
+        = -m G / M_v vertically with a payload of m kg, 0 along the track. A stuck axis's guides
+        carry the weight the magnets do not, the payload's with it; held to an acceleration of 0,
+        a 1 kg payload left -2.3 m/s^2 on every stuck sample of vertical guides, and their friction
+        came out with a holding share of 0.01 and a viscous part of -150 N s/m (drawn pair 28907
+        of the independent generator: Coulomb 0.93 N for 0.70 on the viscous part's bound).
+        ``s``: a term's time symbol, read when the logs' payloads differ."""
+        if axis != "vertical":
+            return 0.0
+        loads = self.payloads
+        if not self.payloads_differ:
+            load = loads[0]
+        elif s is None:
+            raise ValueError("LibraryContext.at_rest: the logs' payloads differ; give the log's index")
+        else:
+            load = sum(m * (s[1] == k) for k, m in enumerate(loads))
+        return -load * self.params.gravity / self.params.mass_vertical
 
     def magnets_frame(self, u):
         """The logged currents (i_q, i_d) in the magnets' frame beside the chosen commutation

@@ -77,6 +77,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                 ctx.params,
                 axis,
                 holding=ctx.modelled(axis),
+                holding_in_time=ctx.holds_in_time(axis),
                 viscous=viscous,
                 stribeck_speed=STRIBECK_SPEED if stribeck else None,
                 name=name if form == "full" else f"{name}_{'with_' if stribeck else ''}{form}",

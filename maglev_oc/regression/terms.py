@@ -449,6 +449,7 @@ def guide_friction(
     *,
     reversal_speed: float = REVERSAL_SPEED,
     holding: Callable | None = None,
+    holding_in_time: bool = False,
     stick_speed: float | None = None,
     viscous: bool = True,
     stribeck_speed: float | None = None,
@@ -470,6 +471,10 @@ def guide_friction(
     below the encoder's resolution) holds a stuck axis against whatever the motor applies, up to
     the breakaway force; without this column the stuck samples (no acceleration under a changing
     current) pull the motor constants towards zero.
+
+    ``holding_in_time``: ``holding`` is (x, u, s) -> that acceleration, s the sample's time
+    (:func:`when_symbol`), and the term is :attr:`~AccelerationTerm.in_time` (what a stuck axis
+    holds differs between logs that carry different payloads).
 
     ``viscous=False`` leaves the viscous part out (c = 0: the friction with its viscous coefficient
     held at its physical bound).
@@ -507,19 +512,31 @@ def guide_friction(
         stick = stick_speed * width / reversal_speed  # the variants scale every speed
         slide = None if stribeck_speed is None else stribeck_speed * width / reversal_speed
 
-        def build(x, u, du, p):
+        def build(x, u, du, p, s=None):
             q = dict(zip(names, (p[i] for i in range(k)), strict=True))
             sign = ca.tanh(x[vi] / width)
             acc = -(q["coulomb"] * sign + q.get("viscous", 0) * x[vi]) / m
             if slide is not None:
                 acc = acc - q["stribeck_rise"] * sign * ca.exp(-((x[vi] / slide) ** 2)) / m
             if holding is not None:
-                acc = acc - q["holding"] * holding(x, u) * ca.exp(-((x[vi] / stick) ** 2))
+                held = holding(x, u, s) if holding_in_time else holding(x, u)
+                acc = acc - q["holding"] * held * ca.exp(-((x[vi] / stick) ** 2))
             return _put(axis, acc)
 
         form = ("" if viscous else "_coulomb") + ("_stribeck" if stribeck_speed is not None else "")
-        return term_function(f"friction_{axis}{form}", build, k)
+        if not holding_in_time:
+            return term_function(f"friction_{axis}{form}", build, k)
+        x, u, du, s, p = (ca.SX.sym(n, d) for n, d in (("x", 4), ("u", 2), ("du", 2), ("s", 2), ("p", k)))
+        return ca.Function(
+            f"friction_{axis}{form}",
+            [x, u, du, s, p],
+            [build(x, u, du, p, s)],
+            ["x", "u", "du", "s", "p"],
+            ["acc"],
+        )
 
+    if holding_in_time and holding is None:
+        raise ValueError("guide_friction: holding_in_time without a holding")
     physical = [(n, units[n], 1.0) for n in names]
     return AccelerationTerm(
         # the holding share is left out of a fit where the logged currents' errors are most of its
@@ -543,6 +560,7 @@ def guide_friction(
         function=fn(reversal_speed),
         physical=linear_physical(physical),
         signature="residual steps with the sign of the velocity",
+        in_time=holding_in_time,
         variants=(fn(reversal_speed / 2), fn(reversal_speed * 2)),
         variant_note=f"reversal speed {reversal_speed / 2 * 1e3:g}-{reversal_speed * 2 * 1e3:g} mm/s"
         + (
