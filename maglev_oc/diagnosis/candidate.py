@@ -22,7 +22,7 @@ from maglev_oc.errors import InputError
 from maglev_oc.model.hardware import RIG_SAMPLE_TIME
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import PreparedLogs
-from maglev_oc.regression.terms import AccelerationTerm, term_function, when_symbol
+from maglev_oc.regression.terms import AccelerationTerm, term_function, term_function_in_time
 from maglev_oc.results import Estimate
 
 __all__ = [
@@ -362,13 +362,20 @@ class LibraryContext:
         (drawn pairs 27904 and 27907 of the independent generator) left 0.033 N along the track,
         claimed as a tilted base. ``s``: a term's time symbol (:func:`~maglev_oc.regression.terms.
         when_symbol`), read when :attr:`payloads_differ`."""
+        return (self.params.mass_horizontal + self.payload(s)) * self.params.gravity
+
+    def payload(self, s=None):
+        """[kg] The payload of the log a sample is from: the one all logs declare, or when
+        :attr:`payloads_differ` an expression of ``s``, a term's time symbol (:func:`~maglev_oc.
+        regression.terms.when_symbol`: the log's index is ``s[1]``)."""
         loads = self.payloads
         if not self.payloads_differ:
-            return (self.params.mass_horizontal + loads[0]) * self.params.gravity
+            return loads[0]
         if s is None:
-            raise ValueError("LibraryContext.weight_carried: the logs' payloads differ; give the log's index")
-        load = sum(m * (s[1] == k) for k, m in enumerate(loads))
-        return (self.params.mass_horizontal + load) * self.params.gravity
+            raise ValueError(
+                "LibraryContext: the logs' payloads differ; give the log's index (a term in time)"
+            )
+        return sum(m * (s[1] == k) for k, m in enumerate(loads))
 
     def along_the_guides(self, name: str, build: Callable, n_parameters: int):
         """A term Function of ``build(x, u, du, q, weight)``, ``weight`` the weight the guides carry
@@ -378,10 +385,9 @@ class LibraryContext:
         if not self.payloads_differ:
             weight = self.weight_carried()
             return term_function(name, lambda x, u, du, q: build(x, u, du, q, weight), n_parameters)
-        x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
-        q = ca.SX.sym("p", n_parameters)
-        acc = build(x, u, du, q, self.weight_carried(s))
-        return ca.Function(name, [x, u, du, s, q], [acc], ["x", "u", "du", "s", "p"], ["acc"])
+        return term_function_in_time(
+            name, lambda x, u, du, s, q: build(x, u, du, q, self.weight_carried(s)), n_parameters
+        )
 
     def shapes(self, x):
         """The shape functions l1..l4 at the gap x[0] (L = C l)."""
@@ -415,14 +421,7 @@ class LibraryContext:
         ``s``: a term's time symbol, read when the logs' payloads differ."""
         if axis != "vertical":
             return 0.0
-        loads = self.payloads
-        if not self.payloads_differ:
-            load = loads[0]
-        elif s is None:
-            raise ValueError("LibraryContext.at_rest: the logs' payloads differ; give the log's index")
-        else:
-            load = sum(m * (s[1] == k) for k, m in enumerate(loads))
-        return -load * self.params.gravity / self.params.mass_vertical
+        return -self.payload(s) * self.params.gravity / self.params.mass_vertical
 
     def magnets_frame(self, u):
         """The logged currents (i_q, i_d) in the magnets' frame beside the chosen commutation

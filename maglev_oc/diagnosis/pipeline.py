@@ -1342,9 +1342,9 @@ def _shown_beside_unexplained(
         and (by_name[j.name].axis, j.rival) in probes
         and by_name[j.name].reported_name not in chosen_effects
     ]
-    if not refused or len(sel.selected) >= session.settings.max_effects:
-        return None
     settings = session.settings
+    if not refused or len(sel.selected) >= settings.max_effects:
+        return None
     chosen = [by_name[n] for n in sel.selected]
     beside = list(dict.fromkeys(probes[(c.axis, c.variable)] for c in refused))
     design = session.design(model, [c.term for c in chosen] + beside + [c.term for c in refused])
@@ -1367,9 +1367,10 @@ def _shown_beside_unexplained(
 
 
 def _with(sel: Selection, design: Design, shown: Judgement) -> Selection:
-    """``sel`` with ``shown``'s candidate chosen after the others (its step's confidence 1: it is
-    the one candidate that passes there, :func:`_shown_beside_unexplained`) and every effect
-    refitted."""
+    """``sel`` with ``shown``'s candidate chosen after the others and every effect refitted. Its
+    step's confidence is 1, as for two effects the selection chooses together when neither passes
+    alone: it was chosen by the tests beside the unexplained dependence
+    (:func:`_shown_beside_unexplained`), not in a bootstrap contest with other candidates."""
     accepted = dataclasses.replace(shown, verdict="accepted")
     steps = [*sel.steps, Step(shown.name, 1.0, {shown.name: accepted})]
     return dataclasses.replace(

@@ -326,7 +326,7 @@ class Judgement:
     # (:func:`_unresolved`; None when that is not why it is not separable)
     travel_needed: float | None = None
     # the variable of the generic rival that explained more than it, when that is why it is not
-    # specific (:func:`_verdict`); "" otherwise
+    # specific (:func:`_verdict_and_rival`); "" otherwise
     rival: str = ""
 
     @property
@@ -1020,11 +1020,9 @@ def judge(
     ]
     unresolved = _unresolved(cand, measured.physical, [*beside, *in_its_place], design, settings)
     rivals = thrust.rivals(cand) if side else rivals
-    verdict, reason = _verdict(measured, cand, axes, cur_fit, settings, rivals, periods, unresolved)
-    rival = ""
-    if verdict == "not specific" and reason.startswith(RIVAL_REASON) and rivals is not None:
-        best_rival = rivals.best((cand.axis, _reported(cand)), measured.fit, cand.axis)
-        rival = best_rival.variable if best_rival is not None else ""
+    verdict, reason, rival = _verdict_and_rival(
+        measured, cand, axes, cur_fit, settings, rivals, periods, unresolved
+    )
     if tried is not None and not side:
         reason += (
             f"; predicting the logged thrust current it explains {percent(_own_gain(tried.pooled_axes))} "
@@ -1375,7 +1373,40 @@ def _verdict(
     periods_seen: float | None = None,
     unresolved: Sequence[tuple[str, float]] = (),
 ) -> tuple[str, str]:
-    """(verdict, reason) from the measured evidence, the tests in the module doc's order;
+    """(verdict, reason) from the measured evidence, the tests in the module doc's order
+    (:func:`_verdict_and_rival` without the rival's variable)."""
+    return _verdict_and_rival(j, cand, axes, cur_fit, settings, rivals, periods_seen, unresolved)[:2]
+
+
+def _verdict_and_rival(
+    j: Judgement,
+    cand: Candidate,
+    axes: np.ndarray,
+    cur_fit: SubsetFit,
+    settings: SelectionSettings,
+    rivals: Rivals | None,
+    periods_seen: float | None = None,
+    unresolved: Sequence[tuple[str, float]] = (),
+) -> tuple[str, str, str]:
+    """(verdict, reason, the variable of the rival that explained more when that is the reason, else
+    ""): :func:`_before_the_rivals`, then, if it passes, :func:`_against_the_rival`."""
+    verdict, reason = _before_the_rivals(j, cand, axes, cur_fit, settings, periods_seen, unresolved)
+    if verdict != "passes":
+        return verdict, reason, ""
+    return _against_the_rival(j, cand, axes, settings, rivals)
+
+
+def _before_the_rivals(
+    j: Judgement,
+    cand: Candidate,
+    axes: np.ndarray,
+    cur_fit: SubsetFit,
+    settings: SelectionSettings,
+    periods_seen: float | None = None,
+    unresolved: Sequence[tuple[str, float]] = (),
+) -> tuple[str, str]:
+    """(verdict, reason) from the measured evidence, the tests in the module doc's order but the
+    rivals' (:func:`_against_the_rival`, the last);
     ``periods_seen``: the logged travel in periods of a position-periodic candidate;
     ``unresolved``: chosen effects whose spatial period the travel does not tell from its own."""
     gain, quarter, z, wald, threshold = j.own_pooled_gain, j.own_gain, j.z, j.wald, j.wald_threshold
@@ -1434,21 +1465,28 @@ def _verdict(
             f"{gain:.1%} of the {AXES[better]} one: the data show a {AXES[better]} dependence, not "
             f"what this effect does on both axes"
         )
-    rival = rivals.best((cand.axis, _reported(cand)), j.fit, cand.axis) if rivals else None
-    if rival is not None:
-        own = quarter if cand.axis == "both" else float(np.nanmean(j.gain_axes[axes]))
-        if rival.gain > own + settings.rival_margin:
-            return "not specific", (
-                f"{RIVAL_REASON} {rival.variable.replace('_', ' ')} explains more of the held-out "
-                f"error ({rival.gain:.1%} against {own:.1%}): the data show a dependence on that variable, "
-                "not this effect's shape"
-            )
     return "passes", ""
 
 
-RIVAL_REASON = "a smooth function of the"
-"""How the reason of a candidate that a generic rival explains more than begins (:func:`_verdict`;
-``Judgement.rival`` names the rival's variable)."""
+def _against_the_rival(
+    j: Judgement, cand: Candidate, axes: np.ndarray, settings: SelectionSettings, rivals: Rivals | None
+) -> tuple[str, str, str]:
+    """(verdict, reason, the rival's variable) of the last test of the module doc, for a candidate
+    that passed the others: not specific when a generic rival explains more of the held-out error
+    on its axes by more than ``rival_margin``; else ("passes", "", "")."""
+    rival = rivals.best((cand.axis, _reported(cand)), j.fit, cand.axis) if rivals else None
+    if rival is None:
+        return "passes", "", ""
+    own = j.own_gain if cand.axis == "both" else float(np.nanmean(j.gain_axes[axes]))
+    if rival.gain <= own + settings.rival_margin:
+        return "passes", "", ""
+    return (
+        "not specific",
+        f"a smooth function of the {rival.variable.replace('_', ' ')} explains more of the held-out "
+        f"error ({rival.gain:.1%} against {own:.1%}): the data show a dependence on that variable, "
+        "not this effect's shape",
+        rival.variable,
+    )
 
 
 def axis_loss_breaks(j: Judgement, settings: SelectionSettings) -> bool:

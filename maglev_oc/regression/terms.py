@@ -51,6 +51,7 @@ __all__ = [
     "linear_physical",
     "periodic_force",
     "term_function",
+    "term_function_in_time",
     "viscous_friction",
     "when_symbol",
 ]
@@ -82,6 +83,16 @@ def term_function(name: str, build: Callable, n_parameters: int) -> ca.Function:
     p = ca.SX.sym("p", n_parameters)
     acc = build(x, u, du, p)
     return ca.Function(name, [x, u, du, p], [ca.vertcat(acc)], ["x", "u", "du", "p"], ["acc"])
+
+
+def term_function_in_time(name: str, build: Callable, n_parameters: int) -> ca.Function:
+    """A term Function in time (x (4), u (2), du (2), s (2), p) -> acc (2) from
+    ``build(x, u, du, s, p)``, s the sample's time (:func:`when_symbol`;
+    :attr:`AccelerationTerm.in_time`)."""
+    x, u, du, s = ca.SX.sym("x", 4), ca.SX.sym("u", 2), ca.SX.sym("du", 2), when_symbol()
+    p = ca.SX.sym("p", n_parameters)
+    acc = build(x, u, du, s, p)
+    return ca.Function(name, [x, u, du, s, p], [ca.vertcat(acc)], ["x", "u", "du", "s", "p"], ["acc"])
 
 
 def _casadi_name(name: str) -> str:
@@ -526,13 +537,8 @@ def guide_friction(
         form = ("" if viscous else "_coulomb") + ("_stribeck" if stribeck_speed is not None else "")
         if not holding_in_time:
             return term_function(f"friction_{axis}{form}", build, k)
-        x, u, du, s, p = (ca.SX.sym(n, d) for n, d in (("x", 4), ("u", 2), ("du", 2), ("s", 2), ("p", k)))
-        return ca.Function(
-            f"friction_{axis}{form}",
-            [x, u, du, s, p],
-            [build(x, u, du, p, s)],
-            ["x", "u", "du", "s", "p"],
-            ["acc"],
+        return term_function_in_time(
+            f"friction_{axis}{form}", lambda x, u, du, s, p: build(x, u, du, p, s), k
         )
 
     if holding_in_time and holding is None:
