@@ -651,6 +651,48 @@ def test_a_force_judged_beside_an_unexplained_dependence_is_held_to_the_end_effe
 
 
 @pytest.mark.slow
+def test_a_slope_of_the_guides_is_not_dropped_for_what_was_chosen_after_it(tmp_path):
+    # Two effects of a drawn set with a declared 0.6 kg payload (bench/diagnose_rigs.py --rig measured
+    # --drawn-pairs 12 --per-log 3 --payload 0.6 --seed 29300, set 29300, which the default rig
+    # misdiagnoses the same way): guides sloping by 2.5 mrad with a 5.7 um waviness at 78 mm, and a
+    # 1.2 degree commutation offset. The slope was chosen beside the offset; end effects of 0.1-0.2 %
+    # and a spring along the track were chosen after it, on the waviness the slope leaves, and beside
+    # them the backward pass found the slope collinear with the constants and dropped it: a tilt of
+    # the guides claimed, the offset's vertical angle at 0.28 rad (14 times the truth). Dropped in its
+    # place (selection._later_in_its_place): the two true effects, sized within 30 % (the issue's
+    # bound; measured -2.50 mrad for -2.47, 0.0206 rad for 0.0206).
+    kinds, names = ("guide_misalignment", "commutation_offset"), ["commutation_offset", "guide_misalignment"]
+    _, d = _drawn_pair_finds(tmp_path, 29300, kinds, names, payload=(0.6, True))
+    offset = next(e for e in d.effects if e.name == "commutation_offset").parameters
+    # the vertical angle is the thrust's within 3 standard errors (0.28 rad when the slope was dropped)
+    gap = abs(offset["angle_vertical"].value - offset["angle_horizontal"].value)
+    assert gap < 3 * math.hypot(offset["angle_vertical"].stderr, offset["angle_horizontal"].stderr)
+
+
+@pytest.mark.slow
+def test_a_spring_and_end_effects_are_not_a_current_sensor_offset_with_a_payload(tmp_path):
+    # A drawn set on measured currents with a declared 0.6 kg payload (bench/diagnose_rigs.py --rig
+    # measured --drawn-pairs 12 --per-log 3 --payload 0.6 --seed 29300, set 29308): end effects of 9 %
+    # of the thrust and 6 % of the attraction at +-50 mm, a 10.8 N/m cable carrier and a 4 % thrust
+    # ripple at the slot pitch. The current sensors' offset explained 52 % of the held-out error at
+    # the first step (61 % of the vertical, 43 % of the horizontal), the carrier 49 % (98 % of the
+    # horizontal); the end effects (88 % of the vertical) were refused because a smooth function of
+    # the position on both axes, the carrier with it, explained more. The offset, a tilt, end effects
+    # and a gain mismatch were claimed. The carrier and the end effects are tried as a pair beside
+    # the offset (selection._pair_over_best with the candidates a rival refused): the three true
+    # effects, the spring and the ripple sized within 30 % (the issue's bound; measured 10.7 N/m and
+    # 3.8 %); the end effects' size, 4.7 % of the thrust at the ends for 8.4 % at 40 mm, is not.
+    kinds = ("end_effect", "cable_carrier", "thrust_ripple")
+    names = ["cable_carrier_force", "end_effects", "thrust_ripple"]
+    effects, d = _drawn_pair_finds(
+        tmp_path, 29308, kinds, names, sized=False, rig="measured", payload=(0.6, True)
+    )
+    found = {e.name: e.parameters for e in d.effects}
+    assert abs(found["cable_carrier_force"]["stiffness"].value / effects[1].stiffness - 1) < 0.3
+    assert abs(found["thrust_ripple"]["amplitude"].value / effects[2].ratio - 1) < 0.3
+
+
+@pytest.mark.slow
 def test_stuck_vertical_guides_carry_the_weight_of_a_payload_nobody_declared(tmp_path):
     # A random pair on measured currents through the sensors' 300 Hz filter, carrying 1 kg nobody
     # declared (bench/diagnose_rigs.py --rig filtered --drawn-pairs 12 --payload 1.0 --undeclared

@@ -1,0 +1,145 @@
+"""The selection's backward pass finds an effect not separable beside the rest: the effect chosen
+after it that confounds it is dropped in its place when, without both, the first explains more of
+the held-out error (``selection._later_in_its_place``); else the first is dropped, as before."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+
+from maglev_oc.diagnosis.selection import SelectionSettings, _later_in_its_place
+from tests._diagnosis_cases import _judgement as injected_judgement
+
+BASE = injected_judgement(z=5.0, wald=100.0)
+CONFOUNDED = dataclasses.replace(
+    BASE,
+    name="guide_misalignment",
+    verdict="not separable",
+    reason="confounded with the base constants on this log (variance inflation 291)",
+)
+
+
+def _library() -> dict:
+    """A slope of the guides (one parameter), end effects (four) and a spring along the track (two):
+    the names and parameters the function reads."""
+
+    def cand(*names):
+        return SimpleNamespace(term=SimpleNamespace(parameter_names=names), nuisance=())
+
+    return {
+        "guide_misalignment": cand("slope"),
+        "end_effects": cand("a", "b", "c", "d"),
+        "cable_carrier_force": cand("stiffness", "force_at_zero"),
+    }
+
+
+def judge(table: dict):
+    """A judge of (name, others) from ``table``: name -> (others' set -> (gain, verdict)), the
+    calls recorded in ``judge.calls``."""
+    calls = []
+
+    def judged(name, others):
+        calls.append((name, tuple(others)))
+        gain, verdict = table[name][frozenset(others)]
+        return dataclasses.replace(
+            BASE, name=name, verdict=verdict, gain=gain, gain_axes=np.array([gain, gain])
+        )
+
+    judged.calls = calls
+    return judged
+
+
+CURRENT = ["base", "commutation_offset", "guide_misalignment", "end_effects"]
+REST = frozenset({"base", "commutation_offset"})
+
+
+def test_a_later_effect_that_explains_less_is_dropped_in_the_place_of_the_one_it_confounds():
+    # Set 29300 of the independent generator: the slope chosen beside a commutation offset explained
+    # 67.6 % of the held-out error; end effects of 0.1-0.2 % chosen after it made it collinear with
+    # the constants. Without them it passes, and it explains more than they do in its place.
+    s = SelectionSettings()
+    judged = judge(
+        {
+            "guide_misalignment": {REST: (0.676, "passes")},
+            "end_effects": {REST: (0.44, "passes"), REST | {"guide_misalignment"}: (0.026, "passes")},
+        }
+    )
+    out = _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, _library(), judged, s)
+    assert out is not None and out.name == "end_effects"
+    assert out.verdict == "not separable" and out.confounded_with == ("guide_misalignment",)
+    assert out.gain == 0.026  # its judgement beside the one kept
+    assert "67.6%" in out.reason and "44.0%" in out.reason and "variance inflation 291" in out.reason
+
+
+def test_the_first_is_dropped_when_the_later_one_explains_more_in_its_place():
+    s, lib = SelectionSettings(), _library()
+    # the later one explains more than the first beside the rest: the first goes (None), as before
+    more = judge(
+        {
+            "guide_misalignment": {REST: (0.50, "passes")},
+            "end_effects": {REST: (0.60, "passes")},
+        }
+    )
+    assert _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, lib, more, s) is None
+    # within the parsimony penalty of the later one's three extra parameters the first is kept
+    within = judge(
+        {
+            "guide_misalignment": {REST: (0.50, "passes")},
+            "end_effects": {
+                REST: (0.50 + 2.9 * s.parameter_penalty, "passes"),
+                REST | {"guide_misalignment"}: (0.01, "passes"),
+            },
+        }
+    )
+    assert (
+        _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, lib, within, s).name == "end_effects"
+    )
+    beyond = judge(
+        {
+            "guide_misalignment": {REST: (0.50, "passes")},
+            "end_effects": {REST: (0.50 + 3.1 * s.parameter_penalty, "passes")},
+        }
+    )
+    assert _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, lib, beyond, s) is None
+    # a later one that does not pass in its place explains nothing the first does not: it goes
+    refused = judge(
+        {
+            "guide_misalignment": {REST: (0.50, "passes")},
+            "end_effects": {REST: (0.90, "implausible"), REST | {"guide_misalignment"}: (0.01, "passes")},
+        }
+    )
+    assert (
+        _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, lib, refused, s).name == "end_effects"
+    )
+
+
+def test_nothing_is_dropped_in_its_place_unless_a_later_choice_is_what_confounds_it():
+    s, lib = SelectionSettings(), _library()
+    # without the later effect the first still does not pass: the constants confound it on their own
+    still = judge({"guide_misalignment": {REST: (0.50, "not separable")}})
+    assert _later_in_its_place("guide_misalignment", CONFOUNDED, CURRENT, lib, still, s) is None
+    # the last chosen has no later effect, and another verdict than not separable is no confounding
+    nothing = judge({})
+    last = ["base", "commutation_offset", "end_effects", "guide_misalignment"]
+    assert _later_in_its_place("guide_misalignment", CONFOUNDED, last, lib, nothing, s) is None
+    small = dataclasses.replace(CONFOUNDED, verdict="not significant")
+    assert _later_in_its_place("guide_misalignment", small, CURRENT, lib, nothing, s) is None
+    assert nothing.calls == []
+
+
+def test_the_latest_choice_is_tried_first():
+    # two later effects: the most recent is the first whose removal is tried
+    s = SelectionSettings()
+    current = [*CURRENT, "cable_carrier_force"]
+    rest = frozenset({"base", "commutation_offset", "end_effects"})
+    judged = judge(
+        {
+            "guide_misalignment": {rest: (0.60, "passes")},
+            "cable_carrier_force": {rest: (0.10, "passes"), rest | {"guide_misalignment"}: (0.02, "passes")},
+        }
+    )
+    out = _later_in_its_place("guide_misalignment", CONFOUNDED, current, _library(), judged, s)
+    assert out.name == "cable_carrier_force"
+    assert judged.calls[0] == ("guide_misalignment", ("base", "commutation_offset", "end_effects"))
