@@ -670,6 +670,25 @@ def test_a_slope_of_the_guides_is_not_dropped_for_what_was_chosen_after_it(tmp_p
 
 
 @pytest.mark.slow
+def test_a_tilt_is_not_dropped_for_end_effects_that_took_its_steady_thrust(tmp_path):
+    # A drawn set on measured currents through the sensors' 300 Hz filter (bench/diagnose_rigs.py
+    # --rig filtered --drawn-pairs 12 --per-log 3 --seed 29900, set 29901): guides sloping by 2.0 mrad
+    # with a 3.2 um waviness, a base tilted by 6.7 mrad (0.105 N along the track) and a field shape.
+    # The tilt, chosen beside the slope, explained nothing more beside end effects chosen after it
+    # (their thrust's fall, on the steady thrust that holds the tilt); it was dropped as not
+    # significant, the end effects then as implausible, and the tilt was not claimed. The later
+    # choice is dropped in its place (selection._later_in_its_place): the slope and the tilt, each
+    # within 30 % (the issue's bound; measured -2.13 mrad and 0.1035 N); the field shape, 1.5 % of
+    # the field at 14.5 mm, is not found.
+    kinds = ("guide_misalignment", "field_shape", "tilted_base")
+    names = ["guide_misalignment", "horizontal_guides_not_level"]
+    effects, d = _drawn_pair_finds(tmp_path, 29901, kinds, names, sized=False, rig="filtered")
+    found = {e.name: e.parameters for e in d.effects}
+    assert abs(found["guide_misalignment"]["slope"].value / effects[0].slope - 1) < 0.3
+    assert abs(found["horizontal_guides_not_level"]["tilt"].value / effects[2].angle - 1) < 0.3
+
+
+@pytest.mark.slow
 def test_a_spring_and_end_effects_are_not_a_current_sensor_offset_with_a_payload(tmp_path):
     # A drawn set on measured currents with a declared 0.6 kg payload (bench/diagnose_rigs.py --rig
     # measured --drawn-pairs 12 --per-log 3 --payload 0.6 --seed 29300, set 29308): end effects of 9 %
