@@ -43,6 +43,7 @@ from maglev_oc.diagnosis.selection import (
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset, residuals
+from maglev_oc.results import Estimate
 from tests._diagnosis_cases import _judgement
 
 
@@ -107,6 +108,40 @@ def test_too_small_quotes_the_axes_it_was_judged_on():
     assert verdict == "too small"
     assert f"{judged[0]:.2g} m/s^2 RMS ({judged[1]:.2g} in its largest" in reason
     assert "judged where largest" not in reason  # its peak on the judged axis is under the size too
+
+
+def test_two_periods_no_travel_tells_apart_are_said_to_be_the_same():
+    # a cogging at 38.1 mm beside a guide waviness the residual showed at the same period (set 29901
+    # of the independent generator): the reason asked for "a travel 1e+09 times as long"
+    s = SelectionSettings()
+    j = dataclasses.replace(
+        _judgement(z=s.min_z + 1, wald=100.0), physical={"period": Estimate(0.0381, 0.0, "m")}
+    )
+    cand = SimpleNamespace(axis="both", plausible=lambda physical: None)
+
+    def reason(beats):
+        return _verdict(
+            j,
+            cand,
+            np.array([0, 1]),
+            SimpleNamespace(compensation=1.0),
+            s,
+            None,
+            None,
+            [("guide_waviness_38mm", beats)],
+        )
+
+    verdict, same = reason(0.0)
+    assert verdict == "not separable"
+    assert (
+        same
+        == "its period of 38.1 mm is that of guide waviness 38mm: no length of travel tells the two apart"
+    )
+    # a drift short of min_beats still says how much longer a travel would do, up to the bound
+    for beats in (0.5 * s.min_beats, 1.01 * s.min_beats / selection_module.SAME_PERIOD_TRAVEL):
+        verdict, drift = reason(beats)
+        assert verdict == "not separable" and f"drift apart by {beats:.2f} of a cycle" in drift
+    assert "no length of travel" in reason(0.99 * s.min_beats / selection_module.SAME_PERIOD_TRAVEL)[1]
 
 
 def test_own_gain_is_the_mean_over_the_axes_it_acts_on():

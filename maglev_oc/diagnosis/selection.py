@@ -1449,6 +1449,11 @@ def _before_the_rivals(
         name, beats = unresolved[0]
         period = j.physical["period"].value
         longer = settings.min_beats / max(beats, 1e-9)
+        if longer > SAME_PERIOD_TRAVEL:
+            return "not separable", (
+                f"its period of {period * 1e3:.1f} mm is that of {name.replace('_', ' ')}: no length of "
+                "travel tells the two apart"
+            )
         return "not separable", (
             f"its period of {period * 1e3:.1f} mm and that of {name.replace('_', ' ')} drift apart by "
             f"{beats:.2f} of a cycle over the logged travel, less than {settings.min_beats:g}: the travel "
@@ -2297,6 +2302,7 @@ def _later_in_its_place(
     if j.verdict not in ("not separable", "not significant"):
         return None
     later = current[current.index(name) + 1 :]
+    words = name.replace("_", " ")
 
     def worth(jj: Judgement) -> float:
         return jj.gain - settings.parameter_penalty * _reported(by_name[jj.name])
@@ -2314,9 +2320,9 @@ def _later_in_its_place(
             beside,
             verdict="not separable",
             reason=(
-                f"not separable from {name.replace('_', ' ')} on this log, which was chosen before it "
-                f"and explains more of the held-out error in its place ({percent(kept.gain)} against "
-                f"{percent(instead.gain)}): beside this one it is {j.verdict} ({j.reason})"
+                f"not separable from {words} on this log: {words}, chosen before it, explains more of "
+                f"the held-out error in its place ({percent(kept.gain)} against {percent(instead.gain)}), "
+                f"and beside this one {words} was {j.verdict} ({j.reason})"
             ),
             confounded_with=(name,),
         )
@@ -2439,6 +2445,12 @@ def _pairs_restoring_thrust(
     forms = [p for p in gains if {by_name[n].reported_name for n in p} == effects]
     return sorted(forms, key=gains.get, reverse=True)
 
+
+SAME_PERIOD_TRAVEL = 1e3
+"""How many times the logged travel would have to be longer for two periods to drift apart by
+``min_beats`` before they are said to be the same period (the reason then says no travel separates
+them): a waviness of the guides at a motor period drifts by nothing, and "a travel 1e+09 times as
+long" was what the reason said."""
 
 PAIR_CANDIDATES = 4
 """How many of a step's passing candidates (by held-out gain, less the parsimony penalty) are tried in
