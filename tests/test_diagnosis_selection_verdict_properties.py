@@ -438,25 +438,53 @@ def test_an_effect_a_later_choice_explains_is_dropped_even_when_two_were_chosen(
     # (an effect chosen early may be explained by later ones). Both planted effects pass at their
     # steps (friction first: 52 % against 28 % of the held-out mean square); here the judgement of
     # friction beside the cogging is made to find it explained (as a constant force is by a
-    # commutation offset that also makes one). With exactly two effects chosen the friction must
-    # go, the final fit being that of the cogging alone (recomputed: the same fit, rel 1e-12)
+    # commutation offset that also makes one), and the cogging in its place to explain more than it
+    # (as the offset explains more than the constant force). With exactly two effects chosen the
+    # friction must go, the final fit being that of the cogging alone (recomputed: the same fit,
+    # rel 1e-12)
     design, lib = two_effects
     friction, cogging = lib["guide_friction_horizontal"], lib["cogging_horizontal_19mm"]
-    real = selection_module.judge
-
-    def explained_later(d, cand, current, *args, **kw):
-        j = real(d, cand, current, *args, **kw)
-        if cand.name == friction.name and cogging.name in current:
-            return dataclasses.replace(j, verdict="not significant", reason="explained by the cogging")
-        return j
-
-    monkeypatch.setattr(selection_module, "judge", explained_later)
-    sel = selection_module.select(design, [friction, cogging], SelectionSettings(bootstrap=5))
+    sel = _explained_later(design, friction, cogging, monkeypatch, cogging_in_its_place=0.99)
     assert sel.selected == [cogging.name]
     assert sel.last[friction.name].reason.startswith("dropped after the later choices")
     alone = fit_subset(design, ["base", cogging.name])
     np.testing.assert_array_equal(sel.final.index, alone.index)
     np.testing.assert_allclose(sel.final.coef, alone.coef, rtol=1e-12)
+
+
+def test_a_later_choice_that_explains_less_in_its_place_goes_instead(two_effects, monkeypatch):
+    # The same, with the cogging in the friction's place explaining what it does (28 % against the
+    # friction's 52 %): the log cannot tell the two apart, and the one chosen first explains more,
+    # so the cogging goes (selection._later_in_its_place), listed as not separable from the friction
+    design, lib = two_effects
+    friction, cogging = lib["guide_friction_horizontal"], lib["cogging_horizontal_19mm"]
+    sel = _explained_later(design, friction, cogging, monkeypatch, cogging_in_its_place=None)
+    assert sel.selected == [friction.name]
+    dropped = sel.last[cogging.name]
+    assert dropped.verdict == "not separable" and dropped.confounded_with == (friction.name,)
+    assert "explained by the cogging" in dropped.reason
+    alone = fit_subset(design, ["base", friction.name])
+    np.testing.assert_allclose(sel.final.coef, alone.coef, rtol=1e-12)
+
+
+def _explained_later(design, friction, cogging, monkeypatch, cogging_in_its_place):
+    """select() over the friction and the cogging with the friction's judgement beside the cogging
+    made not significant; once it was, the cogging judged without the friction gains
+    ``cogging_in_its_place`` (None: what it does)."""
+    real = selection_module.judge
+    seen = []
+
+    def explained_later(d, cand, current, *args, **kw):
+        j = real(d, cand, current, *args, **kw)
+        if cand.name == friction.name and cogging.name in current:
+            seen.append(True)
+            return dataclasses.replace(j, verdict="not significant", reason="explained by the cogging")
+        if cand.name == cogging.name and friction.name not in current and seen and cogging_in_its_place:
+            return dataclasses.replace(j, gain=cogging_in_its_place)
+        return j
+
+    monkeypatch.setattr(selection_module, "judge", explained_later)
+    return selection_module.select(design, [friction, cogging], SelectionSettings(bootstrap=5))
 
 
 @pytest.mark.parametrize("bootstrap", [7, 30])
