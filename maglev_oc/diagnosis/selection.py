@@ -2149,9 +2149,7 @@ def select(
                 continue
             # parsimony: a candidate that only adds coefficients to a nested, simpler one (a spring
             # with zero stiffness is a constant force) must beat it by more than the penalty
-            best = max(
-                passing, key=lambda j: j.gain - settings.parameter_penalty * _reported(by_name[j.name])
-            )
+            best = max(passing, key=lambda j: _worth(j, by_name, settings))
             best = _form_of_effect(design, best, passing, by_name, held_out, counted, settings)
             # refused only because a generic rival explained more: on both axes that rival may take
             # another effect's axis, which the pair then explains
@@ -2232,7 +2230,8 @@ def select(
                     pool = [n for n in pool if by_name[n].reported_name != effect]
                     dropped = rounds_dropped = True
                     break
-                # confounded only beside an effect chosen after it that explains less: that one goes
+                # confounded or explained only beside an effect chosen after it that explains less in
+                # its place: that one goes
                 later = _later_in_its_place(name, j, current, by_name, judged_beside, settings)
                 if later is not None:
                     last[later.name] = later
@@ -2303,17 +2302,15 @@ def _later_in_its_place(
         return None
     later = current[current.index(name) + 1 :]
     words = name.replace("_", " ")
-
-    def worth(jj: Judgement) -> float:
-        return jj.gain - settings.parameter_penalty * _reported(by_name[jj.name])
-
     for other in reversed(later):
         rest = [c for c in current if c not in (name, other)]
         kept = judged_beside(name, rest)
         if kept.verdict != "passes":
             continue
         instead = judged_beside(other, rest)
-        if instead.verdict == "passes" and worth(instead) > worth(kept):
+        if instead.verdict == "passes" and _worth(instead, by_name, settings) > _worth(
+            kept, by_name, settings
+        ):
             continue
         beside = judged_beside(other, [*rest, name])
         return dataclasses.replace(
@@ -2507,12 +2504,9 @@ def _pair_over_best(
             _reported(by_name[n]) for n in names
         )
 
-    def worth(j: Judgement) -> float:
-        return j.gain - settings.parameter_penalty * _reported(by_name[j.name])
-
     def others(js: Sequence[Judgement]) -> list[Judgement]:
         kept = (j for j in js if not j.side and by_name[j.name].reported_name != effect)
-        return sorted(kept, key=worth, reverse=True)[:PAIR_CANDIDATES]
+        return sorted(kept, key=lambda j: _worth(j, by_name, settings), reverse=True)[:PAIR_CANDIDATES]
 
     ranked, refused = others(passing), others(by_rival)
     if len(ranked) + bool(ranked and refused) < 2:
@@ -2771,6 +2765,12 @@ def _beyond_its_span(
             "which this effect's shape is only the first terms"
         ),
     )
+
+
+def _worth(j: Judgement, by_name: Mapping[str, Candidate], settings: SelectionSettings) -> float:
+    """``j``'s held-out gain less the parsimony penalty of its candidate's reported parameters: what
+    a step ranks candidates by."""
+    return j.gain - settings.parameter_penalty * _reported(by_name[j.name])
 
 
 def _reported(cand: Candidate) -> int:
