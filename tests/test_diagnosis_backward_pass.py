@@ -150,7 +150,7 @@ def test_an_effect_that_explains_nothing_beside_a_later_one_is_the_same_case():
     )
     out = _later_in_its_place("horizontal_guides_not_level", quiet, current, lib, judged, s)
     assert out.name == "end_effects" and out.verdict == "not separable"
-    assert "horizontal guides not level was not significant (falls by 0.5%)" in out.reason
+    assert "horizontal guides off level was not significant (falls by 0.5%)" in out.reason
 
 
 def test_the_latest_choice_is_tried_first():

@@ -206,6 +206,7 @@ from scipy.stats import chi2
 
 from maglev_oc.diagnosis.library import Candidate
 from maglev_oc.diagnosis.thrust_current import THRUST, ThrustSide, judged_on_thrust_current
+from maglev_oc.diagnosis.words import plain
 from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE, PLAUSIBLE_Z, beyond_plausible
 from maglev_oc.regression.base import AXES, AXIS_INDEX, CONSTANT_AXIS, CONSTANT_NAMES
 from maglev_oc.regression.covariance import (
@@ -1158,7 +1159,7 @@ def _beside_a_stand_in(
             j,
             verdict="not separable",
             reason=(
-                f"{rival.name.replace('_', ' ')}, which the base constants absorb on this log, explains "
+                f"{plain(rival.name)}, which the base constants absorb on this log, explains "
                 f"as much ({rival.gain:.1%} against {j.gain:.1%}), and {why}: the log does not tell "
                 "the two apart"
             ),
@@ -1451,11 +1452,11 @@ def _before_the_rivals(
         longer = settings.min_beats / max(beats, 1e-9)
         if longer > SAME_PERIOD_TRAVEL:
             return "not separable", (
-                f"its period of {period * 1e3:.1f} mm is that of {name.replace('_', ' ')}: no length of "
+                f"its period of {period * 1e3:.1f} mm is that of {plain(name)}: no length of "
                 "travel tells the two apart"
             )
         return "not separable", (
-            f"its period of {period * 1e3:.1f} mm and that of {name.replace('_', ' ')} drift apart by "
+            f"its period of {period * 1e3:.1f} mm and that of {plain(name)} drift apart by "
             f"{beats:.2f} of a cycle over the logged travel, less than {settings.min_beats:g}: the travel "
             f"does not tell the two periods apart (a travel {longer:.3g} times as long does)"
         )
@@ -2221,7 +2222,7 @@ def select(
                     last[name] = dataclasses.replace(
                         j,
                         verdict="not specific",
-                        reason=f"beside the rest, {form.name.replace('_', ' ')} explains {how}",
+                        reason=f"beside the rest, {plain(form.name)} explains {how}",
                     )
                     current = [form.name if c == name else c for c in current]
                     last[form.name] = _accepted(form)
@@ -2301,7 +2302,7 @@ def _later_in_its_place(
     if j.verdict not in ("not separable", "not significant"):
         return None
     later = current[current.index(name) + 1 :]
-    words = name.replace("_", " ")
+    words = plain(name)
     for other in reversed(later):
         rest = [c for c in current if c not in (name, other)]
         kept = judged_beside(name, rest)
