@@ -133,10 +133,8 @@ def test_two_periods_no_travel_tells_apart_are_said_to_be_the_same():
 
     verdict, same = reason(0.0)
     assert verdict == "not separable"
-    assert (
-        same
-        == "its period of 38.1 mm is that of guide waviness (38 mm period): no length of travel tells the two apart"
-    )
+    period = "its period of 38.1 mm is that of guide waviness (38 mm period)"
+    assert same == f"{period}: no length of travel tells the two apart"
     # a drift short of min_beats still says how much longer a travel would do, up to the bound
     for beats in (0.5 * s.min_beats, 1.01 * s.min_beats / selection_module.SAME_PERIOD_TRAVEL):
         verdict, drift = reason(beats)
