@@ -72,6 +72,27 @@ def test_the_smallest_mass_read_is_beyond_a_rigs_own_difference():
     assert moving_mass_change(_constants(_payload(0.9 * MIN_MASS_CHANGE)), REFERENCE, MODEL.params) is None
 
 
+def test_the_vertical_constants_alone_read_a_payload_whatever_c1_did():
+    # C2 and C3 asked alone (the thrust-restoring pairs' payload, selection._carried_vertically):
+    # a payload's vertical factors give its mass whatever C1 is (set 30200 of the independent
+    # generator: 0.8 kg with C1 at 3.5 beside a commutation offset and a spring), and not 0.25 kg.
+    # They cannot tell a weaker field from a payload: the magnets 10 % weaker (C2 with the field's
+    # square, C3 with the field) read as 0.74 kg. That is why the payload is read only when C1 agrees,
+    # and the selection takes the vertical reading as one more C1 a thrust-restoring pair may reach,
+    # not as a payload
+    for c1 in (0.25, 1.0):
+        factors = (c1, *_payload(0.8)[1:])
+        found = moving_mass_change(_constants(factors), REFERENCE, MODEL.params, asked=("C2", "C3"))
+        assert found is not None and found.added.value == pytest.approx(0.8, abs=1e-4)
+        assert found.factor("C1") == pytest.approx(_payload(0.8)[0], rel=1e-4)
+        assert moving_mass_change(_constants(factors), REFERENCE, MODEL.params) is None  # C1 asked too
+    weaker = _constants((0.9, 0.81, 0.9, 1.0))
+    assert moving_mass_change(weaker, REFERENCE, MODEL.params, asked=("C2", "C3")).added.value > 0.7
+    assert moving_mass_change(weaker, REFERENCE, MODEL.params) is None
+    small = _payload(0.25)
+    assert moving_mass_change(_constants(small), REFERENCE, MODEL.params, asked=("C2", "C3")) is None
+
+
 # --- a log of a stage carrying a payload ----------------------------------------------------------
 def test_a_payload_is_read_as_such_not_as_something_the_model_lacks(tmp_path):
     # the generator's plant with its constants those of movers 1 kg heavier (C1 -39 %, C2..C4

@@ -210,7 +210,15 @@ class _Session:
             if any(c.thrust_proportional for c in library)
             else None
         )
-        return select(design, library, settings or self.settings, probes, side, _constants(self.model))
+        return select(
+            design,
+            library,
+            settings or self.settings,
+            probes,
+            side,
+            _constants(self.model),
+            self.model.params,
+        )
 
 
 @one_blas_thread  # ~800 small block Grams: BLAS threads only spin (numerics.one_blas_thread)

@@ -207,7 +207,9 @@ from scipy.stats import chi2
 from maglev_oc.diagnosis.library import Candidate
 from maglev_oc.diagnosis.thrust_current import THRUST, ThrustSide, judged_on_thrust_current
 from maglev_oc.diagnosis.words import plain
+from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.pipeline import PLAUSIBLE_CHANGE, PLAUSIBLE_Z, beyond_plausible
+from maglev_oc.model.parameters import StageParameters
 from maglev_oc.regression.base import AXES, AXIS_INDEX, CONSTANT_AXIS, CONSTANT_NAMES
 from maglev_oc.regression.covariance import (
     DEFAULT_BAND,
@@ -2003,13 +2005,16 @@ def select(
     probes: dict[tuple[str, str], str] | None = None,
     side: ThrustSide | None = None,
     reference: Mapping[str, float] | None = None,
+    params: StageParameters | None = None,
 ) -> Selection:
     """Forward selection over ``candidates`` (groups of ``design``); ``probes``: (axis, variable) ->
     group name of the generic smooth rivals in the design (see :func:`_rival_gains`); ``side``: the
     design restated in the thrust current, on which the candidates proportional to it are judged
     too (:func:`~maglev_oc.diagnosis.thrust_current.thrust_side`; None: on the accelerations alone);
     ``reference``: the constants C1..C4 of a stage of this design, against which a rival's are held
-    (:meth:`Rivals.best`; None: not held)."""
+    (:meth:`Rivals.best`; None: not held); ``params``: the stage's masses, with which a payload the
+    vertical constants read is allowed for in the thrust's plausible C1 (:func:`_carried_vertically`;
+    None: not)."""
     settings = settings or SelectionSettings()
     rng = np.random.default_rng(settings.seed)
     n_blocks = design.gram.shape[0]
@@ -2127,7 +2132,9 @@ def select(
             if not passing:
                 # the pair's forms in turn (guide friction with or without its Stribeck rise): the first
                 # in which each passes beside the other
-                pairs = _pairs_restoring_thrust(design, current, cur_fit, pool, by_name, reference, settings)
+                pairs = _pairs_restoring_thrust(
+                    design, current, cur_fit, pool, by_name, reference, settings, params
+                )
                 found = next(
                     (
                         both
@@ -2393,13 +2400,15 @@ def _pairs_restoring_thrust(
     by_name: dict[str, Candidate],
     reference: Mapping[str, float] | None,
     settings: SelectionSettings,
+    params: StageParameters | None = None,
 ) -> list[tuple[str, str]]:
     """The two effects along the track that, fitted together beside ``current``, explain the most
     of the held-out horizontal error with C1 back within ``identify``'s plausible change of the
     model's, when no candidate passes alone and ``cur_fit``'s C1 is one no stage of this design has
     (beyond :data:`RIG_SPREAD` of the model's, by :data:`PLAUSIBLE_Z` standard errors):
     each pair of their forms that does so by at least ``min_gain``, the most explaining first; empty
-    otherwise.
+    otherwise. With the stage's masses (``params``), C1 may also come back to the model's for the
+    payload that C2 and C3 read (:func:`_carried_vertically`).
 
     Two forces along the track that the loop cancels with i_q each leave C1 far off when fitted
     alone, so neither explains enough to pass, and the forward selection, one effect at a time,
@@ -2426,13 +2435,15 @@ def _pairs_restoring_thrust(
         return []
     names = [n for n in pool if by_name[n].axis in ("horizontal", "both") and by_name[n].fallback_for is None]
     before = cur_fit.holdout_rms[AXIS_INDEX["horizontal"]]
+    carried = _carried_vertically(cur_fit, reference, params)
+    targets = [c1_model] if carried is None else [c1_model, c1_model * carried.factor("C1")]
     gains: dict[tuple[str, str], float] = {}
     for i, a in enumerate(names):
         for b in names[i + 1 :]:
             if by_name[a].reported_name == by_name[b].reported_name:
                 continue
             fit = fit_subset(design, [*current, a, b], covariance=False)
-            if abs(fit.value("C1") / reference["C1"] - 1.0) > PLAUSIBLE_CHANGE:
+            if all(abs(fit.value("C1") / t - 1.0) > PLAUSIBLE_CHANGE for t in targets):
                 continue
             g = 1.0 - (fit.holdout_rms[AXIS_INDEX["horizontal"]] / before) ** 2
             if g >= settings.min_gain:
@@ -2442,6 +2453,32 @@ def _pairs_restoring_thrust(
     effects = {by_name[n].reported_name for n in max(gains, key=gains.get)}
     forms = [p for p in gains if {by_name[n].reported_name for n in p} == effects]
     return sorted(forms, key=gains.get, reverse=True)
+
+
+def _carried_vertically(
+    fit: SubsetFit, reference: Mapping[str, float], params: StageParameters | None
+) -> MassChange | None:
+    """The payload the vertical mover's constants C2 and C3 of ``fit`` read against ``reference``
+    (:func:`~maglev_oc.identification.masses.moving_mass_change` asked of the two), or None (no
+    masses, no such reading, or lighter movers).
+
+    A payload nobody declared lowers C1 by M_h / (M_h + m), and a force along the track the model
+    lacks can take C1 anywhere; the vertical mover's constants still read the mass. Drawn set 30200
+    of the independent generator (1 um encoders, 0.8 kg nobody declared; guides sloping by 2.6 mrad,
+    a 9.8 N/m cable carrier, a -1.8 degree commutation offset): C1 at 3.5 beside the base model,
+    C2 and C3 19 % and 13 % under the model's; the offset and the carrier together explained 99.8 %
+    of the held-out horizontal error with C1 at 9.7, the loaded stage's 14.2 x 1.594 / 2.394 = 9.5,
+    but 32 % from the model's, and were not proposed. Nothing was claimed, the payload was not read
+    (C1 was not the mass's), and four dependences were left unexplained.
+
+    The two constants alone do not tell a weaker field from a payload (magnets 10 % weaker read as
+    0.74 kg): the reading only widens the C1 a proposed pair may reach. Each of the pair must still
+    pass beside the other, and a payload is read afterwards only when C1 agrees with C2 and C3."""
+    if params is None or not all(n in fit.names for n in ("C2", "C3")):
+        return None
+    constants = {n: Estimate(fit.value(n), fit.stderr(n), "") for n in ("C2", "C3")}
+    found = moving_mass_change(constants, reference, params, asked=("C2", "C3"))
+    return found if found is not None and found.added.value > 0 else None
 
 
 SAME_PERIOD_TRAVEL = 1e3
