@@ -17,13 +17,18 @@ import pytest
 from maglev_oc.diagnosis.candidate import Candidate, LibraryContext, within
 from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.diagnosis.result import Effect
-from maglev_oc.diagnosis.selection import Judgement
+from maglev_oc.diagnosis.selection import Judgement, _verdict_and_rival
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.terms import periodic_force
 from maglev_oc.results import PerAxis
 from tests.test_diagnosis_selection_properties import cogged_design
 from tests.test_statistics_properties import RATE_FRICTION, _friction_candidate, _log
+
+
+def _verdict(*args, **kwargs) -> tuple[str, str]:
+    """(verdict, reason) of ``selection._verdict_and_rival`` without the rival's variable."""
+    return _verdict_and_rival(*args, **kwargs)[:2]
 
 
 def _judgement(*, z, wald, gain_axes=(0.1, 0.1), rms=(0.01, 0.01), peak=(0.01, 0.01), threshold=10.0):

@@ -19,8 +19,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from maglev_oc.diagnosis.selection import Judgement, SelectionSettings, _verdict
+from maglev_oc.diagnosis.selection import Judgement, SelectionSettings
 from tests._diagnosis_cases import _judgement as injected_judgement
+from tests._diagnosis_cases import _verdict
 from tests.diagnosis_support import diagnose_path
 
 

@@ -36,7 +36,6 @@ from maglev_oc.diagnosis.selection import (
     _own_gain,
     _rival_gains,
     _separability,
-    _verdict,
     judge,
     select,
 )
@@ -44,7 +43,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset, residuals
 from maglev_oc.results import Estimate
-from tests._diagnosis_cases import _judgement
+from tests._diagnosis_cases import _judgement, _verdict
 
 
 def _judged(design, cand, settings):

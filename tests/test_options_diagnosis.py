@@ -34,7 +34,6 @@ from maglev_oc.diagnosis.selection import (
     SelectionSettings,
     _CrossFit,
     _CrossParts,
-    _verdict,
     judge,
     select,
 )
@@ -45,7 +44,7 @@ from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset, residuals
 from maglev_oc.regression.terms import periodic_force
 from maglev_oc.results import Estimate
-from tests._diagnosis_cases import _judgement
+from tests._diagnosis_cases import _judgement, _verdict
 from tests._regression_cases import _both_axes_log
 from tests.test_statistics_properties import _log
 

@@ -720,7 +720,7 @@ def test_min_gain_is_judged_on_the_axes_the_candidate_acts_on(with_friction, mea
     latter (``own_gain``). The measured judgement is moved onto such a log by setting the vertical
     axis's drop to 0 (what a horizontal term leaves there): a min_gain between the average and
     the own-axis drop passes, just above the own-axis drop does not."""
-    from maglev_oc.diagnosis.selection import _verdict
+    from tests._diagnosis_cases import _verdict
 
     a = int(np.argmax(with_friction.weights))
     own = measured.gain_axes[a]

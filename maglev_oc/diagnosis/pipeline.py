@@ -1917,10 +1917,10 @@ def _merged_friction_by_direction(effects: list[Effect]) -> tuple[list[Effect], 
     of the friction (a tilt beside small friction, triples_07 of the independent sets): then the
     tilt is claimed as before."""
     names = [e.name for e in effects]
-    if not {"guide_friction_horizontal", "horizontal_guides_not_level"} <= set(names):
+    if not {"guide_friction_horizontal", TILT} <= set(names):
         return effects, []
     friction = effects[names.index("guide_friction_horizontal")]
-    tilt = effects[names.index("horizontal_guides_not_level")]
+    tilt = effects[names.index(TILT)]
     force, coulomb = tilt.parameters["force"], friction.parameters["coulomb"]
     if not abs(force.value) <= MAX_DIRECTION_ASYMMETRY * coulomb.value:
         return effects, []

@@ -1366,21 +1366,6 @@ def percent(gain: float) -> str:
     return f"{gain:.1%}" if gain >= -1.0 else "< -100 %"
 
 
-def _verdict(
-    j: Judgement,
-    cand: Candidate,
-    axes: np.ndarray,
-    cur_fit: SubsetFit,
-    settings: SelectionSettings,
-    rivals: Rivals | None,
-    periods_seen: float | None = None,
-    unresolved: Sequence[tuple[str, float]] = (),
-) -> tuple[str, str]:
-    """(verdict, reason) from the measured evidence, the tests in the module doc's order
-    (:func:`_verdict_and_rival` without the rival's variable)."""
-    return _verdict_and_rival(j, cand, axes, cur_fit, settings, rivals, periods_seen, unresolved)[:2]
-
-
 def _verdict_and_rival(
     j: Judgement,
     cand: Candidate,
