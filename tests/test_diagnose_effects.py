@@ -716,6 +716,25 @@ def test_a_spring_and_end_effects_are_not_a_current_sensor_offset_with_a_payload
 
 
 @pytest.mark.slow
+def test_a_spring_and_a_slope_beside_shared_large_effects_are_not_a_current_sensor_offset(tmp_path):
+    # A drawn set of four effects (bench/diagnose_rigs.py --drawn-pairs 12 --per-log 4 --seed 30100,
+    # set 30103): vertical guide friction of 1.1 N, a -3.1 degree commutation offset, guides sloping
+    # by 3.0 mrad with a 6.1 um waviness at 74 mm, and a 8.4 N/m cable carrier. Beside the friction
+    # and the offset a current sensor offset was chosen, and the carrier dropped in its place. Without
+    # it the other candidates chose the four true effects, held-out error 0.026 / 0.019 m/s^2 against
+    # 0.052 / 0.036, but against the base model's 0.28 / 0.12 (which the friction and the offset
+    # make) that was 98.5 % explained against 94.0 %, short of rival_margin. Held against the fit of
+    # the effects both chose (pipeline._tie_shown; 92.0 % against 67.6 % of its 0.077 / 0.085): the
+    # four true effects, the spring and the slope sized within 30 % (the bound; measured
+    # 8.2 N/m, 3.2 mrad).
+    kinds = ("guide_friction_vertical", "guide_misalignment", "cable_carrier", "commutation_offset")
+    names = ["cable_carrier_force", "commutation_offset", "guide_friction_vertical", "guide_misalignment"]
+    effects, d = _drawn_pair_finds(tmp_path, 30103, kinds, names, sized=False)
+    assert _off(d, "cable_carrier_force", "stiffness", effects[2].stiffness) < SIZE_TOLERANCE
+    assert _off(d, "guide_misalignment", "slope", effects[1].slope) < SIZE_TOLERANCE
+
+
+@pytest.mark.slow
 def test_a_payload_nobody_declared_beside_forces_that_take_c1_is_read_from_the_vertical_constants(tmp_path):
     # A drawn set on 1 um encoders carrying 0.8 kg nobody declared (bench/diagnose_rigs.py --rig enc1um
     # --drawn-pairs 12 --per-log 3 --payload 0.8 --undeclared --seed 30200, set 30200): guides sloping
