@@ -754,6 +754,26 @@ def test_end_effects_misfit_is_not_a_ripple_whose_slot_part_is_not_told_from_non
 
 
 @pytest.mark.slow
+def test_a_slope_of_the_guides_that_only_the_end_effects_fall_off_sizes_is_not_claimed(tmp_path):
+    # A drawn set of four effects on measured currents (bench/diagnose_rigs.py --rig measured
+    # --drawn-pairs 12 --per-log 4 --seed 31600, set 31600): end effects falling as a Gaussian over
+    # 32 mm from +-50 mm (10 % of the thrust at +-40 mm, 2 % at the centre), a 5.6 N/m cable
+    # carrier, a 0.89 ms amplifier lag (not in measured currents) and a base tilted by 11.5 mrad.
+    # Beside the carrier and the end effects, guides sloping by 1.0 mrad were claimed (0.3 % of the
+    # held-out error): the fall-off's misfit. Refitted with each fall-off the end effects' scan
+    # allows, that slope ran from 0.33 to 4.3 mrad; the true slopes of 25 benched logs with end
+    # effects moved by at most 0.23 times their size (pipeline.SHAPE_SIZES). Not separable from
+    # the end effects' shape: the carrier and the end effects, the spring within 30 % (the issue's
+    # bound; measured 5.59 N/m for 5.62).
+    kinds = ("end_effect", "cable_carrier", "amplifier_dynamics", "tilted_base")
+    names = ["cable_carrier_force", "end_effects"]
+    effects, d = _drawn_pair_finds(tmp_path, 31600, kinds, names, sized=False, rig="measured")
+    assert _off(d, "cable_carrier_force", "stiffness", effects[1].stiffness) < SIZE_TOLERANCE
+    slope = next(n for n in d.not_separable if n.name == "guide_misalignment")
+    assert slope.confounded_with == ("end_effects",), slope
+
+
+@pytest.mark.slow
 def test_a_payload_nobody_declared_beside_forces_that_take_c1_is_read_from_the_vertical_constants(tmp_path):
     # A drawn set on 1 um encoders carrying 0.8 kg nobody declared (bench/diagnose_rigs.py --rig enc1um
     # --drawn-pairs 12 --per-log 3 --payload 0.8 --undeclared --seed 30200, set 30200): guides sloping
