@@ -774,6 +774,28 @@ def test_a_slope_of_the_guides_that_only_the_end_effects_fall_off_sizes_is_not_c
 
 
 @pytest.mark.slow
+def test_effects_that_the_log_shows_only_together_are_found_together(tmp_path):
+    # A drawn set on a rig logging at 500 Hz with the magnets warming by 15 K (bench/diagnose_rigs.py
+    # --rig log500 --drawn-pairs 12 --per-log 3 --warm large --seed 32000, set 32008): a normal
+    # cogging of 1.3 N peak at 15 mm, end effects of 12 % of the thrust at +-50 mm falling as a
+    # Gaussian over 35 mm, a 0.9 ms amplifier lag, and the field 1.1 % lower after 60 s. Each alone
+    # explained 10-20 % of the held-out error at z 0.6-2.0 and nothing was claimed, the log said to
+    # be explained to its noise. Pairs of such candidates, each judged beside the other
+    # (selection._pairs_of_the_unseen): the cogging, the end effects and the warming, the cogging
+    # and the warming within 30 % (the bound; measured 0.27 N for 0.31 at the 19.3 mm gap it
+    # is sized at, a 1.13 % fall of the field for 1.14).
+    from tests.independent.effects import MagnetWarming
+
+    kinds = ("normal_cogging", "end_effect", "amplifier_dynamics")
+    _, d, s = _drawn_pair(tmp_path, 32008, kinds, "log500", extra=(MagnetWarming.large(),))
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    assert sorted(e.name for e in d.effects) == ["cogging_vertical_19mm", "end_effects", "magnet_field_drift"]
+    for kind in ("normal_cogging", "magnet_warming"):
+        truth, claimed = s.sizes[kind]
+        assert abs(claimed / truth - 1) < SIZE_TOLERANCE, (kind, truth, claimed)
+
+
+@pytest.mark.slow
 def test_a_payload_nobody_declared_beside_forces_that_take_c1_is_read_from_the_vertical_constants(tmp_path):
     # A drawn set on 1 um encoders carrying 0.8 kg nobody declared (bench/diagnose_rigs.py --rig enc1um
     # --drawn-pairs 12 --per-log 3 --payload 0.8 --undeclared --seed 30200, set 30200): guides sloping
