@@ -2467,11 +2467,10 @@ def _pairs_of_the_unseen(
         ),
         key=lambda j: -j.gain,
     )
-    names: list[str] = []
+    best_form: dict[str, str] = {}  # effect -> its most explaining form
     for j in unseen:
-        if by_name[j.name].reported_name not in {by_name[n].reported_name for n in names}:
-            names.append(j.name)
-    names = names[:PAIR_CANDIDATES]
+        best_form.setdefault(by_name[j.name].reported_name, j.name)
+    names = list(best_form.values())[:PAIR_CANDIDATES]
     return [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
 
 
