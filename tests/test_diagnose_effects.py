@@ -796,6 +796,50 @@ def test_effects_that_the_log_shows_only_together_are_found_together(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_tilt_that_guides_sloping_against_the_stator_explain_as_well_is_not_claimed(tmp_path):
+    # A drawn set on measured currents through the sensors' filter, the magnets warming a little
+    # (bench/diagnose_rigs.py --rig filtered --drawn-pairs 12 --per-log 3 --warm small --seed 32100,
+    # set 32105): guides sloping by -2.3 mrad against the stator, a normal cogging of 2.5 N peak at
+    # 15 mm, end effects of 6 % at +-50 mm. A 4.0 mrad tilt of the guides was claimed first: its
+    # constant force along the track is the slope's, and the end effects' unequal losses at the two
+    # ends took the line the slope makes in the attraction. Neither is claimed now; both are listed
+    # as not separable, with the gauge-block check that tells them apart, and the cogging is sized
+    # within 30 % (the issue's bound; measured 2.5 N at 15 mm).
+    from tests.independent.effects import MagnetWarming
+
+    kinds = ("normal_cogging", "end_effect", "guide_misalignment")
+    _, d, s = _drawn_pair(tmp_path, 32105, kinds, "filtered", extra=(MagnetWarming.small(),))
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    assert "horizontal_guides_not_level" not in s.claimed
+    apart = {n.name: n for n in d.not_separable}
+    assert apart["horizontal_guides_not_level"].confounded_with == ("guide_misalignment",)
+    assert apart["guide_misalignment"].confounded_with == ("horizontal_guides_not_level",)
+    assert "gauge-block" in apart["horizontal_guides_not_level"].experiment
+    truth, claimed = s.sizes["normal_cogging"]
+    assert abs(claimed / truth - 1) < SIZE_TOLERANCE, (truth, claimed)
+
+
+@pytest.mark.slow
+def test_guides_sloping_against_the_stator_that_the_vertical_axis_shows_take_a_tilts_place(tmp_path):
+    # A drawn set on a rig logging at 500 Hz with the magnets warming by 15 K (bench/diagnose_rigs.py
+    # --rig log500 --drawn-pairs 12 --per-log 3 --warm large --seed 32000, set 32011): end effects,
+    # guides sloping against the stator, a thrust ripple. A tilt of the guides was claimed with
+    # exactly the slope's force along the track, the slope refused (Wald 6.5 against 15.1) beside
+    # a vertical residual the warming had not yet taken. Beside the rest the slope explains as
+    # much along the track and 28 % of the vertical error, and takes the tilt's place
+    # (selection.told_apart_on_the_other_axis), sized within 30 % (the issue's bound).
+    from tests.independent.effects import MagnetWarming
+
+    kinds = ("end_effect", "guide_misalignment", "thrust_ripple")
+    _, d, s = _drawn_pair(tmp_path, 32011, kinds, "log500", extra=(MagnetWarming.large(),))
+    assert s.true_first and s.no_false_claim, (s.claimed, s.notes)
+    names = [e.name for e in d.effects]
+    assert "guide_misalignment" in names and "horizontal_guides_not_level" not in names
+    truth, claimed = s.sizes["guide_misalignment"]
+    assert abs(claimed / truth - 1) < SIZE_TOLERANCE, (truth, claimed)
+
+
+@pytest.mark.slow
 def test_a_payload_nobody_declared_beside_forces_that_take_c1_is_read_from_the_vertical_constants(tmp_path):
     # A drawn set on 1 um encoders carrying 0.8 kg nobody declared (bench/diagnose_rigs.py --rig enc1um
     # --drawn-pairs 12 --per-log 3 --payload 0.8 --undeclared --seed 30200, set 30200): guides sloping

@@ -93,13 +93,16 @@ from maglev_oc.diagnosis.selection import (
     _friction_axes,
     _holdout_residual,
     _travel,
+    alike_along_the_track,
     another_motor,
     axis_loss_breaks,
     evidence,
     fitted_constants,
     holds_its_axis,
     judge,
+    percent,
     select,
+    told_apart_on_the_other_axis,
 )
 from maglev_oc.diagnosis.thrust_current import thrust_side
 from maglev_oc.diagnosis.trace import Trace, traces, unexplained_periods
@@ -1191,6 +1194,16 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
         )
         not_sep.sort(key=lambda n: -n.gain)
         sel = _without(sel, design, pulled)
+    alike = _alike_along_the_track(library, design, sel, session.settings)
+    if alike:
+        # what tells them apart is what the two-axis one does on its other axis
+        two = next(j for j in alike if by_name[j.name].axis == "both")
+        experiment = _separating(two, by_name[two.name], session)
+        not_sep.extend(
+            NotSeparable(j.name, j.confounded_with, experiment, j.gain, j.reason, j.physical) for j in alike
+        )
+        not_sep.sort(key=lambda n: -n.gain)
+        sel = _without(sel, design, alike)
     shaped = _told_by_the_end_effects_shape(session, fitted, library, design, sel)
     if shaped:
         not_sep = sorted([*not_sep, *shaped], key=lambda n: -n.gain)
@@ -1399,6 +1412,21 @@ def _shown_beside_unexplained(
     beside = list(dict.fromkeys(probes[(c.axis, c.variable)] for c in refused))
     design = session.design(model, [c.term for c in chosen] + beside + [c.term for c in refused])
     current = ["base", *[c.name for c in chosen], *[t.name for t in beside]]
+    judged = _judged_beside(design, current, chosen, refused, settings)
+    passing = [j for j in judged if j.verdict == "passes"]
+    return max(passing, key=lambda j: j.gain) if passing else None
+
+
+def _judged_beside(
+    design: Design,
+    current: list[str],
+    chosen: Sequence[Candidate],
+    candidates: Sequence[Candidate],
+    settings: SelectionSettings,
+) -> list[Judgement]:
+    """Each of ``candidates`` judged as a forward step of the selection judges it, beside ``current``
+    (the design's groups fitted; ``chosen``: the effects among them, whose friction and evidence
+    mask the test)."""
     fit = fit_subset(design, current, covariance=False)
     counted = evidence(design, chosen, settings)
     r0 = _holdout_residual(design, fit, counted)
@@ -1406,14 +1434,50 @@ def _shown_beside_unexplained(
     fold = _CrossFit(design, settings.cross_parts) if settings.cross_parts else None
     cross = _CrossParts.of(fold, current, chosen, settings) if fold else None
     friction = frozenset(_friction_axes(chosen))
-    judged = [
+    return [
         judge(
             design, c, current, fit, r0, mse0, settings, counted=counted, cross=cross, friction_axes=friction
         )
-        for c in refused
+        for c in candidates
     ]
-    passing = [j for j in judged if j.verdict == "passes"]
-    return max(passing, key=lambda j: j.gain) if passing else None
+
+
+def _alike_along_the_track(
+    library: Sequence[Candidate], design: Design, sel: Selection, settings
+) -> list[Judgement]:
+    """A chosen effect and the other of its pair in ``ALIKE_ALONG_THE_TRACK``, both not separable,
+    when beside the rest of the chosen effects the two explain the same along the track and the
+    other axis does not tell them apart (:func:`~maglev_oc.diagnosis.selection.told_apart_on_the_other_axis`):
+    a tilt of the guides beside end effects whose unequal losses at the two ends take the line
+    that guides sloping against the stator make in the attraction (drawn set 32105 of the
+    independent generator). Judged once the selection is done: dropped inside it, the force along
+    the track both explain would leave the other effects judged without it."""
+    by_name = {c.name: c for c in library}
+    for name in sel.selected:
+        other = alike_along_the_track(name, by_name)
+        if other is None or other in sel.selected or other not in design.groups:
+            continue
+        rest = [by_name[n] for n in sel.selected if n != name]
+        current = ["base", *[c.name for c in rest]]
+        j, alt = _judged_beside(design, current, rest, [by_name[name], by_name[other]], settings)
+        alike = told_apart_on_the_other_axis(j, alt, by_name, design.moving, settings)
+        if alike is None or alike.takes_place:
+            continue
+        (a, b), two = alike.along, plain(alike.two_axis)
+        why = (
+            f"beside the rest, {{}} explains as much along the track ({percent(a)} against {percent(b)} of "
+            f"the held-out error), and on the other axis {two} explain {percent(alike.other)}: this log "
+            "does not tell the two apart"
+        )
+        return [
+            dataclasses.replace(
+                j, verdict="not separable", reason=why.format(plain(other)), confounded_with=(other,)
+            ),
+            dataclasses.replace(
+                alt, verdict="not separable", reason=why.format(plain(name)), confounded_with=(name,)
+            ),
+        ]
+    return []
 
 
 def _with(sel: Selection, design: Design, shown: Judgement) -> Selection:
