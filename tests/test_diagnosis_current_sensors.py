@@ -177,3 +177,26 @@ def test_beside_tilted_guides_an_offset_is_not_separable_from_their_waviness(gen
     (entry,) = [n for n in d["not_separable"] if n["name"] == "current_sensor_offset"]
     assert entry["confounded_with"] == ["guide_misalignment"]
     assert "commands at zero" in entry["experiment"]
+
+
+@pytest.mark.slow
+def test_beside_end_effects_a_gain_mismatch_that_their_fall_off_moves_is_not_claimed(tmp_path):
+    """Sensor pair 7103 of bench/diagnose_rigs.py --sensor-pairs: 76 mA of sensor offset (the large
+    size) and the large end effects. Over the 62 mm travel a mismatch's forces over each pole pitch
+    take what the end effects' assumed fall-off misses: a 0.093 +- 0.01 % mismatch was claimed, which
+    ran from 0.037 % to 0.23 % over the fall-offs the travel allows. Held to the end effects' shape
+    (pipeline.SHAPE_SIZES) it is not separable from them; the offset and the end effects are claimed,
+    the offset within the issue's 30 %."""
+    from tests.independent.sets import SINGLE_EFFECTS
+
+    effects = (E.CurrentSensorOffset.large(), SINGLE_EFFECTS["end_effect"]("large"))
+    scenario = Scenario(name="current_sensor_offset+end_effect", seed=7103, effects=effects, rig=Rig())
+    csv, truth_path = write_log(simulate(scenario), tmp_path, "sensor_pair_7103")
+    d = diagnose_path(csv).to_dict()
+    s = score("sensor_pair_7103", json.loads(truth_path.read_text()), d["effects"])
+    assert s.true_first and s.no_false_claim, s.claimed
+    assert sorted(e["name"] for e in d["effects"]) == ["current_sensor_offset", "end_effects"]
+    (entry,) = [n for n in d["not_separable"] if n["name"] == "current_sensor_gain_mismatch"]
+    assert entry["confounded_with"] == ["end_effects"]
+    truth, claimed = s.sizes["current_sensor_offset"]
+    assert abs(claimed / truth - 1) < 0.3, (truth, claimed)
