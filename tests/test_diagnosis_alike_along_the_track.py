@@ -83,3 +83,17 @@ def test_each_of_the_pair_names_the_other_and_nothing_else_has_one():
     assert alike_along_the_track(SLOPE, BY_NAME) == TILT
     assert alike_along_the_track("cable_carrier_force", BY_NAME) is None
     assert alike_along_the_track(TILT, {TILT: BY_NAME[TILT]}) is None  # the library lacks the slope
+
+
+def test_the_report_sizes_a_candidate_not_separable_from_an_effect_and_not_one_confounded_with_constants():
+    # the words page of maglev-oc diagnose: the tilt of set 32105 is the same force along the track
+    # either way, so its size means something; a constant force traded with C2, C3 means nothing
+    from maglev_oc.diagnosis.result import NotSeparable
+    from maglev_oc.regression.terms import Estimate
+    from maglev_oc.reporting.diagnosis_report import _beside_effects
+
+    force = {"force": Estimate(0.063, 0.0008, "N"), "rms_force_horizontal": Estimate(0.063, 0.0, "N")}
+    tilt = NotSeparable(TILT, (SLOPE,), "a gauge-block check", 0.36, "", force)
+    assert _beside_effects(tilt) == " Fitted in its place: force 0.063 ± 0.0008\u00a0N."
+    for confounded in (("C2", "C3"), ("C1..C4",), ("a smooth dependence on the position",), ()):
+        assert _beside_effects(NotSeparable("constant_vertical_force", confounded, "", 0.5, "", force)) == ""

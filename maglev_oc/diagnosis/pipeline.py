@@ -1478,7 +1478,7 @@ def _alike_along_the_track(
             continue
         (a, b), two = alike.along, plain(alike.two_axis)
         why = (
-            f"beside the rest, {{}} explains as much along the track ({percent(a)} against {percent(b)} of "
+            f"beside the rest, {{}} explain as much along the track ({percent(a)} against {percent(b)} of "
             f"the held-out error), and on the other axis {two} explain {percent(alike.other)}: this log "
             "does not tell the two apart"
         )

@@ -21,6 +21,7 @@ import numpy as np
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
+from maglev_oc.diagnosis.result import NotSeparable
 from maglev_oc.diagnosis.selection import best_first
 from maglev_oc.diagnosis.unexplained import TIMING
 from maglev_oc.diagnosis.words import plain
@@ -65,28 +66,44 @@ _CHECK_PARAMETERS = ("forces_lost_at_low_end_alone", "forces_lost_at_high_end_al
 the table of every parameter, not among the sizes."""
 
 
-def _size_parameters(effect: Effect) -> dict:
+def _size_parameters(parameters: dict, nuisance: tuple[str, ...] = ()) -> dict:
     """The parameters that say how large an effect is (not where it acts, not its shape)."""
     return {
         k: v
-        for k, v in effect.parameters.items()
+        for k, v in parameters.items()
         if not k.startswith("rms_force")
-        and k not in effect.candidate.nuisance
+        and k not in nuisance
         and k not in _CHECK_PARAMETERS
         and not (v.unit == "m" and k in _POSITION_PARAMETERS)
     }
 
 
-def effect_sizes(effect: Effect) -> str:
-    """'coulomb 0.128 ± 0.0048 N, viscous ...': an effect's size parameters, value ± standard error;
-    a ratio (unit "1") in per cent."""
+def _sizes(parameters: dict) -> str:
+    """'coulomb 0.128 ± 0.0048 N, viscous ...': value ± standard error; a ratio (unit "1") in per cent."""
 
     def size(v) -> str:
         if v.unit == "1":
             return f"{_fmt(100 * v.value, 100 * v.stderr)}{NBSP}%"
         return f"{_fmt(v.value, v.stderr)}{NBSP}{v.unit}".rstrip(NBSP)
 
-    return ", ".join(f"{k.replace('_', ' ')} {size(v)}" for k, v in _size_parameters(effect).items())
+    return ", ".join(f"{k.replace('_', ' ')} {size(v)}" for k, v in parameters.items())
+
+
+def effect_sizes(effect: Effect) -> str:
+    """'coulomb 0.128 ± 0.0048 N, viscous ...': an effect's size parameters, value ± standard error;
+    a ratio (unit "1") in per cent."""
+    return _sizes(_size_parameters(effect.parameters, effect.candidate.nuisance))
+
+
+def _beside_effects(n: NotSeparable) -> str:
+    """A not separable candidate's sizes as fitted, when what it is confounded with are effects
+    (a tilt of the guides and guides sloping against the stator: the same force along the track,
+    sized alike by either); "" when it is confounded with the constants, whose trade makes its
+    size mean nothing."""
+    if not n.confounded_with or any(c.startswith("C") or " " in c for c in n.confounded_with):
+        return ""
+    sizes = _sizes(_size_parameters(n.parameters))
+    return f" Fitted in its place: {sizes}." if sizes else ""
 
 
 def _drop(before: float, after: float) -> str:
@@ -305,7 +322,8 @@ def _finding_paragraphs(diag: Diagnosis) -> list[str]:
         out.append("No missing effect found: the papers' model, refitted, explains the log to its noise.")
     out += [
         f"Real in the fit but not separable on this log (not claimed): {plain(n.name)}, confounded with "
-        f"{', '.join(map(plain, n.confounded_with))}. What would separate it: {n.experiment}."
+        f"{', '.join(map(plain, n.confounded_with))}.{_beside_effects(n)} What would separate it: "
+        f"{n.experiment}."
         for n in diag.not_separable
     ]
     out += [f"Not explained by any effect of the library: {u.description}" for u in diag.unexplained]
