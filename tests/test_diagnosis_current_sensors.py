@@ -200,3 +200,27 @@ def test_beside_end_effects_a_gain_mismatch_that_their_fall_off_moves_is_not_cla
     assert entry["confounded_with"] == ["end_effects"]
     truth, claimed = s.sizes["current_sensor_offset"]
     assert abs(claimed / truth - 1) < 0.3, (truth, claimed)
+
+
+@pytest.mark.slow
+def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_periods_is_not_claimed(
+    tmp_path,
+):
+    """The large gain mismatch (2.9 %) beside drawn end effects of a raised-cosine profile (8.4 % of
+    the attraction at +-50 mm falling over 20 mm; seed 7705): the end effects' scanned fall-offs do
+    not fit them and a smooth function of the position explains more, reported as unexplained
+    (0.63 N RMS). A 0.31 N normal cogging at 38 mm, seen over 1.5 periods of the 58 mm travel, was
+    claimed beside it; beside that dependence it explains 0.3 % of the held-out error
+    (pipeline.SHORT_PERIODS). The mismatch alone is claimed, within the issue's 30 %."""
+    from tests.independent.draws import KINDS, draw
+
+    ends = draw("end_effect", np.random.default_rng([7705, KINDS.index("end_effect")]))
+    scenario = Scenario(name="gain+ends", seed=7705, effects=(E.CurrentSensorGain.large(), ends), rig=Rig())
+    csv, truth_path = write_log(simulate(scenario), tmp_path, "gain_ends_7705")
+    d = diagnose_path(csv).to_dict()
+    s = score("gain_ends_7705", json.loads(truth_path.read_text()), d["effects"])
+    assert s.true_first and s.no_false_claim, s.claimed
+    assert [e["name"] for e in d["effects"]] == ["current_sensor_gain_mismatch"]
+    assert any(u["depends_on"] == "position" for u in d["unexplained"])
+    truth, claimed = s.sizes["current_sensor_gain"]
+    assert abs(claimed / truth - 1) < 0.3, (truth, claimed)
