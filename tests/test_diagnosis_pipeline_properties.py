@@ -388,9 +388,9 @@ def test_an_unexplained_dependence_that_explains_an_effect_as_well_makes_it_not_
     captured = {}
     original = pipeline._explained_by_unexplained
 
-    def recording(session, model, chosen, unexplained, on_thrust=frozenset()):
+    def recording(session, model, chosen, unexplained, on_thrust=frozenset(), periods=None):
         captured.setdefault("args", (session, model, chosen))
-        return original(session, model, chosen, unexplained, on_thrust)
+        return original(session, model, chosen, unexplained, on_thrust, periods)
 
     path, _ = generated("single", _stem("normal_cogging_large"))
     with pytest.MonkeyPatch.context() as mp:
