@@ -262,6 +262,10 @@ SIDE_WORDS = {"accelerations": "the accelerations", THRUST_SIDE: "the logged thr
 """What each side's held-out test predicted, in words."""
 
 SMOOTH_POSITION = "a smooth dependence on the position"
+ALL_CONSTANTS = "C1..C4"
+"""What a candidate collinear with the base constants as a whole is confounded with."""
+THE_CONSTANTS = frozenset({*CONSTANT_NAMES, ALL_CONSTANTS})
+"""The names a candidate confounded with the base constants lists (``Judgement.confounded_with``)."""
 """What a position-periodic candidate seen over too few periods is confounded with."""
 
 RIG_SPREAD = 0.2
@@ -1062,7 +1066,7 @@ def judge(
         # the closest pair drifts apart least: the travel that gives it min_beats tells them all apart
         needed = _travel(design) * settings.min_beats / max(min(b for _, b in unresolved), 1e-9)
     else:
-        confounded = partners or ("C1..C4",)
+        confounded = partners or (ALL_CONSTANTS,)
     return dataclasses.replace(
         measured,
         verdict=verdict,
@@ -1115,12 +1119,11 @@ def _beside_a_stand_in(
     force (inflation 988), the magnets' level per log (45, 91) and a 0.5 % field shape of a log
     without one (1.0), beside a gap sensor offset. A column added where it has nothing to explain
     loses about 0.1 % (module doc, point 6); 5 % lies between the two sets."""
-    base = {*CONSTANT_NAMES, "C1..C4"}
     stand_ins = sorted(
         (
             j
             for j in judged.values()
-            if j.verdict == "not separable" and j.confounded_with and set(j.confounded_with) <= base
+            if j.verdict == "not separable" and j.confounded_with and set(j.confounded_with) <= THE_CONSTANTS
         ),
         key=lambda j: -j.gain,
     )
@@ -2399,7 +2402,7 @@ def _richer_in_place(
 
 
 class _Alike(NamedTuple):
-    """What :func:`_told_apart_on_the_other_axis` found."""
+    """What :func:`told_apart_on_the_other_axis` found."""
 
     alt: Judgement  # the other of the pair, judged beside the rest
     takes_place: bool  # the two-axis effect shows on its other axis: it is what the log shows

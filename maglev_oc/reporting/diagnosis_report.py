@@ -22,7 +22,7 @@ from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.diagnosis.result import NotSeparable
-from maglev_oc.diagnosis.selection import best_first
+from maglev_oc.diagnosis.selection import SMOOTH_POSITION, THE_CONSTANTS, best_first
 from maglev_oc.diagnosis.unexplained import TIMING
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting import diagnosis_plots as plots
@@ -100,7 +100,7 @@ def _beside_effects(n: NotSeparable) -> str:
     (a tilt of the guides and guides sloping against the stator: the same force along the track,
     sized alike by either); "" when it is confounded with the constants, whose trade makes its
     size mean nothing."""
-    if not n.confounded_with or any(c.startswith("C") or " " in c for c in n.confounded_with):
+    if not n.confounded_with or any(c in THE_CONSTANTS or c == SMOOTH_POSITION for c in n.confounded_with):
         return ""
     sizes = _sizes(_size_parameters(n.parameters))
     return f" Fitted in its place: {sizes}." if sizes else ""
