@@ -97,3 +97,18 @@ def test_the_report_sizes_a_candidate_not_separable_from_an_effect_and_not_one_c
     assert _beside_effects(tilt) == " Fitted in its place: force 0.063 ± 0.0008\u00a0N."
     for confounded in (("C2", "C3"), ("C1..C4",), ("a smooth dependence on the position",), ()):
         assert _beside_effects(NotSeparable("constant_vertical_force", confounded, "", 0.5, "", force)) == ""
+
+
+def test_small_angles_and_lengths_are_given_in_thousandths_and_large_ones_and_ratios_are_not():
+    # a guide tilt of 4 mrad printed as 0.004 rad reads as nothing on the report's words page;
+    # a commutation phase of 1.3 rad is an angle of its own size; a ratio stays in per cent
+    from maglev_oc.regression.terms import Estimate
+    from maglev_oc.reporting.diagnosis_report import _sizes
+
+    assert _sizes({"tilt": Estimate(0.004, 0.0002, "rad")}) == "tilt 4 ± 0.2\u00a0mrad"
+    assert (
+        _sizes({"gap_change_over_travel": Estimate(-3e-4, 2e-5, "m")})
+        == "gap change over travel -0.3 ± 0.02\u00a0mm"
+    )
+    assert _sizes({"phase": Estimate(1.3, 0.05, "rad")}) == "phase 1.3 ± 0.05\u00a0rad"
+    assert _sizes({"mismatch": Estimate(0.021, 0.001, "1")}) == "mismatch 2.1 ± 0.1\u00a0%"

@@ -78,12 +78,20 @@ def _size_parameters(parameters: dict, nuisance: tuple[str, ...] = ()) -> dict:
     }
 
 
+_MILLI = {"rad": "mrad", "m": "mm"}
+"""Units a small size reads better in thousandths of: a tilt of 0.0023 rad is 2.3 mrad, a change of
+the gap over the travel of 0.0003 m is 0.3 mm."""
+
+
 def _sizes(parameters: dict) -> str:
-    """'coulomb 0.128 ± 0.0048 N, viscous ...': value ± standard error; a ratio (unit "1") in per cent."""
+    """'coulomb 0.128 ± 0.0048 N, viscous ...': value ± standard error; a ratio (unit "1") in per cent,
+    an angle or length below 0.1 of its unit in thousandths of it (mrad, mm)."""
 
     def size(v) -> str:
         if v.unit == "1":
             return f"{_fmt(100 * v.value, 100 * v.stderr)}{NBSP}%"
+        if v.unit in _MILLI and abs(v.value) < 0.1:
+            return f"{_fmt(1e3 * v.value, 1e3 * v.stderr)}{NBSP}{_MILLI[v.unit]}"
         return f"{_fmt(v.value, v.stderr)}{NBSP}{v.unit}".rstrip(NBSP)
 
     return ", ".join(f"{k.replace('_', ' ')} {size(v)}" for k, v in parameters.items())
