@@ -224,3 +224,30 @@ def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_
     assert any(u["depends_on"] == "position" for u in d["unexplained"])
     truth, claimed = s.sizes["current_sensor_gain"]
     assert abs(claimed / truth - 1) < 0.3, (truth, claimed)
+
+
+@pytest.mark.slow
+def test_beside_a_gain_mismatch_and_end_effects_at_one_stator_end_a_sine_their_fall_off_moves_is_not_claimed(
+    tmp_path,
+):
+    """The large gain mismatch (2.9 %) beside drawn end effects at one stator end (6.3 % of the
+    thrust at +50 mm, falling over 11.6 mm; the other end 300 mm away; seed 7707). The end effects
+    alone are fitted at the scanned 11.9 mm; beside the mismatch's first-order model at 18.9 mm, and
+    a 0.017 N normal cogging at 38 mm, seen over 1.6 periods of the 61 mm travel, took what the two
+    leave (1.6 % of the held-out error). Over the fall-offs the travel allows its size ran from
+    0.018 to 0.048 N, half that range 0.89 times its size (pipeline.SHAPE_SPREAD, 0.75): not separable
+    from the end effects' shape. The mismatch and the end effects are claimed, each within the
+    issue's 30 %."""
+    from tests.independent.draws import KINDS, draw
+
+    ends = draw("end_effect", np.random.default_rng([7707, KINDS.index("end_effect")]))
+    scenario = Scenario(name="gain+ends", seed=7707, effects=(E.CurrentSensorGain.large(), ends), rig=Rig())
+    csv, truth_path = write_log(simulate(scenario), tmp_path, "gain_ends_7707")
+    d = diagnose_path(csv).to_dict()
+    s = score("gain_ends_7707", json.loads(truth_path.read_text()), d["effects"])
+    assert s.true_first and s.no_false_claim, s.claimed
+    assert sorted(e["name"] for e in d["effects"]) == ["current_sensor_gain_mismatch", "end_effects"]
+    assert [n["name"] for n in d["not_separable"]] == ["cogging_vertical_38mm"]
+    for kind in ("current_sensor_gain", "end_effect"):
+        truth, claimed = s.sizes[kind]
+        assert abs(claimed / truth - 1) < 0.3, (kind, truth, claimed)
