@@ -202,6 +202,18 @@ def test_beside_end_effects_a_gain_mismatch_that_their_fall_off_moves_is_not_cla
     assert abs(claimed / truth - 1) < 0.3, (truth, claimed)
 
 
+def _large_gain_beside_drawn_end_effects(seed: int, tmp_path):
+    """The diagnosis (SPEC 3 dict) and score of the large gain mismatch beside end effects drawn as
+    the generator draws them for ``seed``, on its default rig."""
+    from tests.independent.draws import KINDS, draw
+
+    ends = draw("end_effect", np.random.default_rng([seed, KINDS.index("end_effect")]))
+    scenario = Scenario(name="gain+ends", seed=seed, effects=(E.CurrentSensorGain.large(), ends), rig=Rig())
+    csv, truth_path = write_log(simulate(scenario), tmp_path, f"gain_ends_{seed}")
+    d = diagnose_path(csv).to_dict()
+    return d, score(f"gain_ends_{seed}", json.loads(truth_path.read_text()), d["effects"])
+
+
 @pytest.mark.slow
 def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_periods_is_not_claimed(
     tmp_path,
@@ -212,13 +224,7 @@ def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_
     (0.63 N RMS). A 0.31 N normal cogging at 38 mm, seen over 1.5 periods of the 58 mm travel, was
     claimed beside it; beside that dependence it explains 0.3 % of the held-out error
     (pipeline.SHORT_PERIODS). The mismatch alone is claimed, within the issue's 30 %."""
-    from tests.independent.draws import KINDS, draw
-
-    ends = draw("end_effect", np.random.default_rng([7705, KINDS.index("end_effect")]))
-    scenario = Scenario(name="gain+ends", seed=7705, effects=(E.CurrentSensorGain.large(), ends), rig=Rig())
-    csv, truth_path = write_log(simulate(scenario), tmp_path, "gain_ends_7705")
-    d = diagnose_path(csv).to_dict()
-    s = score("gain_ends_7705", json.loads(truth_path.read_text()), d["effects"])
+    d, s = _large_gain_beside_drawn_end_effects(7705, tmp_path)
     assert s.true_first and s.no_false_claim, s.claimed
     assert [e["name"] for e in d["effects"]] == ["current_sensor_gain_mismatch"]
     assert any(u["depends_on"] == "position" for u in d["unexplained"])
@@ -238,13 +244,7 @@ def test_beside_a_gain_mismatch_and_end_effects_at_one_stator_end_a_sine_their_f
     0.018 to 0.048 N, half that range 0.89 times its size (pipeline.SHAPE_SPREAD, 0.75): not separable
     from the end effects' shape. The mismatch and the end effects are claimed, each within the
     issue's 30 %."""
-    from tests.independent.draws import KINDS, draw
-
-    ends = draw("end_effect", np.random.default_rng([7707, KINDS.index("end_effect")]))
-    scenario = Scenario(name="gain+ends", seed=7707, effects=(E.CurrentSensorGain.large(), ends), rig=Rig())
-    csv, truth_path = write_log(simulate(scenario), tmp_path, "gain_ends_7707")
-    d = diagnose_path(csv).to_dict()
-    s = score("gain_ends_7707", json.loads(truth_path.read_text()), d["effects"])
+    d, s = _large_gain_beside_drawn_end_effects(7707, tmp_path)
     assert s.true_first and s.no_false_claim, s.claimed
     assert sorted(e["name"] for e in d["effects"]) == ["current_sensor_gain_mismatch", "end_effects"]
     assert [n["name"] for n in d["not_separable"]] == ["cogging_vertical_38mm"]
