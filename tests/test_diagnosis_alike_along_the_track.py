@@ -85,6 +85,25 @@ def test_each_of_the_pair_names_the_other_and_nothing_else_has_one():
     assert alike_along_the_track(TILT, {TILT: BY_NAME[TILT]}) is None  # the library lacks the slope
 
 
+def test_the_constants_carry_the_force_of_a_tilt_listed_as_not_separable_from_a_slope_and_say_so():
+    # pair 32687 (a 3.7 mrad slope, end effects): neither claimed, C1 refitted 30 % low without the
+    # force along the track the two share, 0.4 % with it (pipeline._with_shared_force)
+    from maglev_oc.diagnosis.result import NotSeparable
+    from maglev_oc.diagnosis.selection import shared_along_the_track
+    from maglev_oc.reporting.diagnosis_report import _shared_force_notes
+
+    tilt, slope = (
+        NotSeparable(a, (b,), "a gauge-block check", 0.67, "", {}) for a, b in ((TILT, SLOPE), (SLOPE, TILT))
+    )
+    assert shared_along_the_track([slope, tilt]) == [(TILT, SLOPE)]
+    assert shared_along_the_track([slope]) == []  # the tilt not listed: nothing to carry
+    other = NotSeparable(TILT, ("C1", "C2"), "", 0.67, "", {})  # not separable from the constants
+    assert shared_along_the_track([other]) == []
+    (note,) = _shared_force_notes(SimpleNamespace(not_separable=[tilt, slope]))
+    assert "horizontal guides off level" in note and "neither is claimed" in note, note
+    assert _shared_force_notes(SimpleNamespace(not_separable=[other])) == []
+
+
 def test_the_report_sizes_a_candidate_not_separable_from_an_effect_and_not_one_confounded_with_constants():
     # the words page of maglev-oc diagnose: the tilt of set 32105 is the same force along the track
     # either way, so its size means something; a constant force traded with C2, C3 means nothing

@@ -39,7 +39,7 @@ from maglev_oc.diagnosis.selection import (
 from maglev_oc.regression.data import prepare
 from maglev_oc.regression.design import build_design
 from maglev_oc.regression.solve import fit_subset
-from tests.diagnosis_support import diagnose_path
+from tests.diagnosis_support import diagnose_path, relative_errors
 from tests.independent import write_log
 from tests.independent.rigs import RIGS
 from tests.independent.scoring import score
@@ -613,3 +613,9 @@ def test_a_tilt_is_not_claimed_for_sloping_guides_beside_a_vertical_trend_no_eff
     assert "gauge-block" in apart["guide_misalignment"].experiment
     vertical = [u for u in d.unexplained if u.axis == "vertical" and u.depends_on == "position"]
     assert vertical and "end effect" in vertical[0].description, d.unexplained
+    # the constants are fitted beside the force along the track the two share (pipeline.
+    # _with_shared_force): C1 within 5 % of the truth, as beside a claimed effect on a log whose end
+    # effects are not in the model (the issue asks 1 % on clean logs; measured -0.4 %, -30 % and a
+    # warning without that force)
+    assert not d.warnings, d.warnings
+    assert abs(relative_errors(d, json.loads((tmp_path / "pair.truth.json").read_text()))["C1"]) < 0.05

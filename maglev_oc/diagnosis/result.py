@@ -106,7 +106,9 @@ class Diagnosis(Result):
     message: str
     sources: tuple[str, ...]
     constants_base: dict[str, Estimate]  # base model alone
-    constants_final: dict[str, Estimate]  # refitted with the effects
+    # refitted with the effects (and the force along the track of a pair not separable from each
+    # other, pipeline._with_shared_force)
+    constants_final: dict[str, Estimate]
     effects: list[Effect]
     not_separable: list[NotSeparable]
     rejected: list[Judgement]

@@ -2428,6 +2428,17 @@ def alike_along_the_track(name: str, by_name: Mapping[str, Candidate]) -> str | 
     return pair[0] if name == pair[1] else pair[1]
 
 
+def shared_along_the_track(not_separable: Sequence) -> list[tuple[str, str]]:
+    """The pairs of :data:`ALIKE_ALONG_THE_TRACK` (one-axis effect, two-axis effect) whose one-axis
+    effect is listed in ``not_separable`` (``NotSeparable``) as not separable from the other: the
+    force along the track both explain is on the log, which of the two it is is not."""
+    return [
+        (one, both)
+        for one, both in ALIKE_ALONG_THE_TRACK
+        if any(n.name == one and both in n.confounded_with for n in not_separable)
+    ]
+
+
 def told_apart_on_the_other_axis(
     j: Judgement,
     alt: Judgement,

@@ -22,7 +22,7 @@ from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.diagnosis.result import NotSeparable
-from maglev_oc.diagnosis.selection import SMOOTH_POSITION, THE_CONSTANTS, best_first
+from maglev_oc.diagnosis.selection import SMOOTH_POSITION, THE_CONSTANTS, best_first, shared_along_the_track
 from maglev_oc.diagnosis.unexplained import TIMING
 from maglev_oc.diagnosis.words import plain
 from maglev_oc.reporting import diagnosis_plots as plots
@@ -595,7 +595,7 @@ def write_diagnosis_report(
             "Lumped constants",
             ("constant", "base model alone", "refitted with the effects", "unit"),
             _constant_rows(diag),
-            notes=_noise_scale_notes(diag),
+            notes=[*_shared_force_notes(diag), *_noise_scale_notes(diag)],
         )
         verdicts = Table(
             "Every candidate and its verdict",
@@ -670,6 +670,17 @@ def write_diagnosis_report(
         # on a second page when both do not fit one (a closed-loop study adds its own times)
         _pack(pdf, [[("Appendix: wall times and settings", [wall, *split_table(settings)])]])
     return pdf.contents
+
+
+def _shared_force_notes(diag: Diagnosis) -> list[str]:
+    """That the refitted constants carry the force along the track of a pair the log does not tell
+    apart (``pipeline._with_shared_force``), when they do."""
+    return [
+        f"Refitted beside the force along the track that {plain(one)} and {plain(both)} both explain: "
+        "the log does not tell which of the two it is (neither is claimed), but without that force "
+        "the fit would read it in the constants."
+        for one, both in shared_along_the_track(diag.not_separable)
+    ]
 
 
 def _noise_scale_notes(diag: Diagnosis) -> list[str]:
