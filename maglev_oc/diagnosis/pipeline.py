@@ -104,6 +104,7 @@ from maglev_oc.diagnosis.selection import (
     percent,
     select,
     shared_along_the_track,
+    sized_alike_on_the_other_axis,
     told_apart_on_the_other_axis,
 )
 from maglev_oc.diagnosis.thrust_current import thrust_side
@@ -1567,16 +1568,25 @@ def _alike_along_the_track(
         current = ["base", *[c.name for c in rest], *[t.name for t in probes]]
         j, alt = _judged_beside(design, current, rest, [by_name[name], by_name[other]], settings)
         alike = told_apart_on_the_other_axis(j, alt, by_name, design.moving, settings)
+        if alike is None:
+            alike = sized_alike_on_the_other_axis(design, current, j, alt, by_name, settings)
         if alike is None or alike.takes_place:
             continue
         (a, b), two = alike.along, plain(alike.two_axis)
         rest_words = (
             f"the rest and the dependence on the {variable} no effect explains" if probes else "the rest"
         )
+        sized = ""
+        if alike.ratio is not None:
+            r, dr = alike.ratio
+            sized = (
+                f", but that axis alone sizes them at {percent(r)} ± {percent(dr)} of their size on both "
+                "(what they explain there is another effect's misfit)"
+            )
         why = (
             f"beside {rest_words}, {{}} explain as much along the track ({percent(a)} against {percent(b)} "
-            f"of the held-out error), and on the other axis {two} explain {percent(alike.other)}: this "
-            "log does not tell the two apart"
+            f"of the held-out error), and on the other axis {two} explain {percent(alike.other)}{sized}: "
+            "this log does not tell the two apart"
         )
         return [
             dataclasses.replace(
