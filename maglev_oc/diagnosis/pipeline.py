@@ -81,6 +81,7 @@ from maglev_oc.diagnosis.refit import (
 )
 from maglev_oc.diagnosis.result import ERROR_METRIC, Diagnosis, Effect, NotSeparable
 from maglev_oc.diagnosis.selection import (
+    OTHER_AXIS_RULES_OUT,
     SMOOTH_POSITION,
     STATE_OF_AXIS,
     Judgement,
@@ -101,6 +102,7 @@ from maglev_oc.diagnosis.selection import (
     fitted_constants,
     holds_its_axis,
     judge,
+    other_axis_size,
     percent,
     select,
     shared_along_the_track,
@@ -1537,6 +1539,10 @@ def _alike_beside_unexplained(
             continue
         chosen = [by_name[n].term for n in sel.selected]
         design = session.design(model, [*chosen, *probes, by_name[other].term])
+        rest = ["base", *[n for n in sel.selected if n != name]]
+        ratio = other_axis_size(design, rest, name)
+        if ratio is not None and abs(ratio[0] - 1.0) > OTHER_AXIS_RULES_OUT * ratio[1]:
+            continue  # that axis's residual does not hold the two-axis effect's signature
         return _alike_along_the_track(library, design, sel, session.settings, probes, two.variable)
     return []
 
@@ -1568,7 +1574,7 @@ def _alike_along_the_track(
         current = ["base", *[c.name for c in rest], *[t.name for t in probes]]
         j, alt = _judged_beside(design, current, rest, [by_name[name], by_name[other]], settings)
         alike = told_apart_on_the_other_axis(j, alt, by_name, design.moving, settings)
-        if alike is None:
+        if alike is None and not probes:  # beside the probes their other axis sizes nothing
             alike = sized_alike_on_the_other_axis(design, current, j, alt, by_name, settings)
         if alike is None or alike.takes_place:
             continue
