@@ -1523,7 +1523,13 @@ def _alike_beside_unexplained(
     sized at 3.63 +- 0.02 mrad, and made the held-out vertical error 30 % worse than the tilt did:
     neither the end effects' assumed fall-off nor the slope's line is the data's shape, and the two
     mix. The log does not tell a tilt from the slope there, and the vertical dependence on the
-    position is reported as unexplained, with the end effects and the slope among its causes."""
+    position is reported as unexplained, with the end effects and the slope among its causes.
+
+    Not where the other axis alone, fitted without the dependence, sizes the two-axis effect further
+    than :data:`~maglev_oc.diagnosis.selection.OTHER_AXIS_RULES_OUT` standard errors from its size
+    on both axes (:func:`~maglev_oc.diagnosis.selection.other_axis_size`): its signature is not in
+    that axis's residual, and the dependence hides nothing of it (set 32004: a true tilt, sized
+    there at -0.01 +- 0.013 of the slope; pair 32687's slope at 0.30 +- 0.22)."""
     by_name = {c.name: c for c in library}
     for name in sel.selected:
         other = alike_along_the_track(name, by_name)
