@@ -2448,6 +2448,29 @@ def _pooled(x: Judgement, axes: np.ndarray) -> float:
     return float(np.mean(g[axes]))
 
 
+def _same_along_the_track(
+    j: Judgement,
+    alt: Judgement,
+    by_name: Mapping[str, Candidate],
+    moving: np.ndarray,
+    settings: SelectionSettings,
+) -> tuple[tuple[float, float], np.ndarray, str] | None:
+    """(pooled held-out gains on the shared axis: ``alt``'s, ``j``'s; the axes only the pair's two-axis
+    effect acts on; its name) when ``alt`` passes and the two explain the same along the track
+    (within the parsimony penalty); None otherwise, or when either set of axes is empty."""
+    if alt.verdict != "passes":
+        return None
+    one, both = next(p for p in ALIKE_ALONG_THE_TRACK if j.name in p)
+    shared = _axes(by_name[one], moving)
+    extra = np.setdiff1d(_axes(by_name[both], moving), shared)
+    if not shared.size or not extra.size:
+        return None
+    along = (_pooled(alt, shared), _pooled(j, shared))
+    if abs(along[0] - along[1]) > settings.parameter_penalty:
+        return None
+    return along, extra, both
+
+
 def told_apart_on_the_other_axis(
     j: Judgement,
     alt: Judgement,
@@ -2477,17 +2500,10 @@ def told_apart_on_the_other_axis(
     the slope in the tilt's place explained 22 % of the vertical error, and on set 32011 (a slope,
     end effects, a thrust ripple, the magnets warming by 15 K) 28 %, as much as the tilt along the
     track (66.46 % against 66.54 %): there it took the tilt's place."""
-    if alt.verdict != "passes":
+    same = _same_along_the_track(j, alt, by_name, moving, settings)
+    if same is None:
         return None
-    one, both = next(p for p in ALIKE_ALONG_THE_TRACK if j.name in p)
-    shared = _axes(by_name[one], moving)
-    extra = np.setdiff1d(_axes(by_name[both], moving), shared)
-    if not shared.size or not extra.size:
-        return None
-
-    along = (_pooled(alt, shared), _pooled(j, shared))
-    if abs(along[0] - along[1]) > settings.parameter_penalty:
-        return None
+    along, extra, both = same
     other = _pooled(j if j.name == both else alt, extra)
     shown = other > settings.parameter_penalty
     if j.name == both and shown:
@@ -2539,17 +2555,10 @@ def sized_alike_on_the_other_axis(
     of another effect its line takes up, not its own: the pair is alike (``_Alike``, not taking
     place, with the ratio). None when it is not the two-axis effect, or the two are told apart along
     the track (gains further apart than the parsimony penalty) or ``alt`` does not pass."""
-    one, both = next(p for p in ALIKE_ALONG_THE_TRACK if j.name in p)
-    if j.name != both or alt.verdict != "passes":
+    same = _same_along_the_track(j, alt, by_name, design.moving, settings)
+    if same is None or j.name != same[2]:
         return None
-    shared = _axes(by_name[one], design.moving)
-    extra = np.setdiff1d(_axes(by_name[both], design.moving), shared)
-    if not shared.size or not extra.size:
-        return None
-
-    along = (_pooled(alt, shared), _pooled(j, shared))
-    if abs(along[0] - along[1]) > settings.parameter_penalty:
-        return None
+    along, extra, both = same
     ratio = other_axis_size(design, current, j.name)
     if ratio is None or (ratio[0] >= OTHER_AXIS_SIZE and abs(ratio[0]) >= OTHER_AXIS_Z * ratio[1]):
         return None
