@@ -131,3 +131,34 @@ def test_small_angles_and_lengths_are_given_in_thousandths_and_large_ones_and_ra
     )
     assert _sizes({"phase": Estimate(1.3, 0.05, "rad")}) == "phase 1.3 ± 0.05\u00a0rad"
     assert _sizes({"mismatch": Estimate(0.021, 0.001, "1")}) == "mismatch 2.1 ± 0.1\u00a0%"
+
+
+def test_the_errors_after_say_they_carry_the_force_of_a_pair_not_told_apart():
+    # with neither of the pair claimed the "after" figures come from the model the constants are
+    # fitted with, the shared force in it (pipeline._shared_terms): the report and the JSON's error
+    # metric say what lowered them, where "nothing to add" stood beside a 42 % drop on pair 32687
+    from maglev_oc.diagnosis.result import ERROR_METRIC, NotSeparable, _after_carries
+    from maglev_oc.reporting.diagnosis_report import outcome_rows
+    from maglev_oc.results import PerAxis
+
+    tilt, slope = (
+        NotSeparable(a, (b,), "a gauge-block check", 0.67, "", {}) for a, b in ((TILT, SLOPE), (SLOPE, TILT))
+    )
+    errors = {
+        "error_before": PerAxis(0.099, 0.0624),
+        "error_after": PerAxis(0.099, 0.0363),
+        "output_error_before": PerAxis(70e-6, 38e-6),
+        "output_error_after": PerAxis(70e-6, 6.6e-6),
+    }
+    rows = outcome_rows(SimpleNamespace(effects=[], not_separable=[tilt, slope], **errors), None)
+    acceleration, position = (verdict for _, _, verdict in rows)
+    assert acceleration.startswith("lowered by 0.0 % (vertical) and 42 % (horizontal) with the force")
+    assert "horizontal guides off level or" in acceleration and acceleration.endswith("(not separable)")
+    assert position.startswith("lowered by 0.0 % (vertical) and 83 % (horizontal) with the force")
+    assert f"after: with the effects and the force along the track of {TILT} or {SLOPE}" in _after_carries(
+        [tilt, slope]
+    )
+    # nothing carried: the metric as SPEC 3 has it, and no drop claimed
+    assert _after_carries([slope]) == ""
+    (row, _) = outcome_rows(SimpleNamespace(effects=[], not_separable=[slope], **errors), None)
+    assert row[2] == "nothing to add" and ERROR_METRIC.endswith("does not move in the logs)")

@@ -567,7 +567,10 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     clock, timings = run.clock, run.clock.timings
     session, fitted, library, design = stage.session, stage.fitted, stage.library, stage.design
     sel = stage.sel
-    constants_final = constants_of(design, _with_shared_force(design, sel, stage.not_separable), run.model)
+    # the fit the constants and every "after" figure come from: the chosen effects', and the force
+    # along the track a pair not separable from each other shares (_with_shared_force)
+    after = _with_shared_force(design, sel, stage.not_separable)
+    constants_final = constants_of(design, after, run.model)
     mass = moving_mass_change(constants_final, _constants(run.model), run.model.params)
     if run.read_payload and _payload_read(mass):
         return _PayloadRead(mass, sum(timings.values()))
@@ -576,13 +579,14 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     effects = clock("effects", _effects, session, fitted, library, design, sel)
     effects, told_apart_by_no_run = _merged_friction_by_direction(effects)
     not_sep = [*not_sep, *told_apart_by_no_run]
-    final = fitted_model(model, sel.final, data.moving, "diagnose: refit with the effects")
+    final = fitted_model(model, after, data.moving, "diagnose: refit with the effects")
+    carried = _shared_terms(design, library, sel, after)
     limits = []
     if run.limits:
         limits = clock("limits", detection_limits, design, library, sel, session.settings, fitted)
         limits = _amplifier_lag_unlogged(limits, data, effects)
-    oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects)
-    val_before, val_after = clock("validation", _validations, session, fitted, final, effects)
+    oe_before, oe_after = clock("output_error", _output_errors, session, fitted, final, effects, carried)
+    val_before, val_after = clock("validation", _validations, session, fitted, final, effects, carried)
     timings["total"] = sum(timings.values())
     warnings = constant_warnings(constants_final, model, mass)
     status, success, message = _outcome(effects, not_sep, unexplained, sel, data, warnings)
@@ -599,13 +603,13 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
         unexplained=unexplained,
         detection_limits=limits,
         error_before=_per_axis(sel.base.holdout_rms, data.moving),
-        error_after=_per_axis(sel.final.holdout_rms, data.moving),
+        error_after=_per_axis(after.holdout_rms, data.moving),
         output_error_before=oe_before,
         output_error_after=oe_after,
         selection=sel,
         trace=stage.trace,
         residual_before=residuals(design, sel.base),
-        residual_after=residuals(design, sel.final),
+        residual_after=residuals(design, after),
         data=data,
         train=session.train,
         holdout=session.hold,
@@ -636,6 +640,19 @@ def _with_shared_force(design: Design, sel: Selection, not_sep: Sequence[NotSepa
         one for one, _ in shared_along_the_track(not_sep) if one in design.groups and one not in sel.selected
     ]
     return fit_subset(design, ["base", *sel.selected, *kept]) if kept else sel.final
+
+
+def _shared_terms(
+    design: Design, library, sel: Selection, after: SubsetFit
+) -> list[tuple[Candidate, np.ndarray]]:
+    """(candidate, coefficients) of the force ``after`` carries beside the chosen effects
+    (:func:`_with_shared_force`): in the model the "after" figures are computed with, as it is in
+    the constants. Without it the held-out errors and the validation after were those of a model
+    whose constants were not the ones reported."""
+    by_name = {c.name: c for c in library}
+    return [
+        (by_name[g], after.group(design, g)[0]) for g in after.groups if g != "base" and g not in sel.selected
+    ]
 
 
 def _amplifier_lag_unlogged(
@@ -1965,23 +1982,32 @@ def _sized_on_band(
     return cand.term.physical_parameters(coef, cov, fitted_constants(fit))
 
 
-def _output_errors(session: _Session, fitted: StageModel, final: StageModel, effects: list[Effect]):
-    """Step 8: the short-horizon output error before (base fit) and after (with the effects)."""
+def _output_errors(
+    session: _Session, fitted: StageModel, final: StageModel, effects: list[Effect], carried: Sequence = ()
+):
+    """Step 8: the short-horizon output error before (base fit) and after (with the effects and the
+    force ``carried`` beside them, :func:`_shared_terms`)."""
     before = output_error(session.data, session.hold, session.model.with_constants(fitted.constants), [])
-    after = output_error(session.data, session.hold, final, [t for e in effects for t in e.terms()])
+    after = output_error(
+        session.data, session.hold, final, [*(t for e in effects for t in e.terms()), *carried]
+    )
     return before, after
 
 
 def _validations(
-    session: _Session, fitted: StageModel, final: StageModel, effects: list[Effect]
+    session: _Session, fitted: StageModel, final: StageModel, effects: list[Effect], carried: Sequence = ()
 ) -> tuple[Validation, Validation]:
-    """Last step: the base model and the model with the effects validated on the held-out block."""
+    """Last step: the base model and the model with the effects (and the force ``carried`` beside
+    them, :func:`_shared_terms`) validated on the held-out block."""
     base = session.model.with_constants(fitted.constants)
     before = validate(
         session.data, session.hold, base, description="base model (C1..C4 refitted, no effects)"
     )
-    terms = [(c.term, coef) for e in effects for c, coef in e.terms()]
+    terms = [(c.term, coef) for c, coef in (*(t for e in effects for t in e.terms()), *carried)]
     words = ", ".join(e.name for e in effects) or "none found"
+    if carried:
+        shared = " or ".join(plain(c.name) for c, _ in carried)
+        words += f"; the force along the track of {shared}, not separable on this log"
     after = validate(
         session.data, session.hold, final, terms, description=f"model with the effects ({words})"
     )

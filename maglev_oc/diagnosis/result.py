@@ -4,13 +4,21 @@ errors before and after (SPEC 3: ``Diagnosis.to_dict()`` is the JSON ``maglev-oc
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.limits import DetectionLimit
-from maglev_oc.diagnosis.selection import SIDE_WORDS, Judgement, Ranked, Selection, best_first
+from maglev_oc.diagnosis.selection import (
+    SIDE_WORDS,
+    Judgement,
+    Ranked,
+    Selection,
+    best_first,
+    shared_along_the_track,
+)
 from maglev_oc.diagnosis.trace import Trace
 from maglev_oc.diagnosis.unexplained import Unexplained
 from maglev_oc.identification.masses import MassChange
@@ -95,6 +103,20 @@ class NotSeparable:
             "reason": self.reason,
             "parameters_if_it_were_separable": {k: v.to_dict() for k, v in self.parameters.items()},
         }
+
+
+def _after_carries(not_separable: Sequence[NotSeparable]) -> str:
+    """What ``error_after`` holds beside the effects, said in the error metric: the force along the
+    track of a pair not separable from each other (``pipeline._shared_terms``), which the refitted
+    constants carry too."""
+    pairs = [f"{one} or {both}" for one, both in shared_along_the_track(not_separable)]
+    if not pairs:
+        return ""
+    return (
+        "; after: with the effects and the force along the track of "
+        + " and ".join(pairs)
+        + " (listed in not_separable: the log does not tell which)"
+    )
 
 
 @dataclass(frozen=True)
@@ -194,7 +216,7 @@ class Diagnosis(Result):
             "unexplained": [u.to_dict() for u in self.unexplained],
             "error_before": self.error_before.to_dict(),
             "error_after": self.error_after.to_dict(),
-            "error_metric": ERROR_METRIC,
+            "error_metric": ERROR_METRIC + _after_carries(self.not_separable),
             "output_error_before": self.output_error_before.to_dict(),
             "output_error_after": self.output_error_after.to_dict(),
             "output_error_metric": "RMS position error of the model simulated over 50 ms windows "
