@@ -40,13 +40,24 @@ which a loop that sticks and slips amplifies into another log (experiments_37 of
 sets). glibc reads it when a process starts; ``tests/conftest.py`` sets it for the test workers."""
 
 
+def _started_with_tunables() -> bool:
+    """Whether this process started with ``GLIBC_TUNABLES`` set (glibc reads it then, and only
+    then): the environment it started with, not ``os.environ``, which the process may have set since
+    (``tests/conftest.py`` does, for the workers it starts)."""
+    try:
+        start = Path("/proc/self/environ").read_bytes().split(b"\0")
+    except OSError:
+        return "GLIBC_TUNABLES" in os.environ
+    return any(v.startswith(b"GLIBC_TUNABLES=") for v in start)
+
+
 def with_generic_libm() -> None:
     """Start this command again under :data:`GENERIC_LIBM` unless it already runs under it (or the
     user set ``GLIBC_TUNABLES`` to something else, which is kept): the logs a command generates are
     then the test suite's. For command-line entry points, before any log is generated."""
-    if "GLIBC_TUNABLES" in os.environ or not sys.platform.startswith("linux"):
+    if not sys.platform.startswith("linux") or _started_with_tunables():
         return
-    env = {**os.environ, "GLIBC_TUNABLES": GENERIC_LIBM}
+    env = {**os.environ, "GLIBC_TUNABLES": os.environ.get("GLIBC_TUNABLES", GENERIC_LIBM)}
     sys.stdout.flush()
     os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
 
