@@ -49,11 +49,6 @@ from maglev_oc.identification.experiments import TWIN_TRUTH, excitation_log
 from maglev_oc.model.feedback import FeedbackTransformation
 from maglev_oc.model.stage import StageModel
 
-# the single-process run started again under the mask (see above); not a worker, which inherits it
-_PYTEST_COMMAND = any(Path(a).name in ("pytest", "py.test") for a in sys.orig_argv[:3])
-if _PYTEST_COMMAND and "PYTEST_XDIST_WORKER" not in os.environ:
-    with_generic_libm()
-
 
 @pytest.fixture(scope="session")
 def model() -> StageModel:
@@ -175,3 +170,19 @@ def pytest_collection_modifyitems(config, items):
         cost[unit[item]] = cost.get(unit[item], 0.0) + measured.get(item.nodeid, 0.1)
     order = {item: k for k, item in enumerate(items)}
     items.sort(key=lambda item: (-cost[unit[item]], unit[item], order[item]))
+
+
+def pytest_configure(config) -> None:
+    """A pytest command run without the mask (see above) is started again under it, before any test
+    and before xdist starts its workers; the output capture suspended first, or the new process's
+    output would go to the capture's files. A worker inherits the mask and is never started again."""
+    if "PYTEST_XDIST_WORKER" in os.environ:
+        return
+    if not any(Path(a).name in ("pytest", "py.test") for a in sys.orig_argv[:3]):
+        return  # pytest.main() from another program: its own command is not pytest's to run again
+    capture = config.pluginmanager.getplugin("capturemanager")
+    if capture is not None:
+        capture.suspend_global_capture(in_=True)
+    with_generic_libm()  # returns at once when the process started under the mask
+    if capture is not None:
+        capture.resume_global_capture()
