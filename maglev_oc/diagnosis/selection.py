@@ -2128,9 +2128,10 @@ def select(
             if not passing:
                 # the pair's forms in turn (guide friction with or without its Stribeck rise): the first
                 # in which each passes beside the other
-                pairs = _pairs_restoring_thrust(
+                restoring = _pairs_restoring_thrust(
                     design, current, cur_fit, pool, by_name, reference, settings, params
-                ) or _pairs_of_the_unseen(judged, by_name, settings)
+                )
+                pairs = restoring or _pairs_of_the_unseen(judged, by_name, settings)
                 found = next(
                     (
                         both
@@ -2140,6 +2141,8 @@ def select(
                     ),
                     None,
                 )
+                if found is None:
+                    found = _lone_of_the_pair(pairs, current, judged_beside, restoring)
                 if found is None:
                     break
                 pair = tuple(j.name for j in found)
@@ -2647,7 +2650,7 @@ def _pairs_restoring_thrust(
             if by_name[a].reported_name == by_name[b].reported_name:
                 continue
             fit = fit_subset(design, [*current, a, b], covariance=False)
-            if all(abs(fit.value("C1") / t - 1.0) > PLAUSIBLE_CHANGE for t in targets):
+            if not any(_restores(fit.value("C1"), c1, t) for t in targets):
                 continue
             g = 1.0 - (fit.holdout_rms[AXIS_INDEX["horizontal"]] / before) ** 2
             if g >= settings.min_gain:
@@ -2657,6 +2660,41 @@ def _pairs_restoring_thrust(
     effects = {by_name[n].reported_name for n in max(gains, key=gains.get)}
     forms = [p for p in gains if {by_name[n].reported_name for n in p} == effects]
     return sorted(forms, key=gains.get, reverse=True)
+
+
+def _lone_of_the_pair(
+    pairs: Sequence[tuple[str, str]],
+    current: list[str],
+    judged_beside: Callable[[str, list[str]], Judgement],
+    restoring: Sequence[tuple[str, str]],
+) -> tuple[Judgement] | None:
+    """The member of the first pair restoring C1 (``restoring``, :func:`_pairs_restoring_thrust`)
+    that passes beside the other where the other does not pass beside it; None otherwise.
+
+    The member is chosen alone: the step goes on from it, and the other is judged at the next step
+    beside it, or in the selection repeated once the references converge around it."""
+    for pair in pairs if restoring else ():
+        both = [judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])]
+        passing = [j for j in both if j.verdict == "passes"]
+        if len(passing) == 1:
+            return (passing[0],)
+    return None
+
+
+RESTORED_SHARE = 0.5
+"""A pair along the track restores C1 (:func:`_pairs_restoring_thrust`) when it brings it within
+``identify``'s plausible change of the model's, or to within this share of the way there, on a
+log scale."""
+
+
+def _restores(c1: float, c1_now: float, target: float) -> bool:
+    """Whether a fit's ``c1`` is back within the plausible change of ``target`` or
+    :data:`RESTORED_SHARE` of the way there from ``c1_now`` (log scale)."""
+    if abs(c1 / target - 1.0) <= PLAUSIBLE_CHANGE:
+        return True
+    if not (c1 > 0 and c1_now > 0):
+        return False
+    return abs(math.log(c1 / target)) <= RESTORED_SHARE * abs(math.log(c1_now / target))
 
 
 def _pairs_of_the_unseen(
