@@ -353,13 +353,14 @@ def _drawn_pair(
     rig="default",
     extra: tuple = (),
     payload: tuple = (0.0, False),
+    duration: float = 60.0,
 ):
     """The log ``bench/diagnose_rigs.py --drawn-pairs`` writes for ``seed`` with these kinds (each
     effect drawn from its own generator, seeded by the log's seed and the kind's index), on ``rig``
     (a ``Rig``, or the name of one of ``tests.independent.rigs.RIGS``, as ``--rig`` takes it), with
     the effects ``extra`` added after them (as ``--shake`` adds the base's vibration) and
     ``payload`` (kg, declared in the log or not: ``--payload``, ``--undeclared``), diagnosed with
-    the defaults and scored: (effects, diagnosis, score)."""
+    the defaults and scored: (effects, diagnosis, score); ``duration`` [s] as ``--duration`` sets it."""
     import numpy as np
 
     from tests.independent import write_log
@@ -376,6 +377,7 @@ def _drawn_pair(
         rig=on,
         payload=payload[0],
         declare_payload=payload[1],
+        duration=duration,
     )
     path, truth_path = write_log(simulate(scenario), tmp_path, stem="pair")
     d = diagnose_path(path)
