@@ -130,10 +130,12 @@ Two forces along the track that the loop cancels with i_q (a commutation offset,
 carrier) each leave C1 far from any stage of this design when fitted alone, so neither passes and
 a selection one effect at a time finds neither. When no candidate passes and C1 is beyond
 ``identify``'s plausible change from the model's (``reference``), the two horizontal candidates
-that together bring it back and explain the most of the held-out horizontal error are proposed
-(:func:`_pairs_restoring_thrust`), and claimed only if each passes beside the other, as the backward
-pass judges every chosen effect, in the first of their forms (guide friction with and without its
-Stribeck rise) in which both do. Otherwise, when no candidate passes, the candidates refused only as
+that together bring it back (or halfway, on a log scale) and explain the most of the held-out
+horizontal error are proposed (:func:`_pairs_restoring_thrust`), and claimed only if each passes
+beside the other, as the backward pass judges every chosen effect, in the first of their forms
+(guide friction with and without its Stribeck rise) in which both do; where only one passes beside
+the other, that one is chosen alone and the other judged beside it in turn
+(:func:`_lone_of_the_pair`). Otherwise, when no candidate passes, the candidates refused only as
 not significant that explained at least ``min_gain`` are proposed in pairs, most explaining first
 (:func:`_pairs_of_the_unseen`), on the same terms: several effects together can leave each one's
 held-out gain too uneven over the held-out blocks to be significant alone.
