@@ -70,3 +70,18 @@ def test_one_form_of_each_effect_and_at_most_pair_candidates_of_them():
     named = {n for p in pairs for n in p}
     assert named == {f"k{i}" for i in range(PAIR_CANDIDATES)}
     assert len(pairs) == PAIR_CANDIDATES * (PAIR_CANDIDATES - 1) // 2
+
+
+def test_a_pair_restores_c1_within_the_plausible_change_or_halfway_there_on_a_log_scale():
+    # selection._restores: set 31806's pair took C1 from 0.33 to 5.3 (26 % of the log distance to
+    # 14.2 left) and is proposed; a pair at 3.4 (38 % left) is too, one at 0.7 (80 % left) is not;
+    # a fit that leaves C1 at zero or below restores nothing
+    from maglev_oc.diagnosis.selection import RESTORED_SHARE, _restores
+
+    assert RESTORED_SHARE == 0.5
+    assert _restores(5.3, 0.33, 14.2) and _restores(3.4, 0.33, 14.2)
+    assert not _restores(0.7, 0.33, 14.2)
+    assert _restores(10.0, -1.0, 14.2)  # within identify's 30 % whatever the start
+    assert not _restores(-5.0, 0.33, 14.2) and not _restores(5.3, -0.33, 14.2)
+    # from above as from below: 60 -> 28 leaves 47 % of the log distance, 60 -> 45 leaves 80 %
+    assert _restores(28.0, 60.0, 14.2) and not _restores(45.0, 60.0, 14.2)
