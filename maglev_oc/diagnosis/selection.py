@@ -206,7 +206,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -2134,17 +2134,15 @@ def select(
                     design, current, cur_fit, pool, by_name, reference, settings, params
                 )
                 pairs = restoring or _pairs_of_the_unseen(judged, by_name, settings)
-                found = next(
-                    (
-                        both
-                        for pair in pairs
-                        for both in ([judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])],)
-                        if all(j.verdict == "passes" for j in both)
-                    ),
-                    None,
-                )
-                if found is None:
-                    found = _lone_of_the_pair(pairs, current, judged_beside, restoring)
+                found, seen = None, []  # each pair's two judgements, each beside the other, in order
+                for one, other in pairs:
+                    both = [judged_beside(one, [*current, other]), judged_beside(other, [*current, one])]
+                    seen.append(both)
+                    if all(j.verdict == "passes" for j in both):
+                        found = both
+                        break
+                if found is None and restoring:  # then every pair was judged, and pairs is restoring
+                    found = _lone_of_the_pair(seen)
                 if found is None:
                     break
                 pair = tuple(j.name for j in found)
@@ -2672,19 +2670,13 @@ def _pairs_restoring_thrust(
     return sorted(forms, key=gains.get, reverse=True)
 
 
-def _lone_of_the_pair(
-    pairs: Sequence[tuple[str, str]],
-    current: list[str],
-    judged_beside: Callable[[str, list[str]], Judgement],
-    restoring: Sequence[tuple[str, str]],
-) -> tuple[Judgement] | None:
-    """The member of the first pair restoring C1 (``restoring``, :func:`_pairs_restoring_thrust`)
-    that passes beside the other where the other does not pass beside it; None otherwise.
+def _lone_of_the_pair(judged_pairs: Iterable[Sequence[Judgement]]) -> tuple[Judgement] | None:
+    """The member of the first pair restoring C1 (:func:`_pairs_restoring_thrust`; each pair's two
+    judgements, each beside the other) that passes where the other does not; None otherwise.
 
     The member is chosen alone: the step goes on from it, and the other is judged at the next step
     beside it, or in the selection repeated once the references converge around it."""
-    for pair in pairs if restoring else ():
-        both = [judged_beside(a, [*current, b]) for a, b in (pair, pair[::-1])]
+    for both in judged_pairs:
         passing = [j for j in both if j.verdict == "passes"]
         if len(passing) == 1:
             return (passing[0],)
