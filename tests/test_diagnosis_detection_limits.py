@@ -241,6 +241,38 @@ def test_an_effect_put_into_the_log_lowers_its_limit_by_its_size_until_the_log_s
         assert math.isnan(x.value) and x.reason.startswith(why) and not x.binding, (f, x)
 
 
+def test_an_effect_judged_beside_friction_on_the_other_axis_alone_says_so_where_no_size_shows_it(clean):
+    # the amplifiers' lag is judged on the axes without claimed guide friction (its column on a
+    # friction axis is the friction's viscous part, selection.judged_axes); where no size shows it
+    # there, "not seen at any size" is of that axis alone and the limit says so, with what measures
+    # it (drawn pair 37007 of the independent generator: a true 0.8 ms lag beside vertical friction
+    # was told "not seen at any size tried" and nothing more). An effect judged on every axis it acts
+    # on, beside friction or not, keeps the plain reason.
+    from unittest import mock
+
+    from maglev_oc.diagnosis import limits
+    from maglev_oc.diagnosis.currents import LAG
+    from maglev_oc.diagnosis.selection import CURRENT_STEP_SEPARATES
+    from maglev_oc.regression.base import AXIS_INDEX
+
+    _, _, (design, library, sel, settings, model) = clean
+    vertical = {AXIS_INDEX["vertical"]}
+    for friction in (set(), vertical):
+        with (
+            mock.patch.object(limits, "_smallest", lambda *a: None),
+            mock.patch.object(limits, "_friction_axes", lambda chosen, f=friction: f),
+        ):
+            found = {x.name: x for x in detection_limits(design, library, sel, settings, model)}
+        never = [x for x in found.values() if x.reason.startswith(limits.NO_SIZE)]
+        assert LAG in found and len(never) > 1, found
+        for x in never:
+            said = x.reason != limits.NO_SIZE
+            assert said is (x.name == LAG and bool(friction)), x
+        if friction:
+            assert "judged on the horizontal axis alone" in found[LAG].reason
+            assert found[LAG].reason.endswith(f"{CURRENT_STEP_SEPARATES})")
+
+
 @pytest.mark.parametrize(
     ("value", "unit", "words"),
     [

@@ -66,6 +66,7 @@ from maglev_oc.diagnosis.candidate import Candidate
 from maglev_oc.diagnosis.currents import AMPLIFIER_LAG_NOT_LOGGED
 from maglev_oc.diagnosis.library import frame_angle
 from maglev_oc.diagnosis.selection import (
+    CURRENT_STEP_SEPARATES,
     THRUST_SIDE,
     Judgement,
     Selection,
@@ -76,6 +77,7 @@ from maglev_oc.diagnosis.selection import (
     evidence,
     fitted_constants,
     holdout_significance,
+    judged_alone,
     judged_axes,
     pooled_gains,
     pooled_significance,
@@ -278,7 +280,11 @@ def _limit(
             cand.name, first, math.inf, unit_name, "", f"not seen at any size: {judged.reason}"
         )
     logged = _residuals(ctx, design, cand)
-    axes = judged_axes(design, cand, ctx.friction)[3] if rows is None else rows
+    _, hidden, left, axes = judged_axes(design, cand, ctx.friction)
+    # judged on the axes without claimed friction: a size those never show says nothing of the others
+    alone = f" ({judged_alone(left, hidden)}; {CURRENT_STEP_SEPARATES})" if hidden and left.size else ""
+    if rows is not None:
+        axes, alone = rows, ""
     if not (at_zero := _failing(ctx, logged, axes)):
         # the log shows one already by these tests: refused on another (or judged beside effects
         # since dropped), it has no size below which the log would not show it
@@ -304,7 +310,7 @@ def _limit(
     for sign in signs:
         found = _smallest(ctx, logged, unit, axes, sign, start, physics, refused)
         if found is None:
-            why = f"{PHYSICS_RULES_OUT}: {refused[-1]}" if refused else NO_SIZE
+            why = (f"{PHYSICS_RULES_OUT}: {refused[-1]}" if refused else NO_SIZE) + alone
             return DetectionLimit(cand.name, first, math.inf, unit_name, "", why, side)
         sizes.append(found)
     s, binding = max(sizes, key=lambda t: abs(t[0]))

@@ -1357,20 +1357,32 @@ def _beside_friction(verdict: str, reason: str, axes: np.ndarray, hidden: Sequen
     """The verdict of a candidate whose evidence on the ``hidden`` axes (claimed guide friction)
     does not count, judged on ``axes``. With none left it was judged on the hidden ones: not
     separable if it passed there (else its verdict stands); otherwise the reason of a verdict
-    other than "passes" says on which axes it was judged."""
-    on = " and ".join(AXES[a] for a in hidden)
-    why = (
-        f"on the {on} axis, where guide friction is claimed, the regulator makes the currents' rate "
-        "follow the velocity and the acceleration, so its signature there is the friction's viscous part"
-    )
+    other than "passes" says on which axes it was judged (:func:`judged_alone`)."""
     if not axes.size:
         if verdict != "passes":
             return verdict, reason
-        return "not separable", f"{why} (a current step measured with a probe separates the two)"
+        return "not separable", f"{_hidden_why(hidden)} ({CURRENT_STEP_SEPARATES})"
     if verdict == "passes":
         return verdict, reason
+    return verdict, f"{reason} ({judged_alone(axes, hidden)})"
+
+
+CURRENT_STEP_SEPARATES = "a current step measured with a probe separates the two"
+
+
+def _hidden_why(hidden: Sequence[int]) -> str:
+    on = " and ".join(AXES[a] for a in hidden)
+    return (
+        f"on the {on} axis, where guide friction is claimed, the regulator makes the currents' rate "
+        "follow the velocity and the acceleration, so its signature there is the friction's viscous part"
+    )
+
+
+def judged_alone(axes: np.ndarray, hidden: Sequence[int]) -> str:
+    """Which axes a candidate not judged ``beside_friction`` was judged on, and why not on the
+    ``hidden`` ones (claimed guide friction there)."""
     judged = " and ".join(AXES[a] for a in axes)
-    return verdict, f"{reason} (judged on the {judged} axis alone: {why})"
+    return f"judged on the {judged} axis alone: {_hidden_why(hidden)}"
 
 
 def percent(gain: float) -> str:
