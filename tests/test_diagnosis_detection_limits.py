@@ -273,6 +273,30 @@ def test_an_effect_judged_beside_friction_on_the_other_axis_alone_says_so_where_
             assert found[LAG].reason.endswith(f"{CURRENT_STEP_SEPARATES})")
 
 
+def test_an_effect_the_physics_rules_out_at_every_size_shown_is_told_the_first_size_past_its_bound(clean):
+    # the search for the smallest size shown goes on growing past the physical bound until it gives
+    # up: the size quoted is the first it refused, just past the bound, not the last (drawn pair
+    # 37007 of the independent generator was told "gap offset of 1.46e+03 m is beyond the physical
+    # bound 0.002 m"); each sign of an effect searched both ways quotes its own refusals
+    from unittest import mock
+
+    from maglev_oc.diagnosis import limits
+
+    _, _, (design, library, sel, settings, model) = clean
+
+    def refusing(ctx, logged, unit, axes, sign, start, physics, refused):
+        assert refused == []  # a fresh list for each sign's search
+        refused += [f"first past the bound ({sign:+g})", "second", "last"]
+        return None
+
+    with mock.patch.object(limits, "_smallest", refusing):
+        found = detection_limits(design, library, sel, settings, model)
+    ruled_out = [x for x in found if x.reason.startswith(limits.PHYSICS_RULES_OUT)]
+    assert ruled_out, found
+    for x in ruled_out:
+        assert x.reason == f"{limits.PHYSICS_RULES_OUT}: first past the bound (+1)", x
+
+
 @pytest.mark.parametrize(
     ("value", "unit", "words"),
     [

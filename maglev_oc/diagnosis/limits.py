@@ -306,11 +306,14 @@ def _limit(
         at = cand.term.physical_parameters(size * direction, np.zeros((index.size, index.size)), constants)
         return cand.plausible(at)
 
-    sizes, refused = [], []
+    sizes = []
     for sign in signs:
+        refused: list[str] = []  # this sign's, the sizes growing
         found = _smallest(ctx, logged, unit, axes, sign, start, physics, refused)
         if found is None:
-            why = (f"{PHYSICS_RULES_OUT}: {refused[-1]}" if refused else NO_SIZE) + alone
+            # the first size the physics refused, just past its bound: the search goes on growing
+            # (the last it tried was a gap offset of 1.5 km on drawn pair 37007)
+            why = (f"{PHYSICS_RULES_OUT}: {refused[0]}" if refused else NO_SIZE) + alone
             return DetectionLimit(cand.name, first, math.inf, unit_name, "", why, side)
         sizes.append(found)
     s, binding = max(sizes, key=lambda t: abs(t[0]))
@@ -430,7 +433,7 @@ def _smallest(
     """(size, the test failing just below it: "" when none of the sizes tried failed) of the
     smallest size along ``sign`` times the
     direction at which the log shows the effect and ``physics`` (its plausibility) allows it; None
-    when no size tried is both (the last plausibility refusal appended to ``refused``). A lag
+    when no size tried is both (each plausibility refusal appended to ``refused``, smallest first). A lag
     seen at less than the loop's hold is claimed from the smallest lag beyond the hold that the
     plausibility test accepts; a ripple seen only beyond 30 % of the thrust is not seen at any
     size the physics allows."""
