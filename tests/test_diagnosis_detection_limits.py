@@ -296,6 +296,25 @@ def test_an_effect_the_physics_rules_out_at_every_size_shown_is_told_the_first_s
     for x in ruled_out:
         assert x.reason == f"{limits.PHYSICS_RULES_OUT}: first past the bound (+1)", x
 
+    # an effect searched both ways: found along +, ruled out along -, its reason that search's own
+    def found_then_refusing(ctx, logged, unit, axes, sign, start, physics, refused):
+        assert refused == []  # the + search's refusals are not carried into the - search
+        if sign > 0:
+            refused.append("refused along +")
+            return 1e-3, "z"
+        refused += ["first past the bound (-1)", "last"]
+        return None
+
+    with mock.patch.object(limits, "_smallest", found_then_refusing):
+        both_ways = [
+            x
+            for x in detection_limits(design, library, sel, settings, model)
+            if x.reason.startswith(limits.PHYSICS_RULES_OUT)
+        ]
+    assert both_ways, "no effect of the clean log is searched in both directions"
+    for x in both_ways:
+        assert x.reason == f"{limits.PHYSICS_RULES_OUT}: first past the bound (-1)", x
+
 
 @pytest.mark.parametrize(
     ("value", "unit", "words"),
