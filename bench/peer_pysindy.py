@@ -66,7 +66,8 @@ d. From terms to effect names, a careful user's physical reading of the selected
    x3^2 u1 on the horizontal; x3^2 (times anything but a ``end_effects``: thrust_loss_at_ends = the
    velocity) on the vertical                             x3^2 u1 coefficient (physical units) x (hi -
                                                          lo)^2 / 4 / L1(median gap), lo, hi = 1st/99th
-                                                         percentiles of x3
+                                                         percentiles of x3; each end's the
+                                                         coefficient x (end^2 - centre^2) / L1
    an odd power of x3 (no velocity) on the vertical;     ``guide_misalignment``: slope = least squares
    x3 u1 on the horizontal                               of the vertical group on (d x2'/d x1) x3 (the
                                                          gap is x1 + slope x3), else from x3 u1 on
@@ -610,6 +611,11 @@ def map_effects(p: Prepared, fit: SindyFit) -> list[dict]:
             # the thrust gain's curvature along x3: coefficient of x3^2 u1 in the library variables
             q = coef(1, "x3^2 u1") / (sc.scale[3] ** 2 * sc.scale[4])
             params["thrust_loss_at_ends"] = q * (x_hi - x_lo) ** 2 / 4 / l1_mid
+            # each end's own, relative to the centre c of the travel: q (x_end^2 - c^2) / L1, whose
+            # mean is the line above (the scorer compares one end where the truth's ends differ)
+            centre = (x_lo + x_hi) / 2
+            for end, x_end in (("low", x_lo), ("high", x_hi)):
+                params[f"thrust_loss_at_{end}_end"] = q * (x_end**2 - centre**2) / l1_mid
             params["low_end_position"], params["high_end_position"] = x_lo, x_hi
         elif name == "guide_misalignment":
             vert = [m for m in members if m[0] == 0]
