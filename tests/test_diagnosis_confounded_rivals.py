@@ -20,6 +20,7 @@ within 3 %, bench/README), 20x noisier than the generator's default.
 from __future__ import annotations
 
 import json
+import math
 import re
 from types import SimpleNamespace
 
@@ -382,6 +383,12 @@ def test_the_pair_proposed_is_the_one_that_brings_the_motor_back(model, tmp_path
     assert proposed(reference=None) == []
     assert proposed(reference={**reference, "C1": cur.value("C1")}) == []
     assert proposed(settings=dataclasses.replace(settings, min_gain=0.9)) == []
+    # nothing left on the horizontal axis (a log the spring and C1 fit exactly: the interrupt test's
+    # sines of tests/test_bad_input.py), or no held-out part there: nothing proposed, and no division
+    # by that zero (a RuntimeWarning printed to the user, an error here)
+    for nothing in (0.0, math.nan):
+        emptied = dataclasses.replace(cur, holdout_rms=np.array([cur.holdout_rms[0], nothing]))
+        assert _pairs_restoring_thrust(design, ["base"], emptied, pool, by_name, reference, settings) == []
     for without in proposed(pool=[n for n in pool if n != "commutation_offset"]):
         c1 = fit_subset(design, ["base", *without], covariance=False).value("C1")
         assert _restores(c1, cur.value("C1"), reference["C1"]), c1

@@ -2662,6 +2662,8 @@ def _pairs_restoring_thrust(
         return []
     names = [n for n in pool if by_name[n].axis in ("horizontal", "both") and by_name[n].fallback_for is None]
     before = cur_fit.holdout_rms[AXIS_INDEX["horizontal"]]
+    if not before > 0:  # nothing left on the horizontal axis to explain (or no held-out part there)
+        return []
     carried = _carried_vertically(cur_fit, reference, params)
     targets = [c1_model] if carried is None else [c1_model, c1_model * carried.factor("C1")]
     gains: dict[tuple[str, str], float] = {}
