@@ -39,6 +39,7 @@ from typing import NoReturn
 
 import numpy as np
 
+from maglev_oc import interrupts
 from maglev_oc.errors import InputError, MaglevError, OutputError
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.loading import load_model
@@ -1184,7 +1185,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         _check_outputs(args)
-        return int(args.func(args))
+        with interrupts.honoured():
+            return int(args.func(args))
     except (MaglevError, OSError) as err:
         print(f"maglev-oc {args.command}: error: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
+from maglev_oc import interrupts
 from maglev_oc.data.log import MAX_PAYLOAD, PAYLOAD_KEY
 from maglev_oc.data.logs import Log, LogError
 from maglev_oc.diagnosis.candidate import Candidate, fmt
@@ -727,6 +728,7 @@ class _Clock:
         t0 = time.perf_counter()
         self.bar.set_description(f"diagnose: {name.replace('_', ' ')}")
         out = fn(*args)
+        interrupts.check()  # a Ctrl-C an extension swallowed within the step ends the diagnosis here
         self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0  # a step may run in parts
         if name not in self.seen:
             self.seen.add(name)
