@@ -732,7 +732,7 @@ def test_no_log_moving_on_a_needed_axis_is_named():
         check_identifiable([v1, v2], CONSTANT_NAMES)
     msg = str(info.value)
     assert info.value.source == "v1.csv, v2.csv"
-    assert re.search(r"no log moves horizontally \(x3 and u1 constant .*\) but C1 need it", msg), msg
+    assert re.search(r"no log moves horizontally \(x3 and u1 constant .*\) but C1 needs it", msg), msg
     h = _synthetic("h.csv", vertical=False, horizontal=True)
     with pytest.raises(LogError) as info:
         check_identifiable([h], ("C1", "C2", "gap_offset"))

@@ -123,7 +123,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread, without_hugepage_advice
 from maglev_oc.progress import progress
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES
-from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, prepare
+from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, axes_left_out, prepare
 from maglev_oc.regression.design import Design, build_design, reusing_columns
 from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
 from maglev_oc.regression.solve import SubsetFit, fit_subset, predicted, residuals
@@ -591,6 +591,7 @@ def _finished(stage: _Stage, run: _Run, bandwidth: float, scale: NoiseScale) -> 
     timings["total"] = sum(timings.values())
     warnings = constant_warnings(constants_final, model, mass)
     status, success, message = _outcome(effects, not_sep, unexplained, sel, data, warnings)
+    warnings = (*axes_left_out(data), *warnings)  # C1 not determined: said first
     return Diagnosis(
         success=success,
         status=status,

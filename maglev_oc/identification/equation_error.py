@@ -41,13 +41,14 @@ from maglev_oc.estimation.differentiate import SavitzkyGolay
 from maglev_oc.identification.result import FitResult
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.base import (
+    CONSTANT_AXIS,
     CONSTANT_NAMES,
     GAP_OFFSET,
     GAP_OFFSET_BOUND,
     GAP_OFFSET_SCALE,
 )
 from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from
-from maglev_oc.regression.data import PreparedLogs, as_log_list, delayed_inputs, prepare
+from maglev_oc.regression.data import PreparedLogs, as_log_list, axes_left_out, delayed_inputs, prepare
 from maglev_oc.regression.design import Design, build_design
 from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
 from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
@@ -178,6 +179,7 @@ class EquationError:
             {"bandwidth": DEFAULT_BANDWIDTH} if differentiator is None else {"differentiator": differentiator}
         )
         self.prepared = prepare(shifted, logging_error=logging_error, model=self.model, **kw)
+        _refuse_left_out(self.prepared, self.estimate)
         self._shifted = shifted
         self._narrow: PreparedLogs | None = None
         # a narrow band well below the fit's own, and an error to scale
@@ -452,6 +454,21 @@ def _reduced_mask(mask: np.ndarray, q: int) -> np.ndarray:
     if q <= 1:
         return mask
     return mask[: (mask.size // q) * q].reshape(-1, q).all(axis=1)
+
+
+def _refuse_left_out(prepared: PreparedLogs, estimate: Sequence[str]) -> None:
+    """Refuse, naming the logs, constants to estimate on an axis the fit leaves out although it
+    moves (:func:`~maglev_oc.regression.data.axes_left_out`: a thrust current that is mostly its
+    errors), as :func:`~maglev_oc.identification.pipeline.identify` refuses a log that does not
+    move: fitted, C1 came out at 4e10 on a log whose platform moved +-1 mm along the track."""
+    for why in axes_left_out(prepared):
+        names = [c for c in estimate if CONSTANT_AXIS.get(c) == "horizontal"]
+        if names:
+            raise LogError(
+                ", ".join(prepared.sources),
+                f"no excitation for identification: {', '.join(names)} need{'s' if len(names) == 1 else ''} "
+                f"the horizontal axis, and {why} (--estimate C2 C3 C4 fits the vertical constants alone)",
+            )
 
 
 def _with_inputs(log: Log, u: np.ndarray) -> Log:

@@ -163,7 +163,7 @@ def check_identifiable(
             raise LogError(
                 files,
                 f"no excitation for identification: no log moves {axis}ly ({' and '.join(sigs)} constant "
-                f"to within the resolution) but {', '.join(names)} need it",
+                f"to within the resolution) but {', '.join(names)} need{'s' if len(names) == 1 else ''} it",
             )
 
 

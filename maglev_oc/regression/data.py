@@ -84,6 +84,17 @@ lives below 30 Hz, and the regression's memory grows with the number of samples.
 MOTION = 50e-6
 """[m] An axis whose position varies by less than this (standard deviation, 5 encoder counts)
 is taken as locked by the stoppers and left out of the regression."""
+THRUST_ERROR_SHARE = 0.5
+"""The horizontal axis is left out of the fit (as a locked one is) when the logged thrust current's
+errors, as estimated (``current_noise``), are at least this share of its energy in the fitting band
+(:meth:`PreparedLogs.thrust_error_share`): C1's column is then mostly those errors, and its
+errors-in-variables fit is singular. A slow scan of the track (sines of 0.01-0.05 Hz over
++-40 mm, nothing along the track but the motor) and a log whose platform moved +-1 mm along it gave
+shares of 3.1 and 1.3 on the independent generator, and C1 at -1.1e9 and 1.4e10 with held-out
+errors of 4e5 and 7e6 m/s^2; ``../shared/logs/independent_clean.csv`` gives 0.04, the independent
+generator's default rig 0.003-0.006, and 400 logs of the benches' rigs at most 0.17 (the noisy
+observers' rig). Half, as :data:`~maglev_oc.regression.solve.OPTIONAL_NOISE_SHARE`
+holds an optional parameter's column mostly made of those errors at zero."""
 NOISE_BAND = (0.3, 0.45)
 """Band of the current-noise floor, as fractions of the sample rate: above the closed-loop band
 of any regulator of this stage (<= 60 rad/s) by a factor of 30 at 1 kHz, below Nyquist."""
@@ -296,6 +307,16 @@ class PreparedLogs:
             current_noise=self.current_noise * scale,
             settings={**self.settings, "current_noise_scale": float(scale)},
         )
+
+    def thrust_error_share(self) -> float:
+        """The logged thrust current's errors (``current_noise``) over its energy in the fitting
+        band, on the valid samples: both through the filter F, as C1's column and its errors enter
+        the equations (:class:`~maglev_oc.regression.design.Design`; C1's column is L1(gap) i_q,
+        L1 nearly constant over the gaps a log covers). Infinite where the current is zero."""
+        filtered = self.filter(self.u[:1])[0][self.valid]
+        energy = float(np.sum(filtered**2))
+        errors = float(self.current_noise[0]) * float(np.sum(self.kernel**2)) * filtered.size
+        return errors / energy if energy > 0 else math.inf
 
     def same_samples(self, other: PreparedLogs) -> bool:
         """Whether ``other`` holds these very arrays (one made from the other by
@@ -581,7 +602,7 @@ def prepare(
     declared = [
         control_rate is not None or log.currents_measured or "control_rate_hz" in log.metadata for log in logs
     ]
-    return PreparedLogs(
+    prepared = PreparedLogs(
         t=cat[0],
         segment=cat[1],
         x=cat[2],
@@ -616,3 +637,30 @@ def prepare(
             **({"payload_kg": [log.payload for log in logs]} if load is not None else {}),
         },
     )
+    return _thrust_shown(prepared)
+
+
+THRUST_LEFT_OUT = "the horizontal axis is left out of the fit"
+"""How the note of :func:`_thrust_shown` begins (:func:`axes_left_out` finds it by it)."""
+
+
+def axes_left_out(prepared: PreparedLogs) -> tuple[str, ...]:
+    """The notes of ``prepared`` that say why an axis that moves is left out of the fit."""
+    return tuple(n for n in prepared.notes if n.startswith(THRUST_LEFT_OUT))
+
+
+def _thrust_shown(prepared: PreparedLogs) -> PreparedLogs:
+    """``prepared`` with its horizontal axis left out of the fit, and a note saying why, when the
+    logged thrust current is mostly its errors (:data:`THRUST_ERROR_SHARE`)."""
+    if not prepared.moving[1]:
+        return prepared
+    share = prepared.thrust_error_share()
+    if share < THRUST_ERROR_SHARE:
+        return prepared
+    note = (
+        f"{THRUST_LEFT_OUT}: the logged thrust current is mostly its errors "
+        f"({min(share, 99.0):.2g} times its energy in the fitting band, as estimated from its noise "
+        "floor), so nothing along the track can be told from them and C1 is not determined by this "
+        "log; moves along the track that need thrust (faster, or against a force) determine it"
+    )
+    return replace(prepared, moving=np.array([prepared.moving[0], False]), notes=(*prepared.notes, note))
