@@ -58,3 +58,17 @@ def test_identify_refuses_c1_from_the_slow_scan_and_fits_the_vertical_constants(
         EquationError(logs[:1], MODEL)
     problem = EquationError(logs[:1], MODEL, estimate=("C2", "C3", "C4"))
     assert problem.prepared.moving[0]
+
+
+def test_identify_refuses_the_vertical_constants_of_a_gap_held_still(tmp_path):
+    # the gap held at its reference (7.7 um of noise and quantization, under the 50 um a fit needs):
+    # refused by name, where it ended in "LumpedConstants.C2: must be positive, got 0.0"
+    still = Scenario(
+        name="still", seed=4242, duration=30.0, reference=ReferenceSpec(gap_peak_range=(0.0, 0.0))
+    )
+    log = read_log(write_log(simulate(still), tmp_path, "still")[0])
+    with pytest.raises(
+        LogError, match=r"C2, C3, C4 need the vertical axis, and the gap varies by [0-9.]+ um"
+    ):
+        EquationError([log], MODEL)
+    assert EquationError([log], MODEL, estimate=("C1",)).prepared.moving[1]
