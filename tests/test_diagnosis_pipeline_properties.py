@@ -258,10 +258,14 @@ def _stem(name: str) -> str:
 def test_a_log_as_long_as_the_shortest_diagnosed_is_accepted(generated):
     path, _ = generated("single", _stem("guide_friction_horizontal_small"))
     log = read_log(path)
-    _, train, hold = pipeline._prepare([log], 0.25, 10.0, log.duration)
+    # the time it covers, n samples of dt (a 60 s log at 1 kHz: 60000 samples, t[-1] = 59.999 s)
+    assert log.recorded == pytest.approx(log.duration + log.sample_time, rel=1e-12)
+    _, train, hold = pipeline._prepare([log], 0.25, 10.0, log.recorded)
     assert train.any() and hold.any() and not (train & hold).any()
-    with pytest.raises(LogError, match="too short to diagnose: need at least"):
-        pipeline._prepare([log], 0.25, 10.0, log.duration * (1 + 1e-9))
+    with pytest.raises(
+        LogError, match=r": 60 s \(60000 samples\) is too short to diagnose: need at least 60.001 s"
+    ):
+        pipeline._prepare([log], 0.25, 10.0, log.recorded + log.sample_time)  # one sample more
 
 
 @pytest.mark.slow

@@ -760,20 +760,21 @@ def test_a_log_moving_on_no_needed_axis_is_refused_by_name_among_good_ones():
 
 
 def test_a_log_of_exactly_the_minimum_duration_is_accepted():
-    # MIN_DURATION = 5 s: 5001 samples at 1 kHz span exactly 5.0 s (t[-1] = 5000 * 1e-3 = 5.0)
-    long_enough = _synthetic("five.csv", vertical=True, horizontal=True, duration=5.0005)
-    assert long_enough.duration == 5.0
+    # MIN_DURATION = 5 s: 5000 samples at 1 kHz cover exactly 5.0 s (t = 0 to 4.999 s, each sample
+    # standing for its millisecond), as a 5 s recording at 1 kHz has them
+    long_enough = _synthetic("five.csv", vertical=True, horizontal=True, duration=5.0005).index_slice(0, 5000)
+    assert long_enough.recorded == pytest.approx(5.0, rel=1e-12) and long_enough.duration < 5.0
     check_identifiable([long_enough], CONSTANT_NAMES)
-    short = dataclasses.replace(long_enough.index_slice(0, 5000), source="short.csv")  # 4.999 s
-    with pytest.raises(LogError, match=r"too short for identification: .* \(5000 samples\)") as info:
+    short = dataclasses.replace(long_enough.index_slice(0, 4999), source="short.csv")  # 4.999 s
+    with pytest.raises(LogError, match=r"too short for identification: 4.999 s \(4999 samples\)") as info:
         check_identifiable([long_enough, short], CONSTANT_NAMES)
     assert info.value.source == "short.csv" and "at least 5 s" in str(info.value)
     check_identifiable([short], CONSTANT_NAMES, min_duration=4.0)  # the option is used
 
 
 def test_too_short_message_shows_a_duration_below_the_minimum():
-    short = _synthetic("short.csv", vertical=True, horizontal=True, duration=4.9995)
-    assert short.duration < 5.0
+    short = _synthetic("short.csv", vertical=True, horizontal=True, duration=4.9985)  # 4999 samples
+    assert short.recorded < 5.0
     with pytest.raises(LogError) as info:
         check_identifiable([short], CONSTANT_NAMES)
     shown = float(re.search(r"identification: ([0-9.]+) s", str(info.value)).group(1))

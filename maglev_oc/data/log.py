@@ -184,6 +184,13 @@ class Log:
         return float(self.t[-1] - self.t[0])
 
     @property
+    def recorded(self) -> float:
+        """The time the log covers [s]: its samples times the sample time (a 10 s recording at
+        1 kHz has 10000 samples, from t = 0 to 9.999 s). What a minimum length is held to: held to
+        :attr:`duration`, a 10 s log was refused as "10.0 s is too short: need at least 10 s"."""
+        return self.n * self.sample_time
+
+    @property
     def states_measured(self) -> tuple[bool, bool, bool, bool]:
         """For x1..x4, whether the row holds data (False: x2 or x4 was not in the log, NaN row)."""
         return tuple(bool(np.all(np.isfinite(row))) for row in self.x)  # type: ignore[return-value]

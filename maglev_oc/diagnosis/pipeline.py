@@ -758,11 +758,11 @@ def _prepare(
     if not 0.05 <= holdout_fraction <= 0.5:
         raise InputError(f"holdout_fraction must be in [0.05, 0.5], got {holdout_fraction!r}")
     for log in logs:
-        if log.duration < min_duration:
+        if log.recorded < min_duration:
             raise LogError(
                 log.source,
-                f"{log.duration:.1f} s is too short to diagnose: need at least "
-                f"{min_duration:g} s (a quarter is held out for validation)",
+                f"{log.recorded:.6g} s ({log.n} samples) is too short to diagnose: need at least "
+                f"{min_duration:.6g} s (a quarter is held out for validation)",
             )
     # memory grows as samples x candidate columns: a long run is diagnosed at a rate that keeps
     # MAX_SAMPLES (the band of the fit, 10 Hz, stays far below any such rate)

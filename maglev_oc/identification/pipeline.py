@@ -125,10 +125,10 @@ def check_identifiable(
     moving: dict[str, dict[str, bool]] = {}
     for log in logs:
         name = log.source or "<log>"
-        if log.duration < min_duration:
+        if log.recorded < min_duration:
             raise LogError(
                 name,
-                f"too short for identification: {log.duration:.6g} s ({log.n} samples); need at least "
+                f"too short for identification: {log.recorded:.6g} s ({log.n} samples); need at least "
                 f"{min_duration:g} s of excitation (the sum-of-sines references of 000 Sec. IV have "
                 "periods up to 10 s)",
             )
