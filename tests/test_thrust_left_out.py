@@ -61,14 +61,20 @@ def test_identify_refuses_c1_from_the_slow_scan_and_fits_the_vertical_constants(
 
 
 def test_identify_refuses_the_vertical_constants_of_a_gap_held_still(tmp_path):
-    # the gap held at its reference (7.7 um of noise and quantization, under the 50 um a fit needs):
+    # the gap held at its reference (10 um of noise and quantization, under the 50 um a fit needs):
     # refused by name, where it ended in "LumpedConstants.C2: must be positive, got 0.0"
     still = Scenario(
         name="still", seed=4242, duration=30.0, reference=ReferenceSpec(gap_peak_range=(0.0, 0.0))
     )
     log = read_log(write_log(simulate(still), tmp_path, "still")[0])
     with pytest.raises(
-        LogError, match=r"C2, C3, C4 need the vertical axis, and the gap varies by [0-9.]+ um"
+        LogError,
+        match=r"C2, C3, C4 need the vertical axis, and the vertical axis is left out of the fit: its gap "
+        r"varies by [0-9.]+ um",
     ):
         EquationError([log], MODEL)
     assert EquationError([log], MODEL, estimate=("C1",)).prepared.moving[1]
+    # diagnosed on the horizontal axis alone, saying first why the vertical constants are not fitted
+    d = diagnose([log], limits=False)
+    assert d.warnings and d.warnings[0].startswith("the vertical axis is left out of the fit: its gap varies")
+    assert math.isnan(d.constants_final["C2"].value) and d.constants_final["C1"].value > 0

@@ -49,7 +49,6 @@ from maglev_oc.regression.base import (
 )
 from maglev_oc.regression.covariance import DEFAULT_BAND, correlation_from
 from maglev_oc.regression.data import (
-    MOTION,
     PreparedLogs,
     as_log_list,
     axes_left_out,
@@ -464,31 +463,22 @@ def _reduced_mask(mask: np.ndarray, q: int) -> np.ndarray:
 
 
 def _refuse_left_out(prepared: PreparedLogs, estimate: Sequence[str]) -> None:
-    """Refuse, naming the logs, constants to estimate on an axis the fit leaves out: one whose
-    position varies by less than :data:`~maglev_oc.regression.data.MOTION` (taken as locked), or one
-    that moves but whose thrust current is mostly its errors
-    (:func:`~maglev_oc.regression.data.axes_left_out`), as
-    :func:`~maglev_oc.identification.pipeline.identify` refuses a log that does not move. Fitted,
-    C1 came out at 4e10 on a log whose platform moved +-1 mm along the track, and a gap held within
-    40 um ended in "LumpedConstants.C2: must be positive, got 0.0"."""
-    said = axes_left_out(prepared)
+    """Refuse, naming the logs, constants to estimate on an axis the fit leaves out
+    (:func:`~maglev_oc.regression.data.axes_left_out`: one held still, or one that moves but whose
+    thrust current is mostly its errors), as :func:`~maglev_oc.identification.pipeline.identify`
+    refuses a log that does not move. Fitted, C1 came out at 4e10 on a log whose platform moved
+    +-1 mm along the track, and a gap held within 8 um ended in "LumpedConstants.C2: must be
+    positive, got 0.0"."""
     for k, axis in enumerate(AXES):
         names = [c for c in estimate if CONSTANT_AXIS.get(c) == axis]
-        if not names or prepared.moving[k]:
+        said = [n for n in axes_left_out(prepared) if n.startswith(f"the {axis} axis")]
+        if not names or prepared.moving[k] or not said:
             continue
-        row = 0 if axis == "vertical" else 2
-        spread = float(np.std(prepared.x[row][prepared.valid])) if prepared.valid.any() else 0.0
-        why = (
-            said[0]
-            if axis == "horizontal" and said
-            else f"the {'gap' if axis == 'vertical' else 'position'} varies by {spread * 1e6:.3g} um "
-            f"(standard deviation), less than the {MOTION * 1e6:g} um the fit needs (taken as locked)"
-        )
         others = " ".join(c for c in CONSTANT_NAMES if CONSTANT_AXIS[c] != axis)
         raise LogError(
             ", ".join(prepared.sources),
             f"no excitation for identification: {', '.join(names)} need{'s' if len(names) == 1 else ''} "
-            f"the {axis} axis, and {why} (--estimate {others} fits the other axis's constants alone)",
+            f"the {axis} axis, and {said[0]} (--estimate {others} fits the other axis's constants alone)",
         )
 
 

@@ -572,7 +572,7 @@ def prepare(
     if load is not None:  # the forces of a log with a payload read as the unloaded stage's
         cat[5] = unloaded(cat[5], load, stage.gravity)
     moving = np.array([np.std(cat[2][0]) > MOTION, np.std(cat[2][2]) > MOTION])
-    notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n)
+    notes = tuple(n for log in reduced for n in log.notes if "reduced to" in n) + _still_axes(cat[2], moving)
     notes += tuple(payload_note(log, stage) for log in logs if log.payload)
     if resting is not None:  # found on another band: the same stretches, by their times
         resting = tuple(resting)
@@ -643,10 +643,27 @@ def prepare(
 THRUST_LEFT_OUT = "the horizontal axis is left out of the fit"
 """How the note of :func:`_thrust_shown` begins (:func:`axes_left_out` finds it by it)."""
 
+_LEFT_OUT = ("the vertical axis is left out of the fit", THRUST_LEFT_OUT)
+
 
 def axes_left_out(prepared: PreparedLogs) -> tuple[str, ...]:
-    """The notes of ``prepared`` that say why an axis that moves is left out of the fit."""
-    return tuple(n for n in prepared.notes if n.startswith(THRUST_LEFT_OUT))
+    """The notes of ``prepared`` that say why an axis is left out of the fit (:func:`_still_axes`,
+    :func:`_thrust_shown`), vertical first."""
+    return tuple(n for prefix in _LEFT_OUT for n in prepared.notes if n.startswith(prefix))
+
+
+def _still_axes(x: np.ndarray, moving: np.ndarray) -> tuple[str, ...]:
+    """The notes for the axes whose position varies by less than :data:`MOTION`: held still (on a
+    stopper, or levitated at one gap), nothing on them can be fitted."""
+    out = []
+    for k, (row, what, names) in enumerate(((0, "gap", "C2, C3 and C4"), (2, "position", "C1"))):
+        if not moving[k]:
+            out.append(
+                f"{_LEFT_OUT[k]}: its {what} varies by {float(np.std(x[row])) * 1e6:.3g} um (standard "
+                f"deviation), less than the {MOTION * 1e6:g} um a fit needs, so {names} "
+                f"{'is' if k else 'are'} not determined by this log"
+            )
+    return tuple(out)
 
 
 def _thrust_shown(prepared: PreparedLogs) -> PreparedLogs:
