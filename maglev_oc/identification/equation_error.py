@@ -467,7 +467,7 @@ def _refuse_left_out(prepared: PreparedLogs, estimate: Sequence[str]) -> None:
     (:func:`~maglev_oc.regression.data.axes_left_out`: one held still, or one that moves but whose
     thrust current is mostly its errors), as :func:`~maglev_oc.identification.pipeline.identify`
     refuses a log that does not move. Fitted, C1 came out at 4e10 on a log whose platform moved
-    +-1 mm along the track, and a gap held within 8 um ended in "LumpedConstants.C2: must be
+    +-1 mm along the track, and a gap held within 10 um ended in "LumpedConstants.C2: must be
     positive, got 0.0"."""
     for k, axis in enumerate(AXES):
         names = [c for c in estimate if CONSTANT_AXIS.get(c) == axis]
