@@ -39,8 +39,8 @@ from typing import NoReturn
 
 import numpy as np
 
-from maglev_oc import interrupts
 from maglev_oc.errors import InputError, MaglevError, OutputError
+from maglev_oc.interrupts import honoured
 from maglev_oc.model.hardware import PEAK_CURRENT_LIMIT
 from maglev_oc.model.loading import load_model
 from maglev_oc.units import M_TO_MM, MM_TO_M
@@ -1185,7 +1185,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         _check_outputs(args)
-        with interrupts.honoured():
+        with honoured():
             return int(args.func(args))
     except (MaglevError, OSError) as err:
         print(f"maglev-oc {args.command}: error: {err}", file=sys.stderr)

@@ -9,8 +9,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from maglev_oc import interrupts
 from maglev_oc.errors import OutputError
+from maglev_oc.interrupts import raise_if_interrupted
 
 __all__ = ["atomic_path", "replace_directory", "write_text_atomic"]
 
@@ -33,7 +33,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
-        interrupts.check()  # nothing put in place after Ctrl-C, whatever swallowed it
+        raise_if_interrupted()  # nothing put in place after Ctrl-C, whatever swallowed it
         # mkstemp makes the file private (0600); give it the mode a plain open() would
         umask = os.umask(0)
         os.umask(umask)
@@ -60,7 +60,7 @@ def replace_directory(built: str | os.PathLike, path: str | os.PathLike) -> Path
     the new one, or for the instant between the two renames absent."""
     built, path = Path(built), Path(path)
     old = None
-    interrupts.check()
+    raise_if_interrupted()
     try:
         if path.exists():
             old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.old."))

@@ -8,7 +8,8 @@ wrapper tries one overload after another, converting the arguments each time): a
 its output and exited with status 0 (``py-spy dump`` at the signal; 1 of 7 interrupts sent 10.0 to
 10.6 s in, the others ended with status 130 at once).
 
-Under :func:`honoured` the signal is also remembered, and :func:`check` raises it again: between
+Under :func:`honoured` the signal is also remembered, and :func:`raise_if_interrupted` raises it
+again: between
 the steps of a long computation, and before an output is put in place
 (:mod:`maglev_oc.fileio`), so that an interrupted program writes nothing whatever swallowed the
 exception.
@@ -21,7 +22,7 @@ import signal
 import threading
 from collections.abc import Iterator
 
-__all__ = ["check", "honoured"]
+__all__ = ["honoured", "raise_if_interrupted"]
 
 _pending = False
 
@@ -57,7 +58,7 @@ def honoured() -> Iterator[None]:
         _pending = False
 
 
-def check() -> None:
+def raise_if_interrupted() -> None:
     """Raise KeyboardInterrupt if Ctrl-C came within :func:`honoured` and was swallowed since."""
     if _pending:
         raise KeyboardInterrupt

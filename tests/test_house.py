@@ -15,6 +15,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 LAYERS = {
     # the exceptions, importable by everything
     "errors": -1,
+    # Ctrl-C remembered where an extension swallowed it: checked before any output is put in place
+    "interrupts": -1,
     # foundation: no maglev_oc imports but the exceptions
     "results": 0,
     "units": 0,

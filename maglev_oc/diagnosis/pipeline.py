@@ -54,7 +54,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from maglev_oc import interrupts
 from maglev_oc.data.log import MAX_PAYLOAD, PAYLOAD_KEY
 from maglev_oc.data.logs import Log, LogError
 from maglev_oc.diagnosis.candidate import Candidate, fmt
@@ -117,6 +116,7 @@ from maglev_oc.diagnosis.words import listed, plain
 from maglev_oc.errors import InputError
 from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.pipeline import WHAT_TAKES_ITS_PLACE, beyond_plausible
+from maglev_oc.interrupts import raise_if_interrupted
 from maglev_oc.model.hardware import STOPPER_POSITION
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.model.stage import StageModel
@@ -729,7 +729,7 @@ class _Clock:
         t0 = time.perf_counter()
         self.bar.set_description(f"diagnose: {name.replace('_', ' ')}")
         out = fn(*args)
-        interrupts.check()  # a Ctrl-C an extension swallowed within the step ends the diagnosis here
+        raise_if_interrupted()  # a Ctrl-C an extension swallowed within the step ends the diagnosis here
         self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0  # a step may run in parts
         if name not in self.seen:
             self.seen.add(name)
