@@ -1,16 +1,14 @@
 """Ctrl-C that no extension module can lose.
 
-Python turns SIGINT into a KeyboardInterrupt raised at the next bytecode it runs. When that
-bytecode runs inside an extension module's C code that treats any Python error as one more failed
-attempt and clears it, the interrupt is gone. CasADi's ``Function`` constructor is such code (its
-wrapper tries one overload after another, converting the arguments each time): a diagnosis of a
-150 s log interrupted 10.25 s in, while the refit built a model's Functions, ran to its end, wrote
-its output and exited with status 0 (``py-spy dump`` at the signal; 1 of 7 interrupts sent 10.0 to
-10.6 s in, the others ended with status 130 at once).
+Python turns SIGINT into a KeyboardInterrupt raised at the next bytecode it runs. An extension
+module whose C code runs Python and then clears the error it raised loses the interrupt. CasADi's
+``Function`` constructor did so (where in its wrapper was not traced): a diagnosis of a 150 s log
+interrupted 10.25 s in, while the refit built a model's Functions, ran to its end, wrote its output
+and exited with status 0 (``py-spy dump`` at the signal; 1 of 7 interrupts sent 10.0 to 10.6 s in,
+the others ended with status 130 at once).
 
 Under :func:`honoured` the signal is also remembered, and :func:`raise_if_interrupted` raises it
-again: between
-the steps of a long computation, and before an output is put in place
+again between the steps of a long computation and before an output is put in place
 (:mod:`maglev_oc.fileio`), so that an interrupted program writes nothing whatever swallowed the
 exception.
 """
