@@ -641,7 +641,8 @@ def prepare(
 
 
 THRUST_LEFT_OUT = "the horizontal axis is left out of the fit"
-"""How the note of :func:`_thrust_shown` begins (:func:`axes_left_out` finds it by it)."""
+"""How the notes of a horizontal axis left out begin, held still (:func:`_still_axes`) or with a
+thrust current made of its errors (:func:`_thrust_shown`); :func:`axes_left_out` finds them by it."""
 
 _LEFT_OUT = ("the vertical axis is left out of the fit", THRUST_LEFT_OUT)
 
