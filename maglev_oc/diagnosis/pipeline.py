@@ -123,6 +123,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread, without_hugepage_advice
 from maglev_oc.progress import progress
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES
+from maglev_oc.regression.conventions import refuse_convention_slips
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, axes_left_out, prepare
 from maglev_oc.regression.design import Design, build_design, reusing_columns
 from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
@@ -346,6 +347,8 @@ def _diagnosed(
     # the library's design is built two or three times (references moved, waviness added) and a
     # dozen designs of some of its terms beside it: each term's columns are evaluated once
     with reusing_columns(data):
+        if read_mass is None:  # the second pass (a payload read) diagnoses the logs the first checked
+            clock("conventions", refuse_convention_slips, data, model)
         run = _Run(
             tuple(logs),
             train,
@@ -717,8 +720,9 @@ def constant_warnings(
 class _Clock:
     """Runs a step and adds its wall time to its name's; shows the step on a terminal."""
 
-    # prepare, base_fit, selection, waviness, unexplained, effects, limits, output_error, validation
-    STEPS = 9
+    # prepare, conventions, base_fit, selection, waviness, unexplained, effects, limits, output_error,
+    # validation
+    STEPS = 10
 
     def __init__(self, timings: dict[str, float]) -> None:
         self.timings = timings

@@ -61,7 +61,7 @@ from maglev_oc.regression.solve import fit_nonlinear, fit_subset, residuals
 from maglev_oc.regression.terms import AccelerationTerm
 from maglev_oc.results import AXES
 
-__all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error"]
+__all__ = ["DEFAULT_BANDWIDTH", "EquationError", "fit_equation_error", "refuse_left_out"]
 
 DEFAULT_BANDWIDTH = 8.0
 """[Hz] Band of the Savitzky-Golay differentiator for identification (see the module doc)."""
@@ -185,7 +185,7 @@ class EquationError:
             {"bandwidth": DEFAULT_BANDWIDTH} if differentiator is None else {"differentiator": differentiator}
         )
         self.prepared = prepare(shifted, logging_error=logging_error, model=self.model, **kw)
-        _refuse_left_out(self.prepared, self.estimate)
+        refuse_left_out(self.prepared, self.estimate)
         self._shifted = shifted
         self._narrow: PreparedLogs | None = None
         # a narrow band well below the fit's own, and an error to scale
@@ -462,7 +462,7 @@ def _reduced_mask(mask: np.ndarray, q: int) -> np.ndarray:
     return mask[: (mask.size // q) * q].reshape(-1, q).all(axis=1)
 
 
-def _refuse_left_out(prepared: PreparedLogs, estimate: Sequence[str]) -> None:
+def refuse_left_out(prepared: PreparedLogs, estimate: Sequence[str]) -> None:
     """Refuse, naming the logs, constants to estimate on an axis the fit leaves out
     (:func:`~maglev_oc.regression.data.axes_left_out`: one held still, or one that moves but whose
     thrust current is mostly its errors), as :func:`~maglev_oc.identification.pipeline.identify`

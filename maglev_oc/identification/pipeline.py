@@ -27,7 +27,7 @@ import numpy as np
 
 from maglev_oc.data.logs import CURRENT_RESOLUTION, Log, LogError, read_log
 from maglev_oc.errors import InputError
-from maglev_oc.identification.equation_error import EquationError
+from maglev_oc.identification.equation_error import DEFAULT_BANDWIDTH, EquationError, refuse_left_out
 from maglev_oc.identification.layout import CONSTANT_NAMES, GAP_OFFSET
 from maglev_oc.identification.masses import MassChange, moving_mass_change
 from maglev_oc.identification.npfsi import PAPER_EPSILONS, PAPER_GAMMA, npfsi
@@ -36,6 +36,7 @@ from maglev_oc.identification.result import FitResult, NpfsiResult
 from maglev_oc.model.hardware import ENCODER_RESOLUTION
 from maglev_oc.model.parameters import LumpedConstants, StageParameters
 from maglev_oc.model.stage import StageModel
+from maglev_oc.regression.conventions import refuse_convention_slips
 from maglev_oc.regression.data import as_log_list, delayed_inputs, levitating_parts, prepare
 from maglev_oc.regression.payload import declared
 from maglev_oc.regression.stoppers import RestingStretch
@@ -392,9 +393,17 @@ def identify(
     logs, resting = levitating_parts(logs, model)  # a touch mid-log cuts a log in two
     times: dict[str, float] = {}
     ee = oe = None
+    t0 = time.perf_counter()
+    problem = None
     if "equation_error" in methods or "output_error" in methods:
-        t0 = time.perf_counter()
-        ee = EquationError(logs, model, estimate=estimate, terms=terms, input_delay=input_delay).fit()
+        problem = EquationError(logs, model, estimate=estimate, terms=terms, input_delay=input_delay)
+        prepared = problem.prepared
+    else:  # NPFSI alone: the least-squares fits' refusals, on their preparation of the logs
+        prepared = prepare(logs, bandwidth=DEFAULT_BANDWIDTH, model=model)
+        refuse_left_out(prepared, estimate)
+    refuse_convention_slips(prepared, model)
+    if problem is not None:
+        ee = problem.fit()
         times["equation_error"] = time.perf_counter() - t0
     if "output_error" in methods:
         t0 = time.perf_counter()

@@ -1,0 +1,198 @@
+"""Logs that break the model's conventions, named before anything is fitted or claimed.
+
+The model reads u1 as i_q and u2 as i_d (SPEC 2), and its signs are fixed (SPEC 1): a positive
+i_q accelerates the platform toward negative x3 (x4' = -L1 u1, L1 > 0), and a positive i_d
+weakens the magnets' pull and opens the gap (x2' = ... - L3 u2, L3 < 0). A log recorded with
+another convention passes every check of the file, and its fits then say the wrong thing: on a
+30 s log of the independent generator with 1 N of horizontal guide friction (bench/README l),
+
+- x3 counted the other way: the friction was found beside C1 = -13.5 and a warning that
+  "something the model still lacks takes the place" of the thrust constant; identify stopped on
+  "LumpedConstants.C1: must be positive";
+- u1 and u2 exchanged: a cable carrier was claimed (falsely) beside C1 = 0.0024 and C3 = -6.2;
+- u2 with the other sign: C3 = -32.1, and the same misleading warning.
+
+Each slip shows in C1..C4 fitted alone by equation error (:func:`convention_slips`), log by log:
+
+- **A sign.** C1 or C3 below zero by more than :data:`SLIP_SIGMAS` standard errors (the long-run
+  covariance). Friction and springs that the base model lacks bias C1 toward zero (0.68 for
+  14.8 on the log above) but not across it: the thrust current carries whatever the motor pushes,
+  so its correlation with the acceleration keeps the motor's sign. x3 counted the other way and
+  u1 with the other sign are the same slip to C1..C4, whose forces do not depend on x3.
+- **Exchanged currents.** C1..C4 fitted with u1 and u2 exchanged explain the gap's acceleration
+  more than :data:`SWAP_FACTOR` times closer (RMS) than as logged, with C3 positive. Near
+  equilibrium i_d carries the weight and i_q is a tenth of an ampere or less, so one of the two
+  fits is far off: as logged / exchanged, 0.018 / 0.41 m/s^2 on the log above and 0.041 / 0.59
+  on ``../shared/logs/independent_clean.csv`` (a factor of 14 the other way).
+
+Nothing is corrected silently: :func:`refuse_convention_slips` raises a
+:class:`~maglev_oc.errors.LogError` naming the logs, what the fit shows and which column to change.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from maglev_oc.errors import LogError
+from maglev_oc.regression.base import AXIS_INDEX, CONSTANT_NAMES, UNITS
+from maglev_oc.regression.design import build_design
+from maglev_oc.regression.solve import SubsetFit, fit_subset, residuals
+
+if TYPE_CHECKING:
+    from maglev_oc.model.stage import StageModel
+    from maglev_oc.regression.data import PreparedLogs
+
+__all__ = ["SLIP_SIGMAS", "SWAP_FACTOR", "ConventionSlip", "convention_slips", "refuse_convention_slips"]
+
+SLIP_SIGMAS = 5.0
+"""A constant is read as fitted with the other sign when it is below zero by more than this many of
+its standard errors: far beyond chance (the long-run covariance already allows for coloured
+residuals), while the slips measured sit 15 (C1) and 3000 (C3) standard errors below zero."""
+SWAP_FACTOR = 4.0
+"""How many times closer (RMS of the gap's acceleration residual) C1..C4 must fit with u1 and u2
+exchanged for the columns to be read as exchanged. Measured 23 for a log exchanged, and 1/14 to
+1/23 for logs as they should be (module doc): a factor of 4 leaves room both ways."""
+
+
+@dataclass(frozen=True)
+class ConventionSlip:
+    """A log that breaks a convention of the model.
+
+    Attributes
+    ----------
+    source : str
+        The log (its file).
+    what : str
+        The slip, in words ("u1 and u2 look exchanged").
+    evidence : str
+        What the fit shows, with numbers.
+    fix : str
+        What to change in the log.
+    """
+
+    source: str
+    what: str
+    evidence: str
+    fix: str
+
+    def __str__(self) -> str:
+        return f"{self.what}: {self.evidence}; {self.fix}"
+
+
+def _exchanged(prepared: PreparedLogs) -> PreparedLogs:
+    """The same samples with u1 and u2 (their rates and error estimates) exchanged."""
+    return replace(
+        prepared,
+        u=prepared.u[::-1].copy(),
+        du=prepared.du[::-1].copy(),
+        current_noise=prepared.current_noise[::-1].copy(),
+    )
+
+
+def _base(prepared: PreparedLogs, model: StageModel, fit: np.ndarray) -> tuple[SubsetFit, np.ndarray]:
+    """C1..C4 alone on the ``fit`` samples, and the RMS of their residual per axis [m/s^2]."""
+    design = build_design(prepared, model, estimate=CONSTANT_NAMES, fit=fit)
+    sub = fit_subset(design, ["base"])
+    r = residuals(design, sub)[:, design.fit]
+    rms = np.sqrt(np.mean(r**2, axis=1)) if r.size else np.full(2, math.nan)
+    return sub, rms
+
+
+def _below_zero(sub: SubsetFit, name: str) -> bool:
+    value, se = sub.value(name), sub.stderr(name)
+    return math.isfinite(value) and math.isfinite(se) and value + SLIP_SIGMAS * se < 0.0
+
+
+def _stated(sub: SubsetFit, name: str) -> str:
+    return f"{name} = {sub.value(name):.4g} ± {sub.stderr(name):.2g} {UNITS[name]}"
+
+
+def _signs(source: str, sub: SubsetFit, model: StageModel, moving: np.ndarray) -> list[ConventionSlip]:
+    """The slips of sign that ``sub`` (C1..C4 alone, as the log's columns read) shows."""
+    out = []
+    given = model.constants
+    if moving[AXIS_INDEX["horizontal"]] and _below_zero(sub, "C1"):
+        out.append(
+            ConventionSlip(
+                source,
+                "the thrust acts with the other sign",
+                f"C1..C4 fitted alone give {_stated(sub, 'C1')} (the model's {given.C1:.4g} is positive): "
+                "in the model a positive i_q accelerates the platform toward negative x3 "
+                "(x4' = -L1 u1, SPEC 1), in this log toward positive x3",
+                "either the horizontal encoder counts the other way (negate x3, and x4 if logged) or "
+                "u1 has the other sign (negate u1); C1..C4 cannot tell which, their forces do not "
+                "depend on x3",
+            )
+        )
+    if moving[AXIS_INDEX["vertical"]] and _below_zero(sub, "C3"):
+        out.append(
+            ConventionSlip(
+                source,
+                "the levitating current acts with the other sign",
+                f"C1..C4 fitted alone give {_stated(sub, 'C3')} (the model's {given.C3:.4g} is positive): "
+                "in the model a positive i_d weakens the magnets' pull and opens the gap "
+                "(x2' = ... - L3 u2 with L3 < 0, SPEC 1), in this log it closes the gap",
+                "negate u2",
+            )
+        )
+    return out
+
+
+def convention_slips(prepared: PreparedLogs, model: StageModel) -> list[ConventionSlip]:
+    """The slips of convention each log of ``prepared`` shows (module doc), in the order of the logs;
+    empty when there are none.
+
+    Each log is fitted on its own valid samples (the pieces of one file together), so that one log
+    recorded the other way among several is named. An axis that does not move (``prepared.moving``)
+    tells nothing of its constant, and the exchange is judged on the gap's acceleration, so not
+    when the gap is held still.
+    """
+    slips: list[ConventionSlip] = []
+    exchanged = _exchanged(prepared)
+    sources = list(dict.fromkeys(prepared.sources))
+    vertical = AXIS_INDEX["vertical"]
+    for source in sources:
+        pieces = [k for k, s in enumerate(prepared.sources) if s == source]
+        mine = np.isin(prepared.segment, pieces) & prepared.valid
+        if not np.any(mine):
+            continue
+        as_logged, rms = _base(prepared, model, mine)
+        if prepared.moving[vertical]:
+            swapped, rms_swapped = _base(exchanged, model, mine)
+            closer = rms[vertical] / rms_swapped[vertical] if rms_swapped[vertical] > 0 else math.inf
+            if closer > SWAP_FACTOR and swapped.value("C3") > 0.0:
+                slips.append(
+                    ConventionSlip(
+                        source,
+                        "u1 and u2 look exchanged",
+                        f"with the two columns exchanged, C1..C4 fitted alone explain the gap's "
+                        f"acceleration {closer:.3g} times closer (RMS {rms_swapped[vertical]:.3g} against "
+                        f"{rms[vertical]:.3g} m/s^2) with {_stated(swapped, 'C3')}; as logged "
+                        f"{_stated(as_logged, 'C3')} and {_stated(as_logged, 'C4')}. The model reads u1 "
+                        "as i_q, the thrust current, and u2 as i_d, the current that levitates (SPEC 2)",
+                        "exchange the names of the two columns",
+                    )
+                )
+                # the signs are read from the fit with the columns as they should be
+                slips.extend(_signs(source, swapped, model, prepared.moving))
+                continue
+        slips.extend(_signs(source, as_logged, model, prepared.moving))
+    return slips
+
+
+def refuse_convention_slips(prepared: PreparedLogs, model: StageModel) -> None:
+    """Raise a :class:`~maglev_oc.errors.LogError` naming the logs that break the model's
+    conventions (:func:`convention_slips`), each slip with its evidence and its fix."""
+    slips = convention_slips(prepared, model)
+    if not slips:
+        return
+    named = list(dict.fromkeys(s.source for s in slips))
+    said = "; ".join(str(s) if len(named) == 1 else f"{s.source}: {s}" for s in slips)
+    raise LogError(
+        ", ".join(named),
+        f"the log breaks the model's conventions, so nothing is fitted: {said}",
+    )
