@@ -102,6 +102,18 @@ def test_one_log_recorded_the_other_way_among_two_is_named(recorded):
     assert [(s.source, s.what) for s in slips] == [("flipped.csv", THRUST)]
 
 
+def test_a_sign_the_base_fit_leaves_in_doubt_is_named_beside_the_effects(tmp_path):
+    # a large detent takes the thrust current: C1 by C1..C4 alone measured -2.46 +- 0.57 with x3
+    # reversed (4.3 standard errors, under SLIP_SIGMAS: not refused), -14.5 beside the detent
+    scenario = Scenario(name="detent", seed=4343, duration=30.0, effects=(E.DetentForce.large(),))
+    log = _edited(read_log(write_log(simulate(scenario), tmp_path, "detent")[0]), x3=-1.0)
+    assert _slips(log) == []
+    d = diagnose([log], limits=False)
+    said = [w for w in d.warnings if w.startswith("C1 refitted beside the effects")]
+    assert said and THRUST in said[0] and "negate x3" in said[0], d.warnings
+    assert d.constants_final["C1"].value < -SLIP_SIGMAS * d.constants_final["C1"].stderr
+
+
 def test_diagnose_and_identify_refuse_before_fitting(recorded):
     flipped = _edited(recorded, exchange=True)
     with pytest.raises(LogError, match=r"rig\.csv: the log breaks the model's conventions.*look exchanged"):

@@ -180,6 +180,7 @@ def test_a_tilt_beside_friction_is_found_in_the_frictions_entry(generated):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_periodic_force_over_too_few_periods_is_not_claimed(generated):
     # pairs_03: a 4 mrad misalignment with 8 um waviness at 60 mm, and a 5 % end effect at +-50 mm
     # (2.6 % at +-40 mm). The travel (about 70 mm) covers 1.2 pole pitches: the end effect's
@@ -410,6 +411,7 @@ def _off(d, name: str, parameter: str, truth: float) -> float:
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_and_a_misalignment_on_a_pid_rig_are_not_the_current_sensors_errors(tmp_path):
     # A random pair on the papers' PID loops (bench/diagnose_rigs.py --drawn-pairs --rig pid, seed
     # 15307): guides that change the gap by -2.4 um/mm along the track (4.2 um of waviness at 49 mm)
@@ -492,6 +494,7 @@ def test_the_offsets_thrust_is_not_counted_twice_on_the_thrust_side(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_tilted_guides_a_cable_carrier_and_a_commutation_offset_on_fine_encoders(tmp_path):
     # Three effects on a rig with 1 um encoders (bench/diagnose_rigs.py --rig enc1um --drawn-pairs 12
     # --per-log 3 --seed 24100, set 24110): guides tilted by -2.5 mrad with 5 um of waviness at
@@ -513,6 +516,7 @@ def test_tilted_guides_a_cable_carrier_and_a_commutation_offset_on_fine_encoders
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_that_explains_no_more_than_a_tilt_gives_way_to_it(tmp_path):
     # Three effects on a 10 kHz loop logged at 1 kHz (bench/diagnose_rigs.py --rig ctrl10k
     # --drawn-pairs 12 --per-log 3 --seed 24600, set 24602): guides tilted 2.1 mrad against the
@@ -577,6 +581,7 @@ def test_the_ripple_beside_an_offset_ripples_the_current_of_the_offset_fitted_be
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_the_thrust_form_of_the_offset_keeps_the_attraction_its_angle_makes(tmp_path):
     # Three effects on a rig whose current sensors are filtered at 300 Hz (bench/diagnose_rigs.py
     # --rig filtered --drawn-pairs 12 --per-log 3 --seed 27100, set 27101): a 1.6 N detent, guides
@@ -646,6 +651,7 @@ def test_a_cogging_force_is_found_beside_a_larger_dependence_on_the_position_not
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_force_judged_beside_an_unexplained_dependence_is_held_to_the_end_effects_shape(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs 16 --pairs-with end_effect normal_cogging
     # detent_force --seed 9000, pair 9415): a detent and end effects. The misfit of the end effects'
@@ -718,6 +724,7 @@ def test_a_spring_and_end_effects_are_not_a_current_sensor_offset_with_a_payload
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_and_a_slope_beside_shared_large_effects_are_not_a_current_sensor_offset(tmp_path):
     # A drawn set of four effects (bench/diagnose_rigs.py --drawn-pairs 12 --per-log 4 --seed 30100,
     # set 30103): vertical guide friction of 1.1 N, a -3.1 degree commutation offset, guides sloping
@@ -737,6 +744,7 @@ def test_a_spring_and_a_slope_beside_shared_large_effects_are_not_a_current_sens
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_end_effects_misfit_is_not_a_ripple_whose_slot_part_is_not_told_from_none(tmp_path):
     # A drawn pair on the noisy rig (observer at 2.8 kHz) with a declared 0.5 kg payload
     # (bench/diagnose_rigs.py --rig obs2800 --drawn-pairs 12 --payload 0.5 --seed 28600, pair
@@ -756,6 +764,7 @@ def test_end_effects_misfit_is_not_a_ripple_whose_slot_part_is_not_told_from_non
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_slope_of_the_guides_that_only_the_end_effects_fall_off_sizes_is_not_claimed(tmp_path):
     # A drawn set of four effects on measured currents (bench/diagnose_rigs.py --rig measured
     # --drawn-pairs 12 --per-log 4 --seed 31600, set 31600): end effects falling as a Gaussian over
@@ -798,6 +807,7 @@ def test_effects_that_the_log_shows_only_together_are_found_together(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_tilt_that_guides_sloping_against_the_stator_explain_as_well_is_not_claimed(tmp_path):
     # A drawn set on measured currents through the sensors' filter, the magnets warming a little
     # (bench/diagnose_rigs.py --rig filtered --drawn-pairs 12 --per-log 3 --warm small --seed 32100,
@@ -842,6 +852,7 @@ def test_guides_sloping_against_the_stator_that_the_vertical_axis_shows_take_a_t
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_payload_nobody_declared_beside_forces_that_take_c1_is_read_from_the_vertical_constants(tmp_path):
     # A drawn set on 1 um encoders carrying 0.8 kg nobody declared (bench/diagnose_rigs.py --rig enc1um
     # --drawn-pairs 12 --per-log 3 --payload 0.8 --undeclared --seed 30200, set 30200): guides sloping
@@ -894,6 +905,7 @@ def test_a_declared_payloads_weight_pulls_along_sloping_guides(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_tilt_within_what_a_read_payloads_error_pulls_along_sloping_guides_is_not_claimed(tmp_path):
     # The same draws with the 0.8 kg left out of the log (--payload 0.8 --undeclared, pair 27904):
     # guides sloping by 4.2 mrad and a 0.29 ms amplifier lag. The payload is read as 0.69 +- 0.05 kg
@@ -927,6 +939,7 @@ def test_a_payload_nobody_declared_is_read_and_the_log_diagnosed_carrying_it(tmp
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_bowl_over_the_travel_is_no_waviness_of_straight_guides(tmp_path):
     # Three effects on the default rig (bench/diagnose_rigs.py --drawn-pairs 12 --per-log 3
     # --pairs-with end_effect commutation_offset guide_friction_vertical tilted_base cable_carrier
@@ -943,6 +956,7 @@ def test_a_bowl_over_the_travel_is_no_waviness_of_straight_guides(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_tilt_chosen_early_gives_way_to_the_spring_the_rest_shows(tmp_path):
     # Three effects on the papers' PID loops (bench/diagnose_rigs.py --rig pid --drawn-pairs 12
     # --per-log 3 --seed 25900, set 25905): a 7.1 N/m cable carrier, a 1.5 degree commutation offset
@@ -958,6 +972,7 @@ def test_a_tilt_chosen_early_gives_way_to_the_spring_the_rest_shows(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_the_normal_coggings_push_along_sloping_guides_is_no_detent(tmp_path):
     # A drawn pair on warming magnets (bench/diagnose_rigs.py --drawn-pairs 12 --warm small --seed
     # 26700, pair 26703): guides sloping by -4.0 mrad and a normal cogging of 2.4 N peak at 15 mm.
@@ -990,6 +1005,7 @@ def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offset_on_both_axes(tmp_path):
     # A random pair on a rig logging its amplifiers' measured currents with 10 mA of noise
     # (bench/diagnose_rigs.py --drawn-pairs 12 --rig measured --seed 18300, pair 18310): guides
@@ -1019,6 +1035,7 @@ def test_a_spring_and_a_wavy_misalignment_are_chosen_together_over_a_sensor_offs
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_pair_standing_in_for_a_misalignment_and_its_next_effect_is_not_chosen_over_them(tmp_path):
     # A random pair on the noisy rig (observers at 2.8 kHz, the logged currents as noisy as
     # ../shared/logs/independent_clean.csv's; bench/diagnose_rigs.py --drawn-pairs 12 --rig obs2800
@@ -1101,6 +1118,7 @@ def test_a_true_slow_cogging_beside_the_same_end_effects_is_still_claimed(tmp_pa
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_cogging_beside_end_effects_is_not_refused_for_a_stand_in_that_needs_another_motor(tmp_path):
     # A random pair (the drawn pairs' generator, seed 9030): normal cogging (1.25 N at 15 mm, 0.3 N
     # at the 19.5 mm gap) and end effects falling as a raised cosine (5.8 % of the thrust, 4.8 % of
@@ -1211,6 +1229,7 @@ def test_a_large_commutation_offset_beside_normal_cogging_is_sized_from_the_thru
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_end_effects_beside_a_misalignment_are_not_also_a_ripple_over_the_pole_pitch(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9105): end effects falling as a
     # Gaussian over 19 mm (7 % of the thrust and of the attraction at +-50 mm) and a 4.9 mrad guide

@@ -436,6 +436,7 @@ def test_three_forces_along_the_track_are_found_in_the_form_of_the_pair_the_data
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_guide_waviness_at_the_pole_pitch_is_not_claimed_as_a_detent(tmp_path):
     # random pair 10018 on the noisy rig (--drawn-pairs 24 --seed 10010 --rig obs2800): guides
     # tilted by 3.14 mrad with 4.7 um of waviness at 57.35 mm, and a thrust ripple (2.5 % at 19 mm,
@@ -472,6 +473,7 @@ def test_a_commutation_offset_beside_a_tilted_base_is_found_as_a_pair(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_guide_waviness_longer_than_the_travel_is_not_claimed_as_a_spring_and_end_effects(tmp_path):
     # random pair 10075 on the noisy rig (--drawn-pairs 24 --seed 10070 --rig obs2800): guides
     # tilted by 4.5 mrad with 7.3 um of waviness at 77 mm over 60 mm of travel, and a 1.1 N detent
@@ -492,6 +494,7 @@ def test_a_guide_waviness_longer_than_the_travel_is_not_claimed_as_a_spring_and_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_beside_tilted_guides_keeps_the_slope_a_long_waviness_could_stand_for(tmp_path):
     # random pair 10085 on the noisy rig (--drawn-pairs 24 --seed 10070 --rig obs2800): guides
     # tilted by 2.9 mrad with 6.2 um of waviness at 56 mm, and a 6 N/m cable carrier. Beside the

@@ -180,6 +180,7 @@ def test_beside_tilted_guides_an_offset_is_not_separable_from_their_waviness(gen
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_beside_end_effects_a_gain_mismatch_that_their_fall_off_moves_is_not_claimed(tmp_path):
     """Sensor pair 7103 of bench/diagnose_rigs.py --sensor-pairs: 76 mA of sensor offset (the large
     size) and the large end effects. Over the 62 mm travel a mismatch's forces over each pole pitch
@@ -215,6 +216,7 @@ def _large_gain_beside_drawn_end_effects(seed: int, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_periods_is_not_claimed(
     tmp_path,
 ):

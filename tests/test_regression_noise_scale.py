@@ -246,6 +246,7 @@ def test_beside_effects_only_the_kept_selection_is_refitted_at_the_scale(monkeyp
 
     floor = object()
     monkeypatch.setattr(P, "_prepare", lambda *a: (floor, None, None))
+    monkeypatch.setattr(P, "refuse_convention_slips", lambda data, model: None)  # no samples to check
     monkeypatch.setattr(P, "reusing_columns", lambda data: contextlib.nullcontext())
     monkeypatch.setattr(P, "_finished", lambda stage, run, bandwidth, scale: (stage, scale))
     monkeypatch.setattr(P, "_at_scale", lambda stage, s: ("refitted", stage, s))
@@ -368,6 +369,7 @@ def test_the_diagnosis_calibrates_only_when_the_base_model_explains_the_log(monk
     floor = Data()
     taken = NS.NoiseScale(0.7, 0.7, 0.1, 20.0, ("C1",), "taken")
     monkeypatch.setattr(P, "_prepare", lambda *a: (floor, None, None))
+    monkeypatch.setattr(P, "refuse_convention_slips", lambda data, model: None)  # no samples to check
     monkeypatch.setattr(P, "reusing_columns", lambda data: contextlib.nullcontext())
     monkeypatch.setattr(P, "_noise_scale", lambda stage, run: taken)
     monkeypatch.setattr(P, "_finished", lambda stage, run, bandwidth, scale: (stage.data, scale))

@@ -123,7 +123,7 @@ from maglev_oc.model.stage import StageModel
 from maglev_oc.numerics import one_blas_thread, without_hugepage_advice
 from maglev_oc.progress import progress
 from maglev_oc.regression.base import CONSTANT_AXIS, CONSTANT_NAMES
-from maglev_oc.regression.conventions import refuse_convention_slips
+from maglev_oc.regression.conventions import refuse_convention_slips, sign_slip
 from maglev_oc.regression.data import DEFAULT_MAX_RATE, PreparedLogs, axes_left_out, prepare
 from maglev_oc.regression.design import Design, build_design, reusing_columns
 from maglev_oc.regression.noise_scale import LOW_BAND, NoiseScale, band_consistent_scale
@@ -707,6 +707,14 @@ def constant_warnings(
         if not beyond_plausible(est.value, start, est.stderr):
             continue
         change, axis = est.value / start - 1.0, CONSTANT_AXIS[name]
+        slip = sign_slip(name, est.value, est.stderr)
+        if slip is not None:  # the base fit left it in doubt (refuse_convention_slips); not so beside them
+            out.append(
+                f"{name} refitted beside the effects is {est.value:.4g} ± {est.stderr:.2g}, of the other "
+                f"sign than the model's {start:.4g}: {slip}. The effects' sizes and places are not to be "
+                "trusted until the log is recorded as the model reads it"
+            )
+            continue
         out.append(
             f"{name} refitted beside the effects is {est.value:.4g}, {abs(change):.0%} "
             f"{'below' if change < 0 else 'above'} the model's {start:.4g}: a stage of this design does not "
