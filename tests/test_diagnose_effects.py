@@ -533,6 +533,7 @@ def test_a_spring_that_explains_no_more_than_a_tilt_gives_way_to_it(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_lead_of_filtered_currents_is_not_a_friction_of_the_guides(tmp_path):
     # A random pair on the rig logging its amplifiers' currents through a 300 Hz sensor filter, 0.53 ms
     # late (bench/diagnose_rigs.py --rig filtered --drawn-pairs 12 --seed 24200, pair 24206): a normal
@@ -568,6 +569,7 @@ def test_end_effects_not_chosen_are_scanned_about_the_references_that_judge_them
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_the_ripple_beside_an_offset_ripples_the_current_of_the_offset_fitted_beside_it(tmp_path):
     # Three effects on the papers' PID loops (bench/diagnose_rigs.py --rig pid --drawn-pairs 12
     # --per-log 3 --seed 25900, set 25911): a cable carrier, a 2.4 % thrust ripple and a commutation
@@ -598,6 +600,7 @@ def test_the_thrust_form_of_the_offset_keeps_the_attraction_its_angle_makes(tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_slope_the_vertical_fixes_is_not_confounded_with_a_spring_on_precise_encoders(tmp_path):
     # Three effects on 1 um encoders (bench/diagnose_rigs.py --rig enc1um --drawn-pairs 12 --per-log 3
     # --seed 26800, set 26810): vertical guide friction, guides sloping by -4.5 mrad, a 9.2 N/m cable
@@ -665,6 +668,7 @@ def test_a_force_judged_beside_an_unexplained_dependence_is_held_to_the_end_effe
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_slope_of_the_guides_is_not_dropped_for_what_was_chosen_after_it(tmp_path):
     # Two effects of a drawn set with a declared 0.6 kg payload (bench/diagnose_rigs.py --rig measured
     # --drawn-pairs 12 --per-log 3 --payload 0.6 --seed 29300, set 29300, which the default rig
@@ -684,6 +688,7 @@ def test_a_slope_of_the_guides_is_not_dropped_for_what_was_chosen_after_it(tmp_p
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_tilt_is_not_dropped_for_end_effects_that_took_its_steady_thrust(tmp_path):
     # A drawn set on measured currents through the sensors' 300 Hz filter (bench/diagnose_rigs.py
     # --rig filtered --drawn-pairs 12 --per-log 3 --seed 29900, set 29901): guides sloping by 2.0 mrad
@@ -702,6 +707,7 @@ def test_a_tilt_is_not_dropped_for_end_effects_that_took_its_steady_thrust(tmp_p
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_and_end_effects_are_not_a_current_sensor_offset_with_a_payload(tmp_path):
     # A drawn set on measured currents with a declared 0.6 kg payload (bench/diagnose_rigs.py --rig
     # measured --drawn-pairs 12 --per-log 3 --payload 0.6 --seed 29300, set 29308): end effects of 9 %
@@ -990,6 +996,7 @@ def test_the_normal_coggings_push_along_sloping_guides_is_no_detent(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_lag_is_not_dropped_beside_a_dependence_on_the_velocity_it_delays(tmp_path):
     # Three effects on a rig with 20 um encoders (bench/diagnose_rigs.py --rig enc20um --drawn-pairs
     # 12 --per-log 3 --seed 21700, set 21707): a 218 Hz amplifier with 0.24 ms of delay (0.96 ms in
@@ -1088,6 +1095,7 @@ def _end_effects_16106(tmp_path, *more, seed: int = 16106):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_slow_sine_that_the_end_effects_shape_moves_is_not_claimed_beside_them(tmp_path):
     # Fitted with the exponential and rounded fall-offs, the raised cosine left a vertical misfit
     # along the travel that a 0.034 N normal cogging at 38 mm took (z 5.3): a false claim. Refitted
@@ -1153,6 +1161,7 @@ def test_end_effects_at_one_stator_end_beside_cogging_are_found_at_that_end(tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_end_effects_beside_sticking_vertical_guides_stand_beside_a_gap_dependence_of_another_motor(
     tmp_path,
 ):
@@ -1174,6 +1183,7 @@ def test_end_effects_beside_sticking_vertical_guides_stand_beside_a_gap_dependen
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_vertical_friction_is_not_refused_beside_a_gap_dependence_of_another_motor(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs 10 --pairs-with end_effect
     # guide_friction_vertical guide_friction_horizontal --seed 9000): vertical guide friction
@@ -1197,6 +1207,7 @@ def test_vertical_friction_is_not_refused_beside_a_gap_dependence_of_another_mot
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_end_effects_beside_sticking_vertical_guides_are_sized_as_the_guides_hold_them(tmp_path):
     # A random pair (the same bench run as pair 9112's above, seed 9330): vertical guide friction
     # (Coulomb 1.10 N, breakaway 2.05 N) and end effects losing 6.6 % of the thrust and 6.5 % of the
@@ -1245,6 +1256,7 @@ def test_end_effects_beside_a_misalignment_are_not_also_a_ripple_over_the_pole_p
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_commutation_offset_is_judged_separable_by_the_angle_both_axes_share(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9128): a 3.1 degree commutation
     # offset and end effects at one end. The loop cancels i_d's steady thrust with a steady i_q,
@@ -1333,6 +1345,7 @@ def test_no_amplifier_lag_is_claimed_from_the_vertical_axis_of_sticking_guides(t
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_the_force_of_a_guide_waviness_is_not_claimed_as_a_cable_carrier(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9201): vertical guide friction
     # and a -2.1 mrad guide slope with 3.7 um of waviness at 69 mm. Over the 100 mm travel the
@@ -1386,6 +1399,7 @@ def test_friction_whose_viscous_part_turns_negative_beside_a_later_effect_keeps_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_spring_beside_a_wavy_guide_is_judged_after_the_waviness_is_searched_for(tmp_path):
     # A random pair (bench/diagnose_rigs.py --drawn-pairs, seed 9332): a guide misalignment with
     # waviness and a cable carrier. Judged by the position's further orders in the first

@@ -208,6 +208,7 @@ def test_a_large_effect_on_the_noisy_rig_is_found_alone_and_sized(tmp_path, effe
     assert not d.unexplained
 
 
+@pytest.mark.extended
 def test_a_probe_collinear_with_a_chosen_effect_still_rivals_that_effects_shape(tmp_path):
     # random pair 9118 (bench/diagnose_rigs.py --drawn-pairs, the generator's default rig): Gaussian
     # end effects and an amplifier lag. The end effects' attraction part is a smooth function of the
@@ -230,6 +231,7 @@ def test_a_trend_along_the_travel_on_the_noisy_rig_is_not_claimed_as_end_effects
     assert "end_effects" not in [e.name for e in d.effects]
 
 
+@pytest.mark.extended
 def test_a_spring_whose_constant_a_chosen_force_repeats_is_judged_on_its_stiffness(tmp_path):
     # random pair 9227 on the noisy rig (--drawn-pairs 40 --seed 9200 --rig obs2800): a cable
     # carrier (8.5 N/m) and a commutation offset. A constant force along the track was chosen first;
@@ -413,6 +415,7 @@ def _noisy_named(tmp_path, set_name: str, seed_offset: int, name: str):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_three_forces_along_the_track_are_found_in_the_form_of_the_pair_the_data_support(tmp_path):
     # noisy triples_06 of the independent set at seed offset 2000 (bench/diagnose_score.py --sets
     # triples --rig obs2800 --seed-offset 2000): horizontal guide friction (0.3 N Coulomb, 0.4 N
@@ -508,6 +511,7 @@ def test_a_spring_beside_tilted_guides_keeps_the_slope_a_long_waviness_could_sta
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_a_vertical_friction_that_only_holds_the_models_misfit_is_not_claimed_and_what_it_hid_is_found(
     tmp_path,
 ):
@@ -640,6 +644,7 @@ def test_a_tilt_is_not_claimed_for_sloping_guides_beside_a_vertical_trend_no_eff
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_sloping_guides_are_not_claimed_for_a_tilt_where_the_vertical_axis_alone_does_not_size_them(tmp_path):
     # Drawn pair 33250 on currents through the sensors' filter (bench/diagnose_rigs.py --rig filtered
     # --drawn-pairs 12 --pairs-with end_effect tilted_base guide_misalignment normal_cogging --seed

@@ -235,6 +235,7 @@ def test_beside_end_effects_no_model_fits_a_slow_sine_seen_over_a_travel_of_few_
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 def test_beside_a_gain_mismatch_and_end_effects_at_one_stator_end_a_sine_their_fall_off_moves_is_not_claimed(
     tmp_path,
 ):
