@@ -102,6 +102,18 @@ def test_one_log_recorded_the_other_way_among_two_is_named(recorded):
     assert [(s.source, s.what) for s in slips] == [("flipped.csv", THRUST)]
 
 
+def test_an_exchange_beside_friction_on_both_axes_is_read_from_c4(tmp_path):
+    # large guide friction on both axes leaves the two fits within SWAP_FACTOR (measured 1.35 and
+    # 1.02 times closer exchanged); C4, which the pull of the currents' own field makes positive,
+    # came out -1.41 +- 0.08 exchanged (as recorded on 660 logs: never below -1.8 standard errors)
+    friction = (E.GuideFriction.large("vertical"), E.GuideFriction.large("horizontal"))
+    scenario = Scenario(name="friction", seed=4343, duration=30.0, effects=friction)
+    log = read_log(write_log(simulate(scenario), tmp_path, "friction")[0])
+    assert _slips(log) == []
+    (slip,) = _slips(_edited(log, exchange=True))
+    assert slip.what == EXCHANGED and "C4 = -1.4" in slip.evidence and "times closer" not in slip.evidence
+
+
 def test_a_sign_the_base_fit_leaves_in_doubt_is_named_beside_the_effects(tmp_path):
     # a large detent takes the thrust current: C1 by C1..C4 alone measured -2.46 +- 0.57 with x3
     # reversed (4.3 standard errors, under SLIP_SIGMAS: not refused), -14.5 beside the detent

@@ -27,7 +27,13 @@ Each slip shows in C1..C4 fitted alone by equation error (:func:`convention_slip
   weight and i_q is a tenth of an ampere or less. As logged / exchanged, the gap's acceleration
   0.018 / 0.41 m/s^2 on the log above, 0.041 / 0.59 on ``../shared/logs/independent_clean.csv``.
   Both axes are judged because large friction on one makes that axis's fit poor either way
-  (vertical guide friction: 0.975 of the exchanged fit's RMS on a log as it should be).
+  (vertical guide friction: 0.975 of the exchanged fit's RMS on a log as it should be). Where
+  friction on both axes leaves the two fits within that factor, C4 tells: the pull of the currents'
+  own field makes it positive, while with i_d in u1 the fit reads the levitating current's effect
+  through its square and C4 comes out negative. As logged, C4 below zero by more than
+  :data:`SLIP_SIGMAS` standard errors (and not so with the columns exchanged) reads an exchange: on
+  660 logs of the independent generator, C4 alone was at least -1.8 standard errors (-0.092) as
+  recorded and at most -8.9 (-0.80) exchanged (bench/README m).
 
 Nothing is corrected silently: :func:`refuse_convention_slips` raises a
 :class:`~maglev_oc.errors.LogError` naming the logs, what the fit shows and which column to change.
@@ -200,14 +206,24 @@ def convention_slips(prepared: PreparedLogs, model: StageModel) -> list[Conventi
         shown = prepared.moving & (rms_swapped > 0)
         closer[shown] = rms[shown] / rms_swapped[shown]
         axis = int(np.argmax(closer))
-        if closer[axis] > SWAP_FACTOR and swapped.compensated and swapped.value("C3") > 0.0:
+        by_fit = closer[axis] > SWAP_FACTOR
+        by_c4 = _below_zero(as_logged, "C4") and not _below_zero(swapped, "C4")
+        if (by_fit or by_c4) and swapped.compensated and swapped.value("C3") > 0.0:
+            evidence = (
+                f"with the two columns exchanged, C1..C4 fitted alone explain the {_ACCELERATION[axis]} "
+                f"{closer[axis]:.3g} times closer (RMS {rms_swapped[axis]:.3g} against {rms[axis]:.3g} m/s^2)"
+                if by_fit
+                else f"as logged C1..C4 fitted alone give {_stated(as_logged, 'C4')}, where the pull of the "
+                f"currents' own field makes C4 positive (the model's {model.constants.C4:.4g}): the "
+                "levitating current, logged in u1, reaches the gap's fit only through its square, so C4 "
+                "stands in for C3; with the columns exchanged "
+                f"{_stated(swapped, 'C4')}"
+            )
             slips.append(
                 ConventionSlip(
                     source,
                     "u1 and u2 look exchanged",
-                    f"with the two columns exchanged, C1..C4 fitted alone explain the {_ACCELERATION[axis]} "
-                    f"{closer[axis]:.3g} times closer (RMS {rms_swapped[axis]:.3g} against {rms[axis]:.3g} "
-                    f"m/s^2) with {_stated(swapped, 'C1')} and {_stated(swapped, 'C3')}; as logged "
+                    f"{evidence}, with {_stated(swapped, 'C1')} and {_stated(swapped, 'C3')}; as logged "
                     f"{_stated(as_logged, 'C1')} and {_stated(as_logged, 'C3')}. The model reads u1 as i_q, "
                     "the thrust current, and u2 as i_d, the current that levitates (SPEC 2)",
                     "exchange the names of the two columns",
