@@ -20,7 +20,7 @@ from maglev_oc.data.reading import read_log
 from maglev_oc.diagnosis.pipeline import diagnose
 from maglev_oc.identification.pipeline import identify
 from maglev_oc.model.stage import StageModel
-from maglev_oc.regression.conventions import SLIP_SIGMAS, SWAP_FACTOR, convention_slips
+from maglev_oc.regression.conventions import SLIP_SIGMAS, SWAP_FACTOR, convention_slips, sign_slip
 from maglev_oc.regression.data import prepare
 from tests.independent import effects as E
 from tests.independent.logio import write_log
@@ -124,6 +124,15 @@ def test_a_sign_the_base_fit_leaves_in_doubt_is_named_beside_the_effects(tmp_pat
     said = [w for w in d.warnings if w.startswith("C1 refitted beside the effects")]
     assert said and THRUST in said[0] and "negate x3" in said[0], d.warnings
     assert d.constants_final["C1"].value < -SLIP_SIGMAS * d.constants_final["C1"].stderr
+
+
+def test_only_a_constant_surely_below_zero_is_read_as_a_sign_slip():
+    # the rule of the warning beside the effects: SLIP_SIGMAS standard errors below zero, C1 and C3
+    assert THRUST in sign_slip("C1", -14.5, 0.03) and "negate u2" in sign_slip("C3", -32.1, 0.01)
+    assert sign_slip("C1", -2.46, 0.57) is None  # 4.3 standard errors: in doubt
+    assert sign_slip("C1", 0.68, 0.03) is None and sign_slip("C1", 40.0, 0.1) is None  # off, not reversed
+    assert sign_slip("C4", -1.4, 0.08) is None  # C4's sign tells an exchange, not a reversal
+    assert sign_slip("C1", float("nan"), 0.1) is None
 
 
 def test_diagnose_and_identify_refuse_before_fitting(recorded):

@@ -127,9 +127,13 @@ def _base(prepared: PreparedLogs, model: StageModel, fit: np.ndarray) -> tuple[S
     return sub, rms
 
 
+def _negative(value: float, stderr: float) -> bool:
+    """Below zero by more than :data:`SLIP_SIGMAS` standard errors."""
+    return math.isfinite(value) and math.isfinite(stderr) and value + SLIP_SIGMAS * stderr < 0.0
+
+
 def _below_zero(sub: SubsetFit, name: str) -> bool:
-    value, se = sub.value(name), sub.stderr(name)
-    return math.isfinite(value) and math.isfinite(se) and value + SLIP_SIGMAS * se < 0.0
+    return _negative(sub.value(name), sub.stderr(name))
 
 
 def _stated(sub: SubsetFit, name: str) -> str:
@@ -159,9 +163,7 @@ def sign_slip(name: str, value: float, stderr: float) -> str | None:
     """The slip a fitted ``name`` (``C1`` or ``C3``) below zero by more than :data:`SLIP_SIGMAS`
     standard errors shows, in words with its fix (for a constant fitted beside effects); None
     otherwise."""
-    if name not in SIGNS or not (math.isfinite(value) and math.isfinite(stderr)):
-        return None
-    if value + SLIP_SIGMAS * stderr >= 0.0:
+    if name not in SIGNS or not _negative(value, stderr):
         return None
     what, physics, fix = SIGNS[name]
     return f"{what} ({physics}): the log looks recorded another way; {fix}"
