@@ -110,6 +110,11 @@ sixteen pairs 9006-9657 of cogging or detents beside end effects that bench/READ
 ranges real stages show (``tests/independent/draws.py``: sizes log-uniform over at least the sets'
 small-to-large span, phases and signs at random), alone on the default rig. The sets and variants
 are values somebody chose; these are not, which is what a user's rig is like.
+
+``--experiment NAME`` (with any of the above): every log recorded under one experiment of the
+``experiments`` set instead of the default sines (``steps``, ``small_travel``, ``fast_sines``,
+``short_log``, ``off_centre``, ``soft_gains``, ``stiff_gains``, ``far_constants``): drawn pairs
+under a user's own excitation, which ``--experiments`` records with one effect at a time.
 """
 
 from __future__ import annotations
@@ -436,6 +441,13 @@ def main() -> None:
         help="with --payload: leave the payload out of the log's header (a load nobody declared)",
     )
     parser.add_argument(
+        "--experiment",
+        default=None,
+        help="record every log run under this experiment of the experiments set (its references, gains, "
+        "length or constants' spread: steps, small_travel, fast_sines, short_log, off_centre, soft_gains, "
+        "stiff_gains, far_constants) instead of the default sines",
+    )
+    parser.add_argument(
         "--duration", type=float, default=None, help="record every log run for this many seconds (default 60)"
     )
     parser.add_argument(
@@ -593,6 +605,15 @@ def main() -> None:
                 (stem, dataclasses.replace(sc, payload=args.payload, declare_payload=not args.undeclared))
                 for stem, sc in runs
             ]
+            for g, runs in groups.items()
+        }
+    if args.experiment:
+        from tests.independent.sets import under_experiment
+
+        if args.experiment not in EXPERIMENTS:
+            parser.error(f"--experiment: unknown {args.experiment!r}; choose from {list(EXPERIMENTS)}")
+        groups = {
+            g: [(stem, under_experiment(sc, args.experiment)) for stem, sc in runs]
             for g, runs in groups.items()
         }
     if args.duration is not None:

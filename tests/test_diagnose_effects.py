@@ -211,7 +211,10 @@ def test_without_the_periods_rule_the_same_log_names_a_detent(generated, monkeyp
     # (pipeline._chosen_pitches), which explains as much in its place; and beside the misalignment
     # and the end effects a waviness longer than the travel is scanned for
     # (pipeline._waviness_beyond_travel: on this log a period is found, and the selection repeated
-    # with that waviness in the pool does not take the detent). Without all three, it is named
+    # with that waviness in the pool does not take the detent). And a force at a motor pitch seen
+    # over fewer than pipeline.SHORT_PERIODS (2) of its periods is judged beside the unexplained
+    # dependence on the position, which explains what the detent did (dropped as not specific).
+    # Without all four, it is named
     from maglev_oc.diagnosis import pipeline
 
     path, _ = generated("pairs", "pairs_03")
@@ -221,6 +224,10 @@ def test_without_the_periods_rule_the_same_log_names_a_detent(generated, monkeyp
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" not in [e.name for e in off.effects]
     monkeypatch.setattr(pipeline, "_waviness_beyond_travel", lambda *args: [])
+    off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
+    assert "cogging_horizontal_57mm" not in [e.name for e in off.effects]
+    assert any(r.name == "cogging_horizontal_57mm" and r.verdict == "not specific" for r in off.rejected)
+    monkeypatch.setattr(pipeline, "SHORT_PERIODS", 0.0)
     off = diagnose_path(path, settings=SelectionSettings(min_periods=0.0))
     assert "cogging_horizontal_57mm" in [e.name for e in off.effects]
 

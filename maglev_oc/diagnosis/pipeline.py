@@ -94,6 +94,7 @@ from maglev_oc.diagnosis.selection import (
     _friction_axes,
     _holdout_residual,
     _periods_seen,
+    _spatial_period,
     _travel,
     alike_along_the_track,
     another_motor,
@@ -1274,7 +1275,13 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
         )
         on_thrust = frozenset(n for n in sel.selected if sel.last[n].side)
         seen = {n: _periods_seen(by_name[n], sel.last[n].physical, design) for n in sel.selected}
-        stale = _explained_by_unexplained(session, fitted, chosen, unexplained, on_thrust, seen)
+        shown = _position_shown(session, not_sep, by_name, unexplained)
+        along = frozenset(
+            n for n in sel.selected if _along_the_position_alone(by_name[n], sel.last[n], design)
+        )
+        stale = _explained_by_unexplained(
+            session, fitted, chosen, unexplained, on_thrust, seen, shown=shown, along=along
+        )
         if stale:
             rejected.extend(stale)
             sel = _without(sel, design, stale)
@@ -2076,12 +2083,19 @@ def _explained_by_unexplained(
     unexplained: Sequence[Unexplained],
     on_thrust: frozenset[str] = frozenset(),
     periods: Mapping[str, float | None] | None = None,
+    *,
+    shown: Sequence[Unexplained] = (),
+    along: frozenset[str] = frozenset(),
 ) -> list[Judgement]:
     """The chosen effects that no longer pass once the unexplained dependences on other variables
     than their own are in the model (a dependence on an effect's own variable is that effect's
     imperfect shape, not a rival), each judged as the selection's backward pass judges it (the
     held-out quarter pooled with the cross-fitted training parts, the samples that count beside a
     friction).
+
+    ``shown``, ``along``: the dependences on the position that a refused force periodic over too
+    few periods showed (:func:`_position_shown`), rivals of the chosen effects named in ``along``
+    (:func:`_along_the_position_alone`) on their axes, whatever their own variable.
 
     ``periods``: the logged travel in periods of each chosen force periodic in the position at a
     motor pitch (``selection._periods_seen``). One seen over fewer than :data:`SHORT_PERIODS` is
@@ -2117,7 +2131,11 @@ def _explained_by_unexplained(
     that explained them with C2 at 451 (the model's 797), C3 at 1.4 (31) and C4 at -0.016; the end
     effects' own fit had C2 at 840 and C3 at 33.3. Kept, both effects are found and sized on four
     rigs (bench/README (xxxiv))."""
-    probes = [u.term for u in unexplained if u.term is not None]
+    known = {u.term.name for u in unexplained if u.term is not None}
+    if not any(c.name in along for c in chosen):
+        shown = ()
+    shown = [u for u in shown if u.term.name not in known]
+    probes = [u.term for u in (*unexplained, *shown) if u.term is not None]
     if not probes or not chosen:
         return []
     settings = session.settings
@@ -2135,6 +2153,8 @@ def _explained_by_unexplained(
         if seen is not None and seen < SHORT_PERIODS:
             own_variables.discard("position")
         rivals = [u for u in unexplained if u.term is not None and u.depends_on not in own_variables]
+        if c.name in along:
+            rivals += [u for u in shown if c.axis in (u.axis, "both")]
         if not rivals or c.name in on_thrust:
             continue
         others = [o for o in chosen if o is not c]
@@ -2164,6 +2184,51 @@ def _explained_by_unexplained(
                 )
             )
     return out
+
+
+def _position_shown(
+    session: _Session, not_sep: Sequence[NotSeparable], by_name: Mapping[str, Candidate], unexplained
+) -> list[Unexplained]:
+    """The smooth dependences on the position (the generic probe, Legendre orders 1-4 of it) on
+    each axis where a force periodic at a motor pitch was significant but seen over too few of its
+    periods to be told from such a dependence (confounded with :data:`SMOOTH_POSITION`), unless one
+    is reported there already.
+
+    That force's evidence is the log's: the residual on its axis depends on the position, in a
+    shape the travel cannot name. A chosen effect whose force there is the position's alone over
+    this travel must explain more than that dependence, or it only stands in for it. Drawn pair
+    40103 of the independent generator under the small-travel experiment (a 1.6 N detent at 15 mm
+    over the slot pitch, seen over 1.1 of its periods on 24 mm of travel, beside a cable carrier):
+    the 19 mm detent explained 72 % of the held-out horizontal error at z 28 and was refused as not
+    separable; a current sensor offset (its force along the track a smooth function of the position
+    over 0.2 of its period, its vertical part making that axis 0.7 % worse) and a 14.5 mm guide
+    waviness (1.0 % worse vertically) were claimed in its place, beside C1 at 0.70 (true 14.4)."""
+    reported = {u.axis for u in unexplained if u.depends_on == "position"}
+    axes = {
+        by_name[n.name].axis
+        for n in not_sep
+        if SMOOTH_POSITION in n.confounded_with and by_name[n.name].axis in AXES
+    }
+    probes = smooth_probes(session.data)
+    nan = math.nan
+    return [
+        Unexplained(axis, "position", nan, nan, nan, nan, "", term=probes[(axis, "position")])
+        for axis in sorted(axes - reported)
+        if session.data.moving[AXES.index(axis)]
+    ]
+
+
+def _along_the_position_alone(c: Candidate, j: Judgement, design: Design) -> bool:
+    """Whether chosen ``c``'s force on an axis is, over the logged travel, the position's alone in a
+    shape a smooth dependence on the position spans: a force periodic in the position (at a motor
+    pitch or a guide's waviness) seen over fewer than :data:`SHORT_PERIODS` of its periods, or an
+    effect told from such a force only by the tie between the two axes' forces
+    (``Candidate.two_axis_signature``: the current sensors' errors, whose force along the track
+    repeats over two pole pitches, 114 mm)."""
+    if c.two_axis_signature:
+        return True
+    period = _spatial_period(c, j.physical)
+    return period is not None and _travel(design) < SHORT_PERIODS * period
 
 
 def _terms(library: Sequence[Candidate], probes: dict) -> list:

@@ -47,7 +47,7 @@ from .effects import (
     TiltedBase,
 )
 from .reference import ReferenceSpec
-from .simulate import Rig, Scenario
+from .simulate import Scenario
 
 SINGLE_EFFECTS: dict[str, Callable[[str], Effect]] = {
     "guide_friction_horizontal": lambda size: getattr(GuideFriction, size)("horizontal"),
@@ -187,20 +187,27 @@ EXPERIMENT_EFFECTS = (
 def experiment_scenario(experiment: str, effect: str | None, seed: int, duration: float = 60.0) -> Scenario:
     """One log of an experiment of :data:`EXPERIMENTS`: ``effect`` (a key of :data:`SINGLE_EFFECTS`,
     at its large size, or None for a clean log)."""
+    scenario = Scenario(
+        name=f"{experiment}_{effect or 'clean'}",
+        seed=seed,
+        duration=duration,
+        effects=() if effect is None else (SINGLE_EFFECTS[effect]("large"),),
+        description=f"set experiments: {experiment}, {effect or 'no effect'}",
+    )
+    return under_experiment(scenario, experiment)
+
+
+def under_experiment(scenario: Scenario, experiment: str) -> Scenario:
+    """``scenario`` recorded under an experiment of :data:`EXPERIMENTS`: its references, its gains
+    (re-placed from the papers' by ``gain_scale``, the scenario's rig otherwise kept), its length
+    and its constants' spread where the experiment sets them; the effects and the seed unchanged."""
     spec = dict(EXPERIMENTS[experiment])
     reference = ReferenceSpec(**spec.pop("reference", {}))
     scale = spec.pop("gain_scale", None)
-    rig = Rig() if scale is None else Rig(K_h=scaled_gains(K_H, scale), K_v=scaled_gains(K_V, scale))
-    spec.setdefault("duration", duration)
-    return Scenario(
-        name=f"{experiment}_{effect or 'clean'}",
-        seed=seed,
-        effects=() if effect is None else (SINGLE_EFFECTS[effect]("large"),),
-        reference=reference,
-        rig=rig,
-        description=f"set experiments: {experiment}, {effect or 'no effect'}",
-        **spec,
-    )
+    rig = scenario.rig
+    if scale is not None:
+        rig = dataclasses.replace(rig, K_h=scaled_gains(K_H, scale), K_v=scaled_gains(K_V, scale))
+    return dataclasses.replace(scenario, reference=reference, rig=rig, **spec)
 
 
 SET_NAMES = ("clean", "eleven", "single", "pairs", "triples", "experiments")
