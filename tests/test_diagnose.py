@@ -131,7 +131,7 @@ def test_effects_dropped_as_not_specific_leave_the_fit_without_them(generated, m
         seen.setdefault("sel", sel)
         return separate(session, fitted, library, design, sel, tr)
 
-    def all_stale(session, model, chosen, unexplained, on_thrust=frozenset(), periods=None):
+    def all_stale(session, model, chosen, unexplained, on_thrust=frozenset(), periods=None, **rivals):
         if seen.get("dropped"):
             return []
         seen["dropped"] = True

@@ -392,9 +392,9 @@ def test_an_unexplained_dependence_that_explains_an_effect_as_well_makes_it_not_
     captured = {}
     original = pipeline._explained_by_unexplained
 
-    def recording(session, model, chosen, unexplained, on_thrust=frozenset(), periods=None):
+    def recording(session, model, chosen, unexplained, on_thrust=frozenset(), periods=None, **rivals):
         captured.setdefault("args", (session, model, chosen))
-        return original(session, model, chosen, unexplained, on_thrust, periods)
+        return original(session, model, chosen, unexplained, on_thrust, periods, **rivals)
 
     path, _ = generated("single", _stem("normal_cogging_large"))
     with pytest.MonkeyPatch.context() as mp:
