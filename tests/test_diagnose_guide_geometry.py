@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from maglev_oc.diagnosis.pipeline import ATTRACTION, FIELD, _merged_field_shape, _merged_guide_geometry
@@ -41,6 +41,8 @@ rms = st.floats(0.0, 0.05)
 
 @settings(max_examples=40, deadline=None)
 @given(slope=st.tuples(rms, rms), wave=st.tuples(rms, rms), amplitude=st.floats(1e-6, 1e-4))
+# a sum of squares underflows here where hypot does not (found by hypothesis in a CI run of 5d589f9)
+@example(slope=(0.0, 0.0), wave=(0.0, 2.5357267639694253e-190), amplitude=6.103515625e-05)
 def test_a_misalignment_and_a_waviness_become_one_effect(slope, wave, amplitude):
     friction = _effect("guide_friction_horizontal", (0.0, 0.01), coulomb=0.3)
     misalignment = _effect("guide_misalignment", slope, slope=3e-3)

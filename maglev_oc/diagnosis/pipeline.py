@@ -46,6 +46,7 @@ The settings record the scale (``current_noise_scale``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -2369,8 +2370,9 @@ def _in_quadrature(main: Effect, others: Sequence[Effect]) -> tuple[PerAxis, Per
     in quadrature (exact when uncorrelated over the held-out samples), so that the merged force stays
     its acceleration times the axis' mass."""
     parts = (main, *others)
-    contribution = np.sqrt(sum(e.contribution_rms.as_array() ** 2 for e in parts))
-    force = np.sqrt(sum(e.force_rms.as_array() ** 2 for e in parts))
+    # hypot pairwise: without the squares' underflow (or overflow) of a sum of squares
+    contribution = functools.reduce(np.hypot, (e.contribution_rms.as_array() for e in parts))
+    force = functools.reduce(np.hypot, (e.force_rms.as_array() for e in parts))
     return PerAxis.of(contribution), PerAxis.of(force)
 
 
