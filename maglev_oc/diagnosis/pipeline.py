@@ -2209,12 +2209,14 @@ def _position_shown(
         by_name[n.name].axis
         for n in not_sep
         if SMOOTH_POSITION in n.confounded_with and by_name[n.name].axis in AXES
-    }
+    } - reported
+    if not axes:  # the usual case: no Functions built for nothing on each pass of the caller's loop
+        return []
     probes = smooth_probes(session.data)
     nan = math.nan
     return [
         Unexplained(axis, "position", nan, nan, nan, nan, "", term=probes[(axis, "position")])
-        for axis in sorted(axes - reported)
+        for axis in sorted(axes)
         if session.data.moving[AXES.index(axis)]
     ]
 
