@@ -61,9 +61,10 @@ def _wrap(text: str, width: int) -> str:
 
 _POSITION_PARAMETERS = ("at_gap", "period", "low_end_position", "high_end_position", "width", "decay_length")
 """Parameters [m] that say where an effect acts, not how large it is (left out of the sizes)."""
-_CHECK_PARAMETERS = ("forces_lost_at_low_end_alone", "forces_lost_at_high_end_alone")
-"""Parameters an effect's plausibility is judged on (an end effect's each end on its own), shown in
-the table of every parameter, not among the sizes."""
+_CHECK_PARAMETERS = ("forces_lost_at_low_end_alone", "forces_lost_at_high_end_alone", "held_force")
+"""Parameters an effect's plausibility is judged on (an end effect's each end on its own, the force a
+friction's guides hold while the axis sticks), shown in the table of every parameter, not among the
+sizes."""
 
 
 def _size_parameters(parameters: dict, nuisance: tuple[str, ...] = ()) -> dict:
