@@ -5,9 +5,12 @@ held took up a normal cogging on a log with no vertical friction."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from maglev_oc.diagnosis.guides import HELD_BEYOND_BREAKAWAY, _held_within_breakaway
+from maglev_oc.reporting.diagnosis_report import _held_notes
 from maglev_oc.results import Estimate
 from tests.diagnosis_support import diagnose_path
 from tests.independent import write_log
@@ -75,3 +78,13 @@ def test_a_normal_cogging_on_a_slow_gap_axis_is_not_claimed_as_guides_holding_it
     friction = [j for j in judged if j.name.startswith("guide_friction_vertical")]
     assert friction and all(j.verdict != "accepted" for j in friction)
     assert any(j.verdict == "implausible" and "while the axis sticks" in j.reason for j in friction)
+
+
+def test_the_report_says_what_the_held_force_is_only_beside_a_friction_that_has_one():
+    friction = SimpleNamespace(
+        parameters={"coulomb": Estimate(1.0, 0.1, "N"), "held_force": Estimate(1.1, 0.1, "N")}
+    )
+    (note,) = _held_notes(SimpleNamespace(effects=[friction]))
+    assert note.startswith("Held force:") and f"{HELD_BEYOND_BREAKAWAY:g} times its breakaway force" in note
+    tilt = SimpleNamespace(parameters={"force": Estimate(0.1, 0.01, "N")})
+    assert _held_notes(SimpleNamespace(effects=[tilt])) == []

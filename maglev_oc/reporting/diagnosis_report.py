@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from maglev_oc.diagnosis.feedback import CompensationStudy, improvement
+from maglev_oc.diagnosis.guides import HELD_BEYOND_BREAKAWAY
 from maglev_oc.diagnosis.limits import DetectionLimit
 from maglev_oc.diagnosis.pipeline import Diagnosis, Effect
 from maglev_oc.diagnosis.result import NotSeparable
@@ -456,6 +457,17 @@ def _effect_rows(diag: Diagnosis) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _held_notes(diag: Diagnosis) -> list[str]:
+    """What a friction's held force is, when one is in the table: the check its claim passed."""
+    if not any("held_force" in e.parameters for e in diag.effects):
+        return []
+    return [
+        "Held force: what the guides hold while the axis sticks (nine samples in ten less); a friction is "
+        f"claimed only where it is at most {HELD_BEYOND_BREAKAWAY:g} times its breakaway force (static "
+        "friction holds no more than the force it breaks away at)."
+    ]
+
+
 def _variant_notes(diag: Diagnosis) -> list[str]:
     """What each found effect's model-form variants range over (its fixed hyper-parameter)."""
     return [
@@ -594,7 +606,7 @@ def write_diagnosis_report(
                     "The found effects' parameters",
                     ("effect", "parameter", "value ± standard error", "unit"),
                     _effect_rows(diag),
-                    notes=[_PARAMETER_NOTE, *_variant_notes(diag)],
+                    notes=[_PARAMETER_NOTE, *_variant_notes(diag), *_held_notes(diag)],
                 )
             )
         constants = Table(
