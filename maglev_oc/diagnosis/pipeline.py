@@ -1235,7 +1235,7 @@ def _separate_unexplained(session: _Session, fitted, library, design: Design, se
     if off_band:
         rejected.extend(off_band)
         sel = _without(sel, design, off_band)
-    bent = _not_one_slope(session, fitted, library, sel)
+    bent = _not_one_slope(session, fitted, library, design, sel)
     if bent:
         rejected.extend(bent)
         sel = _without(sel, design, bent)
@@ -1772,7 +1772,14 @@ benches (2026-12-06 (o)), the windows agreed within 15 % (a 4.5 mrad slope over 
 experiments_13: 4.85, 4.20 and 4.76 mrad on the windows, 4.53 on all of it)."""
 
 
-def _not_one_slope(session: _Session, fitted: StageModel, library, sel: Selection) -> list[Judgement]:
+WINDOW_SHARE = 0.1
+"""A window of the travel is fitted on its own (:func:`_not_one_slope`) only where it holds at least
+this share of the fitted samples."""
+
+
+def _not_one_slope(
+    session: _Session, fitted: StageModel, library, design: Design, sel: Selection
+) -> list[Judgement]:
     """The chosen guide misalignment when its slope is not one slope along the travel
     (:data:`SLOPE_SPREAD`): dropped as not specific, with the windows' slopes. What it took is a
     dependence on the position of another shape, which the search for what no effect explains
@@ -1793,14 +1800,16 @@ def _not_one_slope(session: _Session, fitted: StageModel, library, sel: Selectio
     x3 = data.x[2]
     lo, mid, hi = np.percentile(x3[data.valid], [1, 50, 99])
     windows = {
-        "all of it": np.ones_like(x3, dtype=bool),
         "the low half": x3 < mid,
         "the high half": x3 >= mid,
         "the central half": np.abs(x3 - mid) < (hi - lo) / 4,
     }
     terms = [by_name[n].term for n in sel.selected]
-    slopes = {}
+    coef, cov = sel.final.group(design, cand.name)  # all of it: the selection's own fit
+    slopes = {"all of it": cand.term.physical_parameters(coef, cov, fitted_constants(sel.final))["slope"]}
     for where, mask in windows.items():
+        if np.count_nonzero(session.train & mask) < WINDOW_SHARE * np.count_nonzero(session.train):
+            continue  # a window the fitted samples barely reach (a travel that drifts over the log)
         on = build_design(
             data, fitted, terms=terms, fit=session.train & mask, holdout=session.hold, weights=session.weights
         )
