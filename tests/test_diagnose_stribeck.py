@@ -23,6 +23,7 @@ import pytest
 from maglev_oc.diagnosis.candidate import LibraryContext
 from maglev_oc.diagnosis.guides import STRIBECK_SPEED, friction_candidates
 from maglev_oc.errors import InputError
+from maglev_oc.model.equilibrium import equilibrium_currents
 from maglev_oc.model.parameters import StageParameters
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.terms import REVERSAL_SPEED, guide_friction
@@ -66,9 +67,12 @@ def test_the_library_has_each_form_reported_under_the_frictions_name():
     their viscous part stand in for their parent only; the breakaway is F_c + F_x with the
     variance var(F_c) + var(F_x) + 2 cov (computed here from the covariance)."""
     model = StageModel()
-    n = 200  # the few fields of a prepared log the context reads (its ranges)
+    n = 200  # the few fields of a prepared log the context reads: its ranges, and the currents of a
+    # stage levitated at rest, for what its guides would hold while it sticks (guides._held_force)
     x = np.vstack([np.linspace(0.012, 0.018, n), np.zeros(n), np.linspace(-0.05, 0.05, n), np.zeros(n)])
-    ctx = LibraryContext(model, SimpleNamespace(x=x, valid=np.ones(n, dtype=bool), settings={}))
+    u = np.vstack([np.zeros(n), equilibrium_currents(model, x[0]).current])
+    log = SimpleNamespace(x=x, u=u, du=np.zeros((2, n)), valid=np.ones(n, dtype=bool), settings={})
+    ctx = LibraryContext(model, log)
     forms = {c.name: c for c in friction_candidates(ctx)}
     for axis in ("vertical", "horizontal"):
         name = f"guide_friction_{axis}"
@@ -87,6 +91,8 @@ def test_the_library_has_each_form_reported_under_the_frictions_name():
         assert phys["breakaway"].stderr == pytest.approx(math.sqrt(0.04 + 0.01 - 0.01), rel=1e-12)
         reason = forms[f"{name}_with_stribeck"].plausible(phys)
         assert reason is None, reason
+        # levitated at rest at equilibrium, the stage needs no holding: its guides hold nothing
+        assert phys["held_force"].value == pytest.approx(0.0, abs=1e-9)
         phys_neg = rich.physical(np.array([1.0, 3.0, -0.5, 0.9]), cov, {"C1": model.constants.C1})
         assert "Stribeck" in forms[f"{name}_with_stribeck"].plausible(phys_neg)
 
