@@ -324,13 +324,21 @@ def _pooled(values: np.ndarray, cov: np.ndarray) -> Estimate:
 
 
 def _commutation_text(e) -> str:
+    """The offset in words, with both axes' angles when they differ by more than 3 standard errors.
+    Which axis carries another effect the angles alone do not say: beside sticking vertical guides
+    the attraction's was off (bench/README, *Random pairs*); on drawn pair 42204 of the independent
+    generator's noisy-observer rig (a -1.51 degree offset, guides tilted by 8.6 mrad, 0.135 N along
+    the track) the attraction gave -1.51 +- 0.04 degrees and the thrust -1.81 +- 0.008: the tilt's
+    force, which the thrust's column C1 l1 d i_d takes up where i_d is steady."""
     h, v = e["angle_horizontal"], e["angle_vertical"]
     text = f"The commutation angle is off by {fmt(e['angle'], 180 / math.pi, 'degrees')}"
     if abs(h.value - v.value) > 3.0 * math.hypot(h.stderr, v.stderr):
         return (
             f"{text}, from the thrust that i_d makes ({fmt(h, 180 / math.pi, 'degrees')}); the "
-            f"attraction that i_q makes gives {fmt(v, 180 / math.pi, 'degrees')}, so another vertical "
-            "effect is mixed into it."
+            f"attraction that i_q makes gives {fmt(v, 180 / math.pi, 'degrees')}, so another effect is "
+            "mixed into one of them: a vertical one into the attraction's, or into the thrust's a steady "
+            "force along the track (a tilt of the guides), which i_d, steady while the stage levitates, "
+            "turns into an angle."
         )
     return text + "."
 
