@@ -56,6 +56,17 @@ STRIBECK_SPEED_LARGEST = 10e-3
 axis that nine samples in ten move slower than this never shows the friction's Coulomb level."""
 
 
+COULOMB_Z = 3.0
+"""A guide friction's Coulomb force must be positive by this many standard errors: it is what makes
+the effect a friction of the guides, and a claim needs its defining part as clearly as the
+selection needs the held-out gain (``SelectionSettings.min_z``). Drawn pair 46110 of the
+independent generator's filtered-current rig under steps (0.91 N of horizontal Coulomb friction and
+amplifiers lagging by 1.2 ms; no vertical friction): at 2 standard errors a vertical friction of
+0.0038 +- 0.0016 N of Coulomb force and 3.0 +- 0.3 N s/m of viscous force was claimed (0.7 % of
+the held-out error), a damping of the gap that the delayed currents make, not the guides. On 12
+true vertical frictions of the noisy-observer rig (Coulomb 0.6-2.4 N) every one passed at 3."""
+
+
 def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     """For each axis's guides: Coulomb + viscous friction with the share held while sticking; the
     same friction with no viscous part, judged only when the full fit's viscous coefficient comes
@@ -84,7 +95,9 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                 name=name if form == "full" else f"{name}_{'with_' if stribeck else ''}{form}",
             )
             plausible = [
-                detected("coulomb", "Coulomb friction (sticking without friction is not physical)"),
+                detected(
+                    "coulomb", "Coulomb friction (sticking without friction is not physical)", k=COULOMB_Z
+                ),
                 within("coulomb", MAX_FORCE_SHARE * ctx.weight(axis), "Coulomb friction"),
                 within("holding", 1.5, "share of the force held while sticking"),
                 _held_within_breakaway,
