@@ -233,6 +233,7 @@ def test_an_effect_on_two_axes_kept_over_a_rival_on_one_must_show_on_the_other()
         ("commutation_offset",),
     )
     assert "-0.2% of the held-out vertical error" in first.reason and "neither is claimed" in second.reason
+    assert "beside horizontal guides off level, commutation angle offset was not significant" in first.reason
     assert calls == [("commutation_offset", ("base",))]  # judged beside the rest without the later one
 
 

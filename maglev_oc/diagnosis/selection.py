@@ -2379,9 +2379,9 @@ def _not_shown_beyond(
     as not separable from the other, when ``name`` explains nothing there beside the rest (its
     pooled held-out gain on that axis within the parsimony penalty); None otherwise.
 
-    On their shared axis the log does not tell the two apart (beside each other neither is
-    significant), and which explains a little more of it is not evidence: the effect on two axes is
-    the one the log shows only if its other axis shows it. Pair 41102 of the independent
+    On their shared axis the log does not tell the two apart (beside the later one, ``name`` is not
+    separable or not significant), and which explains a little more of it is not evidence: the
+    effect on two axes is the one the log shows only if its other axis shows it. Pair 41102 of the independent
     generator's noisy-observer rig under steps (guides tilted by 6.2 mrad, a 0.097 N force along
     the track, beside 1.2 N of horizontal Coulomb friction): a commutation offset of -0.22 +- 0.02
     degrees was claimed, its thrust's column C1 l1 i_d near a constant where the levitation current
@@ -2399,8 +2399,9 @@ def _not_shown_beyond(
     axis = " and ".join(AXES[a] for a in beyond)
     words, other_words = plain(name), plain(later.name)
     why = (
-        f"beside each other neither is significant, and {words} explains {percent(shown)} of the "
-        f"held-out {axis} error, where it acts and {other_words} does not; neither is claimed"
+        f"beside {other_words}, {words} was {j.verdict}, and beside the rest it explains "
+        f"{percent(shown)} of the held-out {axis} error, where it acts and {other_words} does not; "
+        "neither is claimed"
     )
     first = dataclasses.replace(
         j,
