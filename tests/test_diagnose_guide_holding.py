@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from maglev_oc.diagnosis import guides
 from maglev_oc.diagnosis.guides import HELD_BEYOND_BREAKAWAY, _held_within_breakaway
 from maglev_oc.reporting.diagnosis_report import _held_notes
 from maglev_oc.results import Estimate
@@ -47,7 +48,7 @@ def test_a_stribeck_form_is_bounded_by_its_breakaway_force_and_a_fit_without_hol
 
 
 @pytest.mark.slow
-def test_a_normal_cogging_on_a_slow_gap_axis_is_not_claimed_as_guides_holding_it(tmp_path):
+def test_a_normal_cogging_on_a_slow_gap_axis_is_not_claimed_as_guides_holding_it(tmp_path, monkeypatch):
     # Drawn pair 41108 of the independent generator (bench/diagnose_rigs.py --drawn-pairs 12 --rig
     # obs2800 --experiment steps --seed 41100): a 2.2 N normal cogging at 15 mm beside a cable
     # carrier, no vertical friction; nine samples in ten move the gap slower than 2.5 mm/s. Before
@@ -73,7 +74,12 @@ def test_a_normal_cogging_on_a_slow_gap_axis_is_not_claimed_as_guides_holding_it
     (cogging,) = [e for e in d.effects if e.name == "cogging_vertical_19mm"]
     # the 30 % on the peak at the generator's reference gap of 15 mm
     assert cogging.parameters["amplitude_15mm"].value == pytest.approx(2.1944, rel=0.3)
-    # the friction is refused by the bound, not by another rule
+    assert all(not e.name.startswith("guide_friction") for e in d.effects)
+    # the friction is refused by the bound: its Coulomb force is not detected by guides.COULOMB_Z
+    # standard errors either (0.15 +- 0.07 N), and at 2 the bound, not another rule, refuses it
+    monkeypatch.setattr(guides, "COULOMB_Z", 2.0)
+    d = diagnose_path(csv)
+    assert [e.name for e in d.effects] == ["cable_carrier_force", "cogging_vertical_19mm"]
     judged = [j for st in d.selection.steps for j in st.judgements.values()] + list(d.selection.last.values())
     friction = [j for j in judged if j.name.startswith("guide_friction_vertical")]
     assert friction and all(j.verdict != "accepted" for j in friction)

@@ -157,5 +157,11 @@ def test_a_detent_over_a_small_excursion_is_not_taken_by_effects_the_position_al
     assert SMOOTH_POSITION in cogging.confounded_with
     assert any(u.axis == "horizontal" and u.depends_on == "position" for u in d.unexplained)
     dropped = {j.name: j for j in d.rejected if j.verdict == "not specific"}
-    assert "current_sensor_offset" in dropped
-    assert "dependence on the position" in dropped["current_sensor_offset"].reason
+    # the waviness judged beside the dependence explains nothing more; the sensor offset, kept over
+    # a tilt of the guides it was not separable from and explaining nothing of the vertical error,
+    # is listed with the tilt since selection._not_shown_beyond (before, beside the dependence too)
+    assert "dependence on the position" in dropped["guide_waviness_14mm"].reason
+    (offset,) = [n for n in d.not_separable if n.name == "current_sensor_offset"]
+    assert (
+        offset.confounded_with == ("horizontal_guides_not_level",) and "neither is claimed" in offset.reason
+    )

@@ -405,6 +405,10 @@ class Selection:
     base: SubsetFit
     final: SubsetFit
     last: dict[str, Judgement]  # every candidate's judgement at the last step it was judged
+    # chosen effect -> (its judgement, the later one's) as not separable from each other, where the
+    # backward pass kept it over a later effect its other axis does not tell it from
+    # (:func:`_not_shown_beyond`); dropped with it once the selection is done (``pipeline``)
+    unshown: dict[str, tuple[Judgement, Judgement]] = field(default_factory=dict)
 
     @property
     def selected(self) -> list[str]:
@@ -2041,6 +2045,7 @@ def select(
     cur_fit = base
     steps: list[Step] = []
     last: dict[str, Judgement] = {}
+    unshown: dict[str, tuple[Judgement, Judgement]] = {}  # see Selection.unshown
 
     def step_context(model: list[str], fit: SubsetFit, names: Sequence[str]):
         """(judge's arguments from ``model`` to ``cross``, the axes with friction among ``model``,
@@ -2269,12 +2274,11 @@ def select(
                     neither = _not_shown_beyond(
                         name, j, later, current, by_name, judged_beside, design.moving, settings
                     )
-                    gone = {later.name} if neither is None else {later.name, name}
                     if neither is not None:
-                        last[name], later = neither
+                        unshown[name], later = neither, neither[1]
                     last[later.name] = later
-                    current = [c for c in current if c not in gone]
-                    steps = [st for st in steps if st.chosen not in gone]
+                    current = [c for c in current if c != later.name]
+                    steps = [st for st in steps if st.chosen != later.name]
                     dropped = rounds_dropped = True
                     break
                 # the same effect with a parameter at its bound, where the free fit now lies beyond it
@@ -2304,7 +2308,8 @@ def select(
             break
         cur_fit = fit_subset(design, current)
 
-    return Selection(steps, base, fit_subset(design, current), last)
+    unshown = {n: pair for n, pair in unshown.items() if n in current and pair[1].name not in current}
+    return Selection(steps, base, fit_subset(design, current), last, unshown)
 
 
 def _later_in_its_place(
