@@ -1577,7 +1577,9 @@ def _judged_beside(
 def _with_alike(
     not_sep: list[NotSeparable], alike: Sequence[Judgement], by_name: dict[str, Candidate], session: _Session
 ) -> list[NotSeparable]:
-    """``not_sep`` with the pair ``alike`` (:func:`_alike_along_the_track`) added, by gain."""
+    """``not_sep`` with the pair ``alike`` (:func:`_alike_along_the_track`) added, by gain; or with
+    the effect on two axes of a pair the selection listed the other of already
+    (``Selection.unshown``), alone."""
     # what tells them apart is what the two-axis one does on its other axis
     two = next(j for j in alike if by_name[j.name].axis == "both")
     experiment = _separating(two, by_name[two.name], session)
