@@ -129,8 +129,8 @@ class Candidate:
     simpler: str | None = None
     """The candidate with fewer parameters that this one becomes with its extra ones at zero (a
     spring along the track at zero stiffness is a constant force, a tilt's): once everything else is
-    chosen, it takes this one's place where it explains as much beside the rest, within the
-    parsimony penalty of the parameters it lacks (the selection's backward pass)."""
+    chosen, it takes this one's place where what this one adds to it beside the rest does not pass
+    the held-out test of an effect (the selection's backward pass)."""
     physical_sign: int = 0
     """+1 when only a positive size is physical (a friction's Coulomb force, a lag, a loss of force):
     the detection limit (:mod:`~maglev_oc.diagnosis.limits`) is then sought in that direction
