@@ -12,15 +12,23 @@ under 0.15 ms, when sized on the fit's 10 Hz band; on 5 Hz it is 1.36-1.37 ms on
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from maglev_oc.data.logs import read_log
+from maglev_oc.diagnosis import pipeline
 from maglev_oc.diagnosis.currents import LAG, LAG_VERTICAL
 from maglev_oc.diagnosis.library import candidate_library
 from maglev_oc.diagnosis.pipeline import RATE_TERM_BAND
 from maglev_oc.model.stage import StageModel
 from maglev_oc.regression.data import prepare
 from tests.diagnosis_support import diagnose_path
+from tests.independent import write_log
+from tests.independent.effects import AmplifierDynamics, GuideFriction
+from tests.independent.rigs import RIGS
+from tests.independent.sets import under_experiment
+from tests.independent.simulate import Rig, Scenario, simulate
 
 
 def _true_lag(truth: dict) -> float:
@@ -60,3 +68,45 @@ def test_only_a_term_in_the_current_rates_is_sized_on_the_narrower_band(generate
     library = candidate_library(StageModel(), data, {})
     assert [c.name for c in library if c.term.depends_on_rates()] == [LAG, LAG_VERTICAL]
     assert len(library) > 10
+
+
+@pytest.mark.slow
+def test_a_lag_that_rises_on_the_narrower_band_is_not_refused_for_it(tmp_path, monkeypatch):
+    """The quarter band's check (``pipeline._not_on_a_narrower_band``) is against a bias that
+    shrinks with the band; a rise is no such bias and adds nothing to the standard error. Drawn pair
+    48000 of the independent generator (bench/diagnose_rigs.py --drawn-pairs 12 --experiment
+    soft_gains --rig ctrl2k --seed 48000: a 2 kHz loop with its gains at 0.6, 0.90 N of horizontal
+    friction, an amplifier of 257 Hz after 0.3 ms): the lag, judged on the vertical axis beside the
+    friction, came out 1.06 +- 0.02 ms on half the band and 2.18 +- 0.08 ms on a quarter, and was
+    refused with the rise as its standard error (2.18 +- 1.1, not above two of them)."""
+    scenario = Scenario(
+        name="guide_friction_horizontal+amplifier_dynamics",
+        seed=48000,
+        effects=(
+            GuideFriction(
+                axis_="horizontal",
+                coulomb_force=0.9005016468014301,
+                static_force=1.5019366071362314,
+                stribeck_velocity=0.001650630661858614,
+                viscous_coefficient=2.8643427198655953,
+            ),
+            AmplifierDynamics(bandwidth=257.3583781229409, delay=0.0002638922727224952),
+        ),
+        rig=Rig(**RIGS["ctrl2k"]),
+    )
+    run = simulate(under_experiment(scenario, "soft_gains"))
+    csv, truth = write_log(run, tmp_path, stem="pair_48000")
+    d = diagnose_path(csv)
+    assert [e.name for e in d.effects] == ["guide_friction_horizontal", LAG]
+    # beyond the 5 kHz hold the log does not contradict, the 2 kHz loop's own 0.15 ms more: within
+    # the issue's 30 % of the generator's time constant and delay
+    lag = d.effects[1].parameters["time_constant"].value
+    assert lag == pytest.approx(_true_lag_of(json.loads(truth.read_text())), rel=0.3)
+    # with the rise counted as the standard error, as before, the same log refuses the lag
+    monkeypatch.setattr(pipeline, "_quarter_band_spread", lambda quarter, half: abs(quarter - half))
+    assert LAG not in [e.name for e in diagnose_path(csv).effects]
+
+
+def _true_lag_of(truth: dict) -> float:
+    (effect,) = [e for e in truth["effects"] if e["kind"] == "amplifier_dynamics"]
+    return effect["derived"]["time_constant_s"] + effect["derived"]["delay_used_s"]
