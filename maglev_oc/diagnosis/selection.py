@@ -2051,12 +2051,19 @@ def select(
     last: dict[str, Judgement] = {}
     unshown: dict[str, tuple[Judgement, Judgement]] = {}  # see Selection.unshown
 
+    def held_out_about(model: list[str], fit: SubsetFit):
+        """(the chosen candidates of ``model``, which held-out samples count, the held-out residual
+        about ``fit``, the cross-fitted parts): what a held-out test against ``model`` needs."""
+        chosen = [by_name[n] for n in model[1:]]
+        counted = evidence(design, chosen, settings)
+        cross = _CrossParts.of(fold, model, chosen, settings) if fold else None
+        return chosen, counted, held_out.around(fit, counted), cross
+
     def step_context(model: list[str], fit: SubsetFit, names: Sequence[str]):
         """(judge's arguments from ``model`` to ``cross``, the axes with friction among ``model``,
         the thrust side, the held-out mean squares about ``fit``): what judging ``names`` beside
         ``model`` (fitted as ``fit``) needs."""
-        counted = evidence(design, [by_name[n] for n in model[1:]], settings)
-        around = held_out.around(fit, counted)
+        chosen, counted, around, cross = held_out_about(model, fit)
         mse0 = np.maximum(np.mean(around.residual**2, axis=1), 1e-30)
         sizes = {(by_name[n].axis, _reported(by_name[n])) for n in names}
         rivals = (
@@ -2065,8 +2072,6 @@ def select(
             else None
         )
         periods = _periodic_beside(model, by_name, last)
-        chosen = [by_name[n] for n in model[1:]]
-        cross = _CrossParts.of(fold, model, chosen, settings) if fold else None
         thrust = thrust_side.step(model, chosen, counted) if thrust_side else None
         context = (model, fit, around.residual, mse0, settings, rivals, counted, periods, cross)
         return context, frozenset(_friction_axes(chosen)), thrust, around
@@ -2088,10 +2093,7 @@ def select(
         """Test 1 of ``richer`` beside ``others`` against ``simpler`` (its simpler form) in its place:
         what its extra parameters add."""
         model = [*others, simpler]
-        chosen = [by_name[n] for n in model[1:]]
-        counted = evidence(design, chosen, settings)
-        around = held_out.around(fit_subset(design, model, covariance=False), counted)
-        cross = _CrossParts.of(fold, model, chosen, settings) if fold else None
+        _, counted, around, cross = held_out_about(model, fit_subset(design, model, covariance=False))
         axes = _axes(by_name[richer], design.moving)
         return _held_out_test(design, [*others, richer], around.residual, counted, cross, axes)
 
